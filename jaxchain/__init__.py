@@ -1,0 +1,30 @@
+"""jaxchain: a differentiable JAX simulator of chains of friction-excited oscillators.
+
+Implements eq. (5) of *Multiple spatially localized dynamical states in
+friction-excited oscillator chains*. Importing jaxchain turns on float64 in JAX: the
+long stick-slip integrations need it.
+"""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+from ._ensemble import ensemble as ensemble  # noqa: E402
+from ._friction import friction_coefficient as friction_coefficient  # noqa: E402
+from ._friction import smoothed_friction_force as smoothed_friction_force  # noqa: E402
+from ._initial import AbstractInitialCondition as AbstractInitialCondition  # noqa: E402
+from ._initial import GivenState as GivenState  # noqa: E402
+from ._initial import OutOfPhaseExcitation as OutOfPhaseExcitation  # noqa: E402
+from ._initial import excited_block as excited_block  # noqa: E402
+from ._initial import localized_family as localized_family  # noqa: E402
+from ._model import jacobian as jacobian  # noqa: E402
+from ._model import steady_sliding as steady_sliding  # noqa: E402
+from ._model import vector_field as vector_field  # noqa: E402
+from ._options import SimulationOptions as SimulationOptions  # noqa: E402
+from ._params import ChainParams as ChainParams  # noqa: E402
+from ._plots.localized import plot_localized_states as plot_localized_states  # noqa: E402
+from ._results import save_dataset as save_dataset  # noqa: E402
+from ._results import to_dataset as to_dataset  # noqa: E402
+from ._simulate import STATUS as STATUS  # noqa: E402
+from ._simulate import Observables as Observables  # noqa: E402
+from ._simulate import simulate as simulate  # noqa: E402

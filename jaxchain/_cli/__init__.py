@@ -1,0 +1,1 @@
+"""The `jaxchain` command line."""

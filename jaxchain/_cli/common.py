@@ -1,0 +1,125 @@
+"""What every `jaxchain` command shares: option names, the parser that fails in one
+line, the solver table and the compilation cache."""
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+import diffrax
+import jax
+
+from .._params import ChainParams
+
+SOLVERS = {
+    "tsit5": diffrax.Tsit5,
+    "dopri5": diffrax.Dopri5,
+    "dopri8": diffrax.Dopri8,
+    "bosh3": diffrax.Bosh3,
+    "kvaerno3": diffrax.Kvaerno3,
+    "kvaerno5": diffrax.Kvaerno5,
+}
+
+#: Field names in error messages, as the options a user typed.
+OPTION_NAMES = {
+    "ChainParams.v_d": "--vd", "ChainParams.n_osc": "--n-osc", "ChainParams.eps": "--eps",
+    "SimulationOptions.t_end": "--t-end", "SimulationOptions.transient": "--transient",
+    "SimulationOptions.rtol": "--rtol", "SimulationOptions.atol": "--atol",
+    "SimulationOptions.max_steps": "--max-steps",
+}
+
+
+class UsageError(Exception):
+    """A bad option or value: reported in one line, exit status 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose errors are one line on stderr and exit status 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (value > 0 and value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {text!r}")
+    return value
+
+
+def add_model_options(p: argparse.ArgumentParser, *, vd: float, n_osc: int) -> None:
+    """--vd, --n-osc, --eps: the chain (other parameters are eq. (7) of the paper)."""
+    g = p.add_argument_group("model (eq. (5) of the paper; other parameters eq. (7))")
+    g.add_argument("--vd", type=float, default=vd, metavar="V",
+                   help=f"belt speed v_d, dimensionless (default {vd})")
+    g.add_argument("--n-osc", type=positive_int, default=n_osc, metavar="N",
+                   help=f"number of oscillators on the ring (default {n_osc})")
+    eps = ChainParams().eps
+    g.add_argument("--eps", type=positive_float, default=eps,
+                   help=f"tanh smoothing velocity of sign(v_rel) (default {eps:g})")
+
+
+def add_run_options(p: argparse.ArgumentParser) -> None:
+    """--t-end, --transient, --solver, --rtol, --atol, --max-steps."""
+    g = p.add_argument_group("integration")
+    g.add_argument("--t-end", type=positive_float, default=15000.0, metavar="T",
+                   help="final time, in units of 1/omega_n (default 15000, as the paper)")
+    g.add_argument("--transient", type=float, default=10000.0, metavar="T",
+                   help="observables are taken after this time (default 10000)")
+    g.add_argument("--solver", choices=sorted(SOLVERS), default="tsit5",
+                   help="diffrax solver (default tsit5)")
+    g.add_argument("--rtol", type=positive_float, default=1e-6,
+                   help="relative tolerance (default 1e-6)")
+    g.add_argument("--atol", type=positive_float, default=1e-8,
+                   help="absolute tolerance (default 1e-8)")
+    g.add_argument("--max-steps", type=positive_int, default=200_000,
+                   help="step budget per chunk of 250 time units (default 200000)")
+
+
+def add_output_options(p: argparse.ArgumentParser) -> None:
+    """--out, --json, --no-progress."""
+    g = p.add_argument_group("output")
+    g.add_argument("--out", type=Path, default=Path("jaxchain-out"), metavar="DIR",
+                   help="folder for the netCDF Dataset and the PNG "
+                        "(default ./jaxchain-out/)")
+    g.add_argument("--json", action="store_true",
+                   help="print one JSON object on stdout instead of the table")
+    g.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+def usage_message(err: ValueError) -> str:
+    """A ValueError from the library, with field names replaced by option names."""
+    text = str(err)
+    for field, option in OPTION_NAMES.items():
+        text = text.replace(field, option)
+    return text
+
+
+def enable_compilation_cache() -> None:
+    """Keep compiled programs across runs in $JAXCHAIN_CACHE_DIR (default
+    ~/.cache/jaxchain/jax): a second run with the same shapes skips compilation."""
+    path = os.environ.get("JAXCHAIN_CACHE_DIR",
+                          str(Path.home() / ".cache" / "jaxchain" / "jax"))
+    try:
+        Path(path).mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return
+    jax.config.update("jax_compilation_cache_dir", path)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+
+
+def show_progress(args) -> bool:
+    return not args.no_progress and sys.stderr.isatty()

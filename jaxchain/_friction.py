@@ -1,0 +1,45 @@
+"""The exponentially decaying friction law, eqs. (1)-(2) of the paper."""
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from ._params import ChainParams
+
+
+def friction_coefficient(params: ChainParams, v_rel: Float[ArrayLike, "*shape"]
+                         ) -> Float[Array, "*shape"]:
+    """Friction coefficient mu(v_rel) = mu_d + (mu_st - mu_d) exp(-|v_rel| / v0),
+    eq. (1) of the paper.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (uses `mu_d`, `mu_st`, `v0`).
+    - `v_rel`: relative velocity x' - v_d, any shape, dimensionless.
+
+    **Returns:**
+
+    mu, of the same shape as `v_rel`. mu(0) = mu_st, and mu -> mu_d as |v_rel| -> oo.
+    """
+    return params.mu_d + (params.mu_st - params.mu_d) * jnp.exp(
+        -jnp.abs(v_rel) / params.v0
+    )
+
+
+def smoothed_friction_force(params: ChainParams, v_rel: Float[ArrayLike, "*shape"]
+                            ) -> Float[Array, "*shape"]:
+    """Smoothed friction force F = -mu(v_rel) tanh(v_rel / eps), in units of the
+    normal load P.
+
+    This is eq. (2) of the paper with sign(v_rel) replaced by tanh(v_rel / eps). The
+    stick phase becomes a stiff slip at |v_rel| ~ eps, of stiffness about mu_st/eps.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (uses `mu_d`, `mu_st`, `v0`, `eps`).
+    - `v_rel`: relative velocity x' - v_d, any shape, dimensionless.
+
+    **Returns:**
+
+    F, of the same shape as `v_rel`, dimensionless (F/P in eq. (6)).
+    """
+    return -friction_coefficient(params, v_rel) * jnp.tanh(v_rel / params.eps)

@@ -1,0 +1,153 @@
+"""Initial conditions: eqs. (8) and (10) of the paper, and user-given states."""
+
+import abc
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Bool, Float
+
+from ._custom_types import State
+from ._friction import smoothed_friction_force
+from ._params import ChainParams
+
+
+def excited_block(n_osc: int, n_excited: int) -> Bool[np.ndarray, " n_osc"]:
+    """Mask of `n_excited` contiguous oscillators around the centre of the ring.
+
+    The paper does not say which oscillators it excites, only that the 11th (of 20)
+    is always excited (Section 3.3). We take the block that starts at the centre
+    oscillator c = N//2 + 1 (1-based; c = 11 for N = 20) and grows alternately to
+    the right and to the left: oscillators c - (k-1)//2, ..., c + k//2, wrapping
+    around the ring. So k = 1 excites {11}, k = 2 {11, 12}, k = 3 {10, 11, 12}, and
+    k = 20 the whole ring.
+
+    **Arguments:**
+
+    - `n_osc`: ring size N (>= 1).
+    - `n_excited`: number of excited oscillators k, 0 <= k <= N.
+
+    **Returns:**
+
+    Boolean NumPy array of shape (n_osc,).
+
+    **Raises:**
+
+    `ValueError` if `n_excited` is outside [0, n_osc].
+    """
+    if not 0 <= n_excited <= n_osc:
+        raise ValueError(f"n_excited must lie in [0, {n_osc}], got {n_excited}")
+    centre = n_osc // 2  # 0-based index of oscillator N//2 + 1
+    idx = (centre - (n_excited - 1) // 2 + np.arange(n_excited)) % n_osc
+    mask = np.zeros(n_osc, dtype=bool)
+    mask[idx] = True
+    return mask
+
+
+class AbstractInitialCondition(eqx.Module):
+    """An initial state of the chain that may depend on the parameters (for example
+    on the belt speed, through steady sliding). Batch several by giving the array
+    fields a leading axis; `ensemble` vmaps over it."""
+
+    @abc.abstractmethod
+    def __call__(self, params: ChainParams) -> State:
+        """The initial state, shape (2, n_osc): rows (x, x'), dimensionless."""
+
+
+class OutOfPhaseExcitation(AbstractInitialCondition):
+    """Initial displacements 2 (-1)^n on the excited oscillators, around a base
+    displacement, with a common initial velocity: eqs. (8) and (10) of the paper.
+
+        x_n(0) = F(s v_d) + 2 (-1)^n [n excited],   x_n'(0) = velocity,
+
+    with n = 1..N (1-based, as in the paper) and F the smoothed friction force.
+    Eq. (8) is s = -1, velocity = 0 (so the unexcited oscillators start at steady
+    sliding); eq. (10) is s = +1, velocity = 0.56, as printed in the paper.
+
+    **Arguments:**
+
+    - `excited`: boolean mask, shape (n_osc,) (see `excited_block`).
+    - `velocity`: the common initial velocity (dimensionless).
+    - `base_sign`: s, +1 or -1.
+    """
+
+    excited: Bool[ArrayLike, " n_osc"]
+    velocity: Float[ArrayLike, ""] = 0.0
+    base_sign: float = eqx.field(static=True, default=-1.0)
+
+    @classmethod
+    def eq8(cls, excited) -> "OutOfPhaseExcitation":
+        """Eq. (8) of the paper: at rest, unexcited oscillators at steady sliding."""
+        return cls(excited=jnp.asarray(excited, dtype=bool), velocity=0.0, base_sign=-1.0)
+
+    @classmethod
+    def eq10(cls, excited) -> "OutOfPhaseExcitation":
+        """Eq. (10) of the paper: x_n'(0) = 0.56, base displacement F(+v_d)."""
+        return cls(excited=jnp.asarray(excited, dtype=bool), velocity=0.56, base_sign=1.0)
+
+    def __call__(self, params: ChainParams) -> State:
+        excited = jnp.asarray(self.excited)
+        if excited.shape != (params.n_osc,):
+            raise ValueError(
+                f"excited must have shape ({params.n_osc},), got {excited.shape}"
+            )
+        n = jnp.arange(1, params.n_osc + 1)
+        base = smoothed_friction_force(params, self.base_sign * jnp.asarray(params.v_d))
+        x = base + jnp.where(excited, 2.0 * (-1.0) ** n, 0.0)
+        v = jnp.broadcast_to(jnp.asarray(self.velocity, dtype=x.dtype), x.shape)
+        return jnp.stack([x, v])
+
+
+class GivenState(AbstractInitialCondition):
+    """A user-given initial state.
+
+    **Arguments:**
+
+    - `y0`: array of shape (2, n_osc) (rows x, x') or (2 n_osc,).
+
+    **Raises:**
+
+    `ValueError` when called with parameters whose `n_osc` does not match the shape.
+    """
+
+    y0: Float[Array, "..."] = eqx.field(converter=jnp.asarray)
+
+    def __call__(self, params: ChainParams) -> State:
+        n = params.n_osc
+        if self.y0.shape not in ((2, n), (2 * n,)):
+            raise ValueError(
+                f"y0 must have shape (2, {n}) or ({2 * n},), got {self.y0.shape}"
+            )
+        return jnp.reshape(self.y0, (2, n)).astype(float)
+
+
+def localized_family(n_osc: int, family: str = "eq8") -> OutOfPhaseExcitation:
+    """The paper's staircase of initial conditions: 1, 2, ..., N excited oscillators
+    in the block of `excited_block`, by eq. (8) or eq. (10).
+
+    **Arguments:**
+
+    - `n_osc`: ring size N.
+    - `family`: "eq8" or "eq10".
+
+    **Returns:**
+
+    An `OutOfPhaseExcitation` batched over its leading axis: `excited` has shape
+    (n_osc, n_osc), row k-1 exciting k oscillators.
+
+    **Raises:**
+
+    `ValueError` for an unknown family.
+    """
+    if family not in FAMILIES:
+        raise ValueError(f"ics must be one of {sorted(FAMILIES)}, got {family!r}")
+    masks = np.stack([excited_block(n_osc, k) for k in range(1, n_osc + 1)])
+    one = FAMILIES[family](masks[0])
+    return OutOfPhaseExcitation(
+        excited=jnp.asarray(masks),
+        velocity=jnp.full((n_osc,), one.velocity),
+        base_sign=one.base_sign,
+    )
+
+
+FAMILIES = {"eq8": OutOfPhaseExcitation.eq8, "eq10": OutOfPhaseExcitation.eq10}

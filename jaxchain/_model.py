@@ -1,0 +1,78 @@
+"""The vector field of the ring, eq. (5) of the paper, its steady sliding and its
+Jacobian. Nothing here knows about solvers."""
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._custom_types import State
+from ._friction import smoothed_friction_force
+from ._params import ChainParams
+
+
+def vector_field(t, y: Float[Array, "2 n_osc"] | Float[Array, " 2n"],
+                 params: ChainParams):
+    """Right-hand side of eq. (5) of the paper on a ring (periodic boundary
+    conditions, oscillator N coupled to oscillator 1), with the smoothed friction
+    force of `smoothed_friction_force`:
+
+        x_n'' = -2 xi x_n' - x_n - eta_c (2 x_n - x_{n+1} - x_{n-1}) + F(x_n' - v_d).
+
+    For n_osc = 1 the coupling term vanishes (the oscillator is its own neighbour),
+    which gives the single mass-on-moving-belt oscillator of Fig. 3(a).
+
+    **Arguments:**
+
+    - `t`: time (unused; the system is autonomous), dimensionless (eq. 4).
+    - `y`: state of shape (2, n_osc), rows (x, x'), or the same flattened to
+        (2 n_osc,).
+    - `params`: the chain parameters.
+
+    **Returns:**
+
+    dy/dt, of the same shape as `y`.
+
+    **Raises:**
+
+    `ValueError` if the shape of `y` does not match `params.n_osc`.
+    """
+    shape = jnp.shape(y)
+    n = params.n_osc
+    if shape not in ((2, n), (2 * n,)):
+        raise ValueError(f"state must have shape (2, {n}) or ({2 * n},), got {shape}")
+    x, v = jnp.reshape(y, (2, n))
+    coupling = 2 * x - jnp.roll(x, 1) - jnp.roll(x, -1)
+    a = (-2 * params.xi * v - x - params.eta_c * coupling
+         + smoothed_friction_force(params, v - params.v_d))
+    return jnp.reshape(jnp.stack([v, a]), shape)
+
+
+def steady_sliding(params: ChainParams) -> State:
+    """Steady sliding, the fixed point of eq. (5): x_n = F(-v_d) = mu(v_d) (smoothed:
+    mu(v_d) tanh(v_d/eps)), x_n' = 0 for every n.
+
+    **Returns:**
+
+    State of shape (2, n_osc), dimensionless.
+    """
+    x = smoothed_friction_force(params, -jnp.asarray(params.v_d))
+    x = jnp.broadcast_to(x, (params.n_osc,))
+    return jnp.stack([x, jnp.zeros_like(x)])
+
+
+def jacobian(params: ChainParams, y: State | None = None) -> Float[Array, "2n 2n"]:
+    """Jacobian of the flattened vector field of eq. (5), by `jax.jacfwd`.
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `y`: the state, shape (2, n_osc); steady sliding if None.
+
+    **Returns:**
+
+    Matrix of shape (2 n_osc, 2 n_osc), ordered (x_1..x_N, x_1'..x_N').
+    """
+    if y is None:
+        y = steady_sliding(params)
+    flat = jnp.reshape(y, (-1,))
+    return jax.jacfwd(lambda z: vector_field(0.0, z, params))(flat)

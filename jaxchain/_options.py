@@ -1,0 +1,64 @@
+"""Options of a simulation run: horizon, tolerances and how observables are sampled."""
+
+import math
+
+import equinox as eqx
+
+
+class SimulationOptions(eqx.Module):
+    """How long to integrate, how accurately, and how to observe.
+
+    All fields are static: changing one recompiles. Times are dimensionless, in units
+    of 1/omega_n (eq. (4) of the paper).
+
+    **Arguments:**
+
+    - `t_end`: final time. The paper's default is 15000.
+    - `transient`: observables are taken over [transient, t_end]. The paper's
+        default is 10000 (Section 3.2).
+    - `rtol`, `atol`: tolerances of diffrax's `PIDController`.
+    - `sample_dt`: spacing of the dense-output samples from which the extrema are
+        taken. An extremum of a smooth slip phase is missed by at most
+        |x''| sample_dt^2 / 8 ~ A sample_dt^2 / 8, a relative 3e-4 for the default
+        0.05, below the 1e-3 resolution asked of the amplitudes.
+    - `chunk_length`: the run is integrated in chunks of about this length; the
+        samples of one chunk are reduced before the next starts, so memory is fixed
+        by `chunk_length / sample_dt`, never by `t_end`.
+    - `max_steps`: step budget of one chunk.
+    - `halc_tol`: an oscillator counts as on the HALC (stick-slip) when its largest
+        velocity after the transient reaches the belt speed to within this relative
+        tolerance, max x' >= (1 - halc_tol) v_d, i.e. when it sticks.
+
+    **Raises:**
+
+    `ValueError` naming the field for t_end <= 0, transient outside [0, t_end),
+    non-positive or non-finite tolerances, sample_dt, chunk_length or max_steps, or
+    halc_tol outside (0, 1).
+    """
+
+    t_end: float = eqx.field(static=True, default=15000.0)
+    transient: float = eqx.field(static=True, default=10000.0)
+    rtol: float = eqx.field(static=True, default=1e-6)
+    atol: float = eqx.field(static=True, default=1e-8)
+    sample_dt: float = eqx.field(static=True, default=0.05)
+    chunk_length: float = eqx.field(static=True, default=250.0)
+    max_steps: int = eqx.field(static=True, default=200_000)
+    halc_tol: float = eqx.field(static=True, default=0.05)
+
+    def __check_init__(self):
+        for name in ("t_end", "rtol", "atol", "sample_dt", "chunk_length", "max_steps"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"SimulationOptions.{name} must be a finite number > 0, "
+                                 f"got {value!r}")
+        if not (math.isfinite(self.transient) and 0 <= self.transient < self.t_end):
+            raise ValueError(f"SimulationOptions.transient must lie in [0, t_end = "
+                             f"{self.t_end}), got {self.transient!r}")
+        if not 0 < self.halc_tol < 1:
+            raise ValueError(f"SimulationOptions.halc_tol must lie in (0, 1), "
+                             f"got {self.halc_tol!r}")
+
+    def chunks(self, t0: float, t1: float) -> tuple[int, float]:
+        """Number and length of the equal chunks that cover [t0, t1]."""
+        n = max(1, math.ceil((t1 - t0) / self.chunk_length - 1e-9))
+        return n, (t1 - t0) / n

@@ -1,0 +1,104 @@
+"""Physical parameters of the chain (eqs. (4)-(7) of the paper)."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import ArrayLike
+
+from ._custom_types import Scalar
+
+
+def _concrete(value) -> np.ndarray | None:
+    """`value` as a NumPy array, or None when it is a tracer (checked later by
+    whoever traces it)."""
+    if isinstance(value, jax.core.Tracer):
+        return None
+    return np.asarray(value, dtype=float)
+
+
+class ChainParams(eqx.Module):
+    """Dimensionless parameters of the ring of friction-excited oscillators, eq. (5) of
+    the paper *Multiple spatially localized dynamical states in friction-excited
+    oscillator chains*.
+
+    All quantities are dimensionless as in eqs. (4)-(6): displacements in units of
+    x_0 = P/k, velocities in units of x_0*omega_n, time in units of 1/omega_n.
+
+    **Arguments:**
+
+    - `n_osc`: number of oscillators N on the ring (static, >= 1).
+    - `xi`: damping ratio (>= 0).
+    - `mu_d`: dynamic friction coefficient, the limit of mu for large sliding speed
+        (> 0).
+    - `mu_st`: static friction coefficient mu(0) (>= mu_d).
+    - `v0`: reference velocity of the exponential decay in eq. (1) (> 0).
+    - `eta_c`: nearest-neighbour coupling stiffness k_c/k (>= 0).
+    - `v_d`: belt speed (finite).
+    - `eps`: velocity scale of the tanh smoothing of sign(v_rel) (> 0).
+
+    The defaults are eq. (7) of the paper (xi = 0.05, mu_d = 0.5, mu_st/mu_d = 2,
+    v0 = 0.5) with eta_c = 0.01, N = 20 and v_d = 1.5, the scene of Fig. 4.
+
+    The default `eps = 3e-3` is chosen by measurement on the Fig. 4 scene (N = 20,
+    v_d = 1.5, 20 initial conditions by eq. (8), t_end = 15000, Tsit5 at rtol 1e-6;
+    see the README, "Choice of eps"). Against eps = 1e-3, the HALC amplitudes differ
+    by a median 0.4 % at eps = 3e-3 and 1.5 % at eps = 1e-2, while the step count
+    grows as the stick phase stiffens (stiffness about mu_st/eps): 1.0x, 2.5x and
+    5.5x for eps = 1e-2, 3e-3, 1e-3. 3e-3 is the smallest eps whose full scene runs
+    within two minutes on 2 CPU cores.
+
+    Fields other than `n_osc` may be JAX arrays (for example under `jax.vmap`); only
+    concrete values are validated.
+
+    **Raises:**
+
+    `ValueError` naming the field for a non-finite value, n_osc < 1, xi < 0,
+    mu_d <= 0, mu_st < mu_d, v0 <= 0, eta_c < 0 or eps <= 0.
+    """
+
+    n_osc: int = eqx.field(static=True, default=20)
+    xi: float | ArrayLike = 0.05
+    mu_d: float | ArrayLike = 0.5
+    mu_st: float | ArrayLike = 1.0
+    v0: float | ArrayLike = 0.5
+    eta_c: float | ArrayLike = 0.01
+    v_d: float | ArrayLike = 1.5
+    eps: float | ArrayLike = 3e-3
+
+    def __check_init__(self):
+        if isinstance(self.n_osc, bool) or not isinstance(self.n_osc, (int, np.integer)):
+            raise ValueError(f"ChainParams.n_osc must be an integer, got {self.n_osc!r}")
+        if self.n_osc < 1:
+            raise ValueError(f"ChainParams.n_osc must be >= 1, got {self.n_osc!r}")
+        rules = {
+            "xi": (lambda a: a >= 0, ">= 0"),
+            "mu_d": (lambda a: a > 0, "> 0"),
+            "mu_st": (lambda a: True, ""),
+            "v0": (lambda a: a > 0, "> 0"),
+            "eta_c": (lambda a: a >= 0, ">= 0"),
+            "v_d": (lambda a: True, ""),
+            "eps": (lambda a: a > 0, "> 0"),
+        }
+        for name, (ok, requirement) in rules.items():
+            value = getattr(self, name)
+            a = _concrete(value)
+            if a is None:
+                continue
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"ChainParams.{name} must be finite, got {value!r}")
+            if not np.all(ok(a)):
+                raise ValueError(f"ChainParams.{name} must be {requirement}, got {value!r}")
+        mu_st, mu_d = _concrete(self.mu_st), _concrete(self.mu_d)
+        if mu_st is not None and mu_d is not None and not np.all(mu_st >= mu_d):
+            raise ValueError(
+                f"ChainParams.mu_st must be >= mu_d = {self.mu_d!r}, got {self.mu_st!r}"
+            )
+
+    @property
+    def hopf_vd(self) -> Scalar:
+        """Analytic Hopf belt speed of steady sliding for the non-smooth law,
+        v0 * ln((mu_st - mu_d) / (2 xi v0)), from linearising eq. (5) (see
+        `shared/DESIGN.md`). It is the same for every Fourier mode of the ring.
+        Dimensionless, shape ()."""
+        return self.v0 * jnp.log((self.mu_st - self.mu_d) / (2 * self.xi * self.v0))

@@ -1,0 +1,1 @@
+"""Matplotlib figures of the paper's scenes, one file per figure."""

@@ -1,0 +1,60 @@
+"""Fig. 4 of the paper: localized states as rows of circles."""
+
+import matplotlib
+
+matplotlib.use("Agg")  # figures are written to files; no screen is assumed
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import xarray as xr  # noqa: E402
+from matplotlib.collections import PatchCollection  # noqa: E402
+from matplotlib.patches import Circle  # noqa: E402
+
+
+def plot_localized_states(ds: xr.Dataset, v_d: float | None = None, ax=None):
+    """Draw the localized states at one belt speed in the manner of Fig. 4 of the
+    paper: one row per solution, one circle per oscillator, radius proportional to
+    its amplitude. Rows are labelled with the number of excited oscillators (left)
+    and with n_HALC and E (right); failed runs are marked.
+
+    **Arguments:**
+
+    - `ds`: a Dataset from `to_dataset`, dims (v_d, ic, osc).
+    - `v_d`: which belt speed to draw (nearest); the first one if None.
+    - `ax`: a matplotlib Axes; a new figure if None.
+
+    **Returns:**
+
+    The matplotlib Figure.
+    """
+    row = ds.isel(v_d=0) if v_d is None else ds.sel(v_d=v_d, method="nearest")
+    amps = np.nan_to_num(np.asarray(row["amplitudes"]), nan=0.0)
+    n_ic, n_osc = amps.shape
+    if ax is None:
+        _, ax = plt.subplots(figsize=(0.45 * n_osc + 2.5, 0.4 * n_ic + 1.2))
+    scale = 0.45 / max(float(amps.max()), 1e-12)
+    labels = (np.asarray(row["n_excited"]) if "n_excited" in row.coords
+              else np.arange(1, n_ic + 1))
+    circles = [Circle((j + 1, -i), max(scale * a, 0.02))
+               for i in range(n_ic) for j, a in enumerate(amps[i])]
+    ax.add_collection(PatchCollection(circles, facecolor="tab:blue", edgecolor="k",
+                                      linewidth=0.4, alpha=0.8))
+    for i in range(n_ic):
+        status = int(row["status"][i])
+        note = (f"{int(row['n_halc'][i])} on HALC, E={float(row['energy'][i]):.1f}"
+                if status == 0 else "failed")
+        ax.text(n_osc + 0.8, -i, note, va="center", fontsize=7)
+    ax.set_xlim(0.3, n_osc + 4.5)
+    ax.set_ylim(-n_ic + 0.4, 0.6)
+    ax.set_aspect("equal")
+    ax.set_xticks(np.arange(1, n_osc + 1))
+    ax.set_yticks(-np.arange(n_ic), [str(k) for k in labels])
+    ax.set_xlabel("oscillator n")
+    ax.set_ylabel("oscillators excited")
+    ax.set_title(f"Localized states, v_d = {float(row['v_d']):g} "
+                 f"(radius ∝ amplitude; cf. Fig. 4)", fontsize=9)
+    for side in ("top", "right"):
+        ax.spines[side].set_visible(False)
+    fig = ax.figure
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,186 @@
+"""Integration of one trajectory of eq. (5) with diffrax, observing while integrating."""
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from ._custom_types import State
+from ._initial import AbstractInitialCondition, GivenState
+from ._model import vector_field
+from ._options import SimulationOptions
+from ._params import ChainParams
+from ._progress import progress_bar, tick
+
+#: Status codes of a trajectory, with what to do about each.
+STATUS = (
+    "ok",
+    "max_steps reached: raise max_steps or use a larger eps",
+    "solver failed (step size underflow or a failed implicit solve): tighten the "
+    "tolerances, use another solver or a larger eps",
+    "non-finite state: the trajectory blew up; check the parameters or use a larger eps",
+)
+
+
+class Observables(eqx.Module):
+    """What one run observes over [transient, t_end]. Under `ensemble` every field
+    gains the leading batch axes (n_vd, n_ic).
+
+    **Fields:**
+
+    - `amplitudes`: half of peak-to-peak of each x_n, shape (n_osc,).
+    - `energy`: E = 1/2 sum_n A_n^2, eq. (9) of the paper, shape ().
+    - `on_halc`: whether each oscillator is on the high-amplitude limit cycle (it
+        sticks: its largest velocity reaches the belt speed), shape (n_osc,).
+    - `n_halc`: number of oscillators on the HALC, shape ().
+    - `x_max`, `x_min`, `v_max`: extrema of x_n and x_n', shape (n_osc,).
+    - `y_final`: state at t_end, shape (2, n_osc).
+    - `num_steps`: accepted plus rejected steps of the whole run, shape ().
+    - `status`: index into `STATUS` (0 is success), shape ().
+
+    All quantities are dimensionless (eqs. (4)-(6)).
+    """
+
+    amplitudes: Float[Array, "*batch n_osc"]
+    energy: Float[Array, "*batch"]
+    on_halc: Bool[Array, "*batch n_osc"]
+    n_halc: Int[Array, "*batch"]
+    x_max: Float[Array, "*batch n_osc"]
+    x_min: Float[Array, "*batch n_osc"]
+    v_max: Float[Array, "*batch n_osc"]
+    y_final: Float[Array, "*batch 2 n_osc"]
+    num_steps: Int[Array, "*batch"]
+    status: Int[Array, "*batch"]
+
+
+def _status_code(result) -> Int[Array, ""]:
+    return jnp.where(result == diffrax.RESULTS.successful, 0,
+                     jnp.where(result == diffrax.RESULTS.max_steps_reached, 1, 2))
+
+
+def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
+    """Integrate one chunk [t0, t1]; reduce its `n_samples` dense samples (if any)
+    into the running extrema of `carry`."""
+    y, solver_state, controller_state, made_jump, extrema, steps, status = carry
+    # Once a chunk has failed the rest of the run is skipped (a zero-length solve),
+    # so a failed lane does not hold up the others under vmap.
+    t1 = jnp.where(status == 0, t1, t0)
+    subs = [diffrax.SubSaveAt(t1=True)]
+    if n_samples:
+        subs.append(diffrax.SubSaveAt(ts=t0 + (t1 - t0) * jnp.linspace(0.0, 1.0, n_samples)))
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(vector_field), solver, t0, t1, None, y, params,
+        saveat=diffrax.SaveAt(subs=subs, solver_state=True, controller_state=True,
+                              made_jump=True),
+        stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
+        max_steps=options.max_steps, throw=False,
+        solver_state=solver_state, controller_state=controller_state,
+        made_jump=made_jump,
+    )
+    if n_samples:
+        x, v = sol.ys[1][:, 0], sol.ys[1][:, 1]
+        x_max, x_min, v_max = extrema
+        extrema = (jnp.maximum(x_max, x.max(0)), jnp.minimum(x_min, x.min(0)),
+                   jnp.maximum(v_max, v.max(0)))
+    code = _status_code(sol.result)
+    status = jnp.where(status == 0, code, status)
+    if progress:
+        tick(y[0, 0])
+    return (sol.ys[0][-1], sol.solver_state, sol.controller_state, sol.made_jump,
+            extrema, steps + sol.stats["num_steps"], status)
+
+
+def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
+        options: SimulationOptions, progress: bool = False) -> Observables:
+    """Pure, traceable core of `simulate` for one trajectory: no checks, no
+    exceptions. `ensemble` vmaps it. With `progress`, each chunk ticks the active
+    progress bar through a host callback; such programs are left out of JAX's
+    persistent compilation cache, so it is off unless a bar is shown."""
+    n = params.n_osc
+    big = jnp.full((n,), jnp.inf)
+    carry = (y0, None, None, None, (-big, big, -big), jnp.array(0), jnp.array(0))
+    n_tr, len_tr = options.chunks(0.0, options.transient)
+    n_obs, len_obs = options.chunks(options.transient, options.t_end)
+    n_samples = int(np.ceil(len_obs / options.sample_dt)) + 1
+    spans = [(0.0, len_tr, n_tr, 0)] if options.transient > 0 else []
+    spans.append((options.transient, len_obs, n_obs, n_samples))
+
+    for start, length, count, samples in spans:
+        # The first chunk runs outside the scan: it creates the solver and controller
+        # states that the scan then carries from chunk to chunk.
+        if carry[1] is None:
+            carry = _advance(params, solver, options, progress, carry, start, start + length,
+                             samples)
+            start, count = start + length, count - 1
+        if count:
+            t0s = start + length * jnp.arange(count)
+
+            def body(c, t0, length=length, samples=samples):
+                return _advance(params, solver, options, progress, c, t0, t0 + length,
+                                samples), None
+
+            carry, _ = jax.lax.scan(body, carry, t0s)
+
+    y_final, _, _, _, (x_max, x_min, v_max), steps, status = carry
+    amplitudes = 0.5 * (x_max - x_min)
+    finite = jnp.all(jnp.isfinite(amplitudes)) & jnp.all(jnp.isfinite(y_final))
+    status = jnp.where((status == 0) & ~finite, 3, status)
+    amplitudes = jnp.where(status == 0, amplitudes, jnp.nan)  # no partial answers
+    on_halc = v_max >= (1 - options.halc_tol) * params.v_d
+    return Observables(
+        amplitudes=amplitudes, energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc,
+        n_halc=jnp.sum(on_halc), x_max=x_max, x_min=x_min, v_max=v_max,
+        y_final=y_final, num_steps=steps, status=status,
+    )
+
+
+def n_ticks(options: SimulationOptions) -> int:
+    """Number of progress ticks (chunks) of one trajectory."""
+    n_tr = options.chunks(0.0, options.transient)[0] if options.transient > 0 else 0
+    return n_tr + options.chunks(options.transient, options.t_end)[0]
+
+
+_run_jit = eqx.filter_jit(run)
+
+
+def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
+             solver: diffrax.AbstractSolver = diffrax.Tsit5(),
+             options: SimulationOptions = SimulationOptions(), *, throw: bool = True,
+             progress: bool = False) -> Observables:
+    """Integrate eq. (5) of the paper for one trajectory and return its observables.
+
+    The run is integrated with `diffrax.diffeqsolve` in chunks of
+    `options.chunk_length`, carrying the solver and step-size-controller states
+    across chunks, so the step sequence is that of one adaptive solve. Dense-output
+    samples of each chunk after `options.transient` are reduced to running extrema
+    at once: memory does not grow with `options.t_end`, and no trajectory is stored.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (`ChainParams`).
+    - `y0`: an initial condition (`OutOfPhaseExcitation`, `GivenState`, ...) or a
+        state array of shape (2, n_osc) or (2 n_osc,).
+    - `solver`: a diffrax solver, `diffrax.Tsit5()` by default.
+    - `options`: `SimulationOptions` (horizon, tolerances, sampling).
+    - `throw`: raise on failure (default) or return the status.
+    - `progress`: show a tqdm bar, one tick per chunk.
+
+    **Returns:**
+
+    `Observables` with per-oscillator fields of shape (n_osc,).
+
+    **Raises:**
+
+    `ValueError` for a state of the wrong shape; `RuntimeError` with advice when
+    the run fails and `throw=True`.
+    """
+    if not isinstance(y0, AbstractInitialCondition):
+        y0 = GivenState(y0)
+    y = y0(params)
+    with progress_bar(n_ticks(options), "simulate", progress):
+        obs = _run_jit(params, y, solver, options, progress)
+    if throw and int(obs.status) != 0:
+        raise RuntimeError(STATUS[int(obs.status)])
+    return obs

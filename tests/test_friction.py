@@ -1,0 +1,37 @@
+import jax.numpy as jnp
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import jaxchain as jc
+
+
+def test_friction_coefficient_limits():
+    p = jc.ChainParams()
+    assert float(jc.friction_coefficient(p, 0.0)) == p.mu_st
+    assert np.isclose(float(jc.friction_coefficient(p, 50.0)), p.mu_d, rtol=1e-12)
+    # eq. (1) at |v_rel| = v0: mu_d + (mu_st - mu_d)/e, on both sides
+    expected = p.mu_d + (p.mu_st - p.mu_d) / np.e
+    assert np.allclose(jc.friction_coefficient(p, jnp.array([-p.v0, p.v0])), expected)
+
+
+def test_smoothed_force_tends_to_coulomb_law_away_from_zero():
+    p = jc.ChainParams(eps=1e-3)
+    v = jnp.array([-2.0, -0.5, 0.5, 2.0])
+    coulomb = -jc.friction_coefficient(p, v) * jnp.sign(v)
+    assert np.allclose(jc.smoothed_friction_force(p, v), coulomb, rtol=1e-12)
+    assert float(jc.smoothed_friction_force(p, 0.0)) == 0.0
+    # slope at zero is mu_st / eps: the stiffness of the smoothed stick phase
+    h = 1e-9
+    slope = (jc.smoothed_friction_force(p, h) - jc.smoothed_friction_force(p, -h)) / (2 * h)
+    assert np.isclose(float(slope), -p.mu_st / p.eps, rtol=1e-5)
+
+
+@settings(max_examples=50, deadline=None)
+@given(v=st.floats(-100, 100), eps=st.floats(1e-5, 1.0))
+def test_smoothed_force_is_odd_and_bounded_by_mu_st(v, eps):
+    p = jc.ChainParams(eps=eps)
+    f = float(jc.smoothed_friction_force(p, v))
+    assert abs(f) <= p.mu_st
+    assert f == -float(jc.smoothed_friction_force(p, -v))
+    assert f * v <= 0  # friction always opposes the relative motion

@@ -1,0 +1,40 @@
+import math
+
+import numpy as np
+import pytest
+
+import jaxchain as jc
+
+
+def test_defaults_are_eq7_with_paper_chain():
+    p = jc.ChainParams()
+    assert (p.n_osc, p.xi, p.mu_d, p.mu_st, p.v0, p.eta_c, p.v_d) == (
+        20, 0.05, 0.5, 1.0, 0.5, 0.01, 1.5)
+    assert p.mu_st / p.mu_d == 2
+
+
+def test_analytic_hopf_speed():
+    # v0 ln((mu_st - mu_d)/(2 xi v0)) = 0.5 ln 10 for eq. (7)
+    assert np.isclose(float(jc.ChainParams().hopf_vd), 0.5 * math.log(10), rtol=1e-14)
+
+
+@pytest.mark.parametrize("field, value", [
+    ("n_osc", 0), ("n_osc", 2.5), ("xi", -0.1), ("mu_d", 0.0), ("mu_d", -1.0),
+    ("mu_st", 0.4), ("v0", 0.0), ("eta_c", -0.01), ("eps", 0.0), ("eps", -1e-3),
+    ("xi", math.nan), ("v_d", math.inf), ("eta_c", math.nan), ("mu_st", math.inf),
+    ("v0", -math.inf),
+])
+def test_invalid_parameter_raises_value_error_naming_field(field, value):
+    with pytest.raises(ValueError, match=f"ChainParams.{field}"):
+        jc.ChainParams(**{field: value})
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    ({"t_end": 0.0}, "t_end"), ({"transient": -1.0}, "transient"),
+    ({"t_end": 100.0, "transient": 100.0}, "transient"), ({"rtol": 0.0}, "rtol"),
+    ({"atol": math.nan}, "atol"), ({"sample_dt": -0.1}, "sample_dt"),
+    ({"max_steps": 0}, "max_steps"), ({"halc_tol": 1.5}, "halc_tol"),
+])
+def test_invalid_option_raises_value_error_naming_field(kwargs, field):
+    with pytest.raises(ValueError, match=f"SimulationOptions.{field}"):
+        jc.SimulationOptions(**kwargs)
