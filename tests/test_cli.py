@@ -1,0 +1,68 @@
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import xarray as xr
+
+from jaxchain._cli.main import main
+
+SMALL = ["--n-osc", "3", "--t-end", "400", "--transient", "200"]
+#: The installed console script: beside this interpreter (a venv) or on PATH.
+SCRIPT = next(p for p in (Path(sys.executable).parent / "jaxchain",
+                          shutil.which("jaxchain")) if p and Path(p).exists())
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--vd", "abc"], "--vd"),
+    (["--vd", "nan"], "--vd"),
+    (["--n-osc", "0"], "--n-osc"),
+    (["--n-osc", "2.5"], "--n-osc"),
+    (["--eps", "-1"], "--eps"),
+    (["--eps", "0"], "--eps"),
+    (["--t-end", "-5"], "--t-end"),
+    (["--transient", "20000"], "--transient"),
+    (["--transient", "-1"], "--transient"),
+    (["--solver", "euler"], "--solver"),
+    (["--ics", "eq9"], "--ics"),
+    (["--rtol", "0"], "--rtol"),
+    (["--max-steps", "0"], "--max-steps"),
+    (["--bogus"], "--bogus"),
+])
+def test_bad_option_exits_2_with_one_line(argv, says, capsys):
+    with pytest.raises(SystemExit) as exc:
+        sys.exit(main(["localized", *argv]))
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err and "error" in err
+
+
+def test_localized_json_and_files(tmp_path, capsys):
+    out = tmp_path / "res"
+    assert main(["localized", *SMALL, "--json", "--out", str(out)]) == 0
+    res = json.loads(capsys.readouterr().out)
+    for key in ("v_d", "n_excited", "n_halc", "energy", "amplitudes", "status",
+                "wall_time_s"):
+        assert key in res
+    assert res["n_excited"] == [1, 2, 3]
+    assert len(res["amplitudes"]) == 3 and len(res["amplitudes"][0]) == 3
+    assert res["status"] == ["ok"] * 3
+    ds = xr.load_dataset(out / "localized_vd1.5.nc")
+    assert ds["energy"].values[0].tolist() == pytest.approx(res["energy"])
+    assert ds.attrs["eps"] == 3e-3 and ds.attrs["n_osc"] == 3
+    assert (out / "localized_vd1.5.png").stat().st_size > 1000
+
+
+def test_installed_command_table_and_usage_error(tmp_path):
+    """The console script as a user runs it, in a fresh process."""
+    run = subprocess.run([SCRIPT, "localized", *SMALL, "--out", str(tmp_path)],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    lines = run.stdout.splitlines()
+    assert lines[1].split()[:3] == ["n_excited", "n_HALC", "E"]
+    assert len(lines) == 2 + 3 + 1
+    bad = subprocess.run([SCRIPT, "localized", "--eps", "x"], capture_output=True,
+                         text=True)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
