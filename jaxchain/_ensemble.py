@@ -5,7 +5,6 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-
 from jaxtyping import ArrayLike, Float
 
 from ._initial import AbstractInitialCondition

@@ -10,7 +10,7 @@ from ._friction import smoothed_friction_force
 from ._params import ChainParams
 
 
-def vector_field(t, y: Float[Array, "2 n_osc"] | Float[Array, " 2n"],
+def vector_field(t, y: State | Float[Array, " 2n"],
                  params: ChainParams):
     """Right-hand side of eq. (5) of the paper on a ring (periodic boundary
     conditions, oscillator N coupled to oscillator 1), with the smoothed friction

@@ -20,6 +20,11 @@ def tree_allclose(a, b, *, rtol=1e-7, atol=0.0) -> bool:
     )
 
 
+def tree_index(tree, idx):
+    """One lane of a batched pytree."""
+    return jax.tree_util.tree_map(lambda x: x[idx], tree)
+
+
 def reference_rhs(params: jc.ChainParams):
     """Eq. (5) written out oscillator by oscillator with NumPy, independently of
     `jc.vector_field`, for scipy and for comparison."""

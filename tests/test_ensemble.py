@@ -1,9 +1,10 @@
+import diffrax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
 import jaxchain as jc
-from helpers import SHORT, tree_allclose
+from helpers import SHORT, tree_allclose, tree_index
 
 
 def test_ensemble_equals_runs_done_one_at_a_time():
@@ -19,13 +20,8 @@ def test_ensemble_equals_runs_done_one_at_a_time():
         for j, mask in enumerate(masks):
             single = jc.simulate(jc.ChainParams(n_osc=4, v_d=vd),
                                  jc.OutOfPhaseExcitation.eq8(mask), options=SHORT)
-            lane = jax_tree_index(obs, (i, j))
+            lane = tree_index(obs, (i, j))
             assert tree_allclose(lane, single, rtol=1e-9, atol=1e-12)
-
-
-def jax_tree_index(tree, idx):
-    import jax
-    return jax.tree_util.tree_map(lambda x: x[idx], tree)
 
 
 def test_a_failing_trajectory_is_flagged_and_the_others_kept():
@@ -43,7 +39,7 @@ def test_dataset_round_trip_keeps_parameters(tmp_path):
     p = jc.ChainParams(n_osc=3, eps=2e-2)
     ics = jc.localized_family(3)
     obs = jc.ensemble(p, [1.5], ics, options=SHORT, progress=False)
-    ds = jc.to_dataset(obs, p, [1.5], jc.simulate.__defaults__[0], SHORT,
+    ds = jc.to_dataset(obs, p, [1.5], diffrax.Tsit5(), SHORT,
                        n_excited=[1, 2, 3], ics="eq8")
     path = jc.save_dataset(ds, tmp_path / "out" / "run.nc")
     back = xr.load_dataset(path)
