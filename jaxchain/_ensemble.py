@@ -5,13 +5,15 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import xarray as xr
 from jaxtyping import ArrayLike, Float
 
 from ._initial import AbstractInitialCondition
 from ._options import SimulationOptions
 from ._params import ChainParams
 from ._progress import progress_bar
-from ._simulate import Observables, n_ticks, run
+from ._results import to_dataset
+from ._simulate import n_ticks, run
 
 
 @eqx.filter_jit
@@ -28,7 +30,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
              ics: AbstractInitialCondition,
              solver: diffrax.AbstractSolver = diffrax.Tsit5(),
              options: SimulationOptions = SimulationOptions(), *,
-             progress: bool = True) -> Observables:
+             progress: bool = True) -> xr.Dataset:
     """Run every (belt speed, initial condition) pair of a grid, vmapped, in one
     compiled function. Trajectories never raise: each has a `status` (0 = ok, see
     `STATUS`), so one failing lane never discards the others.
@@ -50,9 +52,9 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
 
     **Returns:**
 
-    `Observables` whose fields have leading axes (n_vd, n_ic): amplitudes has shape
-    (n_vd, n_ic, n_osc), energy (n_vd, n_ic), and so on. `to_dataset` turns it into
-    an `xarray.Dataset`.
+    An `xarray.Dataset` (see `to_dataset`) with dims (v_d, ic, osc): amplitudes
+    has shape (n_vd, n_ic, n_osc), energy (n_vd, n_ic), and so on, with the
+    parameters, options and solver as attributes.
 
     **Raises:**
 
@@ -71,7 +73,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     with progress_bar(total, f"{len(v_d)}x{n_ic} trajectories", progress):
         obs = _ensemble(params, v_d, ics, solver, options, progress)
         jax.block_until_ready(obs)
-    return obs
+    return to_dataset(obs, params, v_d, ics, solver, options)
 
 
 

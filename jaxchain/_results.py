@@ -9,6 +9,7 @@ import numpy as np
 import xarray as xr
 from jaxtyping import ArrayLike
 
+from ._initial import AbstractInitialCondition, OutOfPhaseExcitation
 from ._options import SimulationOptions
 from ._params import ChainParams
 from ._simulate import STATUS, Observables
@@ -25,41 +26,42 @@ def _package_version() -> str:
 
 
 def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
-               solver: diffrax.AbstractSolver, options: SimulationOptions, *,
-               n_excited: ArrayLike | None = None, ics: str = "") -> xr.Dataset:
-    """Turn the output of `ensemble` into a self-describing `xarray.Dataset`.
+               ics: AbstractInitialCondition, solver: diffrax.AbstractSolver,
+               options: SimulationOptions) -> xr.Dataset:
+    """Turn batched `Observables` into a self-describing `xarray.Dataset`.
 
     **Arguments:**
 
     - `obs`: `Observables` with leading axes (n_vd, n_ic).
-    - `params`, `solver`, `options`: what produced `obs`; stored as attributes.
-    - `v_d`: the belt speeds, shape (n_vd,).
-    - `n_excited`: optional number of excited oscillators of each initial
-        condition, shape (n_ic,), stored as a coordinate along `ic`.
-    - `ics`: optional name of the initial-condition family (e.g. "eq8").
+    - `params`, `v_d`, `ics`, `solver`, `options`: what produced `obs`.
 
     **Returns:**
 
-    A Dataset with dims (v_d, ic, osc); `osc` counts 1..N as in the paper. Data
-    variables: amplitudes, on_halc, x_max, x_min, v_max (v_d, ic, osc); energy,
-    n_halc, num_steps, status (v_d, ic). Attributes: every field of `params` (but
-    v_d), of `options`, the solver, the meaning of the status codes, the jaxchain
-    version and the paper.
+    A Dataset with dims (v_d, ic, osc) and `component` (x, v); `osc` counts 1..N
+    as in the paper. Data variables: amplitudes, on_halc, x_max, x_min, v_max
+    (v_d, ic, osc); y_initial, y_final (v_d, ic, component, osc); energy, n_halc,
+    num_steps, status (v_d, ic). When the initial conditions excite oscillators
+    (`OutOfPhaseExcitation`), `n_excited` is a coordinate along `ic`. Attributes:
+    every field of `params` (but v_d), of `options`, the solver, the type of
+    initial condition, the meaning of the status codes, the jaxchain version and
+    the paper.
     """
     per_osc = ("v_d", "ic", "osc")
     per_run = ("v_d", "ic")
-    data = {
-        name: (per_osc, np.asarray(getattr(obs, name)))
-        for name in ("amplitudes", "on_halc", "x_max", "x_min", "v_max")
-    } | {
-        name: (per_run, np.asarray(getattr(obs, name)))
-        for name in ("energy", "n_halc", "num_steps", "status")
-    }
+    states = ("v_d", "ic", "component", "osc")
+    data = {name: (per_osc, np.asarray(getattr(obs, name)))
+            for name in ("amplitudes", "on_halc", "x_max", "x_min", "v_max")}
+    data |= {name: (per_run, np.asarray(getattr(obs, name)))
+             for name in ("energy", "n_halc", "num_steps", "status")}
+    data |= {name: (states, np.asarray(getattr(obs, name)))
+             for name in ("y_initial", "y_final")}
     n_vd, n_ic, n_osc = data["amplitudes"][1].shape
     coords = {"v_d": np.asarray(v_d, dtype=float).reshape(n_vd),
-              "ic": np.arange(n_ic), "osc": np.arange(1, n_osc + 1)}
-    if n_excited is not None:
-        coords["n_excited"] = ("ic", np.asarray(n_excited))
+              "ic": np.arange(n_ic), "osc": np.arange(1, n_osc + 1),
+              "component": ["x", "v"]}
+    if isinstance(ics, OutOfPhaseExcitation):
+        excited = np.broadcast_to(np.asarray(ics.excited), (n_ic, n_osc))
+        coords["n_excited"] = ("ic", excited.sum(-1))
     ds = xr.Dataset(data, coords=coords)
     ds["amplitudes"].attrs["long_name"] = "half of peak-to-peak of x_n after the transient"
     ds["energy"].attrs["long_name"] = "E = 1/2 sum A_n^2, eq. (9)"
@@ -69,7 +71,7 @@ def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
     attrs = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
              if f.name != "v_d"}
     attrs |= {f.name: getattr(options, f.name) for f in dataclasses.fields(options)}
-    attrs |= {"solver": type(solver).__name__, "ics": ics,
+    attrs |= {"solver": type(solver).__name__, "ics": type(ics).__name__,
               "jaxchain_version": _package_version(), "paper": PAPER,
               "units": "dimensionless, eqs. (4)-(6) of the paper"}
     ds.attrs = {k: (float(v) if not isinstance(v, (str, int)) else v)

@@ -36,7 +36,7 @@ class Observables(eqx.Module):
         sticks: its largest velocity reaches the belt speed), shape (n_osc,).
     - `n_halc`: number of oscillators on the HALC, shape ().
     - `x_max`, `x_min`, `v_max`: extrema of x_n and x_n', shape (n_osc,).
-    - `y_final`: state at t_end, shape (2, n_osc).
+    - `y_initial`, `y_final`: state at t = 0 and at t_end, shape (2, n_osc).
     - `num_steps`: accepted plus rejected steps of the whole run, shape ().
     - `status`: index into `STATUS` (0 is success), shape ().
 
@@ -50,6 +50,7 @@ class Observables(eqx.Module):
     x_max: Float[Array, "*batch n_osc"]
     x_min: Float[Array, "*batch n_osc"]
     v_max: Float[Array, "*batch n_osc"]
+    y_initial: Float[Array, "*batch 2 n_osc"]
     y_final: Float[Array, "*batch 2 n_osc"]
     num_steps: Int[Array, "*batch"]
     status: Int[Array, "*batch"]
@@ -132,7 +133,7 @@ def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
     return Observables(
         amplitudes=amplitudes, energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc,
         n_halc=jnp.sum(on_halc), x_max=x_max, x_min=x_min, v_max=v_max,
-        y_final=y_final, num_steps=steps, status=status,
+        y_initial=y0, y_final=y_final, num_steps=steps, status=status,
     )
 
 

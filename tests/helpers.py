@@ -1,6 +1,5 @@
-"""Small shared systems and comparisons for the tests."""
+"""Small shared systems and references for the tests."""
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -8,21 +7,6 @@ import jaxchain as jc
 
 #: A short horizon that still reaches the stick-slip cycle of one oscillator.
 SHORT = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=100.0)
-
-
-def tree_allclose(a, b, *, rtol=1e-7, atol=0.0) -> bool:
-    """Whether two pytrees have the same structure and close leaves."""
-    la, ta = jax.tree_util.tree_flatten(a)
-    lb, tb = jax.tree_util.tree_flatten(b)
-    return ta == tb and all(
-        np.allclose(np.asarray(x), np.asarray(y), rtol=rtol, atol=atol)
-        for x, y in zip(la, lb)
-    )
-
-
-def tree_index(tree, idx):
-    """One lane of a batched pytree."""
-    return jax.tree_util.tree_map(lambda x: x[idx], tree)
 
 
 def reference_rhs(params: jc.ChainParams):

@@ -12,9 +12,9 @@ def test_fig4_staircase_at_vd_1_5():
     after 10000. The paper finds k oscillators on the HALC for every k (its
     Fig. 4), each contributing about 1.2 to E (Fig. 3(b)). We require it for
     k <= 18; for k = 19 the two unexcited oscillators may be pulled onto the HALC."""
-    obs = jc.ensemble(jc.ChainParams(), [1.5], jc.localized_family(20), progress=False)
-    n_halc, energy = np.asarray(obs.n_halc[0]), np.asarray(obs.energy[0])
-    assert np.all(np.asarray(obs.status) == 0)
+    ds = jc.ensemble(jc.ChainParams(), [1.5], jc.localized_family(20), progress=False)
+    n_halc, energy = ds["n_halc"].values[0], ds["energy"].values[0]
+    assert np.all(ds["status"].values == 0)
     assert n_halc[:18].tolist() == list(range(1, 19))
     assert np.all((energy / n_halc > 1.1) & (energy / n_halc < 1.3))
     order = np.argsort(n_halc, kind="stable")

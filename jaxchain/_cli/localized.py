@@ -12,7 +12,7 @@ from .._initial import FAMILIES, localized_family
 from .._options import SimulationOptions
 from .._params import ChainParams
 from .._plots.localized import plot_localized_states
-from .._results import save_dataset, to_dataset
+from .._results import save_dataset
 from .._simulate import STATUS
 from .common import (SOLVERS, add_model_options, add_output_options, add_run_options,
                      show_progress)
@@ -54,12 +54,10 @@ def run(args) -> int:
     n_excited = np.arange(1, args.n_osc + 1)
 
     start = time.perf_counter()
-    obs = ensemble(params, [args.vd], ics, solver, options,
-                   progress=show_progress(args))
+    ds = ensemble(params, [args.vd], ics, solver, options, progress=show_progress(args))
     wall = time.perf_counter() - start
 
-    ds = to_dataset(obs, params, [args.vd], solver, options, n_excited=n_excited,
-                    ics=args.ics)
+    ds.attrs["ics_family"] = args.ics
     ds.attrs["wall_time_s"] = wall
     stem = f"localized_vd{args.vd:g}"
     nc = save_dataset(ds, args.out / f"{stem}.nc")
