@@ -4,4 +4,3 @@ from jaxtyping import Array, Float
 
 #: State of one chain: row 0 holds the displacements x_n, row 1 the velocities x_n'.
 State = Float[Array, "2 n_osc"]
-Scalar = Float[Array, ""]

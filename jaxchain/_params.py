@@ -2,11 +2,8 @@
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
-
-from ._custom_types import Scalar
 
 
 def _concrete(value) -> np.ndarray | None:
@@ -94,11 +91,3 @@ class ChainParams(eqx.Module):
             raise ValueError(
                 f"ChainParams.mu_st must be >= mu_d = {self.mu_d!r}, got {self.mu_st!r}"
             )
-
-    @property
-    def hopf_vd(self) -> Scalar:
-        """Analytic Hopf belt speed of steady sliding for the non-smooth law,
-        v0 * ln((mu_st - mu_d) / (2 xi v0)), from linearising eq. (5) (see
-        `shared/DESIGN.md`). It is the same for every Fourier mode of the ring.
-        Dimensionless, shape ()."""
-        return self.v0 * jnp.log((self.mu_st - self.mu_d) / (2 * self.xi * self.v0))

@@ -1,6 +1,5 @@
 import math
 
-import numpy as np
 import pytest
 
 import jaxchain as jc
@@ -11,11 +10,6 @@ def test_defaults_are_eq7_with_paper_chain():
     assert (p.n_osc, p.xi, p.mu_d, p.mu_st, p.v0, p.eta_c, p.v_d) == (
         20, 0.05, 0.5, 1.0, 0.5, 0.01, 1.5)
     assert p.mu_st / p.mu_d == 2
-
-
-def test_analytic_hopf_speed():
-    # v0 ln((mu_st - mu_d)/(2 xi v0)) = 0.5 ln 10 for eq. (7)
-    assert np.isclose(float(jc.ChainParams().hopf_vd), 0.5 * math.log(10), rtol=1e-14)
 
 
 @pytest.mark.parametrize("field, value", [
