@@ -58,11 +58,12 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
 
     **Raises:**
 
-    `ValueError` for non-finite belt speeds or initial conditions of the wrong shape.
+    `ValueError` for belt speeds that are not finite and > 0, or initial conditions
+    of the wrong shape.
     """
     v_d = jnp.atleast_1d(jnp.asarray(v_d, dtype=float))
-    if v_d.ndim != 1 or not bool(jnp.all(jnp.isfinite(v_d))):
-        raise ValueError(f"v_d must be a 1-d array of finite belt speeds, got {v_d}")
+    if v_d.ndim != 1 or not bool(jnp.all(jnp.isfinite(v_d) & (v_d > 0))):
+        raise ValueError(f"v_d must be a 1-d array of finite belt speeds > 0, got {v_d}")
     leaves = [x for x in jax.tree_util.tree_leaves(ics) if eqx.is_array(x)]
     if not leaves:
         raise ValueError("ics must carry a leading batch axis on its array fields")

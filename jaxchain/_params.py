@@ -31,7 +31,8 @@ class ChainParams(eqx.Module):
     - `mu_st`: static friction coefficient mu(0) (>= mu_d).
     - `v0`: reference velocity of the exponential decay in eq. (1) (> 0).
     - `eta_c`: nearest-neighbour coupling stiffness k_c/k (>= 0).
-    - `v_d`: belt speed (finite).
+    - `v_d`: belt speed (> 0; a belt moving the other way is the mirror image
+        x -> -x).
     - `eps`: velocity scale of the tanh smoothing of sign(v_rel) (> 0).
 
     The defaults are eq. (7) of the paper (xi = 0.05, mu_d = 0.5, mu_st/mu_d = 2,
@@ -42,8 +43,8 @@ class ChainParams(eqx.Module):
     see the README, "Choice of eps"). Against eps = 1e-3, the HALC amplitudes differ
     by a median 0.4 % at eps = 3e-3 and 1.5 % at eps = 1e-2, while the step count
     grows as the stick phase stiffens (stiffness about mu_st/eps): 1.0x, 2.5x and
-    5.5x for eps = 1e-2, 3e-3, 1e-3. 3e-3 is the smallest eps whose full scene runs
-    within two minutes on 2 CPU cores.
+    5.5x for eps = 1e-2, 3e-3, 1e-3. 3e-3 is the smallest of these whose full scene
+    runs well within 3 minutes on 2 CPU cores (about 100 s).
 
     Fields other than `n_osc` may be JAX arrays (for example under `jax.vmap`); only
     concrete values are validated.
@@ -51,7 +52,7 @@ class ChainParams(eqx.Module):
     **Raises:**
 
     `ValueError` naming the field for a non-finite value, n_osc < 1, xi < 0,
-    mu_d <= 0, mu_st < mu_d, v0 <= 0, eta_c < 0 or eps <= 0.
+    mu_d <= 0, mu_st < mu_d, v0 <= 0, eta_c < 0, v_d <= 0 or eps <= 0.
     """
 
     n_osc: int = eqx.field(static=True, default=20)
@@ -74,7 +75,7 @@ class ChainParams(eqx.Module):
             "mu_st": (lambda a: True, ""),
             "v0": (lambda a: a > 0, "> 0"),
             "eta_c": (lambda a: a >= 0, ">= 0"),
-            "v_d": (lambda a: True, ""),
+            "v_d": (lambda a: a > 0, "> 0"),
             "eps": (lambda a: a > 0, "> 0"),
         }
         for name, (ok, requirement) in rules.items():

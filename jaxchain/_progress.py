@@ -1,7 +1,8 @@
 """A tqdm progress bar fed from inside compiled code, one tick per integrated chunk.
 
-The compiled function always calls `tick` (a cheap host callback); whether a bar is
-shown is decided on the host, so showing it or not never recompiles."""
+Runs compiled with `progress=True` call `tick` (a host callback) after each chunk.
+Such programs are compiled apart from those without a bar, and JAX's persistent
+compilation cache does not keep them."""
 
 import contextlib
 

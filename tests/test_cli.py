@@ -11,8 +11,8 @@ from jaxchain._cli.main import main
 
 SMALL = ["--n-osc", "3", "--t-end", "400", "--transient", "200"]
 #: The installed console script: beside this interpreter (a venv) or on PATH.
-SCRIPT = next(p for p in (Path(sys.executable).parent / "jaxchain",
-                          shutil.which("jaxchain")) if p and Path(p).exists())
+SCRIPT = next((p for p in (Path(sys.executable).parent / "jaxchain",
+                           shutil.which("jaxchain")) if p and Path(p).exists()), None)
 
 
 @pytest.mark.parametrize("argv, says", [
@@ -29,6 +29,8 @@ SCRIPT = next(p for p in (Path(sys.executable).parent / "jaxchain",
     (["--ics", "eq9"], "--ics"),
     (["--rtol", "0"], "--rtol"),
     (["--max-steps", "0"], "--max-steps"),
+    (["--vd", "-1.5"], "--vd"),
+    (["--out", __file__], "--out"),
     (["--bogus"], "--bogus"),
 ])
 def test_bad_option_exits_2_with_one_line(argv, says, capsys):
@@ -37,6 +39,13 @@ def test_bad_option_exits_2_with_one_line(argv, says, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and says in err and "error" in err
+
+
+def test_no_command_exits_2_with_one_line(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([])
+    assert exc.value.code == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
 
 def test_localized_json_and_files(tmp_path, capsys):
@@ -55,6 +64,16 @@ def test_localized_json_and_files(tmp_path, capsys):
     assert (out / "localized_vd1.5.png").stat().st_size > 1000
 
 
+def test_failed_runs_give_valid_json_with_nulls_and_exit_1(tmp_path, capsys):
+    argv = ["localized", "--n-osc", "2", "--t-end", "300", "--transient", "200",
+            "--max-steps", "5", "--json", "--out", str(tmp_path)]
+    assert main(argv) == 1
+    res = json.loads(capsys.readouterr().out)  # strict JSON: NaN would not parse here
+    assert res["status"][0].startswith("max_steps")
+    assert res["energy"] == [None, None] and res["n_halc"] == [-1, -1]
+
+
+@pytest.mark.skipif(SCRIPT is None, reason="the jaxchain console script is not installed")
 def test_installed_command_table_and_usage_error(tmp_path):
     """The console script as a user runs it, in a fresh process."""
     run = subprocess.run([SCRIPT, "localized", *SMALL, "--out", str(tmp_path)],

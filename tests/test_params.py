@@ -16,7 +16,7 @@ def test_defaults_are_eq7_with_paper_chain():
     ("n_osc", 0), ("n_osc", 2.5), ("xi", -0.1), ("mu_d", 0.0), ("mu_d", -1.0),
     ("mu_st", 0.4), ("v0", 0.0), ("eta_c", -0.01), ("eps", 0.0), ("eps", -1e-3),
     ("xi", math.nan), ("v_d", math.inf), ("eta_c", math.nan), ("mu_st", math.inf),
-    ("v0", -math.inf),
+    ("v0", -math.inf), ("v_d", 0.0), ("v_d", -1.5),
 ])
 def test_invalid_parameter_raises_value_error_naming_field(field, value):
     with pytest.raises(ValueError, match=f"ChainParams.{field}"):

@@ -2,8 +2,10 @@
 line, the solver table and the compilation cache."""
 
 import argparse
+import math
 import os
 import sys
+import tempfile
 from pathlib import Path
 
 import diffrax
@@ -106,6 +108,31 @@ def usage_message(err: ValueError) -> str:
     for field, option in OPTION_NAMES.items():
         text = text.replace(field, option)
     return text
+
+
+def writable_folder(path: Path) -> None:
+    """Create the output folder now, before any computation.
+
+    **Raises:**
+
+    `UsageError` naming --out if it cannot be created or written."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as err:
+        raise UsageError(f"--out {path}: cannot write there ({err.strerror})") from None
+
+
+def json_ready(obj):
+    """Replace non-finite floats (failed runs) by None, so that the output is JSON."""
+    if isinstance(obj, dict):
+        return {k: json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
 
 
 def enable_compilation_cache() -> None:

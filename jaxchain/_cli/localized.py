@@ -14,8 +14,9 @@ from .._params import ChainParams
 from .._plots.localized import plot_localized_states
 from .._results import save_dataset
 from .._simulate import STATUS
-from .common import (SOLVERS, add_model_options, add_output_options, add_run_options,
-                     show_progress)
+from .common import (SOLVERS, UsageError, add_model_options, add_output_options,
+                     add_run_options, json_ready, show_progress, usage_message,
+                     writable_folder)
 
 HELP = "localized states at one belt speed, N initial conditions (Fig. 4)"
 DESCRIPTION = """\
@@ -24,7 +25,7 @@ conditions with 1, 2, ..., N oscillators excited (eq. (8) by default, or eq. (10
 integrated to --t-end; amplitudes, the energy E of eq. (9) and the number of
 oscillators on the high-amplitude limit cycle (n_HALC) are taken after --transient.
 With no options this is the paper's scene: N = 20, v_d = 1.5, t_end = 15000,
-transient = 10000 (about a minute on 2 CPU cores, compilation included).
+transient = 10000 (about 100 s on 2 CPU cores, compilation included).
 
 Writes <out>/localized_vd<V>.nc (xarray Dataset with all parameters as attributes)
 and <out>/localized_vd<V>.png (circles of radius proportional to amplitude)."""
@@ -45,10 +46,14 @@ def add_parser(sub):
 
 
 def run(args) -> int:
-    params = ChainParams(n_osc=args.n_osc, v_d=args.vd, eps=args.eps)
-    options = SimulationOptions(t_end=args.t_end, transient=args.transient,
-                                rtol=args.rtol, atol=args.atol,
-                                max_steps=args.max_steps)
+    try:
+        params = ChainParams(n_osc=args.n_osc, v_d=args.vd, eps=args.eps)
+        options = SimulationOptions(t_end=args.t_end, transient=args.transient,
+                                    rtol=args.rtol, atol=args.atol,
+                                    max_steps=args.max_steps)
+    except ValueError as err:
+        raise UsageError(usage_message(err)) from None
+    writable_folder(args.out)
     solver = SOLVERS[args.solver]()
     ics = localized_family(args.n_osc, args.ics)
     n_excited = np.arange(1, args.n_osc + 1)
@@ -67,7 +72,7 @@ def run(args) -> int:
     row = ds.isel(v_d=0)
     status = [STATUS[int(s)].split(":")[0] for s in row["status"].values]
     if args.json:
-        print(json.dumps({
+        print(json.dumps(json_ready({
             "v_d": args.vd,
             "n_excited": n_excited.tolist(),
             "n_halc": row["n_halc"].values.tolist(),
@@ -81,14 +86,14 @@ def run(args) -> int:
             "ics": args.ics,
             "dataset": str(nc),
             "figure": str(png),
-        }))
+        }), allow_nan=False))
     else:
         print(f"v_d = {args.vd:g}, N = {args.n_osc}, eps = {args.eps:g}, "
               f"{args.solver}, ics = {args.ics}")
         print(f"{'n_excited':>9} {'n_HALC':>6} {'E':>9} {'E/n_HALC':>8}  status")
         for k, nh, e, s in zip(n_excited, row["n_halc"].values, row["energy"].values,
                                status):
-            ratio = f"{e / nh:8.3f}" if nh else f"{'-':>8}"
+            ratio = f"{e / nh:8.3f}" if nh > 0 else f"{'-':>8}"
             print(f"{k:9d} {int(nh):6d} {e:9.3f} {ratio}  {s}")
         print(f"wall time {wall:.1f} s (compilation included); wrote {nc} and {png}")
     return 0 if all(s == "ok" for s in status) else 1

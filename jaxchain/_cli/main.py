@@ -3,7 +3,7 @@
 import sys
 
 from . import localized
-from .common import Parser, UsageError, enable_compilation_cache, usage_message
+from .common import Parser, UsageError, enable_compilation_cache
 
 COMMANDS = (localized,)
 
@@ -27,13 +27,12 @@ def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
-        parser.print_help()
-        return 2
+        parser.error("a COMMAND is required (see jaxchain --help)")
     enable_compilation_cache()
     try:
         return args.run(args)
-    except (ValueError, UsageError) as err:
-        print(f"jaxchain {args.command}: error: {usage_message(err)}", file=sys.stderr)
+    except UsageError as err:
+        print(f"jaxchain {args.command}: error: {err}", file=sys.stderr)
         return 2
 
 
