@@ -40,11 +40,12 @@ class ChainParams(eqx.Module):
 
     The default `eps = 3e-3` is chosen by measurement on the Fig. 4 scene (N = 20,
     v_d = 1.5, 20 initial conditions by eq. (8), t_end = 15000, Tsit5 at rtol 1e-6;
-    see the README, "Choice of eps"). Against eps = 1e-3, the HALC amplitudes differ
-    by a median 0.4 % at eps = 3e-3 and 1.5 % at eps = 1e-2, while the step count
-    grows as the stick phase stiffens (stiffness about mu_st/eps): 1.0x, 2.5x and
-    5.5x for eps = 1e-2, 3e-3, 1e-3. 3e-3 is the smallest of these whose full scene
-    runs well within 3 minutes on 2 CPU cores (about 100 s).
+    see the README, "Choice of eps"). Against eps = 3e-4, the HALC amplitudes differ
+    by a median 0.7 % at eps = 3e-3 and 1.7 % at eps = 1e-2; the single oscillator's
+    amplitude is 0.6 % below the non-smooth stick-slip cycle. The step count grows
+    as the stick phase stiffens (stiffness about mu_st/eps): 1x, 2x, 6x and 30x
+    for eps = 1e-2, 3e-3, 1e-3 and 3e-4. 3e-3 is the smallest of these whose full
+    scene runs well within 3 minutes on 2 CPU cores (about 100 s).
 
     Fields other than `n_osc` may be JAX arrays (for example under `jax.vmap`); only
     concrete values are validated.
