@@ -1,15 +1,13 @@
 """What every `jaxchain` command shares: option names, the parser that fails in one
-line, the solver table and the compilation cache."""
+line, and the solver table."""
 
 import argparse
 import math
-import os
 import sys
 import tempfile
 from pathlib import Path
 
 import diffrax
-import jax
 
 from .._params import ChainParams
 
@@ -133,19 +131,6 @@ def json_ready(obj):
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj
-
-
-def enable_compilation_cache() -> None:
-    """Keep compiled programs across runs in $JAXCHAIN_CACHE_DIR (default
-    ~/.cache/jaxchain/jax): a second run with the same shapes skips compilation."""
-    path = os.environ.get("JAXCHAIN_CACHE_DIR",
-                          str(Path.home() / ".cache" / "jaxchain" / "jax"))
-    try:
-        Path(path).mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return
-    jax.config.update("jax_compilation_cache_dir", path)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
 
 
 def show_progress(args) -> bool:

@@ -3,7 +3,7 @@
 import sys
 
 from . import localized
-from .common import Parser, UsageError, enable_compilation_cache
+from .common import Parser, UsageError
 
 COMMANDS = (localized,)
 
@@ -28,7 +28,6 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     if args.command is None:
         parser.error("a COMMAND is required (see jaxchain --help)")
-    enable_compilation_cache()
     try:
         return args.run(args)
     except UsageError as err:
