@@ -101,9 +101,8 @@ def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
 def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
         options: SimulationOptions, progress: bool = False) -> Observables:
     """Pure, traceable core of `simulate` for one trajectory: no checks, no
-    exceptions. `ensemble` vmaps it. With `progress`, each chunk ticks the active
-    progress bar through a host callback; such programs are left out of JAX's
-    persistent compilation cache, so it is off unless a bar is shown."""
+    exceptions. `ensemble` vmaps it. With `progress` (static), each chunk ticks the
+    active progress bar through a host callback."""
     n = params.n_osc
     big = jnp.full((n,), jnp.inf)
     status = jnp.where(jnp.all(jnp.isfinite(y0)), 0, 3)
