@@ -98,6 +98,16 @@ def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
             extrema, steps + sol.stats["num_steps"], status)
 
 
+def _spans(options: SimulationOptions) -> list[tuple[float, float, int, int]]:
+    """The phases of a run as (start, chunk length, number of chunks, samples per
+    chunk): the transient (not sampled), then the observed window."""
+    n_tr, len_tr = options.chunks(0.0, options.transient)
+    n_obs, len_obs = options.chunks(options.transient, options.t_end)
+    n_samples = int(np.ceil(len_obs / options.sample_dt)) + 1
+    spans = [(0.0, len_tr, n_tr, 0)] if options.transient > 0 else []
+    return spans + [(options.transient, len_obs, n_obs, n_samples)]
+
+
 def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
         options: SimulationOptions, progress: bool = False) -> Observables:
     """Pure, traceable core of `simulate` for one trajectory: no checks, no
@@ -107,13 +117,7 @@ def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
     big = jnp.full((n,), jnp.inf)
     status = jnp.where(jnp.all(jnp.isfinite(y0)), 0, 3)
     carry = (y0, None, None, None, (-big, big, -big), jnp.array(0), status)
-    n_tr, len_tr = options.chunks(0.0, options.transient)
-    n_obs, len_obs = options.chunks(options.transient, options.t_end)
-    n_samples = int(np.ceil(len_obs / options.sample_dt)) + 1
-    spans = [(0.0, len_tr, n_tr, 0)] if options.transient > 0 else []
-    spans.append((options.transient, len_obs, n_obs, n_samples))
-
-    for start, length, count, samples in spans:
+    for start, length, count, samples in _spans(options):
         # The first chunk runs outside the scan: it creates the solver and controller
         # states that the scan then carries from chunk to chunk.
         if carry[1] is None:
@@ -143,8 +147,7 @@ def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
 
 def n_ticks(options: SimulationOptions) -> int:
     """Number of progress ticks (chunks) of one trajectory."""
-    n_tr = options.chunks(0.0, options.transient)[0] if options.transient > 0 else 0
-    return n_tr + options.chunks(options.transient, options.t_end)[0]
+    return sum(count for _, _, count, _ in _spans(options))
 
 
 _run_jit = eqx.filter_jit(run)
