@@ -43,3 +43,24 @@ def smoothed_friction_force(params: ChainParams, v_rel: Float[ArrayLike, "*shape
     F, of the same shape as `v_rel`, dimensionless (F/P in eq. (6)).
     """
     return -friction_coefficient(params, v_rel) * jnp.tanh(v_rel / params.eps)
+
+
+def slip_friction_force(params: ChainParams, v_rel: Float[ArrayLike, "*shape"],
+                        direction: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
+    """Friction force in slip, F = -mu(|v_rel|) sign(v_rel), eq. (2) of the paper,
+    with sign(v_rel) given as the slip `direction` (+1 or -1) of the non-smooth
+    reference. Taking the sign from the slip mode, not from v_rel, keeps the force
+    smooth within a slip phase, up to and through the zero of v_rel where the phase
+    ends (the event is then located on a smooth function).
+
+    **Arguments:**
+
+    - `params`: the chain parameters (uses `mu_d`, `mu_st`, `v0`).
+    - `v_rel`: relative velocity x' - v_d, dimensionless.
+    - `direction`: slip direction, +1 or -1, broadcastable against `v_rel`.
+
+    **Returns:**
+
+    F, of the broadcast shape, dimensionless (F/P in eq. (6)).
+    """
+    return -friction_coefficient(params, v_rel) * direction

@@ -60,6 +60,29 @@ def steady_sliding(params: ChainParams) -> State:
     return jnp.stack([x, jnp.zeros_like(x)])
 
 
+def stick_force(params: ChainParams, x: Float[Array, " n_osc"]) -> Float[Array, " n_osc"]:
+    """Friction force that oscillator n needs to stick (x_n' = v_d, x_n'' = 0), from
+    eq. (5) of the paper:
+
+        f_n = 2 xi v_d + x_n + eta_c (2 x_n - x_{n+1} - x_{n-1}).
+
+    It depends on the displacements only (the coupling is elastic), so whether one
+    oscillator can stick never depends on what its neighbours do at the same instant.
+    Stick lasts while |f_n| < mu_st.
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `x`: displacements, shape (n_osc,), dimensionless.
+
+    **Returns:**
+
+    f, shape (n_osc,), dimensionless (in units of the normal load P).
+    """
+    coupling = 2 * x - jnp.roll(x, 1) - jnp.roll(x, -1)
+    return 2 * params.xi * params.v_d + x + params.eta_c * coupling
+
+
 def jacobian(params: ChainParams, y: State | None = None) -> Float[Array, "2n 2n"]:
     """Jacobian of the flattened vector field of eq. (5), by `jax.jacfwd`.
 

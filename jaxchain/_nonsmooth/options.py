@@ -1,0 +1,73 @@
+"""Options of a run of the non-smooth reference."""
+
+import math
+
+import equinox as eqx
+
+
+class NonsmoothOptions(eqx.Module):
+    """Horizon, tolerances and bookkeeping of `simulate_nonsmooth`.
+
+    All fields are static: changing one recompiles. Times are dimensionless, in units
+    of 1/omega_n (eq. (4) of the paper).
+
+    **Arguments:**
+
+    - `t_end`: final time (the paper's 15000).
+    - `transient`: the observables are taken over [transient, t_end] (the paper's
+        10000), split into two halves of equal length to tell periodic from
+        irregular states.
+    - `rtol`, `atol`: tolerances of the smooth phases (diffrax `PIDController`).
+        The defaults, 1e-12, make the reference about 1e-9 accurate.
+    - `root_tol`: absolute tolerance on event times of the optimistix Newton root
+        finder (bisection) on the dense output.
+    - `switch_tol`: at an event, every oscillator whose guard (relative velocity,
+        stick margin mu_st - |f| or velocity) lies within `switch_tol` of zero
+        switches at that instant. This is how simultaneous and near-simultaneous
+        switches are handled; see `simulate_nonsmooth`.
+    - `chunk_length`: the run advances in chunks of about this length (one
+        progress tick each); events split a chunk into smooth segments.
+    - `max_steps`: step budget of one smooth segment.
+    - `max_events`: event budget of one chunk; more means chattering.
+    - `log_size`: the event log keeps the last `log_size` switches.
+
+    **Raises:**
+
+    `ValueError` naming the field for t_end <= 0, transient outside [0, t_end), or
+    a tolerance, length or budget that is not a finite number > 0.
+    """
+
+    t_end: float = eqx.field(static=True, default=15000.0)
+    transient: float = eqx.field(static=True, default=10000.0)
+    rtol: float = eqx.field(static=True, default=1e-12)
+    atol: float = eqx.field(static=True, default=1e-12)
+    root_tol: float = eqx.field(static=True, default=1e-13)
+    switch_tol: float = eqx.field(static=True, default=1e-9)
+    chunk_length: float = eqx.field(static=True, default=250.0)
+    max_steps: int = eqx.field(static=True, default=100_000)
+    max_events: int = eqx.field(static=True, default=100_000)
+    log_size: int = eqx.field(static=True, default=1024)
+
+    def __check_init__(self):
+        for name in ("t_end", "rtol", "atol", "root_tol", "switch_tol", "chunk_length",
+                     "max_steps", "max_events", "log_size"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"NonsmoothOptions.{name} must be a finite number > 0, "
+                                 f"got {value!r}")
+        if not (math.isfinite(self.transient) and 0 <= self.transient < self.t_end):
+            raise ValueError(f"NonsmoothOptions.transient must lie in [0, t_end = "
+                             f"{self.t_end}), got {self.transient!r}")
+
+    def phases(self) -> list[tuple[float, float, int, int]]:
+        """The phases of a run as (start, chunk length, number of chunks, half): the
+        transient (half -1, not observed), then the two halves 0 and 1 of the
+        observed window."""
+        mid = 0.5 * (self.transient + self.t_end)
+        bounds = [(0.0, self.transient, -1), (self.transient, mid, 0), (mid, self.t_end, 1)]
+        out = []
+        for t0, t1, half in bounds:
+            if t1 > t0:
+                n = max(1, math.ceil((t1 - t0) / self.chunk_length - 1e-9))
+                out.append((t0, (t1 - t0) / n, n, half))
+        return out

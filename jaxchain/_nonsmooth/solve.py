@@ -1,0 +1,277 @@
+"""The event-driven run of the non-smooth reference, observing while integrating."""
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Bool, Float, Int
+
+from .._custom_types import State
+from .._initial import AbstractInitialCondition, GivenState
+from .._params import ChainParams
+from .._progress import progress_bar, tick
+from .._simulate import STATUS
+from .options import NonsmoothOptions
+from .switching import guard, initial_modes, mode_field, switch, turning_directions
+
+#: Status codes of a reference run: those of `simulate`, and one more.
+NONSMOOTH_STATUS = STATUS + (
+    "event not resolved: max_events reached in one chunk (chattering), or an event "
+    "located where no guard is within switch_tol; raise max_events or switch_tol",
+)
+
+
+class NonsmoothObservables(eqx.Module):
+    """What one run of the non-smooth reference observes over [transient, t_end].
+    Batched runs give every field the leading batch axes.
+
+    **Fields:**
+
+    - `amplitudes`: half of peak-to-peak of each x_n, shape (n_osc,). Extrema are
+        taken at turning points located as events, so they are exact to the
+        integration tolerance, with no sampling error.
+    - `energy`: E = 1/2 sum_n A_n^2, eq. (9) of the paper, shape ().
+    - `on_halc`: whether each oscillator sticks during the window, shape (n_osc,).
+    - `n_halc`: number of oscillators on the HALC, shape ().
+    - `stick_fraction`: fraction of the window each oscillator spends in stick,
+        shape (n_osc,).
+    - `x_max`, `x_min`: extrema of x_n over each half of the window, shape
+        (2, n_osc).
+    - `half_difference`: largest difference between the two halves' extrema, over
+        the oscillators, relative to max(1, max amplitude), shape (). It is at the
+        integration tolerance for a periodic state.
+    - `y_initial`, `y_final`: state at t = 0 and at t_end, shape (2, n_osc).
+    - `modes_final`: modes at t_end (+1/-1 slip, 0 stick), shape (n_osc,).
+    - `friction_work`, `viscous_dissipation`: int sum_n F_n x_n' dt and
+        int sum_n 2 xi x_n'^2 dt over [0, t_end], shape (). Their difference equals
+        the change of `mechanical_energy` (the energy balance).
+    - `log_time`, `log_osc`, `log_kind`: the last `log_size` switches (time,
+        oscillator index from 0, index into `KINDS`), oldest first, shape
+        (log_size,); unused entries have time NaN and oscillator and kind -1.
+    - `num_events`, `num_steps`: segments ended by an event and integration steps
+        of the whole run, shape ().
+    - `status`: index into `NONSMOOTH_STATUS` (0 is success), shape ().
+
+    A failed run gives NaN observables and `n_halc` = -1. All quantities are
+    dimensionless (eqs. (4)-(6)).
+    """
+
+    amplitudes: Float[Array, "*batch n_osc"]
+    energy: Float[Array, "*batch"]
+    on_halc: Bool[Array, "*batch n_osc"]
+    n_halc: Int[Array, "*batch"]
+    stick_fraction: Float[Array, "*batch n_osc"]
+    x_max: Float[Array, "*batch 2 n_osc"]
+    x_min: Float[Array, "*batch 2 n_osc"]
+    half_difference: Float[Array, "*batch"]
+    y_initial: Float[Array, "*batch 2 n_osc"]
+    y_final: Float[Array, "*batch 2 n_osc"]
+    modes_final: Float[Array, "*batch n_osc"]
+    friction_work: Float[Array, "*batch"]
+    viscous_dissipation: Float[Array, "*batch"]
+    log_time: Float[Array, "*batch log"]
+    log_osc: Int[Array, "*batch log"]
+    log_kind: Int[Array, "*batch log"]
+    num_events: Int[Array, "*batch"]
+    num_steps: Int[Array, "*batch"]
+    status: Int[Array, "*batch"]
+
+
+class _Carry(eqx.Module):
+    t: Float[Array, ""]
+    y: State
+    work: Float[Array, "2"]
+    modes: Float[Array, " n_osc"]
+    x_max: Float[Array, "2 n_osc"]
+    x_min: Float[Array, "2 n_osc"]
+    stick_time: Float[Array, " n_osc"]
+    log_time: Float[Array, " log"]
+    log_osc: Int[Array, " log"]
+    log_kind: Int[Array, " log"]
+    log_count: Int[Array, ""]
+    events: Int[Array, ""]
+    chunk_events: Int[Array, ""]
+    steps: Int[Array, ""]
+    status: Int[Array, ""]
+
+
+def _segment(params, options, observe, half, t_stop, c: _Carry) -> _Carry:
+    """Integrate from c.t with fixed modes until the first event or t_stop, then
+    apply the switching rule."""
+    sigma = turning_directions(params, c.y, c.modes, options.switch_tol)
+    args = (params, c.modes, sigma, observe, options.switch_tol)
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(mode_field), diffrax.Dopri8(), 0.0, t_stop - c.t, None,
+        (c.y, c.work), args, saveat=diffrax.SaveAt(t1=True),
+        stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
+        event=diffrax.Event(guard, optx.Bisection(rtol=0.0, atol=options.root_tol),
+                            direction=False),
+        max_steps=options.max_steps, throw=False,
+    )
+    tau = sol.ts[-1]
+    y, work = sol.ys[0][-1], sol.ys[1][-1]
+    event = sol.event_mask
+    ok = diffrax.is_okay(sol.result)
+    code = jnp.where(sol.result == diffrax.RESULTS.max_steps_reached, 1, 2)
+    code = jnp.where(ok, jnp.where(jnp.all(jnp.isfinite(y)), 0, 3), code)
+
+    stick_time = c.stick_time + jnp.where(observe & (c.modes == 0), tau, 0.0)
+    y_new, modes, kind, turned, resolved = switch(params, y, c.modes, sigma, observe,
+                                                  options.switch_tol)
+    # An event that no guard accounts for would repeat forever: stop the run.
+    code = jnp.where((code == 0) & event & ~resolved, 4, code)
+    modes = jnp.where(event, modes, c.modes)
+    y = jnp.where(event, y_new, y)
+    turned = event & turned & observe
+    h = jnp.maximum(half, 0)
+    x = y[0]
+    x_max = c.x_max.at[h].set(jnp.where(turned & (sigma > 0), jnp.maximum(c.x_max[h], x),
+                                        c.x_max[h]))
+    x_min = c.x_min.at[h].set(jnp.where(turned & (sigma < 0), jnp.minimum(c.x_min[h], x),
+                                        c.x_min[h]))
+    # Event log: a ring buffer; the switching oscillators are appended in index order.
+    t_new = jnp.where(event, c.t + tau, t_stop)
+    logged = event & (kind >= 0)
+    size = options.log_size
+    slot = jnp.where(logged, (c.log_count + jnp.cumsum(logged) - 1) % size, size)
+    return _Carry(
+        t=t_new, y=y, work=work, modes=modes, x_max=x_max, x_min=x_min,
+        stick_time=stick_time,
+        log_time=c.log_time.at[slot].set(t_new, mode="drop"),
+        log_osc=c.log_osc.at[slot].set(jnp.arange(params.n_osc), mode="drop"),
+        log_kind=c.log_kind.at[slot].set(kind, mode="drop"),
+        log_count=c.log_count + jnp.sum(logged), events=c.events + event,
+        chunk_events=c.chunk_events + event, steps=c.steps + sol.stats["num_steps"],
+        status=jnp.where(c.status == 0, code, c.status),
+    )
+
+
+def _observe_point(c: _Carry, half: int) -> _Carry:
+    """Include the current x in the extrema of `half` (window edges count)."""
+    if half < 0:
+        return c
+    x = c.y[0]
+    return eqx.tree_at(lambda d: (d.x_max, d.x_min), c,
+                       (c.x_max.at[half].max(x), c.x_min.at[half].min(x)))
+
+
+def _chunk(params, options, progress, half, c: _Carry, t_stop) -> _Carry:
+    """Advance to t_stop through as many event-separated segments as it takes."""
+    observe = half >= 0
+    c = eqx.tree_at(lambda d: d.chunk_events, c, jnp.array(0))
+
+    def cond(d):
+        return (d.t < t_stop) & (d.status == 0) & (d.chunk_events < options.max_events)
+
+    c = jax.lax.while_loop(cond, lambda d: _segment(params, options, observe, half,
+                                                    t_stop, d), c)
+    status = jnp.where((c.status == 0) & (c.t < t_stop), 4, c.status)
+    c = _observe_point(eqx.tree_at(lambda d: d.status, c, status), half)
+    if progress:
+        tick(c.t)
+    return c
+
+
+def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
+                  progress: bool = False) -> NonsmoothObservables:
+    """Pure, traceable core of `simulate_nonsmooth` for one trajectory: no checks,
+    no exceptions; vmap it for batches."""
+    n = params.n_osc
+    modes = initial_modes(params, y0)
+    y = y0
+    size = options.log_size
+    c = _Carry(
+        t=jnp.array(0.0), y=y, work=jnp.zeros(2), modes=modes,
+        x_max=jnp.full((2, n), -jnp.inf), x_min=jnp.full((2, n), jnp.inf),
+        stick_time=jnp.zeros(n), log_time=jnp.full(size, jnp.nan),
+        log_osc=jnp.full(size, -1), log_kind=jnp.full(size, -1), log_count=jnp.array(0),
+        events=jnp.array(0), chunk_events=jnp.array(0), steps=jnp.array(0),
+        status=jnp.where(jnp.all(jnp.isfinite(y0)), 0, 3),
+    )
+    for start, length, count, half in options.phases():
+        c = _observe_point(c, half)
+
+        def body(d, t_stop, half=half):
+            return _chunk(params, options, progress, half, d, t_stop), None
+
+        c, _ = jax.lax.scan(body, c, start + length * jnp.arange(1, count + 1))
+
+    ok = c.status == 0
+    x_max, x_min = (jnp.where(ok, e, jnp.nan) for e in (c.x_max, c.x_min))
+    amplitudes = 0.5 * (x_max.max(0) - x_min.min(0))
+    scale = jnp.maximum(1.0, jnp.max(amplitudes))
+    half_difference = jnp.maximum(jnp.max(jnp.abs(x_max[0] - x_max[1])),
+                                  jnp.max(jnp.abs(x_min[0] - x_min[1]))) / scale
+    window = options.t_end - options.transient
+    stick_fraction = jnp.where(ok, c.stick_time / window, jnp.nan)
+    on_halc = stick_fraction > 0
+    # Oldest first in the ring buffer of the log.
+    order = (c.log_count + jnp.arange(size)) % size
+    return NonsmoothObservables(
+        amplitudes=amplitudes, energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc,
+        n_halc=jnp.where(ok, jnp.sum(on_halc), -1), stick_fraction=stick_fraction,
+        x_max=x_max, x_min=x_min, half_difference=half_difference, y_initial=y0,
+        y_final=c.y, modes_final=c.modes, friction_work=c.work[0],
+        viscous_dissipation=c.work[1], log_time=c.log_time[order],
+        log_osc=c.log_osc[order], log_kind=c.log_kind[order], num_events=c.events,
+        num_steps=c.steps, status=c.status,
+    )
+
+
+def n_ticks_nonsmooth(options: NonsmoothOptions) -> int:
+    """Number of progress ticks (chunks) of one reference run."""
+    return sum(count for _, _, count, _ in options.phases())
+
+
+_run_jit = eqx.filter_jit(run_nonsmooth)
+
+
+def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State,
+                       options: NonsmoothOptions = NonsmoothOptions(), *,
+                       throw: bool = True, progress: bool = False
+                       ) -> NonsmoothObservables:
+    """Integrate eq. (5) of the paper with the non-smooth friction law of eqs.
+    (1)-(2), event-driven, and return the observables.
+
+    Each oscillator is in slip (eq. (5) with F = -mu(|v_rel|) sign(v_rel)) or in
+    stick (x_n' = v_d while the force it needs, `stick_force`, stays below mu_st in
+    magnitude). Stick ends when |f_n| reaches mu_st; slip ends when v_rel reaches
+    zero, and the oscillator then sticks if |f_n| < mu_st and otherwise reverses
+    slip direction. This is the switch model of Leine et al. (1998), Nonlinear
+    Dynamics 16, 41-54, without its stick band: stick is exact.
+
+    Every event (a switch, or a turning point of an oscillator while observing) is
+    located by an optimistix Newton root find on diffrax's dense output of the
+    smooth segment (`diffrax.Event`), with time measured from the segment start so
+    that event times keep full precision. Smooth segments use Dopri8 at
+    `options.rtol`. Several oscillators that switch at the same instant (within
+    `options.switch_tol` on their guards) switch together: the force needed to
+    stick depends on displacements only, so each decision is independent of the
+    others. Switches in quick succession are separate events.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (`eps` is not used: there is no smoothing).
+    - `y0`: an initial condition or a state of shape (2, n_osc).
+    - `options`: `NonsmoothOptions`.
+    - `throw`: raise on failure (default) or return the status.
+    - `progress`: show a tqdm bar, one tick per chunk.
+
+    **Returns:**
+
+    `NonsmoothObservables`, per-oscillator fields of shape (n_osc,).
+
+    **Raises:**
+
+    `ValueError` for a state of the wrong shape; `RuntimeError` with advice when the
+    run fails and `throw=True`.
+    """
+    if not isinstance(y0, AbstractInitialCondition):
+        y0 = GivenState(y0)
+    y = y0(params)
+    with progress_bar(n_ticks_nonsmooth(options), "non-smooth reference", progress):
+        obs = _run_jit(params, y, options, progress)
+    if throw and int(obs.status) != 0:
+        raise RuntimeError(NONSMOOTH_STATUS[int(obs.status)])
+    return obs
