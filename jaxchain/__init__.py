@@ -11,6 +11,7 @@ jax.config.update("jax_enable_x64", True)
 
 from ._ensemble import ensemble as ensemble  # noqa: E402
 from ._friction import friction_coefficient as friction_coefficient  # noqa: E402
+from ._friction import slip_friction_force as slip_friction_force  # noqa: E402
 from ._friction import smoothed_friction_force as smoothed_friction_force  # noqa: E402
 from ._initial import AbstractInitialCondition as AbstractInitialCondition  # noqa: E402
 from ._initial import GivenState as GivenState  # noqa: E402
@@ -18,6 +19,14 @@ from ._initial import OutOfPhaseExcitation as OutOfPhaseExcitation  # noqa: E402
 from ._initial import excited_block as excited_block  # noqa: E402
 from ._initial import localized_family as localized_family  # noqa: E402
 from ._model import jacobian as jacobian  # noqa: E402
+from ._model import mechanical_energy as mechanical_energy  # noqa: E402
+from ._model import stick_force as stick_force  # noqa: E402
+from ._nonsmooth.existence import stick_slip_existence_limit as stick_slip_existence_limit  # noqa: E402,E501
+from ._nonsmooth.options import NonsmoothOptions as NonsmoothOptions  # noqa: E402
+from ._nonsmooth.solve import NONSMOOTH_STATUS as NONSMOOTH_STATUS  # noqa: E402
+from ._nonsmooth.solve import NonsmoothObservables as NonsmoothObservables  # noqa: E402
+from ._nonsmooth.solve import simulate_nonsmooth as simulate_nonsmooth  # noqa: E402
+from ._nonsmooth.switching import SWITCH_KINDS as SWITCH_KINDS  # noqa: E402
 from ._model import steady_sliding as steady_sliding  # noqa: E402
 from ._model import vector_field as vector_field  # noqa: E402
 from ._options import SimulationOptions as SimulationOptions  # noqa: E402

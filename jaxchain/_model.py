@@ -83,6 +83,27 @@ def stick_force(params: ChainParams, x: Float[Array, " n_osc"]) -> Float[Array, 
     return 2 * params.xi * params.v_d + x + params.eta_c * coupling
 
 
+def mechanical_energy(params: ChainParams, y: State) -> Float[Array, ""]:
+    """Kinetic plus elastic energy of the ring,
+
+        1/2 sum_n (x_n'^2 + x_n^2 + eta_c (x_{n+1} - x_n)^2),
+
+    whose rate of change along eq. (5) is the power of friction minus the viscous
+    dissipation sum_n 2 xi x_n'^2 (the energy balance).
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `y`: state of shape (2, n_osc).
+
+    **Returns:**
+
+    The energy, shape (), dimensionless.
+    """
+    x, v = y
+    return 0.5 * jnp.sum(v**2 + x**2 + params.eta_c * (jnp.roll(x, -1) - x) ** 2)
+
+
 def jacobian(params: ChainParams, y: State | None = None) -> Float[Array, "2n 2n"]:
     """Jacobian of the flattened vector field of eq. (5), by `jax.jacfwd`.
 

@@ -2,6 +2,7 @@
 
 import jax.numpy as jnp
 import numpy as np
+from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 
@@ -31,3 +32,40 @@ def reference_rhs(params: jc.ChainParams):
 
 def flat(y) -> jnp.ndarray:
     return jnp.reshape(jnp.asarray(y), (-1,))
+
+
+def scipy_slip_arc(params: jc.ChainParams, t_max: float = 50.0):
+    """The single oscillator's slip arc from the stick exit point, x = mu_st -
+    2 xi v_d, x' = v_d, with scipy (DOP853, rtol 1e-12): x'' = -2 xi x' - x +
+    mu(v_d - x') while x' < v_d, ending when x' returns to v_d. Turning points
+    (x' = 0) are recorded as events."""
+    p = params
+
+    def slip(t, y):
+        mu = p.mu_d + (p.mu_st - p.mu_d) * np.exp(-(p.v_d - y[1]) / p.v0)
+        return [y[1], -2 * p.xi * y[1] - y[0] + mu]
+
+    def back_to_belt(t, y):
+        return y[1] - p.v_d
+    back_to_belt.terminal, back_to_belt.direction = True, 1
+
+    def turning(t, y):
+        return y[1]
+
+    return solve_ivp(slip, (0.0, t_max), [p.mu_st - 2 * p.xi * p.v_d, p.v_d],
+                     method="DOP853", rtol=1e-12, atol=1e-12,
+                     events=[back_to_belt, turning])
+
+
+def scipy_stick_slip_cycle(params: jc.ChainParams) -> tuple[float, float]:
+    """(amplitude, period) of the single oscillator's non-smooth stick-slip cycle,
+    independently of jaxchain: the scipy slip arc, then stick at x' = v_d from the
+    return point back to the exit point. The extrema lie at the arc's turning
+    points."""
+    arc = scipy_slip_arc(params)
+    assert arc.status == 1  # it returned to the belt speed: the cycle exists
+    x_turn = arc.y_events[1][:, 0]
+    x_exit, x_return = arc.y[0, 0], arc.y[0, -1]
+    amplitude = 0.5 * (max(x_turn.max(), x_exit) - min(x_turn.min(), x_return))
+    period = arc.t[-1] + (x_exit - x_return) / params.v_d
+    return amplitude, period

@@ -6,7 +6,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
-from helpers import SHORT, flat, reference_rhs
+from helpers import SHORT, flat, reference_rhs, scipy_stick_slip_cycle
 from jaxchain._simulate import run
 
 
@@ -75,34 +75,11 @@ def test_trajectory_matches_scipy_dop853():
     assert np.allclose(obs.amplitudes, 0.5 * (x.max(1) - x.min(1)), rtol=1e-3)
 
 
-def _nonsmooth_stick_slip_amplitude(p):
-    """Amplitude of the single oscillator's stick-slip cycle for the non-smooth law
-    (eq. (2)), with scipy: stick ends where the needed force 2 xi v_d + x reaches
-    mu_st, at x = mu_st - 2 xi v_d, x' = v_d; the slip arc, x'' = -2 xi x' - x +
-    mu(v_d - x'), runs until x' returns to v_d, then the oscillator sticks again
-    and moves with the belt back to the exit point. The extrema lie on the slip
-    arc (x' = 0 there)."""
-    def slip(t, y):
-        mu = p.mu_d + (p.mu_st - p.mu_d) * np.exp(-(p.v_d - y[1]) / p.v0)
-        return [y[1], -2 * p.xi * y[1] - y[0] + mu]
-
-    def back_to_belt(t, y):
-        return y[1] - p.v_d
-    back_to_belt.terminal, back_to_belt.direction = True, 1
-
-    exit_point = [p.mu_st - 2 * p.xi * p.v_d, p.v_d]
-    arc = solve_ivp(slip, (0.0, 50.0), exit_point, method="DOP853", rtol=1e-12,
-                    atol=1e-12, events=back_to_belt, dense_output=True)
-    assert arc.status == 1  # it sticks again: a stick-slip cycle exists
-    x = arc.sol(np.linspace(0.0, arc.t[-1], 200_001))[0]
-    return 0.5 * (x.max() - x.min())
-
-
 def test_single_oscillator_cycle_converges_to_nonsmooth_stick_slip_cycle():
     """The smoothed HALC of one oscillator at v_d = 1.5 sticks (n_HALC = 1) and its
     amplitude approaches the non-smooth stick-slip amplitude as eps -> 0: the error
     shrinks with eps and is below 1 % at the default eps."""
-    reference = _nonsmooth_stick_slip_amplitude(jc.ChainParams(n_osc=1))
+    reference = scipy_stick_slip_cycle(jc.ChainParams(n_osc=1))[0]
     errors = {}
     for eps in (1e-2, 3e-3):
         p = jc.ChainParams(n_osc=1, eps=eps)

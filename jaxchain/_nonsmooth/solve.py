@@ -45,9 +45,9 @@ class NonsmoothObservables(eqx.Module):
     - `modes_final`: modes at t_end (+1/-1 slip, 0 stick), shape (n_osc,).
     - `friction_work`, `viscous_dissipation`: int sum_n F_n x_n' dt and
         int sum_n 2 xi x_n'^2 dt over [0, t_end], shape (). Their difference equals
-        the change of `mechanical_energy` (the energy balance).
+        the change of `mechanical_energy`.(the energy balance).
     - `log_time`, `log_osc`, `log_kind`: the last `log_size` switches (time,
-        oscillator index from 0, index into `KINDS`), oldest first, shape
+        oscillator index from 0, index into `SWITCH_KINDS`), oldest first, shape
         (log_size,); unused entries have time NaN and oscillator and kind -1.
     - `num_events`, `num_steps`: segments ended by an event and integration steps
         of the whole run, shape ().

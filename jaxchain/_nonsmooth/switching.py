@@ -23,7 +23,7 @@ from .._friction import slip_friction_force
 from .._model import stick_force
 
 #: Kinds of switch recorded in the event log.
-KINDS = ("stick to slip", "slip to stick", "slip reversal")
+SWITCH_KINDS = ("stick to slip", "slip to stick", "slip reversal")
 
 
 def mode_field(t, state, args):
@@ -108,13 +108,14 @@ def switch(params, y, modes, sigma, observe, tol):
       decelerating) gives an extremum.
 
     Switching oscillators get x_n' = v_d exactly (a change of at most `tol`), so
-    that every guard starts the next segment above zero. Because f_n depends on displacements only, the decisions are
-    independent of one another: simultaneous switches need no ordering.
+    that every guard starts the next segment above zero. Because f_n depends on
+    displacements only, the decisions are independent of one another:
+    simultaneous switches need no ordering.
 
     **Returns:**
 
     (y, modes, kind, turned, resolved): the projected state, the new modes, the
-    kind of switch of each oscillator (an index into `KINDS`, -1 for none), the
+    kind of switch of each oscillator (an index into `SWITCH_KINDS`, -1 for none), the
     turning-point mask, and whether anything happened at all.
     """
     x, v = y

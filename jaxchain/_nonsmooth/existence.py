@@ -1,0 +1,75 @@
+"""The existence limit of the single oscillator's stick-slip cycle in the non-smooth
+model: the belt speed at which the slip arc that leaves stick just grazes v_rel = 0."""
+
+import diffrax
+import equinox as eqx
+import jax.numpy as jnp
+import optimistix as optx
+
+from .._params import ChainParams
+from .switching import mode_field
+
+
+def _slip_arc_peak(v_d, params: ChainParams, rtol: float):
+    """max (x' - v_d) on the slip arc that leaves stick, before it would cross the
+    belt speed: positive where the arc returns to stick, zero at grazing."""
+    p = eqx.tree_at(lambda q: q.v_d, params, v_d)
+    exit_state = jnp.stack([jnp.atleast_1d(p.mu_st - 2 * p.xi * v_d), jnp.atleast_1d(v_d)])
+    modes = -jnp.ones(1)  # f = +mu_st at the exit: the oscillator falls behind the belt
+
+    def acceleration(t, y, args, **kwargs):
+        return mode_field(t, y, args)[0][1, 0]
+
+    # The first down-crossing of x'' is the first maximum of x' (x'' = 0 at the exit,
+    # then negative, so that the exit itself does not trigger).
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(mode_field), diffrax.Dopri8(), 0.0, 100.0, None,
+        (exit_state, jnp.zeros(2)), (p, modes), saveat=diffrax.SaveAt(t1=True),
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=rtol),
+        event=diffrax.Event(acceleration, optx.Bisection(rtol=0.0, atol=1e-14),
+                            direction=False),
+    )
+    return sol.ys[0][-1, 1, 0] - v_d
+
+
+def stick_slip_existence_limit(params: ChainParams = ChainParams(n_osc=1),
+                               lower: float = 1.2, upper: float = 3.0, *,
+                               tol: float = 1e-10, rtol: float = 1e-12) -> float:
+    """Largest belt speed at which the single oscillator's stick-slip cycle of the
+    non-smooth model (eqs. (1)-(2) and (5) with eta_c irrelevant) exists.
+
+    A cycle of one oscillator leaves stick at x = mu_st - 2 xi v_d, x' = v_d
+    (`stick_force` = mu_st), slips behind the belt and must come back to x' = v_d
+    to stick again. Above the limit the slip arc spirals into steady sliding
+    instead. At the limit it grazes: the first maximum of x' on the arc equals v_d.
+    That maximum minus v_d is a smooth function of v_d, located with diffrax (an
+    event at x'' = 0 on the slip vector field of the reference) and its root with
+    optimistix's bisection. This is where the unstable cycle born at the Hopf point
+    meets the stick-slip cycle in the non-smooth limit.
+
+    **Arguments:**
+
+    - `params`: parameters; `xi`, `mu_d`, `mu_st` and `v0` are used.
+    - `lower`, `upper`: a bracket of belt speeds, the cycle existing at `lower` and
+        not at `upper`.
+    - `tol`: absolute tolerance on the limit.
+    - `rtol`: integration tolerance of the slip arc.
+
+    **Returns:**
+
+    The limit belt speed, dimensionless.
+
+    **Raises:**
+
+    `ValueError` if the bracket does not contain the limit.
+    """
+    peak = eqx.filter_jit(_slip_arc_peak)
+    lo, hi = (float(peak(jnp.asarray(v), params, rtol)) for v in (lower, upper))
+    if not (lo > 0 > hi):
+        raise ValueError(f"the bracket [lower, upper] = [{lower}, {upper}] must contain "
+                         f"the existence limit: the cycle must exist at lower and not at "
+                         f"upper (peak x' - v_d = {lo:.3g}, {hi:.3g})")
+    sol = optx.root_find(lambda v, _: _slip_arc_peak(v, params, rtol),
+                         optx.Bisection(rtol=0.0, atol=tol), jnp.asarray(0.5 * (lower + upper)),
+                         options={"lower": lower, "upper": upper})
+    return float(sol.value)

@@ -1,0 +1,108 @@
+"""The event-driven non-smooth reference, checked against analytical results, scipy
+and the energy balance."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxchain as jc
+from helpers import scipy_slip_arc, scipy_stick_slip_cycle
+
+ONE = jc.ChainParams(n_osc=1)
+
+
+def _stick_exit_state(p):
+    return jnp.array([[p.mu_st - 2 * p.xi * p.v_d], [p.v_d]])
+
+
+def test_stick_exit_time_and_oscillator_match_the_stick_force_formula():
+    """A ring whose oscillators all stick moves rigidly with the belt, so f_n grows
+    at the rate v_d and the first to leave stick is the one of largest f_n(0), at
+    t = (mu_st - f_n(0)) / v_d, with f_n = 2 xi v_d + x_n + eta_c (2 x_n - x_{n+1} -
+    x_{n-1}) written out here."""
+    p = jc.ChainParams(n_osc=3, eta_c=0.3)
+    x = np.array([0.1, 0.4, -0.2])
+    f = 2 * p.xi * p.v_d + x + p.eta_c * (2 * x - np.roll(x, 1) - np.roll(x, -1))
+    first = int(np.argmax(f))
+    t_exit = float((p.mu_st - f[first]) / p.v_d)
+    y0 = np.stack([x, np.full(3, p.v_d)])
+    obs = jc.simulate_nonsmooth(p, y0, jc.NonsmoothOptions(t_end=t_exit + 0.1, transient=0.0))
+    logged = np.asarray(obs.log_osc) >= 0
+    assert int(obs.log_osc[logged][0]) == first
+    assert jc.SWITCH_KINDS[int(obs.log_kind[logged][0])] == "stick to slip"
+    assert abs(float(obs.log_time[logged][0]) - t_exit) < 1e-10
+
+
+def test_single_oscillator_cycle_matches_scipy():
+    """Amplitude and period of the stick-slip cycle at v_d = 1.5 against scipy's
+    DOP853 with events, to 1e-8 relative (the acceptance asks 1e-6)."""
+    amplitude, period = scipy_stick_slip_cycle(ONE)
+    obs = jc.simulate_nonsmooth(ONE, _stick_exit_state(ONE),
+                                jc.NonsmoothOptions(t_end=200.0, transient=100.0))
+    exits = np.asarray(obs.log_time)[np.asarray(obs.log_kind) == 0]
+    assert float(obs.amplitudes[0]) == pytest.approx(amplitude, rel=1e-8)
+    assert np.allclose(np.diff(exits), period, rtol=1e-8, atol=0)
+    assert int(obs.n_halc) == 1 and float(obs.half_difference) < 1e-9
+
+
+def test_energy_balance_over_a_long_run():
+    """Friction work = change of mechanical energy + viscous dissipation, for a ring
+    with a localized stick-slip state over 3000 time units."""
+    p = jc.ChainParams(n_osc=4)
+    obs = jc.simulate_nonsmooth(p, jc.OutOfPhaseExcitation.eq8(jc.excited_block(4, 2)),
+                                jc.NonsmoothOptions(t_end=3000.0, transient=2000.0))
+    change = jc.mechanical_energy(p, obs.y_final) - jc.mechanical_energy(p, obs.y_initial)
+    residual = change - (obs.friction_work - obs.viscous_dissipation)
+    assert int(obs.num_events) > 1000  # many switches were crossed
+    assert abs(float(residual)) < 1e-9 * float(obs.friction_work)
+
+
+def test_identical_oscillators_switch_together_like_one():
+    """A ring started with every oscillator in the same state has no coupling force:
+    all oscillators switch at the same instants (simultaneous events) and each
+    follows the single oscillator's cycle."""
+    p = jc.ChainParams(n_osc=4)
+    y0 = jnp.tile(_stick_exit_state(p), (1, 4))
+    opt = jc.NonsmoothOptions(t_end=200.0, transient=100.0)
+    ring = jc.simulate_nonsmooth(p, y0, opt)
+    single = jc.simulate_nonsmooth(ONE, _stick_exit_state(ONE), opt)
+    assert np.allclose(ring.amplitudes, single.amplitudes[0], rtol=1e-9)
+    assert int(ring.n_halc) == 4
+    times = np.asarray(ring.log_time)
+    times = times[np.isfinite(times)].reshape(-1, 4)
+    assert np.all(np.ptp(times, axis=1) == 0) and np.all(np.diff(times[:, 0]) > 0)
+    assert int(ring.num_events) == int(single.num_events)
+
+
+def test_existence_limit_brackets_the_scipy_slip_arc():
+    """Just below the limit the scipy slip arc returns to the belt speed; just above,
+    it does not."""
+    limit = jc.stick_slip_existence_limit(ONE)
+    assert 1.5 < limit < 2.5
+    below = scipy_slip_arc(jc.ChainParams(n_osc=1, v_d=limit - 1e-4))
+    above = scipy_slip_arc(jc.ChainParams(n_osc=1, v_d=limit + 1e-4))
+    assert below.status == 1 and above.status == 0
+
+
+def test_existence_limit_rejects_a_bad_bracket():
+    with pytest.raises(ValueError, match="bracket"):
+        jc.stick_slip_existence_limit(ONE, lower=1.2, upper=1.5)
+
+
+def test_failures_are_a_status_or_an_error():
+    opt = jc.NonsmoothOptions(t_end=50.0, transient=0.0)
+    bad = jnp.full((2, 1), jnp.nan)
+    obs = jc.simulate_nonsmooth(ONE, bad, opt, throw=False)
+    assert int(obs.status) == 3 and int(obs.n_halc) == -1
+    with pytest.raises(RuntimeError, match="non-finite"):
+        jc.simulate_nonsmooth(ONE, bad, opt)
+    chatter = jc.NonsmoothOptions(t_end=50.0, transient=0.0, max_events=2)
+    obs = jc.simulate_nonsmooth(ONE, _stick_exit_state(ONE), chatter, throw=False)
+    assert int(obs.status) == 4 and np.isnan(float(obs.energy))
+
+
+@pytest.mark.parametrize("field,value", [("rtol", 0.0), ("switch_tol", -1.0),
+                                         ("transient", 50.0), ("max_events", 0)])
+def test_bad_options_raise_naming_the_field(field, value):
+    with pytest.raises(ValueError, match=f"NonsmoothOptions.{field}"):
+        jc.NonsmoothOptions(t_end=50.0, **{field: value})
