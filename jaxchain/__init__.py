@@ -27,6 +27,7 @@ from ._nonsmooth.solve import NONSMOOTH_STATUS as NONSMOOTH_STATUS  # noqa: E402
 from ._nonsmooth.solve import NonsmoothObservables as NonsmoothObservables  # noqa: E402
 from ._nonsmooth.solve import simulate_nonsmooth as simulate_nonsmooth  # noqa: E402
 from ._nonsmooth.switching import SWITCH_KINDS as SWITCH_KINDS  # noqa: E402
+from ._model import split_vector_field as split_vector_field  # noqa: E402
 from ._model import steady_sliding as steady_sliding  # noqa: E402
 from ._model import vector_field as vector_field  # noqa: E402
 from ._options import SimulationOptions as SimulationOptions  # noqa: E402
@@ -37,3 +38,8 @@ from ._results import to_dataset as to_dataset  # noqa: E402
 from ._simulate import STATUS as STATUS  # noqa: E402
 from ._simulate import Observables as Observables  # noqa: E402
 from ._simulate import simulate as simulate  # noqa: E402
+from ._solvers import SOLVERS as SOLVERS  # noqa: E402
+from ._crosscheck import crosscheck as crosscheck  # noqa: E402
+from ._work_precision import work_precision as work_precision  # noqa: E402
+from ._plots.crosscheck import plot_crosscheck as plot_crosscheck  # noqa: E402
+from ._plots.work_precision import plot_work_precision as plot_work_precision  # noqa: E402

@@ -3,12 +3,15 @@
 import math
 
 import equinox as eqx
+import jax
 
 
 class SimulationOptions(eqx.Module):
     """How long to integrate, how accurately, and how to observe.
 
-    All fields are static: changing one recompiles. Times are dimensionless, in units
+    All fields but the tolerances are static: changing one recompiles. `rtol` and
+    `atol` may be given as JAX arrays, so that a sweep over tolerances compiles
+    once (Python floats are static like the other fields). Times are dimensionless, in units
     of 1/omega_n (eq. (4) of the paper).
 
     **Arguments:**
@@ -38,8 +41,8 @@ class SimulationOptions(eqx.Module):
 
     t_end: float = eqx.field(static=True, default=15000.0)
     transient: float = eqx.field(static=True, default=10000.0)
-    rtol: float = eqx.field(static=True, default=1e-6)
-    atol: float = eqx.field(static=True, default=1e-8)
+    rtol: float = 1e-6
+    atol: float = 1e-8
     sample_dt: float = eqx.field(static=True, default=0.05)
     chunk_length: float = eqx.field(static=True, default=250.0)
     max_steps: int = eqx.field(static=True, default=200_000)
@@ -48,6 +51,8 @@ class SimulationOptions(eqx.Module):
     def __check_init__(self):
         for name in ("t_end", "rtol", "atol", "sample_dt", "chunk_length", "max_steps"):
             value = getattr(self, name)
+            if isinstance(value, jax.Array) and value.shape == ():
+                value = float(value)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"SimulationOptions.{name} must be a finite number > 0, "
                                  f"got {value!r}")

@@ -9,7 +9,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from ._custom_types import State
 from ._initial import AbstractInitialCondition, GivenState
-from ._model import vector_field
+from ._model import split_vector_field, vector_field
 from ._options import SimulationOptions
 from ._params import ChainParams
 from ._progress import progress_bar, tick
@@ -65,6 +65,21 @@ def _status_code(result) -> Int[Array, ""]:
                      jnp.where(result == diffrax.RESULTS.max_steps_reached, 1, 2))
 
 
+#: IMEX solvers: they get the friction force as their implicit term.
+IMEX_SOLVERS = (diffrax.KenCarp3, diffrax.KenCarp4, diffrax.KenCarp5)
+
+
+def terms(solver: diffrax.AbstractSolver):
+    """The diffrax terms of eq. (5) for `solver`: one `ODETerm`, or for an IMEX solver
+    a `MultiTerm` of the explicit elastic part and the implicit friction part
+    (`split_vector_field`)."""
+    if isinstance(solver, IMEX_SOLVERS):
+        return diffrax.MultiTerm(
+            diffrax.ODETerm(lambda t, y, p: split_vector_field(t, y, p)[0]),
+            diffrax.ODETerm(lambda t, y, p: split_vector_field(t, y, p)[1]))
+    return diffrax.ODETerm(vector_field)
+
+
 def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
     """Integrate one chunk [t0, t1]; reduce its `n_samples` dense samples (if any)
     into the running extrema of `carry`."""
@@ -76,7 +91,7 @@ def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
     if n_samples:
         subs.append(diffrax.SubSaveAt(ts=t0 + (t1 - t0) * jnp.linspace(0.0, 1.0, n_samples)))
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(vector_field), solver, t0, t1, None, y, params,
+        terms(solver), solver, t0, t1, None, y, params,
         saveat=diffrax.SaveAt(subs=subs, solver_state=True, controller_state=True,
                               made_jump=True),
         stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),

@@ -7,18 +7,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-import diffrax
-
 from .._params import ChainParams
+from .._solvers import SOLVERS  # noqa: F401  (re-exported for the commands)
 
-SOLVERS = {
-    "tsit5": diffrax.Tsit5,
-    "dopri5": diffrax.Dopri5,
-    "dopri8": diffrax.Dopri8,
-    "bosh3": diffrax.Bosh3,
-    "kvaerno3": diffrax.Kvaerno3,
-    "kvaerno5": diffrax.Kvaerno5,
-}
 
 #: Field names in error messages, as the options a user typed.
 OPTION_NAMES = {
@@ -26,6 +17,8 @@ OPTION_NAMES = {
     "SimulationOptions.t_end": "--t-end", "SimulationOptions.transient": "--transient",
     "SimulationOptions.rtol": "--rtol", "SimulationOptions.atol": "--atol",
     "SimulationOptions.max_steps": "--max-steps",
+    "NonsmoothOptions.rtol": "--ref-rtol", "NonsmoothOptions.atol": "--ref-rtol",
+    "NonsmoothOptions.t_end": "--t-end", "NonsmoothOptions.transient": "--transient",
 }
 
 
@@ -80,7 +73,8 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--transient", type=float, default=10000.0, metavar="T",
                    help="observables are taken after this time (default 10000)")
     g.add_argument("--solver", choices=sorted(SOLVERS), default="tsit5",
-                   help="diffrax solver (default tsit5)")
+                   help="diffrax solver (default tsit5); kencarp* are IMEX, with the "
+                        "friction force implicit")
     g.add_argument("--rtol", type=positive_float, default=1e-6,
                    help="relative tolerance (default 1e-6)")
     g.add_argument("--atol", type=positive_float, default=1e-8,

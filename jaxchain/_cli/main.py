@@ -2,10 +2,10 @@
 
 import sys
 
-from . import localized
+from . import crosscheck, localized, work_precision
 from .common import Parser, UsageError
 
-COMMANDS = (localized,)
+COMMANDS = (localized, crosscheck, work_precision)
 
 
 def build_parser() -> Parser:

@@ -1,0 +1,118 @@
+"""`jaxchain work-precision`: error against run time for every solver, tolerance and
+eps, against the non-smooth reference."""
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from .._plots.work_precision import plot_work_precision
+from .._solvers import SOLVERS
+from .._work_precision import (SCENES, WP_EPS, WP_RTOLS, WP_SOLVERS, recommend,
+                               work_precision)
+from .common import UsageError, json_ready, positive_int, writable_folder
+
+HELP = "error against run time of every solver and eps (work-precision diagram)"
+DESCRIPTION = f"""\
+Measure error against wall time for the diffrax solvers {', '.join(WP_SOLVERS)}
+(kencarp4 is IMEX with the friction force implicit), rtol = 1e-3 ... 1e-10 (atol =
+rtol/100) and eps = 1e-1 ... 1e-5, on two scenes at v_d = 1.5: the single
+oscillator (window [200, 400]) and the chain of N = 20 with one oscillator excited
+(eq. (8), window [1000, 1500]). Errors are measured against the event-driven
+non-smooth reference: on the amplitudes and E over the window, and on the
+trajectory at t = 20, before it diverges. Compilation is timed apart from the run.
+scipy's LSODA and Radau and the reference at looser tolerances are outside points.
+
+Writes <out>/work_precision.csv as it goes (a later run with the same --out resumes
+it) and <out>/work_precision_<scene>.png, and prints the fastest settings for 1 %
+and 0.1 % amplitude error. The full study takes tens of minutes on 2 CPU cores;
+use --scenes, --solvers, --rtols, --eps to run part of it."""
+
+
+def _list(kind):
+    def parse(text):
+        try:
+            return [kind(v) for v in text.split(",") if v]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list, got "
+                                             f"{text!r}") from None
+    return parse
+
+
+def add_parser(sub):
+    p = sub.add_parser("work-precision", help=HELP, description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--scenes", type=_list(str), default=list(SCENES), metavar="S,S",
+                   help=f"scenes (default {','.join(SCENES)})")
+    p.add_argument("--solvers", type=_list(str), default=list(WP_SOLVERS), metavar="S,...",
+                   help=f"diffrax solvers, of {','.join(SOLVERS)} (default "
+                        f"{','.join(WP_SOLVERS)})")
+    p.add_argument("--rtols", type=_list(float), default=list(WP_RTOLS), metavar="R,...",
+                   help="relative tolerances (default 1e-3,...,1e-10)")
+    p.add_argument("--eps", type=_list(float), default=list(WP_EPS), metavar="E,...",
+                   help="smoothing eps values (default 1e-1,...,1e-5)")
+    p.add_argument("--max-steps", type=positive_int, default=100_000,
+                   help="step budget per chunk of 250 time units (default 100000)")
+    p.add_argument("--no-scipy", action="store_true", help="leave out scipy's points")
+    p.add_argument("--out", type=Path, default=Path("jaxchain-out"), metavar="DIR",
+                   help="folder for the CSV and PNGs (default ./jaxchain-out/)")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object (the recommendations) instead of text")
+    p.add_argument("--no-progress", action="store_true", help="do not report each run")
+    p.set_defaults(run=run)
+    return p
+
+
+def run(args) -> int:
+    for name in args.scenes:
+        if name not in SCENES:
+            raise UsageError(f"--scenes: unknown scene {name!r} (choose from "
+                             f"{', '.join(SCENES)})")
+    for name in args.solvers:
+        if name not in SOLVERS:
+            raise UsageError(f"--solvers: unknown solver {name!r} (choose from "
+                             f"{', '.join(SOLVERS)})")
+    for option, values in (("--rtols", args.rtols), ("--eps", args.eps)):
+        if not values or not all(0 < v < 1 for v in values):
+            raise UsageError(f"{option}: values must lie in (0, 1), got {values}")
+    writable_folder(args.out)
+    csv_path = args.out / "work_precision.csv"
+    start = time.perf_counter()
+
+    def report(message):
+        if not args.no_progress:
+            print(f"[{time.perf_counter() - start:7.1f} s] {message}", flush=True)
+
+    rows = work_precision(csv_path, args.scenes, args.solvers, args.rtols, args.eps,
+                          scipy=not args.no_scipy, max_steps=args.max_steps,
+                          progress=report)
+    figures, advice = [], {}
+    for scene in args.scenes:
+        png = args.out / f"work_precision_{scene}.png"
+        plot_work_precision(rows, scene).savefig(png, dpi=130)
+        figures.append(str(png))
+        for target in (1e-2, 1e-3):
+            best = recommend(rows, scene, target)
+            advice[f"{scene} {target:g}"] = None if best is None else {
+                "solver": best["method"], "eps": float(best["eps"]),
+                "rtol": float(best["rtol"]), "atol": float(best["atol"]),
+                "wall_s": float(best["wall_s"]),
+                "amplitude_error": float(best["amplitude_error"])}
+    failed = sum(r["status"] not in ("ok",) and not r["status"].startswith("skipped")
+                 for r in rows)
+    if args.json:
+        print(json.dumps(json_ready({"csv": str(csv_path), "figures": figures,
+                                     "recommended": advice, "runs": len(rows),
+                                     "failed_runs": failed,
+                                     "wall_time_s": time.perf_counter() - start}),
+                         allow_nan=False))
+    else:
+        for key, best in advice.items():
+            scene, target = key.split()
+            text = ("no run reached it" if best is None else
+                    f"{best['solver']}, eps {best['eps']:g}, rtol {best['rtol']:g}: "
+                    f"{best['wall_s']:.3g} s, error {100 * best['amplitude_error']:.3f} %")
+            print(f"{scene}, amplitude error < {100 * float(target):g} %: {text}")
+        print(f"{len(rows)} runs ({failed} failed, recorded); wrote {csv_path} and "
+              f"{', '.join(figures)}")
+    return 0

@@ -1,0 +1,244 @@
+"""The cross-check of the smoothed model against the event-driven non-smooth
+reference, on a grid of belt speeds and initial conditions."""
+
+import dataclasses
+import time
+from pathlib import Path
+
+import diffrax
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import xarray as xr
+from tqdm.auto import tqdm
+
+from ._initial import FAMILIES, excited_block
+from ._nonsmooth.options import NonsmoothOptions
+from ._nonsmooth.solve import NONSMOOTH_STATUS, run_nonsmooth
+from ._options import SimulationOptions
+from ._params import ChainParams
+from ._results import PAPER, save_dataset
+from ._simulate import STATUS, run
+
+#: The grid of the issue: belt speeds across the bistable range and a set of
+#: eq. (8) and eq. (10) initial conditions, as (family, number excited).
+CROSSCHECK_VD = (1.2, 1.5, 1.65, 1.75)
+CROSSCHECK_ICS = (("eq8", 1), ("eq8", 2), ("eq8", 5), ("eq8", 20), ("eq10", 2),
+                  ("eq10", 20))
+
+
+@dataclasses.dataclass(frozen=True)
+class ClassTolerances:
+    """A state is periodic when the extrema of its two half windows agree to this
+    relative tolerance: the reference's extrema are exact (1e-6 leaves a margin
+    over its ~1e-9 accuracy), the smoothed model's are sampled every `sample_dt`
+    (a relative error of up to 3e-4, hence 1e-3)."""
+
+    reference: float = 1e-6
+    smoothed: float = 1e-3
+
+
+def state_class(n_halc: int, n_osc: int, periodic: bool) -> str:
+    """'steady sliding', or 'localized'/'stick-slip' (all N on the HALC) followed by
+    '(periodic)' or '(irregular)'."""
+    if n_halc < 0:
+        return "failed"
+    if n_halc == 0:
+        return "steady sliding"
+    kind = "stick-slip" if n_halc == n_osc else "localized"
+    return f"{kind} ({'periodic' if periodic else 'irregular'})"
+
+
+@eqx.filter_jit
+def _smoothed_runs(params, v_d, y0, solver, options):
+    def one(vd, y):
+        return run(eqx.tree_at(lambda q: q.v_d, params, vd), y, solver, options)
+    return eqx.filter_vmap(one)(v_d, y0)
+
+
+_reference_run = eqx.filter_jit(run_nonsmooth)
+
+
+def _smoothed(params, v_d, y0, solver, options):
+    """The smoothed runs over the two halves of the observed window (so that the
+    extrema of each half are known), all cases vmapped. JAX dispatches them
+    asynchronously: they run while the caller goes on (with the reference runs, on
+    another core); `_gather` waits for them."""
+    mid = 0.5 * (options.transient + options.t_end)
+    first = dataclasses.replace(options, t_end=mid)
+    second = dataclasses.replace(options, t_end=options.t_end - mid, transient=0.0)
+    a = _smoothed_runs(params, v_d, y0, solver, first)
+    b = _smoothed_runs(params, v_d, a.y_final, solver, second)
+    return a, b
+
+
+def _gather(a, b) -> dict:
+    x_max = np.stack([a.x_max, b.x_max], 1)
+    x_min = np.stack([a.x_min, b.x_min], 1)
+    amplitudes = 0.5 * (x_max.max(1) - x_min.min(1))
+    on_halc = np.asarray(a.on_halc) | np.asarray(b.on_halc)
+    status = np.where(np.asarray(a.status) != 0, a.status, b.status)
+    return {"amplitudes": amplitudes, "x_max": x_max, "x_min": x_min,
+            "n_halc": np.where(status == 0, on_halc.sum(-1), -1), "status": status,
+            "num_steps": np.asarray(a.num_steps) + np.asarray(b.num_steps)}
+
+
+def _reference_case(params, v_d, y0, options, path: Path | None):
+    """One reference run, read from `path` if an earlier run stored it there."""
+    if path is not None and path.exists():
+        with xr.open_dataset(path, engine="h5netcdf") as stored:
+            return {k: stored[k].values for k in stored.data_vars}, stored.attrs["wall_time_s"]
+    start = time.perf_counter()
+    obs = _reference_run(eqx.tree_at(lambda q: q.v_d, params, jnp.asarray(v_d)),
+                         jnp.asarray(y0), options)
+    fields = ("amplitudes", "x_max", "x_min", "n_halc", "status", "stick_fraction",
+              "num_events", "num_steps")
+    out = {k: np.asarray(getattr(obs, k)) for k in fields}
+    wall = time.perf_counter() - start
+    if path is not None:
+        dims = {0: (), 1: ("osc",), 2: ("half", "osc")}
+        ds = xr.Dataset({k: (dims[v.ndim], v) for k, v in out.items()},
+                        attrs={"wall_time_s": wall})
+        save_dataset(ds, path)
+    return out, wall
+
+
+def _amplitude_error(smoothed, reference):
+    """max_n |A_s - A_r| relative to max(1, max_n A_r)."""
+    return np.max(np.abs(smoothed - reference), -1) / np.maximum(1.0, reference.max(-1))
+
+
+def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSSCHECK_ICS,
+               solver: diffrax.AbstractSolver = diffrax.Tsit5(),
+               options: SimulationOptions = SimulationOptions(),
+               reference_options: NonsmoothOptions | None = None, *,
+               tolerances: ClassTolerances = ClassTolerances(),
+               checkpoint: Path | None = None, progress: bool = False) -> xr.Dataset:
+    """Run the smoothed model and the non-smooth reference on the same grid of belt
+    speeds x initial conditions, and compare their observables.
+
+    Irregular states diverge between any two models (and any two tolerances), so
+    they are compared by their statistics over the observed window (amplitudes, E,
+    n_HALC), never as time series; the same comparison serves periodic states.
+
+    **Arguments:**
+
+    - `params`: chain parameters; `v_d` is replaced by each belt speed, `eps` is
+        that of the smoothed model.
+    - `v_d`: belt speeds, dimensionless.
+    - `ics`: initial conditions as (family, k): eq. (8) ("eq8") or eq. (10)
+        ("eq10") with k oscillators excited (`excited_block`).
+    - `solver`, `options`: the smoothed runs (`simulate`'s).
+    - `reference_options`: the reference runs; by default the horizon of
+        `options` with `NonsmoothOptions`'s tolerances.
+    - `tolerances`: how periodic is told from irregular (`ClassTolerances`).
+    - `checkpoint`: a folder where each reference run is stored as it finishes and
+        read back on a later call (resuming an interrupted cross-check).
+    - `progress`: show a tqdm bar over the reference runs.
+
+    **Returns:**
+
+    An `xarray.Dataset` with dims (case, osc) and coords v_d, family, n_excited
+    along case: amplitudes_smoothed/_reference (case, osc); energy, n_halc,
+    half_difference, state_class, status, num_steps of both (case);
+    stick_fraction, num_events and wall_time_s of the reference; and the
+    comparison: amplitude_error (max over oscillators, relative to max(1, largest
+    reference amplitude)), energy_error (relative to max(1, E_reference)),
+    n_halc_agrees, class_agrees. Attributes hold parameters and options.
+
+    **Raises:**
+
+    `ValueError` for an unknown family, a k outside [1, N] or a bad belt speed.
+    """
+    if reference_options is None:
+        reference_options = NonsmoothOptions(t_end=options.t_end, transient=options.transient)
+    if (reference_options.t_end, reference_options.transient) != (options.t_end,
+                                                                   options.transient):
+        raise ValueError("reference_options must observe the same window as options")
+    cases = [(float(vd), fam, int(k)) for vd in v_d for fam, k in ics]
+    y0 = []
+    for vd, fam, k in cases:
+        if fam not in FAMILIES:
+            raise ValueError(f"ics family must be one of {sorted(FAMILIES)}, got {fam!r}")
+        p = dataclasses.replace(params, v_d=vd)  # validates v_d
+        y0.append(np.asarray(FAMILIES[fam](excited_block(params.n_osc, k))(p)))
+    vds = np.array([c[0] for c in cases])
+    y0 = np.stack(y0)
+
+    start = time.perf_counter()
+    pending = _smoothed(params, jnp.asarray(vds), jnp.asarray(y0), solver, options)
+
+    refs, walls = [], []
+    for i, (vd, fam, k) in enumerate(tqdm(cases, desc="non-smooth reference",
+                                          disable=not progress, leave=False)):
+        path = None if checkpoint is None else (
+            Path(checkpoint) / f"reference_vd{vd:g}_{fam}_k{k}_{reference_options.t_end:g}.nc")
+        out, wall = _reference_case(params, vd, y0[i], reference_options, path)
+        refs.append(out)
+        walls.append(wall)
+    ref = {k: np.stack([r[k] for r in refs]) for k in refs[0]}
+    smooth = _gather(*pending)
+    smooth_wall = time.perf_counter() - start  # overlaps the reference runs
+
+    n = params.n_osc
+    half_s = _half_difference(smooth)
+    half_r = _half_difference(ref)
+    class_s = [state_class(int(h), n, d <= tolerances.smoothed)
+               for h, d in zip(smooth["n_halc"], half_s)]
+    class_r = [state_class(int(h), n, d <= tolerances.reference)
+               for h, d in zip(ref["n_halc"], half_r)]
+    energy_s = 0.5 * np.sum(smooth["amplitudes"] ** 2, -1)
+    energy_r = 0.5 * np.sum(ref["amplitudes"] ** 2, -1)
+    case, osc = ("case",), ("case", "osc")
+    ds = xr.Dataset(
+        {
+            "amplitudes_smoothed": (osc, smooth["amplitudes"]),
+            "amplitudes_reference": (osc, ref["amplitudes"]),
+            "energy_smoothed": (case, energy_s), "energy_reference": (case, energy_r),
+            "n_halc_smoothed": (case, smooth["n_halc"]),
+            "n_halc_reference": (case, ref["n_halc"]),
+            "half_difference_smoothed": (case, half_s),
+            "half_difference_reference": (case, half_r),
+            "state_class_smoothed": (case, class_s),
+            "state_class_reference": (case, class_r),
+            "status_smoothed": (case, smooth["status"]),
+            "status_reference": (case, ref["status"]),
+            "num_steps_smoothed": (case, smooth["num_steps"]),
+            "num_steps_reference": (case, ref["num_steps"]),
+            "num_events_reference": (case, ref["num_events"]),
+            "stick_fraction_reference": (osc, ref["stick_fraction"]),
+            "wall_time_s_reference": (case, np.array(walls)),
+            "amplitude_error": (case, _amplitude_error(smooth["amplitudes"],
+                                                       ref["amplitudes"])),
+            "energy_error": (case, np.abs(energy_s - energy_r) / np.maximum(1.0, energy_r)),
+            "n_halc_agrees": (case, smooth["n_halc"] == ref["n_halc"]),
+            "class_agrees": (case, np.array(class_s) == np.array(class_r)),
+        },
+        coords={"v_d": (case, vds), "family": (case, [c[1] for c in cases]),
+                "n_excited": (case, [c[2] for c in cases]), "osc": np.arange(1, n + 1)},
+    )
+    attrs = {f"smoothed_{f.name}": getattr(options, f.name)
+             for f in dataclasses.fields(options)}
+    attrs |= {f"reference_{f.name}": getattr(reference_options, f.name)
+              for f in dataclasses.fields(reference_options)}
+    attrs |= {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
+              if f.name != "v_d"}
+    attrs |= {"solver": type(solver).__name__, "wall_time_s_smoothed": smooth_wall,
+              "periodic_tol_smoothed": tolerances.smoothed,
+              "periodic_tol_reference": tolerances.reference,
+              "status_smoothed_meanings": " | ".join(STATUS),
+              "status_reference_meanings": " | ".join(NONSMOOTH_STATUS),
+              "paper": PAPER, "units": "dimensionless, eqs. (4)-(6) of the paper"}
+    ds.attrs = {k: (float(v) if not isinstance(v, (str, int)) else v)
+                for k, v in attrs.items()}
+    return ds
+
+
+def _half_difference(obs) -> np.ndarray:
+    """Largest change of an extremum between the two half windows, relative to
+    max(1, largest amplitude), per case."""
+    x_max, x_min = np.asarray(obs["x_max"]), np.asarray(obs["x_min"])
+    scale = np.maximum(1.0, 0.5 * (x_max.max(1) - x_min.min(1)).max(-1))
+    change = np.maximum(np.abs(x_max[:, 0] - x_max[:, 1]).max(-1),
+                        np.abs(x_min[:, 0] - x_min[:, 1]).max(-1))
+    return change / scale

@@ -1,0 +1,52 @@
+"""The cross-check of smoothed against non-smooth, as a figure."""
+
+import matplotlib
+
+matplotlib.use("Agg")  # figures are written to files; no screen is assumed
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import xarray as xr  # noqa: E402
+
+
+def plot_crosscheck(ds: xr.Dataset):
+    """Two panels: (a) every oscillator's amplitude, smoothed against non-smooth,
+    on the diagonal when they agree; (b) the amplitude error of each case against
+    v_d, filled for periodic states (of the reference), open for irregular ones,
+    with the 1 % line.
+
+    **Arguments:**
+
+    - `ds`: a Dataset from `crosscheck`.
+
+    **Returns:**
+
+    The matplotlib Figure.
+    """
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.5))
+    a_r = ds["amplitudes_reference"].values.ravel()
+    a_s = ds["amplitudes_smoothed"].values.ravel()
+    top = np.nanmax(np.concatenate([a_r, a_s, [1.0]])) * 1.05
+    left.plot([0, top], [0, top], color="0.7", lw=1)
+    left.scatter(a_r, a_s, s=10, alpha=0.6)
+    left.set(xlabel="amplitude, non-smooth reference", ylabel="amplitude, smoothed",
+             title=f"(a) all oscillators, eps = {ds.attrs['eps']:g}",
+             xlim=(0, top), ylim=(0, top))
+
+    error = 100 * ds["amplitude_error"].values
+    periodic = np.array(["periodic" in c for c in ds["state_class_reference"].values])
+    families = ds["family"].values
+    for family, color in zip(sorted(set(families)), ("C0", "C1", "C2")):
+        for is_periodic, label in ((True, "periodic"), (False, "irregular")):
+            m = (families == family) & (periodic == is_periodic)
+            if m.any():
+                right.scatter(ds["v_d"].values[m], np.maximum(error[m], 1e-4), s=40,
+                              facecolors=color if is_periodic else "none",
+                              edgecolors=color, label=f"{family}, {label}")
+    right.axhline(1.0, color="k", lw=1, ls="--", label="1 %")
+    right.set(yscale="log", xlabel="belt speed v_d",
+              ylabel="amplitude error, % of max(1, largest amplitude)",
+              title="(b) smoothed vs non-smooth, per case")
+    right.legend(fontsize=8)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,66 @@
+"""Work-precision diagrams: error against wall time, log-log."""
+
+import matplotlib
+
+matplotlib.use("Agg")  # figures are written to files; no screen is assumed
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+_MARKERS = {"scipy LSODA": "s", "scipy Radau": "D", "reference": "*"}
+
+
+def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_error"):
+    """One panel per eps, one line per diffrax solver over its rtols (wall time
+    against `error`, log-log), and the outside points in black: scipy's LSODA and
+    Radau at the same eps, and the non-smooth reference at its own tolerances (in
+    every panel). Failed runs are marked x at the top of their panel.
+
+    **Arguments:**
+
+    - `rows`: rows of `work_precision` (dicts of strings).
+    - `scene`: which scene to draw.
+    - `error`: "amplitude_error", "energy_error" or "trajectory_error".
+
+    **Returns:**
+
+    The matplotlib Figure.
+    """
+    rows = [r for r in rows if r["scene"] == scene]
+    eps_values = sorted({float(r["eps"]) for r in rows if float(r["eps"]) > 0}, reverse=True)
+    fig, axes = plt.subplots(1, max(1, len(eps_values)), figsize=(3.6 * len(eps_values), 4),
+                             sharex=True, sharey=True, squeeze=False)
+    solvers = sorted({r["method"] for r in rows} - set(_MARKERS))
+    colors = {s: f"C{i}" for i, s in enumerate(solvers)}
+    ok = [r for r in rows if r["status"] == "ok" and r[error] != ""]
+    values = [float(r[error]) for r in ok]
+    top = 10 ** np.ceil(np.log10(max(values + [1e-1])))
+    for ax, eps in zip(axes[0], eps_values):
+        for solver in solvers:
+            mine = [r for r in rows if r["method"] == solver and float(r["eps"]) == eps]
+            good = sorted((r for r in mine if r in ok), key=lambda r: float(r["rtol"]),
+                          reverse=True)
+            if good:
+                ax.plot([float(r["wall_s"]) for r in good],
+                        [max(float(r[error]), 1e-16) for r in good], "o-", ms=3,
+                        color=colors[solver], label=solver)
+            bad = [r for r in mine if r["status"] != "ok" and r["wall_s"] != ""]
+            if bad:
+                ax.plot([float(r["wall_s"]) for r in bad], [top] * len(bad), "x",
+                        color=colors[solver])
+        for method, marker in _MARKERS.items():
+            pts = [r for r in ok if r["method"] == method
+                   and (method == "reference" or float(r["eps"]) == eps)]
+            if pts:
+                ax.plot([float(r["wall_s"]) for r in pts],
+                        [max(float(r[error]), 1e-16) for r in pts], marker, color="k",
+                        ms=7 if marker == "*" else 4, mfc="none" if marker != "*" else "k",
+                        label=method)
+        ax.axhline(1e-2, color="0.6", lw=0.8, ls="--")
+        ax.axhline(1e-3, color="0.6", lw=0.8, ls=":")
+        ax.set(xscale="log", yscale="log", title=f"eps = {eps:g}", xlabel="wall time (s)")
+    axes[0, 0].set_ylabel(f"{error.replace('_', ' ')} vs non-smooth")
+    axes[0, -1].legend(fontsize=7, loc="lower left")
+    fig.suptitle(f"work-precision, {scene} scene (x: failed; dashed 1 %, dotted 0.1 %)")
+    fig.tight_layout()
+    return fig

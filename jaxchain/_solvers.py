@@ -1,0 +1,28 @@
+"""The diffrax solvers jaxchain offers by name (command line, work-precision study)."""
+
+import diffrax
+import optimistix as optx
+
+
+def _imex(cls):
+    """An IMEX KenCarp solver with the friction force implicit (see `terms`). Its
+    stage equations are solved by Newton's method at the step-size controller's
+    tolerances: diffrax's default VeryChord iteration fails to converge on the
+    friction term and the step size collapses to about 1e-5."""
+    def make():
+        return cls(root_finder=diffrax.with_stepsize_controller_tols(optx.Newton)())
+    return make
+
+
+#: Solver name -> constructor.
+SOLVERS = {
+    "tsit5": diffrax.Tsit5,
+    "dopri5": diffrax.Dopri5,
+    "dopri8": diffrax.Dopri8,
+    "bosh3": diffrax.Bosh3,
+    "kvaerno3": diffrax.Kvaerno3,
+    "kvaerno5": diffrax.Kvaerno5,
+    "kencarp3": _imex(diffrax.KenCarp3),
+    "kencarp4": _imex(diffrax.KenCarp4),
+    "kencarp5": _imex(diffrax.KenCarp5),
+}

@@ -1,0 +1,355 @@
+"""Error against run time (a work-precision study) of every solver, tolerance and
+smoothing eps, measured against the event-driven non-smooth reference."""
+
+import csv
+import dataclasses
+import time
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from ._initial import OutOfPhaseExcitation, excited_block
+from ._nonsmooth.options import NonsmoothOptions
+from ._nonsmooth.solve import simulate_nonsmooth
+from ._options import SimulationOptions
+from ._params import ChainParams
+from ._simulate import STATUS, run
+from ._solvers import SOLVERS
+
+
+@dataclasses.dataclass(frozen=True)
+class Scene:
+    """A scene of the study: the chain, its initial condition (eq. (8), `n_excited`
+    oscillators excited), the observed window [transient, t_end] of the
+    observables and the short horizon `window` of the trajectory error."""
+
+    name: str
+    n_osc: int
+    v_d: float
+    n_excited: int
+    transient: float
+    t_end: float
+    window: float
+
+    def params(self, eps=1e-12) -> ChainParams:
+        return ChainParams(n_osc=self.n_osc, v_d=self.v_d, eps=eps)
+
+    def y0(self) -> np.ndarray:
+        """The initial state, the same for every run: eq. (8) with the non-smooth
+        steady sliding mu(v_d) as base displacement."""
+        ic = OutOfPhaseExcitation.eq8(excited_block(self.n_osc, self.n_excited))
+        return np.asarray(ic(self.params()))
+
+
+#: The single oscillator and the chain scene (a localized state of the paper's
+#: Fig. 4), both at v_d = 1.5.
+SCENES = {
+    "single": Scene("single", 1, 1.5, 1, 200.0, 400.0, 20.0),
+    "chain": Scene("chain", 20, 1.5, 1, 1000.0, 1500.0, 20.0),
+}
+WP_SOLVERS = ("tsit5", "dopri5", "dopri8", "bosh3", "kvaerno3", "kvaerno5", "kencarp4")
+WP_RTOLS = tuple(10.0**-k for k in range(3, 11))
+WP_EPS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5)
+SCIPY_METHODS = ("LSODA", "Radau")
+SCIPY_RTOLS = (1e-4, 1e-6, 1e-8)
+SCIPY_EPS = (1e-2, 1e-3)
+REFERENCE_RTOLS = (1e-6, 1e-8, 1e-10)
+
+#: Columns of the CSV, one row per (scene, method, eps, rtol).
+COLUMNS = ("scene", "method", "eps", "rtol", "atol", "status", "wall_s", "compile_s",
+           "num_steps", "amplitude_error", "energy_error", "trajectory_error",
+           "amplitude_max")
+
+
+@dataclasses.dataclass(frozen=True)
+class Reference:
+    """The non-smooth reference of a scene: amplitudes and E over the window, and
+    the state at t = window."""
+
+    amplitudes: np.ndarray
+    energy: float
+    y_window: np.ndarray
+
+
+def reference(scene: Scene, rtol: float = 1e-12, timed: bool = False
+              ) -> tuple[Reference, float]:
+    """The reference of `scene` at tolerance `rtol`, and the wall time (s) of its
+    observables run, compilation excluded when `timed` (the run is then repeated;
+    otherwise the time includes compilation)."""
+    p, y0 = scene.params(), scene.y0()
+    observe = NonsmoothOptions(t_end=scene.t_end, transient=scene.transient, rtol=rtol,
+                               atol=rtol)
+    short = NonsmoothOptions(t_end=scene.window, transient=0.0, rtol=rtol, atol=rtol)
+    obs, wall = _timed(lambda: simulate_nonsmooth(p, y0, observe))
+    if timed:
+        obs, wall = _timed(lambda: simulate_nonsmooth(p, y0, observe))
+    end = simulate_nonsmooth(p, y0, short)
+    return Reference(np.asarray(obs.amplitudes), float(obs.energy),
+                     np.asarray(end.y_final)), wall
+
+
+def errors(ref: Reference, amplitudes, y_window) -> dict:
+    """Amplitude error (max over oscillators, relative to max(1, largest reference
+    amplitude)), energy error (relative to max(1, E_ref)) and trajectory error (max
+    over the state at t = window, relative to max(1, |y_ref|))."""
+    amplitudes = np.asarray(amplitudes)
+    energy = 0.5 * np.sum(amplitudes**2)
+    scale = max(1.0, float(ref.amplitudes.max()))
+    return {
+        "amplitude_error": float(np.max(np.abs(amplitudes - ref.amplitudes)) / scale),
+        "energy_error": float(abs(energy - ref.energy) / max(1.0, ref.energy)),
+        "trajectory_error": float(np.max(np.abs(np.asarray(y_window) - ref.y_window))
+                                  / max(1.0, float(np.abs(ref.y_window).max()))),
+        "amplitude_max": float(amplitudes.max()),
+    }
+
+
+@eqx.filter_jit
+def _diffrax_run(params, y0, solver, options):
+    return run(params, y0, solver, options)
+
+
+def _timed(fn):
+    start = time.perf_counter()
+    out = jax.block_until_ready(fn())
+    return out, time.perf_counter() - start
+
+
+def diffrax_point(scene: Scene, ref: Reference, solver_name: str, eps: float, rtol: float,
+                  max_steps: int) -> dict:
+    """One smoothed run of `scene` (observables, then the trajectory window) with a
+    diffrax solver. rtol, atol = rtol / 100 and eps are traced, so each solver
+    compiles once per scene; `compile_s` is the compilation time of this call (0
+    once compiled)."""
+    p = scene.params(jnp.asarray(eps))
+    y0 = jnp.asarray(scene.y0())
+    tol = {"rtol": jnp.asarray(rtol), "atol": jnp.asarray(rtol / 100)}
+    observe = SimulationOptions(t_end=scene.t_end, transient=scene.transient,
+                                max_steps=max_steps, **tol)
+    short = SimulationOptions(t_end=scene.window, transient=0.0, max_steps=max_steps, **tol)
+    solver = SOLVERS[solver_name]()
+    compile_s = 0.0
+    for opt in (observe, short):
+        key = (solver_name, opt.t_end, opt.transient, scene.n_osc, max_steps)
+        if key not in _compiled:
+            start = time.perf_counter()
+            _diffrax_run.lower(p, y0, solver, opt).compile()
+            compile_s += time.perf_counter() - start
+            _compiled.add(key)
+    obs, wall = _timed(lambda: _diffrax_run(p, y0, solver, observe))
+    end, _ = _timed(lambda: _diffrax_run(p, y0, solver, short))
+    status = max(int(obs.status), int(end.status))
+    row = {"status": STATUS[status].split(":")[0], "wall_s": wall, "compile_s": compile_s,
+           "num_steps": int(obs.num_steps)}
+    if status == 0:
+        row |= errors(ref, obs.amplitudes, end.y_final)
+    return row
+
+
+_compiled: set = set()
+
+
+def _numpy_field(p: ChainParams) -> Callable:
+    """Eq. (5) with the smoothed law in NumPy, for scipy."""
+    n = p.n_osc
+
+    def rhs(t, y):
+        x, v = y[:n], y[n:]
+        v_rel = v - p.v_d
+        mu = p.mu_d + (p.mu_st - p.mu_d) * np.exp(-np.abs(v_rel) / p.v0)
+        a = (-2 * p.xi * v - x - p.eta_c * (2 * x - np.roll(x, 1) - np.roll(x, -1))
+             - mu * np.tanh(v_rel / p.eps))
+        return np.concatenate([v, a])
+    return rhs
+
+
+class _OutOfTime(Exception):
+    pass
+
+
+def scipy_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: float,
+                budget_s: float) -> dict:
+    """One smoothed run of `scene` with `scipy.integrate.solve_ivp`, the extrema
+    taken from the same 0.05-spaced samples as `simulate`. A run longer than
+    `budget_s` is stopped and recorded as such."""
+    p = scene.params(eps)
+    rhs = _numpy_field(p)
+    y0 = scene.y0().reshape(-1)
+    deadline = time.perf_counter() + budget_s
+
+    def clock(t, y):
+        if time.perf_counter() > deadline:
+            raise _OutOfTime
+        return 1.0
+
+    samples = np.linspace(scene.transient, scene.t_end,
+                          int(round((scene.t_end - scene.transient) / 0.05)) + 1)
+    start = time.perf_counter()
+    try:
+        sol = solve_ivp(rhs, (0.0, scene.t_end), y0, method=method, rtol=rtol,
+                        atol=rtol / 100, t_eval=samples, events=clock)
+        wall = time.perf_counter() - start
+        end = solve_ivp(rhs, (0.0, scene.window), y0, method=method, rtol=rtol,
+                        atol=rtol / 100, events=clock)
+    except _OutOfTime:
+        return {"status": f"time budget of {budget_s:g} s exceeded",
+                "wall_s": time.perf_counter() - start, "compile_s": 0.0}
+    if not (sol.success and end.success):
+        return {"status": f"scipy failed: {sol.message}", "wall_s": wall, "compile_s": 0.0}
+    n = scene.n_osc
+    x = sol.y[:n]
+    amplitudes = 0.5 * (x.max(1) - x.min(1))
+    row = {"status": "ok", "wall_s": wall, "compile_s": 0.0, "num_steps": int(sol.nfev)}
+    return row | errors(ref, amplitudes, end.y[:, -1].reshape(2, n))
+
+
+def read_rows(path: Path) -> list[dict]:
+    """The rows of an existing CSV (to resume), or none."""
+    if not path.exists():
+        return []
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def _key(row) -> tuple:
+    return (row["scene"], row["method"], f"{float(row['eps']):.3g}",
+            f"{float(row['rtol']):.3g}")
+
+
+def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
+                   solvers: Iterable[str] = WP_SOLVERS, rtols: Iterable[float] = WP_RTOLS,
+                   eps: Iterable[float] = WP_EPS, *, scipy: bool = True,
+                   reference_points: bool = True, max_steps: int = 100_000,
+                   scipy_budget_s: float = 60.0, progress: Callable = lambda msg: None
+                   ) -> list[dict]:
+    """Measure error against wall time for every (scene, solver, eps, rtol) and
+    append each result to the CSV at `path` as soon as it is known. Rows already in
+    the CSV are kept and not recomputed, so an interrupted study resumes.
+
+    A failed run is recorded with its status. Once a (solver, eps) pair reaches
+    max_steps at some rtol, its tighter rtols are recorded as skipped (they only
+    take more steps), and so are its smaller eps (stiffer problems).
+
+    The outside points are `scipy.integrate.solve_ivp` (LSODA, Radau) at
+    `SCIPY_EPS` x `SCIPY_RTOLS`, and the reference itself at `REFERENCE_RTOLS`
+    (method "reference", eps 0), its error taken against the reference at 1e-12.
+
+    **Arguments:**
+
+    - `path`: the CSV file (columns `COLUMNS`).
+    - `scenes`: names in `SCENES`.
+    - `solvers`: names in `SOLVERS`.
+    - `rtols`, `eps`: the grid; atol = rtol / 100.
+    - `scipy`, `reference_points`: include the outside points.
+    - `max_steps`: step budget per chunk of 250 time units.
+    - `scipy_budget_s`: wall-time budget of one scipy run.
+    - `progress`: called with a short message before each run.
+
+    **Returns:**
+
+    All rows of the CSV, old and new, as dicts of strings.
+
+    **Raises:**
+
+    `ValueError` for an unknown scene or solver.
+    """
+    scenes, solvers = list(scenes), list(solvers)
+    for name in scenes:
+        if name not in SCENES:
+            raise ValueError(f"scene must be one of {sorted(SCENES)}, got {name!r}")
+    for name in solvers:
+        if name not in SOLVERS:
+            raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {name!r}")
+    rtols, eps = sorted(rtols, reverse=True), sorted(eps, reverse=True)
+    rows = read_rows(path)
+    done = {_key(r) for r in rows}
+    new_file = not path.exists()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
+        if new_file:
+            writer.writeheader()
+
+        def record(row):
+            full = {c: row.get(c, "") for c in COLUMNS}
+            writer.writerow(full)
+            f.flush()
+            rows.append({k: str(v) for k, v in full.items()})
+
+        for scene_name in scenes:
+            scene = SCENES[scene_name]
+            progress(f"{scene_name}: non-smooth reference")
+            ref, ref_wall = reference(scene)
+            base = {"scene": scene_name}
+            if reference_points:
+                for r in REFERENCE_RTOLS:
+                    row = base | {"method": "reference", "eps": 0.0, "rtol": r, "atol": r}
+                    if _key(row) in done:
+                        continue
+                    progress(f"{scene_name}: reference at rtol {r:g}")
+                    coarse, wall = reference(scene, r, timed=True)
+                    record(row | {"status": "ok", "wall_s": wall, "compile_s": 0.0}
+                           | errors(ref, coarse.amplitudes, coarse.y_window))
+            for solver in solvers:
+                failed_eps = None
+                for e in eps:
+                    failed_rtol = None
+                    for r in rtols:
+                        row = base | {"method": solver, "eps": e, "rtol": r, "atol": r / 100}
+                        if _key(row) in done:
+                            continue
+                        if failed_eps is not None:
+                            record(row | {"status": f"skipped: max_steps at eps {failed_eps:g}"})
+                            continue
+                        if failed_rtol is not None:
+                            record(row | {"status": f"skipped: max_steps at rtol "
+                                                    f"{failed_rtol:g}"})
+                            continue
+                        progress(f"{scene_name}: {solver}, eps {e:g}, rtol {r:g}")
+                        result = diffrax_point(scene, ref, solver, e, r, max_steps)
+                        record(row | result)
+                        if result["status"].startswith("max_steps"):
+                            failed_rtol = r
+                            if r == rtols[0]:
+                                failed_eps = e
+            if scipy:
+                for method in SCIPY_METHODS:
+                    for e in SCIPY_EPS:
+                        for r in SCIPY_RTOLS:
+                            row = base | {"method": f"scipy {method}", "eps": e, "rtol": r,
+                                          "atol": r / 100}
+                            if _key(row) in done:
+                                continue
+                            progress(f"{scene_name}: scipy {method}, eps {e:g}, rtol {r:g}")
+                            record(row | scipy_point(scene, ref, method, e, r,
+                                                     scipy_budget_s))
+    return rows
+
+
+def _ok(rows, scene):
+    return [r for r in rows if r["scene"] == scene and r["status"] == "ok"
+            and r["amplitude_error"] != ""]
+
+
+def pareto_front(rows: list[dict], scene: str) -> list[dict]:
+    """The successful diffrax runs of `scene` that no other run beats in both wall
+    time and amplitude error, fastest first."""
+    pts = [r for r in _ok(rows, scene) if r["method"] in SOLVERS]
+    pts.sort(key=lambda r: (float(r["wall_s"]), float(r["amplitude_error"])))
+    front, best = [], np.inf
+    for r in pts:
+        if float(r["amplitude_error"]) < best:
+            front.append(r)
+            best = float(r["amplitude_error"])
+    return front
+
+
+def recommend(rows: list[dict], scene: str, target: float) -> dict | None:
+    """The fastest diffrax run of `scene` whose amplitude error is below `target`."""
+    fits = [r for r in pareto_front(rows, scene) if float(r["amplitude_error"]) < target]
+    return fits[0] if fits else None

@@ -1,0 +1,81 @@
+"""The cross-check of smoothed against non-smooth, and its command."""
+
+import json
+import sys
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import jaxchain as jc
+import jaxchain._crosscheck as xc
+from jaxchain._cli.main import main
+
+SMALL = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=150.0)
+#: Long enough for the localized state of a 4-ring to settle to a periodic orbit.
+SETTLED = jc.SimulationOptions(t_end=1200.0, transient=600.0, chunk_length=150.0)
+
+
+def test_periodic_states_agree_within_the_smoothing_error(tmp_path, monkeypatch):
+    """On a small ring, the default smoothed model gives the reference's n_HALC and
+    amplitudes to better than 1 % on periodic states; a second call reads the
+    stored reference runs back instead of recomputing them."""
+    p = jc.ChainParams(n_osc=4)
+    ics = (("eq8", 1), ("eq8", 4))
+    ds = xc.crosscheck(p, (1.5,), ics, options=SETTLED, checkpoint=tmp_path)
+    assert ds.sizes == {"case": 2, "osc": 4}
+    periodic = np.array(["periodic" in c for c in ds["state_class_reference"].values])
+    assert periodic.any()
+    assert np.all(ds["amplitude_error"].values[periodic] < 1e-2)
+    assert np.all(ds["n_halc_agrees"].values)
+    assert ds["n_halc_reference"].values.tolist() == [1, 4]
+
+    def no_reference(*args, **kwargs):
+        raise AssertionError("the stored reference runs should have been read")
+    monkeypatch.setattr(xc, "_reference_run", no_reference)
+    again = xc.crosscheck(p, (1.5,), ics, options=SETTLED, checkpoint=tmp_path)
+    assert np.array_equal(again["amplitudes_reference"], ds["amplitudes_reference"])
+
+
+def test_smoothed_error_shrinks_with_eps():
+    """The amplitude error against the reference falls when eps is divided by 10
+    (the smoothed law converges to the non-smooth one)."""
+    errs = [float(xc.crosscheck(jc.ChainParams(n_osc=1, eps=eps), (1.5,), (("eq8", 1),),
+                                options=SMALL)["amplitude_error"][0]) for eps in (1e-2, 1e-3)]
+    assert errs[1] < 0.5 * errs[0]
+
+
+def test_state_class_names():
+    assert xc.state_class(0, 20, True) == "steady sliding"
+    assert xc.state_class(3, 20, True) == "localized (periodic)"
+    assert xc.state_class(20, 20, False) == "stick-slip (irregular)"
+    assert xc.state_class(-1, 20, True) == "failed"
+
+
+def test_crosscheck_command_json_and_files(tmp_path, capsys):
+    out = tmp_path / "out"
+    code = main(["crosscheck", "--n-osc", "3", "--vd", "1.5", "--eq8", "1", "--eq10", "",
+                 "--t-end", "400", "--transient", "200", "--json", "--out", str(out)])
+    assert code == 0
+    report = json.loads(capsys.readouterr().out)
+    assert len(report["cases"]) == 1 and report["cases"][0]["ic"] == "eq8 k=1"
+    assert {"amplitude_error", "energy_error", "n_halc_agrees",
+            "class_agrees"} <= set(report["cases"][0])
+    assert (out / "crosscheck.png").stat().st_size > 0
+    ds = xr.open_dataset(out / "crosscheck.nc", engine="h5netcdf")
+    assert ds.attrs["reference_rtol"] == 1e-12 and ds.attrs["eps"] == jc.ChainParams().eps
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--eq8", "5", "--n-osc", "4"], "--eq8"),
+    (["--eq8", "", "--eq10", ""], "--eq8"),
+    (["--vd", "1.5,x"], "--vd"),
+    (["--vd", "-1"], "--vd"),
+    (["--ref-rtol", "0"], "--ref-rtol"),
+])
+def test_crosscheck_bad_options_exit_2(argv, says, capsys, tmp_path):
+    with pytest.raises(SystemExit) as exc:
+        sys.exit(main(["crosscheck", *argv, "--out", str(tmp_path)]))
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err
