@@ -60,7 +60,11 @@ def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_er
         ax.axhline(1e-3, color="0.6", lw=0.8, ls=":")
         ax.set(xscale="log", yscale="log", title=f"eps = {eps:g}", xlabel="wall time (s)")
     axes[0, 0].set_ylabel(f"{error.replace('_', ' ')} vs non-smooth")
-    axes[0, -1].legend(fontsize=7, loc="lower left")
+    handles = {}
+    for ax in axes[0]:
+        for h, label in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(label, h)
+    axes[0, -1].legend(handles.values(), handles.keys(), fontsize=7, loc="lower left")
     fig.suptitle(f"work-precision, {scene} scene (x: failed; dashed 1 %, dotted 0.1 %)")
     fig.tight_layout()
     return fig
