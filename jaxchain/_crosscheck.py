@@ -62,8 +62,8 @@ _reference_run = eqx.filter_jit(run_nonsmooth)
 def _smoothed(params, v_d, y0, solver, options):
     """The smoothed runs over the two halves of the observed window (so that the
     extrema of each half are known), all cases vmapped. JAX dispatches them
-    asynchronously: they run while the caller goes on (with the reference runs, on
-    another core); `_gather` waits for them."""
+    asynchronously; `_gather` waits for them. (On one CPU device XLA runs them
+    before the reference runs, not beside them.)"""
     mid = 0.5 * (options.transient + options.t_end)
     first = dataclasses.replace(options, t_end=mid)
     second = dataclasses.replace(options, t_end=options.t_end - mid, transient=0.0)
@@ -178,7 +178,7 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
         walls.append(wall)
     ref = {k: np.stack([r[k] for r in refs]) for k in refs[0]}
     smooth = _gather(*pending)
-    smooth_wall = time.perf_counter() - start  # overlaps the reference runs
+    smooth_wall = time.perf_counter() - start  # until gathered, after the reference runs
 
     n = params.n_osc
     half_s = _half_difference(smooth)
