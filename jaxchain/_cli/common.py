@@ -53,6 +53,17 @@ def positive_int(text: str) -> int:
     return value
 
 
+def comma_list(kind):
+    """An argparse type: a comma-separated list of `kind` ('' for an empty list)."""
+    def parse(text: str) -> list:
+        try:
+            return [kind(v) for v in text.split(",") if v]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a comma-separated list, got "
+                                             f"{text!r}") from None
+    return parse
+
+
 def add_model_options(p: argparse.ArgumentParser, *, vd: float, n_osc: int) -> None:
     """--vd, --n-osc, --eps: the chain (other parameters are eq. (7) of the paper)."""
     g = p.add_argument_group("model (eq. (5) of the paper; other parameters eq. (7))")

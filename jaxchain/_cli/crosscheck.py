@@ -12,7 +12,7 @@ from .._options import SimulationOptions
 from .._params import ChainParams
 from .._plots.crosscheck import plot_crosscheck
 from .._results import save_dataset
-from .common import (SOLVERS, UsageError, add_output_options, add_run_options,
+from .common import (SOLVERS, UsageError, add_output_options, add_run_options, comma_list,
                      json_ready, positive_float, positive_int, show_progress,
                      usage_message, writable_folder)
 
@@ -35,35 +35,18 @@ in <out>/crosscheck_cases/ as it finishes, and a later run with the same options
 reads it back (resume). About 10 minutes on 2 CPU cores with the defaults."""
 
 
-def _floats(text):
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected numbers separated by commas, got "
-                                         f"{text!r}") from None
-    return values
-
-
-def _ints(text):
-    try:
-        return [int(v) for v in text.split(",") if v]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected integers separated by commas, got "
-                                         f"{text!r}") from None
-
-
 def add_parser(sub):
     p = sub.add_parser("crosscheck", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("grid (eq. (5) of the paper; other parameters eq. (7))")
-    g.add_argument("--vd", type=_floats, default=list(CROSSCHECK_VD), metavar="V,V,...",
+    g.add_argument("--vd", type=comma_list(float), default=list(CROSSCHECK_VD), metavar="V,V,...",
                    help="belt speeds (default " + ",".join(map(str, CROSSCHECK_VD)) + ")")
     default8 = [k for f, k in CROSSCHECK_ICS if f == "eq8"]
     default10 = [k for f, k in CROSSCHECK_ICS if f == "eq10"]
-    g.add_argument("--eq8", type=_ints, default=default8, metavar="K,K,...",
+    g.add_argument("--eq8", type=comma_list(int), default=default8, metavar="K,K,...",
                    help="numbers of excited oscillators of eq. (8) initial conditions "
                         f"(default {','.join(map(str, default8))}; '' for none)")
-    g.add_argument("--eq10", type=_ints, default=default10, metavar="K,K,...",
+    g.add_argument("--eq10", type=comma_list(int), default=default10, metavar="K,K,...",
                    help="the same for eq. (10) (default "
                         f"{','.join(map(str, default10))}; '' for none)")
     g.add_argument("--n-osc", type=positive_int, default=20, metavar="N",

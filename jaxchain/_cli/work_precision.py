@@ -10,7 +10,7 @@ from .._plots.work_precision import plot_work_precision
 from .._solvers import SOLVERS
 from .._work_precision import (SCENES, WP_EPS, WP_RTOLS, WP_SOLVERS, recommend,
                                work_precision)
-from .common import UsageError, json_ready, positive_int, writable_folder
+from .common import UsageError, comma_list, json_ready, positive_int, writable_folder
 
 HELP = "error against run time of every solver and eps (work-precision diagram)"
 DESCRIPTION = f"""\
@@ -29,27 +29,17 @@ and 0.1 % amplitude error. The full study takes tens of minutes on 2 CPU cores;
 use --scenes, --solvers, --rtols, --eps to run part of it."""
 
 
-def _list(kind):
-    def parse(text):
-        try:
-            return [kind(v) for v in text.split(",") if v]
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a comma-separated list, got "
-                                             f"{text!r}") from None
-    return parse
-
-
 def add_parser(sub):
     p = sub.add_parser("work-precision", help=HELP, description=DESCRIPTION,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--scenes", type=_list(str), default=list(SCENES), metavar="S,S",
+    p.add_argument("--scenes", type=comma_list(str), default=list(SCENES), metavar="S,S",
                    help=f"scenes (default {','.join(SCENES)})")
-    p.add_argument("--solvers", type=_list(str), default=list(WP_SOLVERS), metavar="S,...",
+    p.add_argument("--solvers", type=comma_list(str), default=list(WP_SOLVERS), metavar="S,...",
                    help=f"diffrax solvers, of {','.join(SOLVERS)} (default "
                         f"{','.join(WP_SOLVERS)})")
-    p.add_argument("--rtols", type=_list(float), default=list(WP_RTOLS), metavar="R,...",
+    p.add_argument("--rtols", type=comma_list(float), default=list(WP_RTOLS), metavar="R,...",
                    help="relative tolerances (default 1e-3,...,1e-10)")
-    p.add_argument("--eps", type=_list(float), default=list(WP_EPS), metavar="E,...",
+    p.add_argument("--eps", type=comma_list(float), default=list(WP_EPS), metavar="E,...",
                    help="smoothing eps values (default 1e-1,...,1e-5)")
     p.add_argument("--max-steps", type=positive_int, default=100_000,
                    help="step budget per chunk of 250 time units (default 100000)")
