@@ -2,12 +2,34 @@
 
 Implements eq. (5) of *Multiple spatially localized dynamical states in
 friction-excited oscillator chains*. Importing jaxchain turns on float64 in JAX: the
-long stick-slip integrations need it.
+long stick-slip integrations need it. On a CPU it also asks JAX for one device per
+core, so that ensembles run side by side on all cores (see `_one_device_per_core`).
 """
+
+import os
 
 import jax
 
 jax.config.update("jax_enable_x64", True)
+
+
+def _one_device_per_core() -> None:
+    """Expose one JAX CPU device per usable core. XLA runs one vmapped integration
+    on one core; `ensemble` and `crosscheck` spread their trajectories over the
+    devices. Left alone when the user chose the device count (`jax_num_cpu_devices`
+    or `--xla_force_host_platform_device_count` in XLA_FLAGS) and when JAX's
+    backends are already running (then there is one CPU device)."""
+    if (jax.config.jax_num_cpu_devices != -1
+            or "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", "")):
+        return
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    try:
+        jax.config.update("jax_num_cpu_devices", max(1, cores or 1))
+    except RuntimeError:  # backends already initialised
+        pass
+
+
+_one_device_per_core()
 
 from ._ensemble import ensemble as ensemble  # noqa: E402
 from ._friction import friction_coefficient as friction_coefficient  # noqa: E402
@@ -39,6 +61,7 @@ from ._simulate import STATUS as STATUS  # noqa: E402
 from ._simulate import Observables as Observables  # noqa: E402
 from ._simulate import simulate as simulate  # noqa: E402
 from ._solvers import SOLVERS as SOLVERS  # noqa: E402
+from ._solvers import DEFAULT_SOLVER as DEFAULT_SOLVER  # noqa: E402
 from ._crosscheck import crosscheck as crosscheck  # noqa: E402
 from ._work_precision import work_precision as work_precision  # noqa: E402
 from ._plots.crosscheck import plot_crosscheck as plot_crosscheck  # noqa: E402

@@ -7,18 +7,20 @@ from pathlib import Path
 
 import diffrax
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
-from tqdm.auto import tqdm
 
 from ._initial import FAMILIES, excited_block
 from ._nonsmooth.options import NonsmoothOptions
 from ._nonsmooth.solve import NONSMOOTH_STATUS, run_nonsmooth
 from ._options import SimulationOptions
 from ._params import ChainParams
+from ._lanes import on_devices, run_lanes
 from ._results import PAPER, save_dataset
-from ._simulate import STATUS, run
+from ._simulate import STATUS
+from ._solvers import DEFAULT_SOLVER, SOLVERS
 
 #: The grid of the issue: belt speeds across the bistable range and a set of
 #: eq. (8) and eq. (10) initial conditions, as (family, number excited).
@@ -49,26 +51,17 @@ def state_class(n_halc: int, n_osc: int, periodic: bool) -> str:
     return f"{kind} ({'periodic' if periodic else 'irregular'})"
 
 
-@eqx.filter_jit
-def _smoothed_runs(params, v_d, y0, solver, options):
-    def one(vd, y):
-        return run(eqx.tree_at(lambda q: q.v_d, params, vd), y, solver, options)
-    return eqx.filter_vmap(one)(v_d, y0)
-
-
 _reference_run = eqx.filter_jit(run_nonsmooth)
 
 
 def _smoothed(params, v_d, y0, solver, options):
     """The smoothed runs over the two halves of the observed window (so that the
-    extrema of each half are known), all cases vmapped. JAX dispatches them
-    asynchronously; `_gather` waits for them. (On one CPU device XLA runs them
-    before the reference runs, not beside them.)"""
+    extrema of each half are known), all cases as lanes of `run_lanes`."""
     mid = 0.5 * (options.transient + options.t_end)
     first = dataclasses.replace(options, t_end=mid)
     second = dataclasses.replace(options, t_end=options.t_end - mid, transient=0.0)
-    a = _smoothed_runs(params, v_d, y0, solver, first)
-    b = _smoothed_runs(params, v_d, a.y_final, solver, second)
+    a = run_lanes(params, v_d, y0, solver, first)
+    b = run_lanes(params, v_d, a.y_final, solver, second)
     return a, b
 
 
@@ -83,14 +76,15 @@ def _gather(a, b) -> dict:
             "num_steps": np.asarray(a.num_steps) + np.asarray(b.num_steps)}
 
 
-def _reference_case(params, v_d, y0, options, path: Path | None):
-    """One reference run, read from `path` if an earlier run stored it there."""
+def _reference_case(params, v_d, y0, options, path: Path | None, device):
+    """One reference run on `device`, read from `path` if an earlier run stored it
+    there."""
     if path is not None and path.exists():
         with xr.open_dataset(path, engine="h5netcdf") as stored:
             return {k: stored[k].values for k in stored.data_vars}, stored.attrs["wall_time_s"]
     start = time.perf_counter()
-    obs = _reference_run(eqx.tree_at(lambda q: q.v_d, params, jnp.asarray(v_d)),
-                         jnp.asarray(y0), options)
+    v_d, y0 = jax.device_put((jnp.asarray(v_d), jnp.asarray(y0)), device)
+    obs = _reference_run(eqx.tree_at(lambda q: q.v_d, params, v_d), y0, options)
     fields = ("amplitudes", "x_max", "x_min", "n_halc", "status", "stick_fraction",
               "num_events", "num_steps")
     out = {k: np.asarray(getattr(obs, k)) for k in fields}
@@ -109,7 +103,7 @@ def _amplitude_error(smoothed, reference):
 
 
 def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSSCHECK_ICS,
-               solver: diffrax.AbstractSolver = diffrax.Tsit5(),
+               solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
                options: SimulationOptions = SimulationOptions(),
                reference_options: NonsmoothOptions | None = None, *,
                tolerances: ClassTolerances = ClassTolerances(),
@@ -135,6 +129,9 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
     - `checkpoint`: a folder where each reference run is stored as it finishes and
         read back on a later call (resuming an interrupted cross-check).
     - `progress`: show a tqdm bar over the reference runs.
+
+    The smoothed runs are lanes of `run_lanes`; the reference runs are spread over
+    the devices, one case at a time per device (`on_devices`).
 
     **Returns:**
 
@@ -166,19 +163,18 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
     y0 = np.stack(y0)
 
     start = time.perf_counter()
-    pending = _smoothed(params, jnp.asarray(vds), jnp.asarray(y0), solver, options)
+    smooth = _gather(*_smoothed(params, jnp.asarray(vds), jnp.asarray(y0), solver, options))
+    smooth_wall = time.perf_counter() - start
 
-    refs, walls = [], []
-    for i, (vd, fam, k) in enumerate(tqdm(cases, desc="non-smooth reference",
-                                          disable=not progress, leave=False)):
+    def reference(i, device):
+        vd, fam, k = cases[i]
         path = None if checkpoint is None else (
             Path(checkpoint) / f"reference_vd{vd:g}_{fam}_k{k}_{reference_options.t_end:g}.nc")
-        out, wall = _reference_case(params, vd, y0[i], reference_options, path)
-        refs.append(out)
-        walls.append(wall)
+        return _reference_case(params, vd, y0[i], reference_options, path, device)
+
+    results = on_devices(reference, len(cases), "non-smooth reference", progress)
+    refs, walls = [r[0] for r in results], [r[1] for r in results]
     ref = {k: np.stack([r[k] for r in refs]) for k in refs[0]}
-    smooth = _gather(*pending)
-    smooth_wall = time.perf_counter() - start  # until gathered, after the reference runs
 
     n = params.n_osc
     half_s = _half_difference(smooth)

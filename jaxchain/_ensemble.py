@@ -1,5 +1,5 @@
-"""Ensembles: `jax.vmap` of the single-trajectory run over belt speeds and initial
-conditions, in one compiled function."""
+"""Ensembles: the single-trajectory run over a grid of belt speeds and initial
+conditions, vmapped and spread over the devices (`run_lanes`)."""
 
 import diffrax
 import equinox as eqx
@@ -9,18 +9,21 @@ import xarray as xr
 from jaxtyping import ArrayLike, Float
 
 from ._initial import AbstractInitialCondition
+from ._lanes import padded_lanes, run_lanes
 from ._options import SimulationOptions
 from ._params import ChainParams
 from ._progress import progress_bar
 from ._results import to_dataset
-from ._simulate import n_ticks, run
+from ._simulate import n_ticks
+from ._solvers import DEFAULT_SOLVER, SOLVERS
 
 
 @eqx.filter_jit
-def _ensemble(params, v_d, ics, solver, options, progress):
+def _initial_states(params, v_d, ics):
+    """The initial state of every (belt speed, initial condition) pair, shape
+    (n_vd, n_ic, 2, n_osc): eq. (8) starts from each belt speed's steady sliding."""
     def one(vd, ic):
-        p = eqx.tree_at(lambda q: q.v_d, params, vd)
-        return run(p, ic(p), solver, options, progress)
+        return ic(eqx.tree_at(lambda q: q.v_d, params, vd))
 
     over_ics = eqx.filter_vmap(one, in_axes=(None, eqx.if_array(0)))
     return eqx.filter_vmap(over_ics, in_axes=(0, None))(v_d, ics)
@@ -28,15 +31,17 @@ def _ensemble(params, v_d, ics, solver, options, progress):
 
 def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
              ics: AbstractInitialCondition,
-             solver: diffrax.AbstractSolver = diffrax.Tsit5(),
+             solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
              options: SimulationOptions = SimulationOptions(), *,
              progress: bool = True) -> xr.Dataset:
-    """Run every (belt speed, initial condition) pair of a grid, vmapped, in one
-    compiled function. Trajectories never raise: each has a `status` (0 = ok, see
-    `STATUS`), so one failing lane never discards the others.
+    """Run every (belt speed, initial condition) pair of a grid, vmapped and spread
+    over the devices (on a CPU, one per core), in one compiled function.
+    Trajectories never raise: each has a `status` (0 = ok, see `STATUS`), so one
+    failing lane never discards the others.
 
-    Under vmap every lane waits for the slowest one within each chunk, so an
-    ensemble costs about (number of lanes) x (steps of the slowest lane).
+    Under vmap every lane waits for the slowest one of its device within each
+    chunk, so an ensemble costs about (lanes per device) x (steps of the slowest
+    lane). Lanes are dealt to devices in turn (`lane_order`).
 
     **Arguments:**
 
@@ -46,7 +51,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
         fields, n_ic of them (for example `localized_family(n_osc)` or
         `GivenState(y0)` with y0 of shape (n_ic, 2, n_osc)). They are evaluated at
         each belt speed, so that eq. (8) starts from that speed's steady sliding.
-    - `solver`: a diffrax solver, `diffrax.Tsit5()` by default.
+    - `solver`: a diffrax solver, `diffrax.Bosh3()` by default (`DEFAULT_SOLVER`).
     - `options`: `SimulationOptions`.
     - `progress`: show a tqdm bar over the chunks of all trajectories.
 
@@ -70,10 +75,15 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     n_ic = leaves[0].shape[0]
     ics_first = jax.tree_util.tree_map(lambda x: x[0] if eqx.is_array(x) else x, ics)
     ics_first(eqx.tree_at(lambda q: q.v_d, params, v_d[0]))  # shape check, may raise
-    total = len(v_d) * n_ic * n_ticks(options)
+    y0 = _initial_states(params, v_d, ics)
+    shape = y0.shape[:2]
+    lanes_vd = jnp.broadcast_to(v_d[:, None], shape).reshape(-1)
+    total = padded_lanes(lanes_vd.shape[0]) * n_ticks(options)
     with progress_bar(total, f"{len(v_d)}x{n_ic} trajectories", progress):
-        obs = _ensemble(params, v_d, ics, solver, options, progress)
+        obs = run_lanes(params, lanes_vd, y0.reshape(-1, *y0.shape[2:]), solver, options,
+                        progress)
         jax.block_until_ready(obs)
+    obs = jax.tree_util.tree_map(lambda x: x.reshape(*shape, *x.shape[1:]), obs)
     return to_dataset(obs, params, v_d, ics, solver, options)
 
 

@@ -13,6 +13,7 @@ from ._model import split_vector_field, vector_field
 from ._options import SimulationOptions
 from ._params import ChainParams
 from ._progress import progress_bar, tick
+from ._solvers import DEFAULT_SOLVER, SOLVERS
 
 #: Status codes of a trajectory, with what to do about each.
 STATUS = (
@@ -169,7 +170,7 @@ _run_jit = eqx.filter_jit(run)
 
 
 def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
-             solver: diffrax.AbstractSolver = diffrax.Tsit5(),
+             solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
              options: SimulationOptions = SimulationOptions(), *, throw: bool = True,
              progress: bool = False) -> Observables:
     """Integrate eq. (5) of the paper for one trajectory and return its observables.
@@ -186,7 +187,7 @@ def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
     - `params`: the chain parameters (`ChainParams`).
     - `y0`: an initial condition (`OutOfPhaseExcitation`, `GivenState`, ...) or a
         state array of shape (2, n_osc) or (2 n_osc,).
-    - `solver`: a diffrax solver, `diffrax.Tsit5()` by default.
+    - `solver`: a diffrax solver, `diffrax.Bosh3()` by default (`DEFAULT_SOLVER`).
     - `options`: `SimulationOptions` (horizon, tolerances, sampling).
     - `throw`: raise on failure (default) or return the status.
     - `progress`: show a tqdm bar, one tick per chunk.

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 import xarray as xr
 
+import jaxchain as jc
 from jaxchain._cli.main import main
 
 SMALL = ["--n-osc", "3", "--t-end", "400", "--transient", "200"]
@@ -60,7 +61,7 @@ def test_localized_json_and_files(tmp_path, capsys):
     assert res["status"] == ["ok"] * 3
     ds = xr.load_dataset(out / "localized_vd1.5.nc")
     assert ds["energy"].values[0].tolist() == pytest.approx(res["energy"])
-    assert ds.attrs["eps"] == 3e-3 and ds.attrs["n_osc"] == 3
+    assert ds.attrs["eps"] == jc.ChainParams().eps and ds.attrs["n_osc"] == 3
     assert (out / "localized_vd1.5.png").stat().st_size > 1000
 
 

@@ -47,7 +47,8 @@ def test_dataset_round_trip_keeps_parameters(tmp_path):
     back = xr.load_dataset(path)
     assert dict(back.sizes) == {"v_d": 1, "ic": 3, "osc": 3, "component": 2}
     assert back.attrs["eps"] == 2e-2 and back.attrs["n_osc"] == 3
-    assert back.attrs["t_end"] == SHORT.t_end and back.attrs["solver"] == "Tsit5"
+    assert back.attrs["t_end"] == SHORT.t_end
+    assert back.attrs["solver"] == type(jc.SOLVERS[jc.DEFAULT_SOLVER]()).__name__
     assert back["n_excited"].values.tolist() == [1, 2, 3]
     assert back.identical(ds)
     # eq. (8) at v_d = 1.5, stored: unexcited oscillators start at steady sliding

@@ -32,7 +32,7 @@ agree (to 1e-6 for the reference, 1e-3 for the sampled smoothed model).
 
 Writes <out>/crosscheck.nc and <out>/crosscheck.png; each reference run is stored
 in <out>/crosscheck_cases/ as it finishes, and a later run with the same options
-reads it back (resume). About 10 minutes on 2 CPU cores with the defaults."""
+reads it back (resume). About 5 minutes on 2 CPU cores with the defaults."""
 
 
 def add_parser(sub):

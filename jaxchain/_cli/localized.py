@@ -25,7 +25,7 @@ conditions with 1, 2, ..., N oscillators excited (eq. (8) by default, or eq. (10
 integrated to --t-end; amplitudes, the energy E of eq. (9) and the number of
 oscillators on the high-amplitude limit cycle (n_HALC) are taken after --transient.
 With no options this is the paper's scene: N = 20, v_d = 1.5, t_end = 15000,
-transient = 10000 (about 100 s on 2 CPU cores, compilation included).
+transient = 10000 (about 90 s on 2 CPU cores, compilation included).
 
 Writes <out>/localized_vd<V>.nc (xarray Dataset with all parameters as attributes)
 and <out>/localized_vd<V>.png (circles of radius proportional to amplitude)."""
