@@ -13,7 +13,8 @@ def plot_crosscheck(ds: xr.Dataset):
     """Two panels: (a) every oscillator's amplitude, smoothed against non-smooth,
     on the diagonal when they agree; (b) the amplitude error of each case against
     v_d, filled for periodic states (of the reference), open for irregular ones,
-    with the 1 % line.
+    each family shifted a little along v_d so that none hides another, a red cross
+    where n_HALC disagrees, and the 1 % line.
 
     **Arguments:**
 
@@ -36,13 +37,20 @@ def plot_crosscheck(ds: xr.Dataset):
     error = 100 * ds["amplitude_error"].values
     periodic = np.array(["periodic" in c for c in ds["state_class_reference"].values])
     families = ds["family"].values
-    for family, color in zip(sorted(set(families)), ("C0", "C1", "C2")):
+    shown = np.maximum(error, 1e-4)
+    x = ds["v_d"].values.astype(float)
+    for i, (family, color) in enumerate(zip(sorted(set(families)), ("C0", "C1", "C2"))):
+        x = np.where(families == family, ds["v_d"].values + 0.008 * (i - 0.5), x)
         for is_periodic, label in ((True, "periodic"), (False, "irregular")):
             m = (families == family) & (periodic == is_periodic)
             if m.any():
-                right.scatter(ds["v_d"].values[m], np.maximum(error[m], 1e-4), s=40,
+                right.scatter(x[m], shown[m], s=40,
                               facecolors=color if is_periodic else "none",
                               edgecolors=color, label=f"{family}, {label}")
+    wrong = ~ds["n_halc_agrees"].values
+    if wrong.any():
+        right.scatter(x[wrong], shown[wrong], marker="x", s=80, color="red",
+                      label="n_HALC disagrees")
     right.axhline(1.0, color="k", lw=1, ls="--", label="1 %")
     right.set(yscale="log", xlabel="belt speed v_d",
               ylabel="amplitude error, % of max(1, largest amplitude)",
