@@ -99,7 +99,7 @@ def run(args) -> int:
     else:
         for key, best in advice.items():
             scene, target = key.split()
-            text = ("no run reached it" if best is None else
+            text = ("no run reached it, confirmed by a run at rtol/10" if best is None else
                     f"{best['solver']}, eps {best['eps']:g}, rtol {best['rtol']:g}: "
                     f"{best['wall_s']:.3g} s, error {100 * best['amplitude_error']:.3f} %")
             print(f"{scene}, amplitude error < {100 * float(target):g} %: {text}")
