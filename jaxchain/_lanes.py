@@ -70,7 +70,7 @@ def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
     v_d = jnp.asarray(v_d, dtype=float)
     y0 = jnp.asarray(y0, dtype=float)
     n_lanes = v_d.shape[0]
-    devices = jax.devices()[:max(1, n_lanes)]
+    devices = _devices(n_lanes)
     order = lane_order(n_lanes, len(devices))
     pick = np.minimum(order, n_lanes - 1)  # padding repeats the last lane
     mesh = Mesh(np.array(devices), ("lanes",))
@@ -82,7 +82,12 @@ def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
 def padded_lanes(n_lanes: int) -> int:
     """How many lanes `run_lanes` integrates for `n_lanes` (padding included), for
     sizing a progress bar."""
-    return len(lane_order(n_lanes, len(jax.devices()[:max(1, n_lanes)])))
+    return len(lane_order(n_lanes, len(_devices(n_lanes))))
+
+
+def _devices(n_tasks: int) -> list:
+    """The devices of JAX's default backend that `n_tasks` tasks or lanes use."""
+    return jax.devices()[:max(1, n_tasks)]
 
 
 
@@ -123,7 +128,7 @@ def on_devices(task: Callable, n_tasks: int, desc: str, progress: bool = False) 
                 bar.update()
 
     threads = [threading.Thread(target=worker, args=(d,), daemon=True)
-               for d in jax.devices()[:max(1, n_tasks)]]
+               for d in _devices(n_tasks)]
     for t in threads:
         t.start()
     for t in threads:
