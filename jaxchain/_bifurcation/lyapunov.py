@@ -1,0 +1,102 @@
+"""The first Lyapunov coefficient of the Hopf bifurcation of steady sliding."""
+
+import itertools
+
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._model import jacobian, steady_sliding, vector_field
+from .._params import ChainParams
+from .hopf import fourier_blocks
+
+
+def _derivative(params: ChainParams, y, vectors) -> Array:
+    """The multilinear form d^k f(y)[v_1, ..., v_k] of the flattened vector field,
+    by nested forward-mode derivatives (real vectors)."""
+    def f(z):
+        return vector_field(0.0, z, params)
+
+    for v in vectors:
+        f = (lambda g, v: lambda z: jax.jvp(g, (z,), (v,))[1])(f, v)
+    return f(y)
+
+
+def _complex_form(params: ChainParams, y, vectors) -> Array:
+    """The multilinear form for complex vectors, expanded into real and imaginary
+    parts (forward-mode tangents are real)."""
+    out = 0.0
+    for parts in itertools.product((0, 1), repeat=len(vectors)):
+        real = [(v.imag if part else v.real) for v, part in zip(vectors, parts)]
+        out = out + (1j ** sum(parts)) * _derivative(params, y, real)
+    return out
+
+
+def first_lyapunov_coefficient(params: ChainParams, mode: int = 0) -> Float[Array, ""]:
+    """The first Lyapunov coefficient l1 of the Hopf bifurcation of steady sliding
+    in Fourier mode `mode`, at `params.v_d` (pass the Hopf point's v_d):
+
+        l1 = 1/(2 omega) Re[<p, C(q, q, conj q)> - 2 <p, B(q, A^-1 B(q, conj q))>
+                            + <p, B(conj q, (2 i omega - A)^-1 B(q, q))>],
+
+    Kuznetsov, *Elements of Applied Bifurcation Theory* (3rd ed., 2004), eq.
+    (3.20), with A q = i omega q, A^T p = -i omega p, <p, q> = <q, q> = 1. A is the
+    Jacobian of eq. (5) (`jax.jacfwd`), B and C its second and third derivatives
+    (nested `jax.jvp`), the linear solves by lineax. l1 > 0: subcritical (an
+    unstable cycle surrounds stable steady sliding); l1 < 0: supercritical.
+
+    For the ring the in-phase mode (`mode=0`) is the one to ask: its subspace
+    (all x_n equal) is invariant and carries the single oscillator. At the ring's
+    Hopf point all modes are critical together, so l1 of one mode does not
+    describe the whole centre manifold.
+
+    For one oscillator with sign() friction, l1 = F'''(-v_d)/8 = xi / (4 v0^2) at
+    the Hopf point (0.05 for eq. (7)), and the small cycle has amplitude
+    sqrt(8 v0 (v_d - v_d,H)). In the ring, <q, q> = 1 spreads the mode over N
+    oscillators and the in-phase l1 is the single oscillator's divided by N.
+
+    **Arguments:**
+
+    - `params`: the chain parameters, at the Hopf point.
+    - `mode`: Fourier mode k with a real mode shape, 0 or N/2.
+
+    **Returns:**
+
+    l1, shape (), dimensionless.
+
+    **Raises:**
+
+    `ValueError` if `mode` is not 0 or N/2.
+    """
+    n = params.n_osc
+    if mode not in (0, n / 2):
+        raise ValueError(f"mode must be 0 or N/2 = {n / 2} (a real mode shape), got {mode!r}")
+    block = fourier_blocks(params)[mode]
+    eigvals, right = jnp.linalg.eig(block)
+    i = jnp.argmax(eigvals.imag)
+    omega = eigvals[i].imag
+    left_vals, left = jnp.linalg.eig(block.T)
+    j = jnp.argmin(left_vals.imag)
+    shape = jnp.asarray(np.cos(np.pi * 2 * mode * np.arange(n) / n) / np.sqrt(n))
+    q = jnp.kron(right[:, i], shape)
+    p = jnp.kron(left[:, j], shape)
+    q = q / jnp.linalg.norm(q)
+    p = p / jnp.vdot(p, q).conj()  # <p, q> = conj(p) . q = 1
+
+    y = jnp.reshape(steady_sliding(params), (-1,))
+    a = jacobian(params).astype(complex)
+
+    def solve(matrix, vector):
+        return lx.linear_solve(lx.MatrixLinearOperator(matrix), vector, lx.LU()).value
+
+    def inner(u, v):
+        return jnp.vdot(u, v)
+
+    c = _complex_form(params, y, [q, q, q.conj()])
+    b1 = solve(a, _complex_form(params, y, [q, q.conj()]))
+    b2 = solve(2j * omega * jnp.eye(2 * n) - a, _complex_form(params, y, [q, q]))
+    value = (inner(p, c) - 2 * inner(p, _complex_form(params, y, [q, b1]))
+             + inner(p, _complex_form(params, y, [q.conj(), b2])))
+    return value.real / (2 * omega)

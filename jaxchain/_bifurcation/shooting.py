@@ -1,0 +1,236 @@
+"""Periodic orbits of eq. (5) by single shooting, and their Floquet multipliers from
+the monodromy matrix."""
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Bool, Complex, Float
+
+from .._custom_types import State
+from .._model import vector_field
+from .._params import ChainParams
+
+
+class ShootingOptions(eqx.Module):
+    """How periodic orbits are integrated and solved for.
+
+    **Arguments:**
+
+    - `solver`: diffrax solver of the flow over one period. Shooting asks for
+        accuracy (the trivial Floquet multiplier is 1 only as far as the flow is
+        exact), so an accurate explicit method is the default.
+    - `rtol`, `atol`: tolerances of the flow (diffrax's `PIDController`).
+    - `max_steps`: step budget of one period.
+    - `newton_tol`: Newton's tolerance (optimistix, rtol = atol) on the state and
+        period.
+    - `newton_steps`: Newton's iteration budget.
+    - `n_samples`: samples of one period from which amplitudes are taken.
+
+    **Raises:**
+
+    `ValueError` naming the field for a non-positive tolerance or count.
+    """
+
+    solver: diffrax.AbstractSolver = diffrax.Tsit5()
+    rtol: float = eqx.field(static=True, default=1e-10)
+    atol: float = eqx.field(static=True, default=1e-12)
+    max_steps: int = eqx.field(static=True, default=200_000)
+    newton_tol: float = eqx.field(static=True, default=1e-9)
+    newton_steps: int = eqx.field(static=True, default=40)
+    n_samples: int = eqx.field(static=True, default=4096)
+
+    def __check_init__(self):
+        for name in ("rtol", "atol", "max_steps", "newton_tol", "newton_steps", "n_samples"):
+            value = getattr(self, name)
+            if not value > 0:
+                raise ValueError(f"ShootingOptions.{name} must be > 0, got {value!r}")
+
+
+def flow(params: ChainParams, y0: State, period, options: ShootingOptions,
+         saveat: diffrax.SaveAt = diffrax.SaveAt(t1=True)) -> diffrax.Solution:
+    """Integrate eq. (5) from `y0` over [0, period]. Forward-mode differentiable
+    (`diffrax.ForwardMode`), for monodromy matrices and Newton's method."""
+    return diffrax.diffeqsolve(
+        diffrax.ODETerm(vector_field), options.solver, 0.0, period, None, y0, params,
+        saveat=saveat, max_steps=options.max_steps, adjoint=diffrax.ForwardMode(),
+        stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
+        throw=False)
+
+
+def pack(y0: State, period) -> Float[Array, " 2n+1"]:
+    """The unknowns of shooting, (x_1..x_N, x_1'..x_N', T)."""
+    return jnp.concatenate([jnp.reshape(y0, (-1,)), jnp.atleast_1d(period)])
+
+
+def unpack(u: Float[Array, " 2n+1"]) -> tuple[State, Float[Array, ""]]:
+    """Inverse of `pack`."""
+    return jnp.reshape(u[:-1], (2, -1)), u[-1]
+
+
+def shooting_residual(u: Float[Array, " 2n+1"], params: ChainParams,
+                      options: ShootingOptions) -> Float[Array, " 2n+1"]:
+    """Single-shooting residual of a periodic orbit (Seydel, *Practical Bifurcation
+    and Stability Analysis*, 3rd ed. (2010), Sect. 7.1): the flow over one period
+    minus the start, phi_T(y0) - y0, and the phase condition x_1'(0) = 0 (the
+    orbit starts at a turning point of oscillator 1, a Poincare section crossed by
+    every stick-slip and every small Hopf cycle).
+
+    **Arguments:**
+
+    - `u`: the unknowns `pack(y0, T)`, shape (2 n_osc + 1,).
+    - `params`: the chain parameters.
+    - `options`: `ShootingOptions`.
+
+    **Returns:**
+
+    Shape (2 n_osc + 1,); zero on a periodic orbit.
+    """
+    y0, period = unpack(u)
+    y1 = flow(params, y0, period, options).ys[-1]
+    return jnp.concatenate([jnp.reshape(y1 - y0, (-1,)), y0[1, :1]])
+
+
+def monodromy(params: ChainParams, y0: State, period, options: ShootingOptions
+              ) -> Float[Array, "2n 2n"]:
+    """The monodromy matrix d phi_T(y0) / d y0, by forward-mode differentiation
+    through `diffrax.diffeqsolve` (`jax.jacfwd`). Ordered as `jacobian`."""
+    def end(z):
+        return jnp.reshape(flow(params, jnp.reshape(z, (2, -1)), period, options).ys[-1], (-1,))
+    return jax.jacfwd(end)(jnp.reshape(y0, (-1,)))
+
+
+def floquet_multipliers(params: ChainParams, y0: State, period, options: ShootingOptions
+                        ) -> tuple[Complex[Array, " 2n"], Array]:
+    """Floquet multipliers, the eigenvalues of the monodromy matrix, and the index
+    of the trivial one: the multiplier whose eigenvector is the flow direction
+    f(y0) (it is 1 on an exact orbit; its distance from 1 measures the accuracy
+    of the flow).
+
+    **Returns:**
+
+    (multipliers of shape (2 n_osc,), complex, by decreasing modulus; index of the
+    trivial multiplier, shape ()).
+    """
+    values, vectors = jnp.linalg.eig(monodromy(params, y0, period, options))
+    order = jnp.argsort(-jnp.abs(values))
+    values, vectors = values[order], vectors[:, order]
+    direction = jnp.reshape(vector_field(0.0, y0, params), (-1,))
+    direction = direction / jnp.linalg.norm(direction)
+    alignment = jnp.abs(vectors.conj().T @ direction) / jnp.linalg.norm(vectors, axis=0)
+    return values, jnp.argmax(alignment)
+
+
+def orbit_extrema(params: ChainParams, y0: State, period, options: ShootingOptions
+                  ) -> tuple[Float[Array, " n_osc"], Float[Array, " n_osc"],
+                             Float[Array, " n_osc"]]:
+    """(x_max, x_min, v_max) of each oscillator over one period, from
+    `options.n_samples` dense-output samples."""
+    ts = period * jnp.linspace(0.0, 1.0, options.n_samples)
+    ys = flow(params, y0, period, options, diffrax.SaveAt(ts=ts)).ys
+    return ys[:, 0].max(0), ys[:, 0].min(0), ys[:, 1].max(0)
+
+
+class PeriodicOrbit(eqx.Module):
+    """A periodic orbit of eq. (5) and its stability.
+
+    **Fields:**
+
+    - `params`: the parameters it belongs to.
+    - `y0`: the state at t = 0 (x_1'(0) = 0), shape (2, n_osc).
+    - `period`: T, shape ().
+    - `amplitudes`: half of peak-to-peak of each x_n, shape (n_osc,).
+    - `energy`: E = 1/2 sum_n A_n^2 (eq. (9) of the paper), shape ().
+    - `n_halc`: oscillators that stick (max x_n' reaches v_d to 1 %), shape ().
+    - `multipliers`: Floquet multipliers by decreasing modulus, shape (2 n_osc,).
+    - `trivial`: index of the trivial multiplier, shape ().
+    - `stable`: all non-trivial multipliers inside the unit circle, shape ().
+    - `residual`: max-norm of the shooting residual, shape ().
+    - `converged`: whether Newton's method converged, shape ().
+
+    All quantities are dimensionless (eqs. (4)-(6)).
+    """
+
+    params: ChainParams
+    y0: State
+    period: Float[Array, ""]
+    amplitudes: Float[Array, " n_osc"]
+    energy: Float[Array, ""]
+    n_halc: Array
+    multipliers: Complex[Array, " 2n"]
+    trivial: Array
+    stable: Bool[Array, ""]
+    residual: Float[Array, ""]
+    converged: Bool[Array, ""]
+
+    @property
+    def critical_multiplier(self) -> Complex[Array, ""]:
+        """The largest non-trivial multiplier in modulus."""
+        return self.multipliers[jnp.where(self.trivial == 0, 1, 0)]
+
+
+def describe_orbit(params: ChainParams, u: Float[Array, " 2n+1"], options: ShootingOptions,
+                   converged=True) -> PeriodicOrbit:
+    """The `PeriodicOrbit` of the shooting unknowns `u` (traceable)."""
+    y0, period = unpack(u)
+    multipliers, trivial = floquet_multipliers(params, y0, period, options)
+    x_max, x_min, v_max = orbit_extrema(params, y0, period, options)
+    amplitudes = 0.5 * (x_max - x_min)
+    others = jnp.where(jnp.arange(multipliers.size) == trivial, 0.0, jnp.abs(multipliers))
+    residual = jnp.max(jnp.abs(shooting_residual(u, params, options)))
+    return PeriodicOrbit(
+        params=params, y0=y0, period=period, amplitudes=amplitudes,
+        energy=0.5 * jnp.sum(amplitudes**2), n_halc=jnp.sum(v_max >= 0.99 * params.v_d),
+        multipliers=multipliers, trivial=trivial, stable=jnp.all(others < 1),
+        residual=residual, converged=jnp.asarray(converged))
+
+
+@eqx.filter_jit
+def _solve(params, u0, options):
+    sol = optx.root_find(
+        lambda u, p: shooting_residual(u, p, options),
+        optx.Newton(rtol=options.newton_tol, atol=options.newton_tol), u0, params,
+        max_steps=options.newton_steps, throw=False)
+    return describe_orbit(params, sol.value, options,
+                          sol.result == optx.RESULTS.successful)
+
+
+def periodic_orbit(params: ChainParams, y0: State, period: float,
+                   options: ShootingOptions = ShootingOptions(), *,
+                   throw: bool = True) -> PeriodicOrbit:
+    """Solve for a periodic orbit of eq. (5) by single shooting: optimistix's Newton
+    method on `shooting_residual` (state and period, with the phase condition
+    x_1'(0) = 0), its Jacobian by forward-mode differentiation through
+    `diffrax.diffeqsolve`. The Floquet multipliers are the eigenvalues of the
+    monodromy matrix (`floquet_multipliers`).
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `y0`: a guess of a state on the orbit, shape (2, n_osc); a state from a long
+        simulation, for instance. Its velocity x_1' is set to 0 first.
+    - `period`: a guess of the period.
+    - `options`: `ShootingOptions`.
+    - `throw`: raise if Newton's method does not converge (default); otherwise
+        return the orbit with `converged=False`.
+
+    **Returns:**
+
+    A `PeriodicOrbit`.
+
+    **Raises:**
+
+    `ValueError` for a guess of the wrong shape or a non-positive period;
+    `RuntimeError` if Newton's method does not converge and `throw=True`.
+    """
+    y0 = jnp.asarray(y0, dtype=float)
+    if y0.shape != (2, params.n_osc):
+        raise ValueError(f"y0 must have shape (2, {params.n_osc}), got {y0.shape}")
+    if not period > 0:
+        raise ValueError(f"period must be > 0, got {period!r}")
+    orbit = _solve(params, pack(y0.at[1, 0].set(0.0), period), options)
+    if throw and not bool(orbit.converged):
+        raise RuntimeError("shooting did not converge: start from a state closer to the "
+                           "orbit (after a longer simulation) or a better period guess")
+    return orbit
