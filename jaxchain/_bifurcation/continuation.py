@@ -1,0 +1,236 @@
+"""Pseudo-arclength continuation, in the manner of BifurcationKit.jl: a problem, an
+algorithm, options, and the branch it returns."""
+
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Bool, Float
+from tqdm.auto import tqdm
+
+from .._params import ChainParams
+
+
+class ContinuationProblem(eqx.Module):
+    """A family of equations G(u, p) = 0 to follow in one parameter p.
+
+    **Fields:**
+
+    - `residual`: G(u, params) -> shape (n,), for unknowns u of shape (n,).
+    - `u0`: a solution at `params`, shape (n,).
+    - `params`: the parameters of `u0`.
+    - `where`: the lens of the continued parameter, `lambda p: p.v_d` by default
+        (used with `eqx.tree_at`).
+    - `describe`: (u, params) -> a record of the point (an `eqx.Module` with a
+        boolean field `stable`), for example `describe_orbit`.
+    """
+
+    residual: Callable = eqx.field(static=True)
+    u0: Float[Array, " n"]
+    params: ChainParams
+    where: Callable = eqx.field(static=True, default=lambda p: p.v_d)
+    describe: Callable = eqx.field(static=True, default=None)
+
+    def at(self, value) -> ChainParams:
+        """`params` with the continued parameter set to `value`."""
+        return eqx.tree_at(self.where, self.params, value)
+
+    def __call__(self, z: Float[Array, " n+1"]) -> Float[Array, " n"]:
+        """G at z = (u, p)."""
+        return self.residual(z[:-1], self.at(z[-1]))
+
+
+class PseudoArclength(eqx.Module):
+    """Keller's pseudo-arclength continuation (H. B. Keller, *Numerical solution of
+    bifurcation and nonlinear eigenvalue problems* (1977)): predict along the
+    tangent of the branch in (u, p), then correct with Newton's method (optimistix)
+    on G(u, p) = 0 together with <t, z - z_predicted> = 0, which passes folds in p.
+
+    **Arguments:**
+
+    - `newton_tol`: Newton's tolerance (rtol = atol) on z = (u, p).
+    - `newton_steps`: Newton's iteration budget per point.
+    """
+
+    newton_tol: float = eqx.field(static=True, default=1e-9)
+    newton_steps: int = eqx.field(static=True, default=12)
+
+
+class ContinuationOptions(eqx.Module):
+    """Step sizes and bounds of a continuation.
+
+    **Arguments:**
+
+    - `ds`: first arclength step in (u, p).
+    - `ds_min`, `ds_max`: bounds of the adapted step; the run stops when a failed
+        step would go below `ds_min`.
+    - `p_min`, `p_max`: the run stops when p leaves [p_min, p_max].
+    - `max_points`: the most points (failed ones included).
+    - `direction`: +1 or -1, the sign of dp/ds at the start.
+    - `fast_steps`: a point corrected within this many Newton steps lets ds grow
+        by 1.5 (to at most `ds_max`); a failed point halves it.
+
+    **Raises:**
+
+    `ValueError` naming the field for a bad value.
+    """
+
+    ds: float = 0.02
+    ds_min: float = 1e-5
+    ds_max: float = 0.2
+    p_min: float = -np.inf
+    p_max: float = np.inf
+    max_points: int = 200
+    direction: int = 1
+    fast_steps: int = 4
+
+    def __check_init__(self):
+        if not 0 < self.ds_min <= self.ds <= self.ds_max:
+            raise ValueError(f"ContinuationOptions needs 0 < ds_min <= ds <= ds_max, got "
+                             f"ds_min = {self.ds_min}, ds = {self.ds}, ds_max = {self.ds_max}")
+        if not self.p_min < self.p_max:
+            raise ValueError(f"ContinuationOptions.p_min must be < p_max, got "
+                             f"{self.p_min} and {self.p_max}")
+        if self.max_points < 1:
+            raise ValueError(f"ContinuationOptions.max_points must be >= 1, got "
+                             f"{self.max_points}")
+        if self.direction not in (1, -1):
+            raise ValueError(f"ContinuationOptions.direction must be +1 or -1, got "
+                             f"{self.direction!r}")
+
+
+class Branch(eqx.Module):
+    """The result of a continuation.
+
+    **Fields:**
+
+    - `p`: the continued parameter at each point, shape (n_points,).
+    - `u`: the unknowns, shape (n_points, n).
+    - `tangent_p`: dp/ds of the unit tangent, shape (n_points,); it changes sign
+        at a fold.
+    - `converged`: whether Newton's method converged, shape (n_points,). A failed
+        point keeps its prediction; the run halves ds and goes on from the last good
+        point.
+    - `records`: `problem.describe` of every converged point, fields with a leading
+        axis (n_converged,).
+    - `stable`: the records' stability, shape (n_converged,).
+    - `folds`: indices into the converged points after which dp/ds changes sign.
+    - `stability_changes`: indices into the converged points after which `stable`
+        changes.
+    - `stop`: why the run ended.
+    """
+
+    p: Float[Array, " n_points"]
+    u: Float[Array, "n_points n"]
+    tangent_p: Float[Array, " n_points"]
+    converged: Bool[Array, " n_points"]
+    records: eqx.Module
+    stable: Bool[Array, " n_converged"]
+    folds: tuple[int, ...] = eqx.field(static=True)
+    stability_changes: tuple[int, ...] = eqx.field(static=True)
+    stop: str = eqx.field(static=True)
+
+
+@eqx.filter_jit
+def _tangent(problem: ContinuationProblem, z, previous):
+    """Unit tangent of the branch at z: the null vector of [G_u, G_p], oriented
+    along `previous`, from the bordered system [[G_u, G_p], [previous^T]] t = e."""
+    jac = jax.jacfwd(problem)(z)
+    bordered = jnp.concatenate([jac, previous[None]], axis=0)
+    rhs = jnp.zeros(z.size).at[-1].set(1.0)
+    t = lx.linear_solve(lx.MatrixLinearOperator(bordered), rhs, lx.LU()).value
+    return t / jnp.linalg.norm(t)
+
+
+@eqx.filter_jit
+def _correct(problem: ContinuationProblem, algorithm: PseudoArclength, predicted, tangent):
+    def equations(z, _):
+        return jnp.concatenate([problem(z), jnp.atleast_1d(tangent @ (z - predicted))])
+
+    sol = optx.root_find(equations, optx.Newton(rtol=algorithm.newton_tol,
+                                                atol=algorithm.newton_tol),
+                         predicted, max_steps=algorithm.newton_steps, throw=False)
+    ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(sol.value))
+    return sol.value, ok, sol.stats["num_steps"]
+
+
+_describe = eqx.filter_jit(lambda problem, z: problem.describe(z[:-1], problem.at(z[-1])))
+
+
+def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = PseudoArclength(),
+                 options: ContinuationOptions = ContinuationOptions(), *,
+                 progress: bool = False) -> Branch:
+    """Follow the branch of solutions of `problem` from `problem.u0` by
+    pseudo-arclength continuation (`PseudoArclength`), detecting folds (dp/ds
+    changes sign) and changes of stability (`problem.describe(...).stable`).
+
+    Points where Newton's method fails are recorded as failed, with their
+    prediction, and the step is halved; what was found is kept.
+
+    **Arguments:**
+
+    - `problem`: a `ContinuationProblem`.
+    - `algorithm`: `PseudoArclength`.
+    - `options`: `ContinuationOptions`.
+    - `progress`: show a tqdm bar, one tick per point.
+
+    **Returns:**
+
+    A `Branch`.
+
+    **Raises:**
+
+    `ValueError` if `problem.u0` is not a solution (residual above 1e3 x the
+    Newton tolerance).
+    """
+    z = jnp.concatenate([problem.u0, jnp.atleast_1d(jnp.asarray(problem.where(problem.params),
+                                                                 dtype=float))])
+    residual = float(jnp.max(jnp.abs(problem(z))))
+    if not residual <= 1e3 * algorithm.newton_tol:
+        raise ValueError(f"problem.u0 is not a solution at the given parameters (residual "
+                         f"{residual:.3g}); solve for it first")
+    start = jnp.zeros(z.size).at[-1].set(float(options.direction))
+    tangent = _tangent(problem, z, start)
+    zs, tangents, converged, records = [z], [tangent], [True], [_describe(problem, z)]
+    ds, stop = options.ds, f"max_points = {options.max_points} reached"
+    bar = tqdm(total=options.max_points, desc="continuation", unit="point",
+               disable=not progress, leave=False)
+    for _ in range(options.max_points - 1):
+        bar.update()
+        predicted = z + ds * tangent
+        new, ok, steps = _correct(problem, algorithm, predicted, tangent)
+        if not bool(ok):
+            zs.append(predicted)
+            tangents.append(tangent)
+            converged.append(False)
+            ds /= 2
+            if ds < options.ds_min:
+                stop = f"Newton's method failed with ds < ds_min = {options.ds_min}"
+                break
+            continue
+        z, tangent = new, _tangent(problem, new, tangent)
+        zs.append(z)
+        tangents.append(tangent)
+        converged.append(True)
+        records.append(_describe(problem, z))
+        if int(steps) <= options.fast_steps:
+            ds = min(1.5 * ds, options.ds_max)
+        if not options.p_min <= float(z[-1]) <= options.p_max:
+            stop = "p left [p_min, p_max]"
+            break
+    bar.close()
+    zs, tangents = jnp.stack(zs), jnp.stack(tangents)
+    ok = np.asarray(converged)
+    records = jax.tree.map(lambda *xs: jnp.stack(xs), *records)
+    stable = np.asarray(records.stable)
+    tp = np.asarray(tangents[ok, -1])
+    return Branch(
+        p=zs[:, -1], u=zs[:, :-1], tangent_p=tangents[:, -1], converged=jnp.asarray(ok),
+        records=records, stable=jnp.asarray(stable),
+        folds=tuple(int(i) for i in np.nonzero(np.sign(tp[1:]) != np.sign(tp[:-1]))[0]),
+        stability_changes=tuple(int(i) for i in np.nonzero(stable[1:] != stable[:-1])[0]),
+        stop=stop)

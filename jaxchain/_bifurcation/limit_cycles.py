@@ -1,0 +1,78 @@
+"""The limit-cycle branch born at the Hopf point of steady sliding: its first small
+cycle, and its continuation problem."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._model import steady_sliding
+from .._params import ChainParams
+from .continuation import ContinuationProblem
+from .hopf import fourier_blocks, hopf_point
+from .lyapunov import first_lyapunov_coefficient
+from .shooting import (PeriodicOrbit, ShootingOptions, describe_orbit, pack,
+                       periodic_orbit, shooting_residual)
+
+
+def limit_cycle_problem(orbit: PeriodicOrbit, options: ShootingOptions = ShootingOptions(),
+                        where=lambda p: p.v_d) -> ContinuationProblem:
+    """The `ContinuationProblem` of the periodic orbits through `orbit`: unknowns
+    (y0, T) of `shooting_residual`, records `describe_orbit` (amplitudes, energy,
+    Floquet multipliers, stability).
+
+    **Arguments:**
+
+    - `orbit`: a converged `PeriodicOrbit`.
+    - `options`: `ShootingOptions` of every point.
+    - `where`: the lens of the continued parameter (default the belt speed).
+    """
+    return ContinuationProblem(
+        residual=lambda u, p: shooting_residual(u, p, options),
+        u0=pack(orbit.y0, orbit.period), params=orbit.params, where=where,
+        describe=lambda u, p: describe_orbit(p, u, options))
+
+
+def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
+               options: ShootingOptions = ShootingOptions()) -> PeriodicOrbit:
+    """The small limit cycle born at the Hopf point of steady sliding in Fourier mode
+    `mode` (0: in phase), a distance `offset` in v_d from the Hopf point on the side
+    where the first Lyapunov coefficient puts it (above v_d,H when subcritical).
+
+    The guess is the normal form of the Hopf bifurcation (Kuznetsov, *Elements of
+    Applied Bifurcation Theory*, Sect. 3.5): y = y_ss + 2 Re(z q) with |z|^2 =
+    -Re(lambda)(v_d) / (l1 omega) and q the critical eigenvector; shooting then
+    solves for the cycle.
+
+    **Arguments:**
+
+    - `params`: the chain parameters; `params.v_d` is ignored.
+    - `offset`: |v_d - v_d,H| of the cycle, > 0.
+    - `mode`: Fourier mode with a real mode shape, 0 or N/2.
+    - `options`: `ShootingOptions`.
+
+    **Returns:**
+
+    A `PeriodicOrbit` at v_d = v_d,H +- offset.
+
+    **Raises:**
+
+    `ValueError` for offset <= 0 or a bad mode; `RuntimeError` if shooting fails.
+    """
+    if not offset > 0:
+        raise ValueError(f"offset must be > 0, got {offset!r}")
+    hopf = hopf_point(params)
+    at_hopf = eqx.tree_at(lambda p: p.v_d, params, hopf.v_d[mode])
+    l1 = first_lyapunov_coefficient(at_hopf, mode)
+    v_d = hopf.v_d[mode] + jnp.sign(l1) * offset
+    near = eqx.tree_at(lambda p: p.v_d, params, v_d)
+    n = params.n_osc
+    values, vectors = jnp.linalg.eig(fourier_blocks(at_hopf)[mode])
+    q2 = vectors[:, jnp.argmax(values.imag)]
+    shape = np.cos(2 * np.pi * mode * np.arange(n) / n) / np.sqrt(n)
+    q = jnp.kron(q2, jnp.asarray(shape))
+    q = q / jnp.linalg.norm(q)
+    growth = hopf.slope[mode] * (v_d - hopf.v_d[mode])
+    radius = jnp.sqrt(-growth / (l1 * hopf.omega[mode]))
+    q = q * jnp.exp(1j * (np.pi / 2 - jnp.angle(q[n])))  # x_1' = 0 at the start
+    y0 = steady_sliding(near) + jnp.reshape(2 * radius * q.real, (2, n))
+    return periodic_orbit(near, y0, float(2 * np.pi / hopf.omega[mode]), options)
