@@ -72,25 +72,39 @@ class BoundaryCurves(eqx.Module):
     converged: Bool[Array, " n_values"]
 
 
+def follow_fold(problem: ContinuationProblem, where: Callable, value: float,
+                solution: Float[Array, " 2n+1"], derivative: Float[Array, " 2n+1"],
+                target: float, max_halvings: int = 6):
+    """Walk the fold's extended-system solution from `where(params) = value` to
+    `target` with the tangent predictor solution + step * derivative; a failed step
+    is halved, at most `max_halvings` times. Returns (solution, derivative, ok) at
+    `target`, or at the last value reached with ok False."""
+    step, halvings = target - value, 0
+    while abs(target - value) > 1e-14:
+        step = np.sign(step) * min(abs(step), abs(target - value))
+        new, new_derivative, ok = fold_and_derivative(
+            problem, where, value + step, solution + step * derivative)
+        if bool(ok):
+            value, solution, derivative = value + step, new, new_derivative
+        else:
+            step, halvings = step / 2, halvings + 1
+            if halvings > max_halvings:
+                return solution, derivative, False
+    return solution, derivative, True
+
+
 def _walk(problem, where, start, base, targets, max_halvings, bar):
-    """Continue the fold from `base` through `targets` (sorted away from base) with
-    a tangent predictor; a failed step is halved, at most `max_halvings` times per
-    target, and then the walk stops."""
+    """`follow_fold` from `base` through `targets` (sorted away from base); stops at
+    the first target it cannot reach."""
     out = {}
     value = base
-    solution, derivative, _ = fold_and_derivative(problem, where, jnp.asarray(base), start)
+    solution, derivative, _ = fold_and_derivative(problem, where, base, start)
     for target in targets:
-        step, halvings = target - value, 0
-        while abs(target - value) > 1e-14:
-            step = np.sign(step) * min(abs(step), abs(target - value))
-            new, new_derivative, ok = fold_and_derivative(
-                problem, where, jnp.asarray(value + step), solution + step * derivative)
-            if bool(ok):
-                value, solution, derivative = value + step, new, new_derivative
-            else:
-                step, halvings = step / 2, halvings + 1
-                if halvings > max_halvings:
-                    return out
+        solution, derivative, ok = follow_fold(problem, where, value, solution, derivative,
+                                               target, max_halvings)
+        if not ok:
+            break
+        value = target
         out[target] = (solution, derivative)
         bar.update()
     return out

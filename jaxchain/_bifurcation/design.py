@@ -1,0 +1,100 @@
+"""Design with gradients: the smallest damping ratio whose bistable window of belt
+speeds is narrower than a target width, by optax."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+from jaxtyping import Array, Float
+
+from .continuation import ContinuationProblem
+from .two_parameter import fold_and_derivative, follow_fold, hopf_vd, where_set
+
+
+class DampingDesign(eqx.Module):
+    """The answer of `smallest_damping`.
+
+    **Fields:**
+
+    - `xi`: the damping ratio at which the window reaches the target width.
+    - `window`: fold minus Hopf belt speed there.
+    - `hopf_vd`, `fold_vd`: the window's edges there.
+    - `d_window`: d window / d xi there (implicit differentiation).
+    - `history`: (xi, window) at each optax iteration, shape (n_iterations, 2).
+    - `converged`: whether |window - target| fell below the tolerance.
+    """
+
+    xi: float
+    window: float
+    hopf_vd: float
+    fold_vd: float
+    d_window: float
+    history: Float[Array, "n_iterations 2"]
+    converged: bool
+
+
+def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, " 2n+1"],
+                     target: float, *, learning_rate: float = 1.0, steps: int = 60,
+                     tol: float = 1e-8) -> DampingDesign:
+    """The smallest damping ratio xi at which the bistable window of belt speeds,
+    fold_vd(xi) - hopf_vd(xi), is narrower than `target`.
+
+    The window narrows monotonically as xi grows (`boundary_curves`: d window / d xi
+    < 0), so the answer is the xi at which it equals the target. It is found by
+    minimising 1/2 (window(xi) - target)^2 over log xi with optax's L-BFGS, the
+    gradient coming from implicit differentiation of the Hopf point and of the
+    fold's extended system (optimistix's `ImplicitAdjoint`), each fold warm-started
+    from the previous one with its tangent predictor.
+
+    **Arguments:**
+
+    - `problem`: the limit cycles' `ContinuationProblem`, at the parameters of
+        `fold_solution`.
+    - `fold_solution`: a solution (u, p, w) of the fold's extended system there.
+    - `target`: the window width, > 0.
+    - `learning_rate`, `steps`: optax L-BFGS's step scale and iteration budget.
+    - `tol`: tolerance on |window - target|.
+
+    **Returns:**
+
+    A `DampingDesign`.
+
+    **Raises:**
+
+    `ValueError` if target <= 0; `RuntimeError` if a fold along the way is lost.
+    """
+    if not target > 0:
+        raise ValueError(f"target must be > 0, got {target!r}")
+    n = problem.u0.size
+    state = {"xi": float(problem.params.xi), "solution": fold_solution}
+    _, state["derivative"], _ = fold_and_derivative(problem, lambda p: p.xi, state["xi"],
+                                                    fold_solution)
+
+    def evaluate(xi):
+        solution, derivative, ok = follow_fold(problem, lambda p: p.xi, state["xi"],
+                                               state["solution"], state["derivative"], xi)
+        if not bool(ok):
+            raise RuntimeError(f"the fold was lost at xi = {xi:.6g}: lower learning_rate or the target")
+        state.update(xi=xi, solution=solution, derivative=derivative)
+        hopf, d_hopf = jax.jvp(lambda x: hopf_vd(where_set(problem.params, lambda p: p.xi, x)),
+                               (jnp.asarray(xi),), (jnp.asarray(1.0),))
+        return float(solution[n] - hopf), float(derivative[n] - d_hopf), float(hopf)
+
+    optimiser = optax.lbfgs(learning_rate=learning_rate, linesearch=None)
+    theta = jnp.log(jnp.asarray(state["xi"]))
+    opt_state = optimiser.init(theta)
+    history, converged = [], False
+    for _ in range(steps):
+        xi = float(jnp.exp(theta))
+        window, d_window, hopf = evaluate(xi)
+        history.append((xi, window))
+        if abs(window - target) < tol:
+            converged = True
+            break
+        grad = jnp.asarray((window - target) * d_window * xi)
+        updates, opt_state = optimiser.update(grad, opt_state, theta)
+        theta = optax.apply_updates(theta, updates)
+    return DampingDesign(xi=xi, window=window, hopf_vd=hopf, fold_vd=hopf + window,
+                         d_window=d_window, history=jnp.asarray(np.array(history)),
+                         converged=converged)

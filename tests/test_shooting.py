@@ -1,0 +1,78 @@
+"""Periodic orbits by shooting and their Floquet multipliers, against long
+simulations, scipy and finite differences."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import jaxchain as jc
+from helpers import SHORT, reference_rhs, scipy_stick_slip_cycle
+
+
+def scipy_flow(params, y, period):
+    sol = solve_ivp(reference_rhs(params), (0.0, period), np.ravel(y), method="DOP853",
+                    rtol=1e-12, atol=1e-13)
+    return sol.y[:, -1]
+
+
+def test_stable_stick_slip_cycle_agrees_with_long_simulation():
+    params = jc.ChainParams(n_osc=1, v_d=1.5)
+    obs = jc.simulate(params, jnp.array([[2.0], [0.0]]), options=SHORT)
+    orbit = jc.periodic_orbit(params, obs.y_final, 6.3)
+    assert bool(orbit.converged) and bool(orbit.stable)
+    assert abs(float(orbit.amplitudes[0] / obs.amplitudes[0]) - 1) < 1e-3
+    assert int(orbit.n_halc) == 1
+    assert abs(complex(orbit.multipliers[orbit.trivial]) - 1) < 1e-6
+    # an independent integrator returns to the start after one period
+    back = scipy_flow(params, orbit.y0, float(orbit.period))
+    assert np.max(np.abs(back - np.ravel(orbit.y0))) < 1e-6
+    # the smoothed period is near the non-smooth cycle's (difference O(eps))
+    _, period = scipy_stick_slip_cycle(params)
+    assert abs(float(orbit.period) / period - 1) < 1e-3
+
+
+def test_small_hopf_cycle_monodromy_against_finite_differences():
+    params = jc.ChainParams(n_osc=1)
+    orbit = jc.hopf_cycle(params, offset=0.01)
+    v_h = float(jc.hopf_vd_analytic(params))
+    assert abs(float(orbit.params.v_d) - (v_h + 0.01)) < 1e-12  # subcritical side
+    # normal form of the subcritical Hopf: A = sqrt(8 v0 (v_d - v_d,H))
+    assert abs(float(orbit.amplitudes[0]) / np.sqrt(8 * 0.5 * 0.01) - 1) < 0.03
+    assert not bool(orbit.stable) and float(abs(orbit.critical_multiplier)) > 1
+    monodromy = np.asarray(jc.monodromy(orbit.params, orbit.y0, orbit.period,
+                                        jc.ShootingOptions()))
+    h, y, T = 1e-6, np.ravel(orbit.y0), float(orbit.period)
+    fd = np.stack([(scipy_flow(orbit.params, y + h * e, T) - scipy_flow(orbit.params, y - h * e, T))
+                   / (2 * h) for e in np.eye(2)], axis=1)
+    np.testing.assert_allclose(monodromy, fd, rtol=0, atol=1e-6)
+    assert abs(complex(orbit.multipliers[orbit.trivial]) - 1) < 1e-6
+
+
+def test_shooting_jacobian_against_finite_differences():
+    params = jc.ChainParams(n_osc=2, v_d=1.5, eta_c=0.1)
+    options = jc.ShootingOptions()
+    u = jnp.array([1.2, 0.9, 0.0, 0.3, 6.3])
+
+    def residual(z):
+        return jc.shooting_residual(z, params, options)
+
+    jac = jax.jacfwd(residual)(u)
+    h = 1e-6
+    fd = jnp.stack([(residual(u + h * e) - residual(u - h * e)) / (2 * h)
+                    for e in jnp.eye(5)], axis=1)
+    np.testing.assert_allclose(jac, fd, rtol=1e-5, atol=1e-6)
+
+
+def test_bad_arguments():
+    params = jc.ChainParams(n_osc=1)
+    with pytest.raises(ValueError, match="y0"):
+        jc.periodic_orbit(params, jnp.zeros((2, 3)), 6.3)
+    with pytest.raises(ValueError, match="period"):
+        jc.periodic_orbit(params, jnp.zeros((2, 1)), -1.0)
+    with pytest.raises(ValueError, match="rtol"):
+        jc.ShootingOptions(rtol=0.0)
+    with pytest.raises(RuntimeError, match="shooting did not converge"):
+        jc.periodic_orbit(params, jnp.array([[50.0], [0.0]]), 1.0,
+                          jc.ShootingOptions(newton_steps=3))
