@@ -166,8 +166,9 @@ class PeriodicOrbit(eqx.Module):
 
     @property
     def critical_multiplier(self) -> Complex[Array, ""]:
-        """The largest non-trivial multiplier in modulus."""
-        return self.multipliers[jnp.where(self.trivial == 0, 1, 0)]
+        """The largest non-trivial multiplier in modulus (batched like `trivial`)."""
+        index = jnp.where(self.trivial == 0, 1, 0)
+        return jnp.take_along_axis(self.multipliers, index[..., None], axis=-1)[..., 0]
 
 
 def describe_orbit(params: ChainParams, u: Float[Array, " 2n+1"], options: ShootingOptions,
