@@ -4,6 +4,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import xarray as xr
 
@@ -86,3 +87,35 @@ def test_installed_command_table_and_usage_error(tmp_path):
     bad = subprocess.run([SCRIPT, "localized", "--eps", "x"], capture_output=True,
                          text=True)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--target", "0"], "--target"),
+    (["--ratio-values", "0.9,2"], "--ratio-values"),
+    (["--xi-values", ""], "--xi-values"),
+    (["--n-osc", "0"], "--n-osc"),
+])
+def test_boundaries_bad_option_exits_2_with_one_line(argv, says, capsys):
+    with pytest.raises(SystemExit) as exc:
+        sys.exit(main(["boundaries", *argv]))
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err
+
+
+@pytest.mark.slow
+def test_boundaries_json_and_figures(tmp_path, capsys):
+    code = main(["boundaries", "--json", "--no-ring", "--no-simulation", "--xi-values",
+                 "0.05,0.06", "--ratio-values", "2.0", "--out", str(tmp_path)])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert abs(out["hopf_vd"] - 0.5 * np.log(10)) < 1e-6
+    assert abs(out["fold_vd"] - jc.stick_slip_existence_limit()) < 0.01
+    assert out["subcritical"] is True and out["eps"] == jc.ChainParams().eps
+    # the design's answer, checked by simulation on both sides of it
+    design = out["design"]
+    assert abs(design["window"] - design["target_window"]) < 1e-6
+    check = design["simulation_check"]
+    assert check["below"]["n_halc"] == 1 and check["above"]["amplitude"] < 1e-3
+    for png in out["figures"]:
+        assert Path(png).stat().st_size > 10_000

@@ -2,10 +2,10 @@
 
 import sys
 
-from . import crosscheck, localized, work_precision
+from . import boundaries, crosscheck, localized, work_precision
 from .common import Parser, UsageError
 
-COMMANDS = (localized, crosscheck, work_precision)
+COMMANDS = (localized, crosscheck, work_precision, boundaries)
 
 
 def build_parser() -> Parser:

@@ -1,0 +1,225 @@
+"""The edges of the bistable range of belt speeds: the Hopf point of steady sliding
+and the fold of the stick-slip limit cycle, for one oscillator and for the ring,
+their sensitivities, and one design question."""
+
+import dataclasses
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ._bifurcation.continuation import Branch, ContinuationOptions, continuation
+from ._bifurcation.design import DampingDesign, smallest_damping
+from ._bifurcation.fold import FoldPoint, fold_point
+from ._bifurcation.hopf import HopfPoint, hopf_eps_correction, hopf_point, hopf_vd_analytic
+from ._bifurcation.limit_cycles import hopf_cycle, limit_cycle_problem
+from ._bifurcation.lyapunov import first_lyapunov_coefficient
+from ._bifurcation.shooting import ShootingOptions, flow, periodic_orbit
+from ._bifurcation.two_parameter import BoundaryCurves, boundary_curves
+from ._initial import GivenState
+from ._nonsmooth.existence import stick_slip_existence_limit
+from ._options import SimulationOptions
+from ._params import ChainParams
+from ._simulate import simulate
+
+
+@dataclasses.dataclass
+class Boundaries:
+    """What `boundaries` found; `summary` is JSON-ready."""
+
+    summary: dict
+    branch: Branch
+    fold: FoldPoint
+    hopf: HopfPoint
+    curves_xi: BoundaryCurves
+    curves_ratio: BoundaryCurves
+    design: DampingDesign
+    ring_branches: dict
+
+
+def _with(params, **changes):
+    for name, value in changes.items():
+        params = eqx.tree_at(lambda p, name=name: getattr(p, name), params, value)
+    return params
+
+
+def _multipliers(orbit) -> list[float]:
+    """The two largest Floquet multipliers in modulus."""
+    return [float(m) for m in np.sort(np.abs(np.asarray(orbit.multipliers)))[::-1][:2]]
+
+
+def design_check(params: ChainParams, design: DampingDesign, target: float,
+                 margin: float = 0.05) -> dict:
+    """Direct simulation on both sides of the design: at v_d = v_d,H(xi) + target
+    the stick-slip cycle must survive for xi = (1 - margin) xi* (window wider than
+    the target) and die for (1 + margin) xi* (narrower). Starts far outside the
+    cycle (x = 3 above steady sliding) and integrates 4000 time units."""
+    out = {}
+    for side, factor in (("below", 1 - margin), ("above", 1 + margin)):
+        p = _with(params, xi=design.xi * factor)
+        v = float(hopf_vd_analytic(p)) + target
+        p = _with(p, v_d=v)
+        obs = simulate(p, GivenState(jnp.array([[3.5], [0.0]])),
+                       options=SimulationOptions(t_end=4000.0, transient=3500.0))
+        out[side] = {"xi": design.xi * factor, "v_d": v,
+                     "amplitude": float(obs.amplitudes[0]), "n_halc": int(obs.n_halc)}
+    out["holds"] = out["below"]["n_halc"] == 1 and out["above"]["amplitude"] < 1e-3
+    return out
+
+
+def _ring_state(params: ChainParams, single, kind: str, options, progress):
+    """Continue the ring's fully stick-slipping state `kind` (in-phase or
+    anti-phase: neighbours half a period apart) from the single oscillator's cycle
+    at `single.params.v_d` towards its fold."""
+    n = params.n_osc
+    if kind == "in-phase":
+        y0 = jnp.tile(single.y0, (1, n))
+    else:
+        half = flow(single.params, single.y0, single.period / 2, options).ys[-1]
+        y0 = jnp.tile(jnp.concatenate([single.y0, half], axis=1), (1, n // 2))
+    orbit = periodic_orbit(_with(params, v_d=single.params.v_d), y0, float(single.period),
+                           options, throw=False)
+    out = {"at_vd": float(single.params.v_d), "converged": bool(orbit.converged),
+           "stable": bool(orbit.stable), "multipliers": _multipliers(orbit)}
+    if not orbit.converged:
+        return out, None
+    problem = limit_cycle_problem(orbit, options)
+    branch = continuation(problem, options=ContinuationOptions(
+        ds=0.05, ds_max=0.1, p_max=2.5, max_points=40), progress=progress)
+    out["branch_points"] = int(np.sum(np.asarray(branch.converged)))
+    out["max_vd_on_branch"] = float(np.max(np.asarray(branch.p)[np.asarray(branch.converged)]))
+    if branch.folds:
+        fold = fold_point(problem, branch, throw=False)
+        out |= {"fold_vd": float(fold.p), "fold_converged": bool(fold.converged),
+                "fold_multipliers": _multipliers(fold.record)}
+    else:
+        out |= {"fold_vd": None, "note": "no fold within the continuation's budget"}
+    return out, branch
+
+
+def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
+               xi_values=(0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.1),
+               ratio_values=(1.6, 1.8, 2.0, 2.2, 2.4), ring: bool = True,
+               progress: bool = False) -> Boundaries:
+    """The Hopf and fold belt speeds of the single oscillator and of the ring.
+
+    1. Single oscillator (`params` with n_osc = 1): the Hopf point (Newton on the
+       growth rate), its first Lyapunov coefficient, the limit-cycle branch from
+       the Hopf point by shooting and pseudo-arclength continuation, the fold by
+       its extended system, and the non-smooth existence limit to compare.
+    2. The fold and Hopf belt speeds against xi and against mu_st/mu_d, with their
+       derivatives by implicit differentiation.
+    3. The design: the smallest xi whose bistable window is narrower than
+       `target`, by optax, checked by simulation on both sides.
+    4. The ring (`params.n_osc`): the Hopf point of every Fourier mode, and the
+       folds of the fully stick-slipping in-phase and anti-phase states.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (eq. (7), eta_c, N, eps).
+    - `target`: the design's window width, > 0.
+    - `xi_values`, `ratio_values`: grids of xi and of mu_st/mu_d.
+    - `ring`: also analyse the ring.
+    - `progress`: show tqdm bars.
+
+    **Returns:**
+
+    `Boundaries`; `summary` holds `hopf_vd`, `fold_vd`, `eps`, `subcritical` and
+    the rest as plain numbers.
+
+    **Raises:**
+
+    `ValueError` for target <= 0; `RuntimeError` if a computation fails.
+    """
+    if not target > 0:
+        raise ValueError(f"target must be > 0, got {target!r}")
+    options = ShootingOptions()
+    single = ChainParams(n_osc=1, xi=params.xi, mu_d=params.mu_d, mu_st=params.mu_st,
+                         v0=params.v0, v_d=params.v_d, eps=params.eps)
+    hopf = hopf_point(single)
+    l1 = float(first_lyapunov_coefficient(_with(single, v_d=hopf.v_d[0])))
+    start = hopf_cycle(single, options=options)
+    problem = limit_cycle_problem(start, options)
+    branch = continuation(problem, options=ContinuationOptions(
+        ds=0.01, ds_max=0.1, p_min=0.5, p_max=2.5, max_points=90), progress=progress)
+    fold = fold_point(problem, branch)
+    limit = stick_slip_existence_limit(single)
+    solution = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
+    fold_problem = eqx.tree_at(lambda pr: pr.params, problem, fold.record.params)
+    curves_xi = boundary_curves(fold_problem, solution, lambda p: p.xi, xi_values,
+                                progress=progress)
+    mu_values = single.mu_d * np.asarray(ratio_values)
+    curves_ratio = boundary_curves(fold_problem, solution, lambda p: p.mu_st, mu_values,
+                                   progress=progress)
+    design = smallest_damping(fold_problem, solution, target)
+    at = int(np.argmin(np.abs(np.asarray(curves_xi.values) - float(single.xi))))
+    at_r = int(np.argmin(np.abs(mu_values - float(single.mu_st))))
+    p_ok = np.asarray(branch.converged)
+    summary = {
+        "hopf_vd": float(hopf.v_d[0]),
+        "fold_vd": float(fold.p),
+        "eps": float(params.eps),
+        "subcritical": l1 > 0 and float(branch.p[p_ok][1]) > float(hopf.v_d[0]),
+        "hopf_vd_analytic": float(hopf_vd_analytic(single)),
+        "hopf_eps_correction": float(hopf_eps_correction(single)),
+        "hopf_newton_steps": int(hopf.newton_steps[0]),
+        "hopf_omega": float(hopf.omega[0]),
+        "hopf_growth_slope": float(hopf.slope[0]),
+        "lyapunov_coefficient": l1,
+        "existence_limit_nonsmooth": limit,
+        "fold_minus_existence_limit": float(fold.p) - limit,
+        "fold_multipliers": _multipliers(fold.record),
+        "fold_amplitude": float(fold.record.amplitudes[0]),
+        "fold_period": float(fold.record.period),
+        "branch_points": int(p_ok.sum()), "branch_failed_points": int((~p_ok).sum()),
+        "branch_stop": branch.stop,
+        "d_hopf_vd_d_xi": float(curves_xi.d_hopf[at]),
+        "d_fold_vd_d_xi": float(curves_xi.d_fold[at]),
+        "d_hopf_vd_d_ratio": float(single.mu_d * curves_ratio.d_hopf[at_r]),
+        "d_fold_vd_d_ratio": float(single.mu_d * curves_ratio.d_fold[at_r]),
+        "xi_curve": {"xi": np.asarray(curves_xi.values).tolist(),
+                     "hopf_vd": np.asarray(curves_xi.hopf_vd).tolist(),
+                     "fold_vd": np.asarray(curves_xi.fold_vd).tolist()},
+        "ratio_curve": {"mu_st/mu_d": list(map(float, ratio_values)),
+                        "hopf_vd": np.asarray(curves_ratio.hopf_vd).tolist(),
+                        "fold_vd": np.asarray(curves_ratio.fold_vd).tolist()},
+        "design": {"target_window": target, "xi": design.xi, "window": design.window,
+                   "hopf_vd": design.hopf_vd, "fold_vd": design.fold_vd,
+                   "d_window_d_xi": design.d_window, "optax_iterations": len(design.history),
+                   "converged": design.converged,
+                   "simulation_check": design_check(single, design, target)},
+    }
+    ring_branches = {}
+    if ring:
+        ring_hopf = hopf_point(params)
+        summary["ring"] = {
+            "n_osc": params.n_osc, "eta_c": float(params.eta_c),
+            "hopf_vd": float(np.max(ring_hopf.v_d)),
+            "hopf_vd_spread_over_modes": float(np.ptp(np.asarray(ring_hopf.v_d))),
+            "hopf_omega_range": [float(np.min(ring_hopf.omega)), float(np.max(ring_hopf.omega))],
+        }
+        if params.n_osc % 2 == 0:
+            cycle = periodic_orbit(_with(single, v_d=1.5), jnp.array([[2.2], [0.0]]), 6.3, options)
+            for kind in ("in-phase", "anti-phase"):
+                summary["ring"][kind], ring_branches[kind] = _ring_state(
+                    params, cycle, kind, options, progress)
+    return Boundaries(summary=summary, branch=branch, fold=fold, hopf=hopf,
+                      curves_xi=curves_xi, curves_ratio=curves_ratio, design=design,
+                      ring_branches=ring_branches)
+
+
+def fig3a_simulations(params: ChainParams, v_d=np.round(np.arange(0.6, 2.21, 0.1), 2),
+                      progress: bool = False):
+    """The simulation dots of Fig. 3(a): the single oscillator at each belt speed
+    from a small and a large initial displacement (x = 0.6 and 3.5, x' = 0),
+    t_end = 3000, observed after 2500. Returns (v_d, energy) with energy of shape
+    (n_vd, 2)."""
+    from ._ensemble import ensemble
+
+    single = ChainParams(n_osc=1, xi=params.xi, mu_d=params.mu_d, mu_st=params.mu_st,
+                         v0=params.v0, eps=params.eps)
+    ds = ensemble(single, jnp.asarray(v_d), GivenState(jnp.array([[[0.6], [0.0]],
+                                                                  [[3.5], [0.0]]])),
+                  options=SimulationOptions(t_end=3000.0, transient=2500.0),
+                  progress=progress)
+    return np.asarray(v_d), ds["energy"].values

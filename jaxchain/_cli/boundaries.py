@@ -1,0 +1,133 @@
+"""`jaxchain boundaries`: the Hopf and fold belt speeds that bound the bistable range,
+for one oscillator and for the ring."""
+
+import argparse
+import json
+import time
+
+from .._boundaries import boundaries, fig3a_simulations
+from .._params import ChainParams
+from .._plots.bifurcation import plot_bifurcation_diagram, plot_bistable_region
+from .common import (UsageError, add_output_options, comma_list, json_ready,
+                     positive_float, positive_int, show_progress, usage_message,
+                     writable_folder)
+
+HELP = "Hopf and fold belt speeds of the bistable range (gradients, continuation)"
+DESCRIPTION = """\
+Compute the edges of the bistable range of belt speeds, where steady sliding and
+stick-slip are both stable (the paper brackets it by simulation, 1.1 < v_d < 1.8):
+
+  - the Hopf point of steady sliding: Newton's method (optimistix) on the largest
+    growth rate Re(lambda)(v_d) of the Jacobian (jax.jacfwd), for every Fourier
+    mode of the ring, against the analytic v0 ln((mu_st - mu_d)/(2 xi v0)); the
+    first Lyapunov coefficient says whether it is subcritical;
+  - the fold of the single oscillator's limit cycle: shooting (diffrax + Newton),
+    Floquet multipliers from the monodromy matrix (forward-mode through the
+    solver), pseudo-arclength continuation from the Hopf point through the fold,
+    then the fold's extended (Moore-Spence) system; compared with the existence
+    limit of the non-smooth stick-slip cycle;
+  - both edges against xi and mu_st/mu_d, with derivatives by implicit
+    differentiation, and the smallest xi whose window is narrower than --target
+    (optax L-BFGS), checked by simulation on both sides;
+  - the ring: the Hopf point of the chain and the folds of its fully
+    stick-slipping in-phase and anti-phase states.
+
+Writes <out>/bifurcation_single.png (Fig. 3(a) with simulation dots),
+<out>/bistable_region.png and <out>/boundaries.json. About 4 minutes on 2 CPU cores
+with the defaults."""
+
+
+def add_parser(sub):
+    p = sub.add_parser("boundaries", help=HELP, description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    g = p.add_argument_group("model (eq. (5) of the paper; other parameters eq. (7))")
+    g.add_argument("--n-osc", type=positive_int, default=20, metavar="N",
+                   help="number of oscillators on the ring (default 20)")
+    g.add_argument("--eps", type=positive_float, default=ChainParams().eps,
+                   help=f"tanh smoothing velocity (default {ChainParams().eps:g})")
+    g.add_argument("--xi", type=positive_float, default=ChainParams().xi,
+                   help=f"damping ratio (default {ChainParams().xi:g})")
+    g = p.add_argument_group("analysis")
+    g.add_argument("--target", type=positive_float, default=0.5,
+                   help="design: the bistable window width to stay below (default 0.5)")
+    g.add_argument("--xi-values", type=comma_list(float),
+                   default=[0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.1], metavar="X,X,...",
+                   help="damping ratios of the two-parameter curves")
+    g.add_argument("--ratio-values", type=comma_list(float),
+                   default=[1.6, 1.8, 2.0, 2.2, 2.4], metavar="R,R,...",
+                   help="values of mu_st/mu_d of the two-parameter curves")
+    g.add_argument("--no-ring", action="store_true", help="skip the ring")
+    g.add_argument("--no-simulation", action="store_true",
+                   help="skip the simulation dots of Fig. 3(a)")
+    add_output_options(p)
+    p.set_defaults(run=run)
+    return p
+
+
+def run(args) -> int:
+    try:
+        params = ChainParams(n_osc=args.n_osc, eps=args.eps, xi=args.xi)
+    except ValueError as err:
+        raise UsageError(usage_message(err)) from None
+    for name in ("xi_values", "ratio_values"):
+        values = getattr(args, name)
+        if not values or min(values) <= 0:
+            raise UsageError(f"--{name.replace('_', '-')}: give positive numbers, got {values}")
+    if min(args.ratio_values) <= 1:
+        raise UsageError("--ratio-values: mu_st/mu_d must be > 1 for a Hopf point")
+    writable_folder(args.out)
+    progress = show_progress(args)
+    start = time.perf_counter()
+    found = boundaries(params, target=args.target, xi_values=args.xi_values,
+                       ratio_values=args.ratio_values, ring=not args.no_ring,
+                       progress=progress)
+    s = found.summary
+    sims = None if args.no_simulation else fig3a_simulations(params, progress=progress)
+    fig = plot_bifurcation_diagram(found.branch, s["hopf_vd"], s["fold_vd"],
+                                   float(found.fold.record.energy), sims,
+                                   title=f"single oscillator (Fig. 3(a)), eps = {args.eps:g}")
+    single_png = args.out / "bifurcation_single.png"
+    fig.savefig(single_png, dpi=150)
+    region_png = args.out / "bistable_region.png"
+    plot_bistable_region(found.curves_xi, found.curves_ratio, float(params.mu_d),
+                         found.design).savefig(region_png, dpi=150)
+    s |= {"wall_time_s": time.perf_counter() - start,
+          "figures": [str(single_png), str(region_png)]}
+    if sims is not None:
+        s["simulation_energy"] = {"v_d": sims[0].tolist(), "energy": sims[1].tolist()}
+    text = json.dumps(json_ready(s), allow_nan=False)
+    (args.out / "boundaries.json").write_text(text)
+    if args.json:
+        print(text)
+        return 0
+    d = s["design"]
+    print(f"single oscillator, eps = {s['eps']:g}:")
+    print(f"  Hopf   v_d = {s['hopf_vd']:.10f}  (analytic eps -> 0: "
+          f"{s['hopf_vd_analytic']:.10f}; eps correction {s['hopf_eps_correction']:.2e}); "
+          f"Re(lambda) crosses with slope {s['hopf_growth_slope']:.4f}, omega "
+          f"{s['hopf_omega']:.4f}")
+    kind = "subcritical" if s["subcritical"] else "supercritical"
+    print(f"         first Lyapunov coefficient {s['lyapunov_coefficient']:.4f}: {kind}")
+    print(f"  fold   v_d = {s['fold_vd']:.6f}  (Floquet multipliers "
+          f"{s['fold_multipliers'][0]:.6f}, {s['fold_multipliers'][1]:.6f}); non-smooth "
+          f"existence limit {s['existence_limit_nonsmooth']:.6f}, difference "
+          f"{s['fold_minus_existence_limit']:+.4f}")
+    print(f"  d v_d,H/d xi = {s['d_hopf_vd_d_xi']:.4f}, d v_d,fold/d xi = "
+          f"{s['d_fold_vd_d_xi']:.4f}; d/d(mu_st/mu_d): {s['d_hopf_vd_d_ratio']:.4f}, "
+          f"{s['d_fold_vd_d_ratio']:.4f}")
+    print(f"  design: window < {d['target_window']:g} for xi >= {d['xi']:.6f} "
+          f"({d['optax_iterations']} optax iterations); simulation check "
+          f"{'holds' if d['simulation_check']['holds'] else 'FAILS'}")
+    if "ring" in s:
+        r = s["ring"]
+        print(f"ring of {r['n_osc']}: Hopf v_d = {r['hopf_vd']:.10f} for every Fourier mode "
+              f"(spread {r['hopf_vd_spread_over_modes']:.1e})")
+        for kind in ("in-phase", "anti-phase"):
+            if kind in r:
+                k = r[kind]
+                fold = "not found" if k.get("fold_vd") is None else f"{k['fold_vd']:.6f}"
+                print(f"  {kind}: fold v_d = {fold}; at v_d = {k['at_vd']}: "
+                      f"{'stable' if k['stable'] else 'unstable'} (|multipliers| "
+                      f"{k['multipliers'][0]:.4f}, {k['multipliers'][1]:.4f})")
+    print(f"figures: {single_png}, {region_png}; {s['wall_time_s']:.0f} s")
+    return 0

@@ -1,0 +1,100 @@
+"""The single oscillator's bifurcation diagram (Fig. 3(a) of the paper) and the
+bistable region against a design parameter."""
+
+import matplotlib
+
+matplotlib.use("Agg")  # figures are written to files; no screen is assumed
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def _segments(x, y, flags):
+    """Split a curve into runs of equal flag, each run sharing its end point with
+    the next so that the curve is unbroken."""
+    start = 0
+    for i in range(1, len(x) + 1):
+        if i == len(x) or flags[i] != flags[start]:
+            end = min(i + 1, len(x))
+            yield x[start:end], y[start:end], flags[start]
+            start = i
+
+
+def plot_bifurcation_diagram(branch, hopf_vd: float, fold_vd: float, fold_energy: float,
+                             simulations=None, v_range=(0.5, 2.3), title: str = ""):
+    """Fig. 3(a) of the paper: energy E = A^2/2 (eq. (9)) of the single oscillator
+    against v_d. Steady sliding (E = 0) and the limit-cycle branch of the
+    continuation, stable solid and unstable dashed; the Hopf and fold points
+    marked; simulation results as dots.
+
+    **Arguments:**
+
+    - `branch`: the limit-cycle `Branch` from the Hopf point.
+    - `hopf_vd`, `fold_vd`, `fold_energy`: the Hopf and fold points.
+    - `simulations`: (v_d of shape (n,), energy of shape (n, n_ic)) or None.
+    - `v_range`: the v_d axis.
+
+    **Returns:**
+
+    The matplotlib Figure.
+    """
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    ax.plot([v_range[0], hopf_vd], [0, 0], "k--", lw=1.5)
+    ax.plot([hopf_vd, v_range[1]], [0, 0], "k-", lw=1.5, label="steady sliding")
+    ok = np.asarray(branch.converged)
+    p = np.asarray(branch.p)[ok]
+    energy = np.asarray(branch.records.energy)
+    stable = np.asarray(branch.records.stable)
+    labelled = set()
+    for x, y, s in _segments(p, energy, stable):
+        label = "stable limit cycle" if s else "unstable limit cycle"
+        ax.plot(x, y, "-" if s else "--", color="C0" if s else "C3", lw=1.5,
+                label=None if label in labelled else label)
+        labelled.add(label)
+    ax.plot([hopf_vd], [0], "o", color="C1", ms=8, label=f"Hopf, v_d = {hopf_vd:.4f}")
+    ax.plot([fold_vd], [fold_energy], "s", color="C2", ms=8,
+            label=f"fold, v_d = {fold_vd:.4f}")
+    if simulations is not None:
+        v, e = simulations
+        for j in range(e.shape[1]):
+            ax.plot(v, e[:, j], "k.", ms=7, label="simulation" if j == 0 else None)
+    ax.set(xlabel="belt speed v_d", ylabel="energy E = A^2 / 2", xlim=v_range,
+           title=title or "single oscillator (Fig. 3(a))")
+    ax.legend(fontsize=8, loc="upper left")
+    fig.tight_layout()
+    return fig
+
+
+def plot_bistable_region(curves_xi, curves_ratio, mu_d: float, design=None):
+    """The bistable range of belt speeds (between the Hopf point and the fold)
+    against the damping ratio xi and against mu_st/mu_d.
+
+    **Arguments:**
+
+    - `curves_xi`, `curves_ratio`: `BoundaryCurves` in xi and in mu_st.
+    - `mu_d`: the dynamic friction coefficient (to turn mu_st into the ratio).
+    - `design`: a `DampingDesign` to mark, or None.
+
+    **Returns:**
+
+    The matplotlib Figure.
+    """
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
+    for ax, curves, scale, name in ((axes[0], curves_xi, 1.0, "damping ratio xi"),
+                                    (axes[1], curves_ratio, 1 / mu_d, "mu_st / mu_d")):
+        x = np.asarray(curves.values) * scale
+        hopf, fold = np.asarray(curves.hopf_vd), np.asarray(curves.fold_vd)
+        ax.fill_between(x, hopf, fold, color="C0", alpha=0.25,
+                        label="bistable: steady sliding and stick-slip")
+        ax.plot(x, hopf, "o-", color="C1", label="Hopf v_d,H")
+        ax.plot(x, fold, "s-", color="C2", label="fold of limit cycles")
+        ax.set(xlabel=name, ylabel="belt speed v_d")
+    if design is not None:
+        axes[0].plot([design.xi, design.xi], [design.hopf_vd, design.fold_vd], "k-", lw=2,
+                     label=f"design: xi = {design.xi:.4f}, window {design.window:.3f}")
+    axes[0].set_title("(a) against damping")
+    axes[1].set_title("(b) against the friction ratio")
+    for ax in axes:
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
