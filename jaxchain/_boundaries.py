@@ -85,15 +85,19 @@ def _ring_state(params: ChainParams, single, kind: str, options, progress):
         return out, None
     problem = limit_cycle_problem(orbit, options)
     branch = continuation(problem, options=ContinuationOptions(
-        ds=0.05, ds_max=0.1, p_max=2.5, max_points=40), progress=progress)
+        ds=0.05, ds_max=0.1, p_max=2.5, max_points=60), progress=progress)
     out["branch_points"] = int(np.sum(np.asarray(branch.converged)))
     out["max_vd_on_branch"] = float(np.max(np.asarray(branch.p)[np.asarray(branch.converged)]))
+    # Near the fold, every oscillator of the weakly coupled ring has a multiplier
+    # near +1 (split by eta_c only), so the extended system may be too ill-posed to
+    # converge; then the branch's largest belt speed brackets the fold to within
+    # one continuation step.
+    out |= {"fold_detected": bool(branch.folds), "fold_vd": None, "fold_converged": False}
     if branch.folds:
         fold = fold_point(problem, branch, throw=False)
-        out |= {"fold_vd": float(fold.p), "fold_converged": bool(fold.converged),
-                "fold_multipliers": _multipliers(fold.record)}
-    else:
-        out |= {"fold_vd": None, "note": "no fold within the continuation's budget"}
+        if bool(fold.converged):
+            out |= {"fold_vd": float(fold.p), "fold_converged": True,
+                    "fold_multipliers": _multipliers(fold.record)}
     return out, branch
 
 

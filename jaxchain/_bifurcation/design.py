@@ -75,7 +75,8 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
         solution, derivative, ok = follow_fold(problem, lambda p: p.xi, state["xi"],
                                                state["solution"], state["derivative"], xi)
         if not bool(ok):
-            raise RuntimeError(f"the fold was lost at xi = {xi:.6g}: lower learning_rate or the target")
+            raise RuntimeError(f"the fold was lost at xi = {xi:.6g}: lower learning_rate "
+                               "or the target")
         state.update(xi=xi, solution=solution, derivative=derivative)
         hopf, d_hopf = jax.jvp(lambda x: hopf_vd(where_set(problem.params, lambda p: p.xi, x)),
                                (jnp.asarray(xi),), (jnp.asarray(1.0),))

@@ -125,7 +125,9 @@ def run(args) -> int:
         for kind in ("in-phase", "anti-phase"):
             if kind in r:
                 k = r[kind]
-                fold = "not found" if k.get("fold_vd") is None else f"{k['fold_vd']:.6f}"
+                fold = (f"{k['fold_vd']:.6f}" if k.get("fold_converged") else
+                        f"~{k['max_vd_on_branch']:.4f} (largest v_d on the branch; "
+                        f"fold {'passed' if k.get('fold_detected') else 'not reached'})")
                 print(f"  {kind}: fold v_d = {fold}; at v_d = {k['at_vd']}: "
                       f"{'stable' if k['stable'] else 'unstable'} (|multipliers| "
                       f"{k['multipliers'][0]:.4f}, {k['multipliers'][1]:.4f})")
