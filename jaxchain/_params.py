@@ -1,9 +1,20 @@
 """Physical parameters of the chain (eqs. (4)-(7) of the paper)."""
 
+import dataclasses
+from collections.abc import Callable
+
 import equinox as eqx
 import jax
 import numpy as np
 from jaxtyping import ArrayLike
+
+
+def _as_array(value):
+    """A parameter value as a float64 NumPy array (a leaf that `eqx.filter_jit`
+    traces, so that a new value does not recompile), or the tracer itself."""
+    if isinstance(value, jax.core.Tracer) or isinstance(value, jax.Array):
+        return value
+    return np.asarray(value, dtype=np.float64)
 
 
 def _concrete(value) -> np.ndarray | None:
@@ -48,8 +59,10 @@ class ChainParams(eqx.Module):
     count grows as 1x, 2x, 6x and 30x for eps = 1e-2, 3e-3, 1e-3 and 3e-4 on the
     Fig. 4 scene.
 
-    Fields other than `n_osc` may be JAX arrays (for example under `jax.vmap`); only
-    concrete values are validated.
+    Fields other than `n_osc` are stored as float64 arrays (JAX arrays or tracers
+    are kept as they are, for example under `jax.vmap`), so that `eqx.filter_jit`
+    traces them: a new value of v_d, eps or xi does not recompile. Only concrete
+    values are validated. Change a field with `with_parameter`, which validates.
 
     **Raises:**
 
@@ -58,13 +71,13 @@ class ChainParams(eqx.Module):
     """
 
     n_osc: int = eqx.field(static=True, default=20)
-    xi: float | ArrayLike = 0.05
-    mu_d: float | ArrayLike = 0.5
-    mu_st: float | ArrayLike = 1.0
-    v0: float | ArrayLike = 0.5
-    eta_c: float | ArrayLike = 0.01
-    v_d: float | ArrayLike = 1.5
-    eps: float | ArrayLike = 1e-3
+    xi: ArrayLike = eqx.field(converter=_as_array, default=0.05)
+    mu_d: ArrayLike = eqx.field(converter=_as_array, default=0.5)
+    mu_st: ArrayLike = eqx.field(converter=_as_array, default=1.0)
+    v0: ArrayLike = eqx.field(converter=_as_array, default=0.5)
+    eta_c: ArrayLike = eqx.field(converter=_as_array, default=0.01)
+    v_d: ArrayLike = eqx.field(converter=_as_array, default=1.5)
+    eps: ArrayLike = eqx.field(converter=_as_array, default=1e-3)
 
     def __check_init__(self):
         if isinstance(self.n_osc, bool) or not isinstance(self.n_osc, (int, np.integer)):
@@ -85,12 +98,45 @@ class ChainParams(eqx.Module):
             a = _concrete(value)
             if a is None:
                 continue
+            shown = a.item() if a.ndim == 0 else a
             if not np.all(np.isfinite(a)):
-                raise ValueError(f"ChainParams.{name} must be finite, got {value!r}")
+                raise ValueError(f"ChainParams.{name} must be finite, got {shown!r}")
             if not np.all(ok(a)):
-                raise ValueError(f"ChainParams.{name} must be {requirement}, got {value!r}")
+                raise ValueError(f"ChainParams.{name} must be {requirement}, got {shown!r}")
         mu_st, mu_d = _concrete(self.mu_st), _concrete(self.mu_d)
         if mu_st is not None and mu_d is not None and not np.all(mu_st >= mu_d):
             raise ValueError(
-                f"ChainParams.mu_st must be >= mu_d = {self.mu_d!r}, got {self.mu_st!r}"
+                f"ChainParams.mu_st must be >= mu_d = {mu_d.tolist()!r}, got {mu_st.tolist()!r}"
             )
+
+
+def with_parameter(params: ChainParams, where: Callable | str, value) -> ChainParams:
+    """`params` with one parameter set to `value`, validated like a new `ChainParams`.
+    This is the one way jaxchain changes a parameter (a bare `eqx.tree_at` would skip
+    the validation and could leave a Python float, which `eqx.filter_jit` treats as
+    static).
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `where`: the field, as a lens such as `lambda p: p.v_d` (as `eqx.tree_at`
+        takes it) or as its name, `"v_d"`.
+    - `value`: the new value: a number, an array or a tracer.
+
+    **Returns:**
+
+    A new `ChainParams`.
+
+    **Raises:**
+
+    `ValueError` naming the field for a bad value, or for an unknown field name.
+    """
+    if isinstance(where, str):
+        names = [f.name for f in dataclasses.fields(params)]
+        if where not in names or where == "n_osc":
+            raise ValueError(f"unknown parameter {where!r}: choose one of "
+                             f"{', '.join(n for n in names if n != 'n_osc')}")
+        name = where
+        where = lambda p: getattr(p, name)  # noqa: E731
+    changed = eqx.tree_at(where, params, value)
+    return ChainParams(**{f.name: getattr(changed, f.name) for f in dataclasses.fields(changed)})
