@@ -55,6 +55,7 @@ from ._model import vector_field as vector_field  # noqa: E402
 from ._options import SimulationOptions as SimulationOptions  # noqa: E402
 from ._params import ChainParams as ChainParams  # noqa: E402
 from ._params import with_parameter as with_parameter  # noqa: E402
+from ._params import parameter_value as parameter_value  # noqa: E402
 from ._plots.localized import plot_localized_states as plot_localized_states  # noqa: E402
 from ._results import save_dataset as save_dataset  # noqa: E402
 from ._results import to_dataset as to_dataset  # noqa: E402

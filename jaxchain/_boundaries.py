@@ -4,7 +4,6 @@ their sensitivities, and one design question."""
 
 import dataclasses
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -19,7 +18,7 @@ from ._bifurcation.two_parameter import BoundaryCurves, boundary_curves
 from ._initial import GivenState
 from ._nonsmooth.existence import stick_slip_existence_limit
 from ._options import SimulationOptions
-from ._params import ChainParams
+from ._params import ChainParams, with_parameter
 from ._simulate import simulate
 
 
@@ -37,12 +36,6 @@ class Boundaries:
     ring_branches: dict
 
 
-def _with(params, **changes):
-    for name, value in changes.items():
-        params = eqx.tree_at(lambda p, name=name: getattr(p, name), params, value)
-    return params
-
-
 def _multipliers(orbit) -> list[float]:
     """The two largest Floquet multipliers in modulus."""
     return [float(m) for m in np.sort(np.abs(np.asarray(orbit.multipliers)))[::-1][:2]]
@@ -56,9 +49,9 @@ def design_check(params: ChainParams, design: DampingDesign, target: float,
     cycle (x = 3 above steady sliding) and integrates 4000 time units."""
     out = {}
     for side, factor in (("below", 1 - margin), ("above", 1 + margin)):
-        p = _with(params, xi=design.xi * factor)
+        p = with_parameter(params, "xi", design.xi * factor)
         v = float(hopf_vd_analytic(p)) + target
-        p = _with(p, v_d=v)
+        p = with_parameter(p, "v_d", v)
         obs = simulate(p, GivenState(jnp.array([[3.5], [0.0]])),
                        options=SimulationOptions(t_end=4000.0, transient=3500.0))
         out[side] = {"xi": design.xi * factor, "v_d": v,
@@ -77,8 +70,8 @@ def _ring_state(params: ChainParams, single, kind: str, options, progress):
     else:
         half = flow(single.params, single.y0, single.period / 2, options).ys[-1]
         y0 = jnp.tile(jnp.concatenate([single.y0, half], axis=1), (1, n // 2))
-    orbit = periodic_orbit(_with(params, v_d=single.params.v_d), y0, float(single.period),
-                           options, throw=False)
+    orbit = periodic_orbit(with_parameter(params, "v_d", single.params.v_d), y0,
+                           float(single.period), options, throw=False)
     out = {"at_vd": float(single.params.v_d), "converged": bool(orbit.converged),
            "stable": bool(orbit.stable), "multipliers": _multipliers(orbit)}
     if not orbit.converged:
@@ -101,9 +94,30 @@ def _ring_state(params: ChainParams, single, kind: str, options, progress):
     return out, branch
 
 
+def _curve_summary(single: ChainParams, where: str, curves: BoundaryCurves) -> dict:
+    """A two-parameter curve as JSON-ready lists, with the non-smooth existence
+    limit at each value beside the fold (an independent reference: the smoothed
+    fold lies within about eps of it)."""
+    values = np.asarray(curves.values)
+    fold = [float(f) if ok else None
+            for f, ok in zip(np.asarray(curves.fold_vd), np.asarray(curves.converged))]
+    limit = [stick_slip_existence_limit(with_parameter(single, where, v)) for v in values]
+    return {"hopf_vd": np.asarray(curves.hopf_vd).tolist(), "fold_vd": fold,
+            "existence_limit_nonsmooth": limit,
+            "fold_minus_existence_limit": [None if f is None else f - e
+                                           for f, e in zip(fold, limit)],
+            "d_hopf_vd": np.asarray(curves.d_hopf).tolist(),
+            "d_fold_vd": [None if f is None else float(d)
+                          for f, d in zip(fold, np.asarray(curves.d_fold))]}
+
+
+#: The default grids of the two-parameter curves: xi, and mu_st/mu_d.
+XI_VALUES = (0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.1)
+RATIO_VALUES = (1.6, 1.8, 2.0, 2.2, 2.4)
+
+
 def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
-               xi_values=(0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.1),
-               ratio_values=(1.6, 1.8, 2.0, 2.2, 2.4), ring: bool = True,
+               xi_values=XI_VALUES, ratio_values=RATIO_VALUES, ring: bool = True,
                progress: bool = False) -> Boundaries:
     """The Hopf and fold belt speeds of the single oscillator and of the ring.
 
@@ -141,7 +155,7 @@ def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
     single = ChainParams(n_osc=1, xi=params.xi, mu_d=params.mu_d, mu_st=params.mu_st,
                          v0=params.v0, v_d=params.v_d, eps=params.eps)
     hopf = hopf_point(single)
-    l1 = float(first_lyapunov_coefficient(_with(single, v_d=hopf.v_d[0])))
+    l1 = float(first_lyapunov_coefficient(with_parameter(single, "v_d", hopf.v_d[0])))
     start = hopf_cycle(single, options=options)
     problem = limit_cycle_problem(start, options)
     branch = continuation(problem, options=ContinuationOptions(
@@ -149,11 +163,10 @@ def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
     fold = fold_point(problem, branch)
     limit = stick_slip_existence_limit(single)
     solution = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
-    fold_problem = eqx.tree_at(lambda pr: pr.params, problem, fold.record.params)
-    curves_xi = boundary_curves(fold_problem, solution, lambda p: p.xi, xi_values,
-                                progress=progress)
+    fold_problem = problem.with_params(fold.record.params)
+    curves_xi = boundary_curves(fold_problem, solution, "xi", xi_values, progress=progress)
     mu_values = single.mu_d * np.asarray(ratio_values)
-    curves_ratio = boundary_curves(fold_problem, solution, lambda p: p.mu_st, mu_values,
+    curves_ratio = boundary_curves(fold_problem, solution, "mu_st", mu_values,
                                    progress=progress)
     design = smallest_damping(fold_problem, solution, target)
     at = int(np.argmin(np.abs(np.asarray(curves_xi.values) - float(single.xi))))
@@ -182,11 +195,10 @@ def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
         "d_hopf_vd_d_ratio": float(single.mu_d * curves_ratio.d_hopf[at_r]),
         "d_fold_vd_d_ratio": float(single.mu_d * curves_ratio.d_fold[at_r]),
         "xi_curve": {"xi": np.asarray(curves_xi.values).tolist(),
-                     "hopf_vd": np.asarray(curves_xi.hopf_vd).tolist(),
-                     "fold_vd": np.asarray(curves_xi.fold_vd).tolist()},
-        "ratio_curve": {"mu_st/mu_d": list(map(float, ratio_values)),
-                        "hopf_vd": np.asarray(curves_ratio.hopf_vd).tolist(),
-                        "fold_vd": np.asarray(curves_ratio.fold_vd).tolist()},
+                     **_curve_summary(single, "xi", curves_xi)},
+        "ratio_curve": {"mu_st/mu_d": (np.asarray(curves_ratio.values) / float(single.mu_d)
+                                       ).tolist(),
+                        **_curve_summary(single, "mu_st", curves_ratio)},
         "design": {"target_window": target, "xi": design.xi, "window": design.window,
                    "hopf_vd": design.hopf_vd, "fold_vd": design.fold_vd,
                    "d_window_d_xi": design.d_window, "optax_iterations": len(design.history),
@@ -203,7 +215,8 @@ def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
             "hopf_omega_range": [float(np.min(ring_hopf.omega)), float(np.max(ring_hopf.omega))],
         }
         if params.n_osc % 2 == 0:
-            cycle = periodic_orbit(_with(single, v_d=1.5), jnp.array([[2.2], [0.0]]), 6.3, options)
+            cycle = periodic_orbit(with_parameter(single, "v_d", 1.5),
+                                   jnp.array([[2.2], [0.0]]), 6.3, options)
             for kind in ("in-phase", "anti-phase"):
                 summary["ring"][kind], ring_branches[kind] = _ring_state(
                     params, cycle, kind, options, progress)

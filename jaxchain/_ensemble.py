@@ -11,7 +11,7 @@ from jaxtyping import ArrayLike, Float
 from ._initial import AbstractInitialCondition
 from ._lanes import padded_lanes, run_lanes
 from ._options import SimulationOptions
-from ._params import ChainParams
+from ._params import ChainParams, with_parameter
 from ._progress import progress_bar
 from ._results import to_dataset
 from ._simulate import n_ticks
@@ -23,7 +23,7 @@ def _initial_states(params, v_d, ics):
     """The initial state of every (belt speed, initial condition) pair, shape
     (n_vd, n_ic, 2, n_osc): eq. (8) starts from each belt speed's steady sliding."""
     def one(vd, ic):
-        return ic(eqx.tree_at(lambda q: q.v_d, params, vd))
+        return ic(with_parameter(params, "v_d", vd))
 
     over_ics = eqx.filter_vmap(one, in_axes=(None, eqx.if_array(0)))
     return eqx.filter_vmap(over_ics, in_axes=(0, None))(v_d, ics)
@@ -74,7 +74,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
         raise ValueError("ics must carry a leading batch axis on its array fields")
     n_ic = leaves[0].shape[0]
     ics_first = jax.tree_util.tree_map(lambda x: x[0] if eqx.is_array(x) else x, ics)
-    ics_first(eqx.tree_at(lambda q: q.v_d, params, v_d[0]))  # shape check, may raise
+    ics_first(with_parameter(params, "v_d", v_d[0]))  # shape check, may raise
     y0 = _initial_states(params, v_d, ics)
     shape = y0.shape[:2]
     lanes_vd = jnp.broadcast_to(v_d[:, None], shape).reshape(-1)

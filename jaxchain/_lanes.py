@@ -22,7 +22,7 @@ from jaxtyping import ArrayLike, Float
 from tqdm.auto import tqdm
 
 from ._options import SimulationOptions
-from ._params import ChainParams
+from ._params import ChainParams, with_parameter
 from ._simulate import Observables, run
 
 
@@ -30,7 +30,7 @@ from ._simulate import Observables, run
 def _sharded(params, v_d, y0, solver, options, progress, mesh):
     def local(vd, y):
         def one(a, b):
-            return run(eqx.tree_at(lambda q: q.v_d, params, a), b, solver, options, progress)
+            return run(with_parameter(params, "v_d", a), b, solver, options, progress)
         return jax.vmap(one)(vd, y)
 
     # check_vma=False: diffrax's loops carry unsharded initial values (solver state)

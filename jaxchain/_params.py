@@ -110,6 +110,36 @@ class ChainParams(eqx.Module):
             )
 
 
+class _Field(eqx.Module):
+    """The lens of one named field: equal names compare and hash equal, so that a
+    jitted function taking the lens compiles once per name."""
+
+    name: str = eqx.field(static=True)
+
+    def __call__(self, params):
+        return getattr(params, self.name)
+
+
+def parameter_lens(where: Callable | str) -> Callable:
+    """The lens of a parameter given by name (`"xi"`) or already as a lens.
+
+    **Raises:**
+
+    `ValueError` for an unknown name.
+    """
+    if not isinstance(where, str):
+        return where
+    names = [f.name for f in dataclasses.fields(ChainParams) if f.name != "n_osc"]
+    if where not in names:
+        raise ValueError(f"unknown parameter {where!r}: choose one of {', '.join(names)}")
+    return _Field(where)
+
+
+def parameter_value(params: ChainParams, where: Callable | str):
+    """The value of the parameter `where` (a name or a lens) in `params`."""
+    return parameter_lens(where)(params)
+
+
 def with_parameter(params: ChainParams, where: Callable | str, value) -> ChainParams:
     """`params` with one parameter set to `value`, validated like a new `ChainParams`.
     This is the one way jaxchain changes a parameter (a bare `eqx.tree_at` would skip
@@ -131,12 +161,5 @@ def with_parameter(params: ChainParams, where: Callable | str, value) -> ChainPa
 
     `ValueError` naming the field for a bad value, or for an unknown field name.
     """
-    if isinstance(where, str):
-        names = [f.name for f in dataclasses.fields(params)]
-        if where not in names or where == "n_osc":
-            raise ValueError(f"unknown parameter {where!r}: choose one of "
-                             f"{', '.join(n for n in names if n != 'n_osc')}")
-        name = where
-        where = lambda p: getattr(p, name)  # noqa: E731
-    changed = eqx.tree_at(where, params, value)
+    changed = eqx.tree_at(parameter_lens(where), params, value)
     return ChainParams(**{f.name: getattr(changed, f.name) for f in dataclasses.fields(changed)})

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
+from jaxchain._boundaries import RATIO_VALUES, XI_VALUES
 
 
 class _Point(eqx.Module):
@@ -51,7 +52,7 @@ def test_fold_is_near_the_nonsmooth_existence_limit(branch):
     assert np.all(np.abs(multipliers[:2] - 1) < 1e-3)  # trivial and critical at +1
 
 
-@pytest.mark.parametrize("where, value", [(lambda p: p.xi, 0.05), (lambda p: p.mu_st, 1.0)])
+@pytest.mark.parametrize("where, value", [("xi", 0.05), ("mu_st", 1.0)])
 def test_fold_derivative_against_finite_differences(branch, where, value):
     problem, _, fold = branch
     start = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
@@ -67,19 +68,60 @@ def test_fold_derivative_against_finite_differences(branch, where, value):
     assert abs(float(derivative[n]) - float(fd)) < 1e-4 * abs(float(fd))
 
 
-def test_boundary_curves_in_xi(branch):
+@pytest.fixture(scope="module")
+def default_curves(branch):
+    """The fold and Hopf curves of `jaxchain boundaries` on its default grids."""
     problem, _, fold = branch
     start = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
-    curves = jc.boundary_curves(problem, start, lambda p: p.xi, [0.045, 0.05, 0.06])
+    mu_d = float(problem.params.mu_d)
+    return {"xi": jc.boundary_curves(problem, start, "xi", XI_VALUES),
+            "mu_st": jc.boundary_curves(problem, start, "mu_st", mu_d * np.asarray(RATIO_VALUES))}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("where", ["xi", "mu_st"])
+def test_every_default_fold_converges_near_the_existence_limit(branch, default_curves, where):
+    problem, _, fold = branch
+    curves = default_curves[where]
     assert bool(jnp.all(curves.converged))
-    xi = np.asarray(curves.values)
-    np.testing.assert_allclose(curves.hopf_vd, 0.5 * np.log(0.5 / xi), atol=1e-10)
-    np.testing.assert_allclose(curves.d_hopf, -0.5 / xi, rtol=1e-8)
-    assert abs(float(curves.fold_vd[1]) - float(fold.p)) < 1e-9
-    # more damping: both edges fall, the fold faster, so the bistable window narrows
-    fold, d_fold = np.asarray(curves.fold_vd), np.asarray(curves.d_fold)
-    assert np.all(np.diff(fold) < 0) and np.all(d_fold < np.asarray(curves.d_hopf))
-    assert np.all(fold > np.asarray(curves.hopf_vd))
+    values = np.asarray(curves.values)
+    single = problem.params
+    limit = np.array([jc.stick_slip_existence_limit(jc.with_parameter(single, where, v))
+                      for v in values])
+    fold_vd = np.asarray(curves.fold_vd)
+    # the smoothed fold comes slightly before the non-smooth grazing limit
+    assert np.all(np.abs(fold_vd - limit) < 0.01) and np.all(fold_vd < limit)
+    # Hopf point: v0 ln((mu_st - mu_d) / (2 xi v0)), and its derivative
+    xi = values if where == "xi" else float(single.xi)
+    mu_st = values if where == "mu_st" else float(single.mu_st)
+    np.testing.assert_allclose(curves.hopf_vd, 0.5 * np.log((mu_st - 0.5) / xi), atol=1e-10)
+    d_hopf = -0.5 / xi if where == "xi" else 0.5 / (mu_st - 0.5)
+    np.testing.assert_allclose(curves.d_hopf, d_hopf, rtol=1e-8)
+    # the curve passes through the one-parameter fold, and the derivative along the
+    # curve is that of finite differences between its points
+    at = int(np.argmin(np.abs(values - float(jc.parameter_value(single, where)))))
+    assert abs(fold_vd[at] - float(fold.p)) < 1e-9
+    d_fold = np.asarray(curves.d_fold)
+    centred = (fold_vd[2:] - fold_vd[:-2]) / (values[2:] - values[:-2])
+    assert np.all(np.sign(centred) == np.sign(d_fold[1:-1]))
+    if where == "xi":
+        # more damping: both edges fall, the fold faster, so the window narrows
+        assert np.all(np.diff(fold_vd) < 0) and np.all(d_fold < np.asarray(curves.d_hopf))
+    assert np.all(fold_vd > np.asarray(curves.hopf_vd))
+
+
+@pytest.mark.slow
+def test_fold_curve_is_robust_to_a_perturbed_start(branch, default_curves):
+    problem, _, fold = branch
+    start = np.concatenate([fold.u, fold.p[None], fold.null_vector])
+    rng = np.random.default_rng(0)
+    perturbed = start * (1 + 1e-6 * rng.choice([-1.0, 1.0], start.size))
+    reference = default_curves["xi"]
+    values = np.asarray(reference.values)[[2, 3, 4]]
+    curves = jc.boundary_curves(problem, jnp.asarray(perturbed), "xi", values)
+    assert bool(jnp.all(curves.converged))
+    np.testing.assert_allclose(curves.fold_vd, np.asarray(reference.fold_vd)[[2, 3, 4]],
+                               rtol=0, atol=1e-8)
 
 
 def test_continuation_on_an_analytic_fold_records_failures():

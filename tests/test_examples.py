@@ -1,6 +1,8 @@
-"""Every notebook in examples/ runs, at reduced size, so that none breaks silently.
-Its first code cell holds the size parameters; the test replaces it."""
+"""Every notebook in examples/ runs, at reduced size, so that none breaks silently,
+and shows its figures. Its first code cell holds the size parameters; the test
+replaces it."""
 
+import re
 from pathlib import Path
 
 import nbformat
@@ -13,17 +15,25 @@ SMALL = {
     "01_localized_states.ipynb":
         "N_OSC = 4\nV_D = 1.5\nT_END = 400.0\nTRANSIENT = 200.0",
 }
+#: A cell that draws: it calls one of jaxchain's plot functions or plt.show().
+PLOTTING = re.compile(r"\bplt\.show\(|\bjc\.plot_\w+\(")
 
 
 @pytest.mark.parametrize("name", sorted(p.name for p in EXAMPLES.glob("*.ipynb")))
-def test_notebook_runs_small(name, tmp_path):
+def test_notebook_runs_small_and_shows_its_figures(name, tmp_path, monkeypatch):
     nb = nbformat.read(EXAMPLES / name, as_version=4)
     assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code"), \
         "store notebooks with their outputs cleared"
     assert nb.cells[0].cell_type == "markdown" and "Fig." in nb.cells[0].source
     first = next(c for c in nb.cells if c.cell_type == "code")
     first.source = SMALL[name]
+    monkeypatch.delenv("MPLBACKEND", raising=False)  # the kernel's own: inline
     NotebookClient(nb, timeout=600, kernel_name="python3",
                    resources={"metadata": {"path": str(tmp_path)}}).execute()
     text = "".join(o.get("text", "") for c in nb.cells for o in c.get("outputs", []))
     assert "E / n_HALC" in text
+    plotting = [c for c in nb.cells if c.cell_type == "code" and PLOTTING.search(c.source)]
+    assert plotting, "a notebook here reproduces a figure"
+    for cell in plotting:
+        assert any("image/png" in o.get("data", {}) for o in cell.outputs), \
+            f"no figure shown by the cell:\n{cell.source}"

@@ -47,7 +47,12 @@ def test_single_oscillator_cycle_matches_scipy():
 
 def test_energy_balance_over_a_long_run():
     """Friction work = change of mechanical energy + viscous dissipation, for a ring
-    with a localized stick-slip state over 3000 time units."""
+    with a localized stick-slip state over 3000 time units. Measured: the residual is
+    4.5e-10 of the friction work (3.5e-7 of 762, 3214 switches) at the default rtol =
+    atol = 1e-12, and 2.3e-10 at 1e-13: it is the integration error of the smooth
+    phases (switch_tol = 1e-10 or 1e-11 leaves it unchanged). Other rings of 4 (1 to
+    4 excited, eq. (8) or (10), v_d = 1.3 to 1.7) give 4.9e-10 to 8.9e-10, the single
+    oscillator 2.8e-11. The bound, 1e-9, leaves a factor of 2 on this case."""
     p = jc.ChainParams(n_osc=4)
     obs = jc.simulate_nonsmooth(p, jc.OutOfPhaseExcitation.eq8(jc.excited_block(4, 2)),
                                 jc.NonsmoothOptions(t_end=3000.0, transient=2000.0))

@@ -12,7 +12,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 from tqdm.auto import tqdm
 
-from .._params import ChainParams
+from .._params import ChainParams, parameter_value, with_parameter
 
 
 class ContinuationProblem(eqx.Module):
@@ -20,24 +20,35 @@ class ContinuationProblem(eqx.Module):
 
     **Fields:**
 
-    - `residual`: G(u, params) -> shape (n,), for unknowns u of shape (n,).
+    - `residual`: G(u, params) -> shape (n,), for unknowns u of shape (n,). A
+        module-level function or an `eqx.Module` with `__call__` compiles once for
+        all problems of its kind; a new lambda compiles anew.
     - `u0`: a solution at `params`, shape (n,).
     - `params`: the parameters of `u0`.
-    - `where`: the lens of the continued parameter, `lambda p: p.v_d` by default
-        (used with `eqx.tree_at`).
+    - `where`: the continued parameter: its name (`"v_d"`, the default) or a lens
+        such as `lambda p: p.xi` (`with_parameter`).
     - `describe`: (u, params) -> a record of the point (an `eqx.Module` with a
-        boolean field `stable`), for example `describe_orbit`.
+        boolean field `stable`), for example `DescribeOrbit`; or None, for no
+        records (every point then counts as stable).
     """
 
-    residual: Callable = eqx.field(static=True)
+    residual: Callable
     u0: Float[Array, " n"]
     params: ChainParams
-    where: Callable = eqx.field(static=True, default=lambda p: p.v_d)
-    describe: Callable = eqx.field(static=True, default=None)
+    where: Callable | str = eqx.field(static=True, default="v_d")
+    describe: Callable | None = None
 
     def at(self, value) -> ChainParams:
-        """`params` with the continued parameter set to `value`."""
-        return eqx.tree_at(self.where, self.params, value)
+        """`params` with the continued parameter set to `value` (`with_parameter`)."""
+        return with_parameter(self.params, self.where, value)
+
+    def with_params(self, params: ChainParams) -> "ContinuationProblem":
+        """The same problem at other parameters."""
+        return eqx.tree_at(lambda pr: pr.params, self, params)
+
+    def value(self) -> Float[Array, ""]:
+        """The continued parameter's value in `params`."""
+        return parameter_value(self.params, self.where)
 
     def __call__(self, z: Float[Array, " n+1"]) -> Float[Array, " n"]:
         """G at z = (u, p)."""
@@ -73,6 +84,9 @@ class ContinuationOptions(eqx.Module):
     - `direction`: +1 or -1, the sign of dp/ds at the start.
     - `fast_steps`: a point corrected within this many Newton steps lets ds grow
         by 1.5 (to at most `ds_max`); a failed point halves it.
+    - `max_correction`: a corrected point further than `max_correction * ds` from
+        its prediction counts as failed: Newton's method jumped to another branch
+        (the correction of a good step is O(ds^2)).
 
     **Raises:**
 
@@ -87,6 +101,7 @@ class ContinuationOptions(eqx.Module):
     max_points: int = 200
     direction: int = 1
     fast_steps: int = 4
+    max_correction: float = 1.0
 
     def __check_init__(self):
         if not 0 < self.ds_min <= self.ds <= self.ds_max:
@@ -98,6 +113,9 @@ class ContinuationOptions(eqx.Module):
         if self.max_points < 1:
             raise ValueError(f"ContinuationOptions.max_points must be >= 1, got "
                              f"{self.max_points}")
+        if not self.max_correction > 0:
+            raise ValueError(f"ContinuationOptions.max_correction must be > 0, got "
+                             f"{self.max_correction!r}")
         if self.direction not in (1, -1):
             raise ValueError(f"ContinuationOptions.direction must be +1 or -1, got "
                              f"{self.direction!r}")
@@ -110,13 +128,12 @@ class Branch(eqx.Module):
 
     - `p`: the continued parameter at each point, shape (n_points,).
     - `u`: the unknowns, shape (n_points, n).
-    - `tangent_p`: dp/ds of the unit tangent, shape (n_points,); it changes sign
-        at a fold.
+    - `tangent`: the unit tangent in (u, p), shape (n_points, n + 1).
     - `converged`: whether Newton's method converged, shape (n_points,). A failed
         point keeps its prediction; the run halves ds and goes on from the last good
         point.
     - `records`: `problem.describe` of every converged point, fields with a leading
-        axis (n_converged,).
+        axis (n_converged,); None without `describe`.
     - `stable`: the records' stability, shape (n_converged,).
     - `folds`: indices into the converged points after which dp/ds changes sign.
     - `stability_changes`: indices into the converged points after which `stable`
@@ -126,13 +143,18 @@ class Branch(eqx.Module):
 
     p: Float[Array, " n_points"]
     u: Float[Array, "n_points n"]
-    tangent_p: Float[Array, " n_points"]
+    tangent: Float[Array, "n_points n+1"]
     converged: Bool[Array, " n_points"]
-    records: eqx.Module
+    records: eqx.Module | None
     stable: Bool[Array, " n_converged"]
     folds: tuple[int, ...] = eqx.field(static=True)
     stability_changes: tuple[int, ...] = eqx.field(static=True)
     stop: str = eqx.field(static=True)
+
+    @property
+    def tangent_p(self) -> Float[Array, " n_points"]:
+        """dp/ds of the unit tangent; it changes sign at a fold."""
+        return self.tangent[:, -1]
 
 
 @eqx.filter_jit
@@ -155,10 +177,22 @@ def _correct(problem: ContinuationProblem, algorithm: PseudoArclength, predicted
                                                 atol=algorithm.newton_tol),
                          predicted, max_steps=algorithm.newton_steps, throw=False)
     ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(sol.value))
-    return sol.value, ok, sol.stats["num_steps"]
+    return sol.value, ok, sol.stats["num_steps"], jnp.linalg.norm(sol.value - predicted)
 
 
-_describe = eqx.filter_jit(lambda problem, z: problem.describe(z[:-1], problem.at(z[-1])))
+@eqx.filter_jit
+def _describe(problem: ContinuationProblem, z):
+    return problem.describe(z[:-1], problem.at(z[-1]))
+
+
+class _Stable(eqx.Module):
+    stable: Bool[Array, ""]
+
+
+def _record(problem: ContinuationProblem, z):
+    if problem.describe is None:
+        return _Stable(stable=jnp.asarray(True))
+    return _describe(problem, z)
 
 
 def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = PseudoArclength(),
@@ -168,8 +202,9 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
     pseudo-arclength continuation (`PseudoArclength`), detecting folds (dp/ds
     changes sign) and changes of stability (`problem.describe(...).stable`).
 
-    Points where Newton's method fails are recorded as failed, with their
-    prediction, and the step is halved; what was found is kept.
+    Points where Newton's method fails, or where its correction exceeds
+    `options.max_correction * ds` (a jump to another branch), are recorded as
+    failed, with their prediction, and the step is halved; what was found is kept.
 
     **Arguments:**
 
@@ -187,23 +222,23 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
     `ValueError` if `problem.u0` is not a solution (residual above 1e3 x the
     Newton tolerance).
     """
-    z = jnp.concatenate([problem.u0, jnp.atleast_1d(jnp.asarray(problem.where(problem.params),
-                                                                 dtype=float))])
+    z = jnp.concatenate([jnp.asarray(problem.u0, dtype=float),
+                         jnp.atleast_1d(jnp.asarray(problem.value(), dtype=float))])
     residual = float(jnp.max(jnp.abs(problem(z))))
     if not residual <= 1e3 * algorithm.newton_tol:
         raise ValueError(f"problem.u0 is not a solution at the given parameters (residual "
                          f"{residual:.3g}); solve for it first")
     start = jnp.zeros(z.size).at[-1].set(float(options.direction))
     tangent = _tangent(problem, z, start)
-    zs, tangents, converged, records = [z], [tangent], [True], [_describe(problem, z)]
+    zs, tangents, converged, records = [z], [tangent], [True], [_record(problem, z)]
     ds, stop = options.ds, f"max_points = {options.max_points} reached"
     bar = tqdm(total=options.max_points, desc="continuation", unit="point",
                disable=not progress, leave=False)
     for _ in range(options.max_points - 1):
         bar.update()
         predicted = z + ds * tangent
-        new, ok, steps = _correct(problem, algorithm, predicted, tangent)
-        if not bool(ok):
+        new, ok, steps, correction = _correct(problem, algorithm, predicted, tangent)
+        if not (bool(ok) and float(correction) <= options.max_correction * ds):
             zs.append(predicted)
             tangents.append(tangent)
             converged.append(False)
@@ -216,7 +251,7 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
         zs.append(z)
         tangents.append(tangent)
         converged.append(True)
-        records.append(_describe(problem, z))
+        records.append(_record(problem, z))
         if int(steps) <= options.fast_steps:
             ds = min(1.5 * ds, options.ds_max)
         if not options.p_min <= float(z[-1]) <= options.p_max:
@@ -229,8 +264,9 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
     stable = np.asarray(records.stable)
     tp = np.asarray(tangents[ok, -1])
     return Branch(
-        p=zs[:, -1], u=zs[:, :-1], tangent_p=tangents[:, -1], converged=jnp.asarray(ok),
-        records=records, stable=jnp.asarray(stable),
+        p=zs[:, -1], u=zs[:, :-1], tangent=tangents, converged=jnp.asarray(ok),
+        records=records if problem.describe is not None else None,
+        stable=jnp.asarray(stable),
         folds=tuple(int(i) for i in np.nonzero(np.sign(tp[1:]) != np.sign(tp[:-1]))[0]),
         stability_changes=tuple(int(i) for i in np.nonzero(stable[1:] != stable[:-1])[0]),
         stop=stop)

@@ -2,14 +2,14 @@
 speeds is narrower than a target width, by optax."""
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
 from jaxtyping import Array, Float
 
+from .._params import with_parameter
 from .continuation import ContinuationProblem
-from .two_parameter import fold_and_derivative, follow_fold, hopf_vd, where_set
+from .two_parameter import fold_curve, hopf_vd_and_derivative
 
 
 class DampingDesign(eqx.Module):
@@ -44,8 +44,8 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
     < 0), so the answer is the xi at which it equals the target. It is found by
     minimising 1/2 (window(xi) - target)^2 over log xi with optax's L-BFGS, the
     gradient coming from implicit differentiation of the Hopf point and of the
-    fold's extended system (optimistix's `ImplicitAdjoint`), each fold warm-started
-    from the previous one with its tangent predictor.
+    fold's extended system (optimistix's `ImplicitAdjoint`), each fold continued
+    from the previous one (`fold_curve`).
 
     **Arguments:**
 
@@ -67,23 +67,22 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
     if not target > 0:
         raise ValueError(f"target must be > 0, got {target!r}")
     n = problem.u0.size
-    state = {"xi": float(problem.params.xi), "solution": fold_solution}
-    _, state["derivative"], _ = fold_and_derivative(problem, lambda p: p.xi, state["xi"],
-                                                    fold_solution)
+    state = {"problem": problem, "solution": fold_solution}
 
     def evaluate(xi):
-        solution, derivative, ok = follow_fold(problem, lambda p: p.xi, state["xi"],
-                                               state["solution"], state["derivative"], xi)
-        if not bool(ok):
+        solutions, derivatives, ok, _ = fold_curve(state["problem"], state["solution"], "xi",
+                                                   [xi])
+        if not ok[0]:
             raise RuntimeError(f"the fold was lost at xi = {xi:.6g}: lower learning_rate "
                                "or the target")
-        state.update(xi=xi, solution=solution, derivative=derivative)
-        hopf, d_hopf = jax.jvp(lambda x: hopf_vd(where_set(problem.params, lambda p: p.xi, x)),
-                               (jnp.asarray(xi),), (jnp.asarray(1.0),))
+        solution, derivative = jnp.asarray(solutions[0]), derivatives[0]
+        state.update(solution=solution,
+                     problem=problem.with_params(with_parameter(problem.params, "xi", xi)))
+        hopf, d_hopf = hopf_vd_and_derivative(problem.params, "xi", xi)
         return float(solution[n] - hopf), float(derivative[n] - d_hopf), float(hopf)
 
     optimiser = optax.lbfgs(learning_rate=learning_rate, linesearch=None)
-    theta = jnp.log(jnp.asarray(state["xi"]))
+    theta = jnp.log(jnp.asarray(problem.params.xi))
     opt_state = optimiser.init(theta)
     history, converged = [], False
     for _ in range(steps):

@@ -6,7 +6,8 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
-from .continuation import Branch, ContinuationProblem
+from .._params import ChainParams
+from .continuation import Branch, ContinuationProblem, _describe
 
 
 class FoldPoint(eqx.Module):
@@ -36,6 +37,17 @@ def _extended(unknowns, problem: ContinuationProblem):
     z, w = unknowns[: n + 1], unknowns[n + 1:]
     g, gw = jax.jvp(lambda u: problem(jnp.concatenate([u, z[-1:]])), (z[:-1],), (w,))
     return jnp.concatenate([g, gw, jnp.atleast_1d(w @ w - 1)])
+
+
+class FoldSystem(eqx.Module):
+    """The extended system of the folds of `problem`, as a residual of unknowns
+    (u, p, w) and parameters: a `ContinuationProblem` whose residual is a
+    `FoldSystem` follows the fold in a second parameter (`fold_curve`)."""
+
+    problem: ContinuationProblem
+
+    def __call__(self, unknowns, params: ChainParams):
+        return _extended(unknowns, self.problem.with_params(params))
 
 
 def _null_vector(problem: ContinuationProblem, z):
@@ -110,5 +122,5 @@ def fold_point(problem: ContinuationProblem, near: Branch | Float[Array, " n+1"]
     if throw and not bool(ok):
         raise RuntimeError("the fold's extended system did not converge: start nearer "
                            "the fold (a smaller continuation step)")
-    record = eqx.filter_jit(problem.describe)(u, problem.at(p))
+    record = _describe(problem, jnp.concatenate([u, p[None]]))
     return FoldPoint(p=p, u=u, null_vector=w, record=record, converged=ok)

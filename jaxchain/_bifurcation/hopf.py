@@ -9,7 +9,7 @@ from jaxtyping import Array, Complex, Float
 
 from .._friction import friction_coefficient
 from .._model import jacobian
-from .._params import ChainParams
+from .._params import ChainParams, with_parameter
 
 
 def fourier_blocks(params: ChainParams) -> Complex[Array, "n_osc 2 2"]:
@@ -127,13 +127,9 @@ class HopfPoint(eqx.Module):
     newton_steps: Array
 
 
-def _with_vd(params: ChainParams, v_d) -> ChainParams:
-    return eqx.tree_at(lambda p: p.v_d, params, v_d)
-
-
 def _mode_growth(v_d, args):
     params, k = args
-    return growth_rates(_with_vd(params, v_d))[k]
+    return growth_rates(with_parameter(params, "v_d", v_d))[k]
 
 
 @eqx.filter_jit
@@ -143,7 +139,7 @@ def _hopf_modes(params: ChainParams, guess, rtol, atol):
     def one(k):
         sol = optx.root_find(_mode_growth, solver, guess, (params, k), max_steps=100,
                              throw=False)
-        at = _with_vd(params, sol.value)
+        at = with_parameter(params, "v_d", sol.value)
         slope = jax.grad(_mode_growth)(sol.value, (params, k))
         return (sol.value, jnp.abs(mode_eigenvalues(at)[k, 0].imag), slope,
                 growth_rates(at)[k], sol.stats["num_steps"], sol.result)

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._model import steady_sliding
-from .._params import ChainParams
+from .._params import ChainParams, with_parameter
 from .continuation import ContinuationProblem
 from .hopf import fourier_blocks, hopf_point
 from .lyapunov import first_lyapunov_coefficient
@@ -14,8 +14,27 @@ from .shooting import (PeriodicOrbit, ShootingOptions, describe_orbit, pack,
                        periodic_orbit, shooting_residual)
 
 
+class ShootingResidual(eqx.Module):
+    """`shooting_residual` with its options bound, as a `ContinuationProblem`
+    residual: equal options give equal residuals, so continuation compiles once."""
+
+    options: ShootingOptions
+
+    def __call__(self, u, params):
+        return shooting_residual(u, params, self.options)
+
+
+class DescribeOrbit(eqx.Module):
+    """`describe_orbit` with its options bound, as a `ContinuationProblem` record."""
+
+    options: ShootingOptions
+
+    def __call__(self, u, params):
+        return describe_orbit(params, u, self.options)
+
+
 def limit_cycle_problem(orbit: PeriodicOrbit, options: ShootingOptions = ShootingOptions(),
-                        where=lambda p: p.v_d) -> ContinuationProblem:
+                        where="v_d") -> ContinuationProblem:
     """The `ContinuationProblem` of the periodic orbits through `orbit`: unknowns
     (y0, T) of `shooting_residual`, records `describe_orbit` (amplitudes, energy,
     Floquet multipliers, stability).
@@ -24,12 +43,11 @@ def limit_cycle_problem(orbit: PeriodicOrbit, options: ShootingOptions = Shootin
 
     - `orbit`: a converged `PeriodicOrbit`.
     - `options`: `ShootingOptions` of every point.
-    - `where`: the lens of the continued parameter (default the belt speed).
+    - `where`: the continued parameter, a name or a lens (default the belt speed).
     """
     return ContinuationProblem(
-        residual=lambda u, p: shooting_residual(u, p, options),
-        u0=pack(orbit.y0, orbit.period), params=orbit.params, where=where,
-        describe=lambda u, p: describe_orbit(p, u, options))
+        residual=ShootingResidual(options), u0=pack(orbit.y0, orbit.period),
+        params=orbit.params, where=where, describe=DescribeOrbit(options))
 
 
 def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
@@ -61,10 +79,10 @@ def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
     if not offset > 0:
         raise ValueError(f"offset must be > 0, got {offset!r}")
     hopf = hopf_point(params)
-    at_hopf = eqx.tree_at(lambda p: p.v_d, params, hopf.v_d[mode])
+    at_hopf = with_parameter(params, "v_d", hopf.v_d[mode])
     l1 = first_lyapunov_coefficient(at_hopf, mode)
     v_d = hopf.v_d[mode] + jnp.sign(l1) * offset
-    near = eqx.tree_at(lambda p: p.v_d, params, v_d)
+    near = with_parameter(params, "v_d", v_d)
     n = params.n_osc
     values, vectors = jnp.linalg.eig(fourier_blocks(at_hopf)[mode])
     q2 = vectors[:, jnp.argmax(values.imag)]

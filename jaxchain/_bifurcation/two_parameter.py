@@ -1,5 +1,6 @@
 """The Hopf and fold belt speeds as functions of a second parameter, with their
-derivatives by implicit differentiation."""
+derivatives by implicit differentiation. The fold is followed by the one
+continuation loop (`continuation`), applied to its extended system."""
 
 from collections.abc import Callable
 
@@ -8,11 +9,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
-from tqdm.auto import tqdm
 
-from .._params import ChainParams
-from .continuation import ContinuationProblem
-from .fold import solve_fold
+from .._params import ChainParams, parameter_value, with_parameter
+from .continuation import (Branch, ContinuationOptions, ContinuationProblem, PseudoArclength,
+                           continuation)
+from .fold import FoldSystem, solve_fold
 from .hopf import _hopf_modes
 
 
@@ -23,29 +24,84 @@ def hopf_vd(params: ChainParams, guess: float = 1.0) -> Float[Array, ""]:
     return _hopf_modes(params, jnp.asarray(guess, dtype=float), 1e-12, 1e-12)[0].max()
 
 
-def with_parameter(problem: ContinuationProblem, where: Callable, value) -> ContinuationProblem:
-    """`problem` with the parameter `where(params)` set to `value`."""
-    return eqx.tree_at(lambda pr: where(pr.params), problem, value)
+def hopf_vd_and_derivative(params: ChainParams, where: Callable | str, value):
+    """`hopf_vd` at `where(params) = value` and its derivative in `value` (forward
+    mode through the implicit function)."""
+    return jax.jvp(lambda x: hopf_vd(with_parameter(params, where, x)),
+                   (jnp.asarray(value, dtype=float),), (jnp.asarray(1.0),))
 
 
 @eqx.filter_jit
-def _derivative(problem: ContinuationProblem, where: Callable, value, solution):
+def _derivative(problem: ContinuationProblem, where, value, solution):
     def solve(v):
-        return solve_fold(with_parameter(problem, where, v), solution)[0]
+        return solve_fold(problem.with_params(with_parameter(problem.params, where, v)),
+                          solution)[0]
     return jax.jvp(solve, (value,), (jnp.ones_like(value),))[1]
 
 
-def fold_and_derivative(problem: ContinuationProblem, where: Callable, value,
+def fold_and_derivative(problem: ContinuationProblem, where: Callable | str, value,
                         start: Float[Array, " 2n+1"]):
-    """The fold's extended-system solution (u, p, w) at `where(params) = value`,
-    from `start`, its derivative in `value` (a forward-mode pass through
-    optimistix's `ImplicitAdjoint` at the converged solution; NaN if Newton's
-    method failed), and whether Newton's method converged."""
+    """Newton's method on the fold's extended system (`solve_fold`) at
+    `where(params) = value`, from `start` = (u, p, w).
+
+    **Returns:**
+
+    (solution (u, p, w); its derivative in `value`, a forward-mode pass through
+    optimistix's `ImplicitAdjoint` at the solution, NaN if Newton's method
+    failed; whether Newton's method converged).
+    """
     value = jnp.asarray(value, dtype=float)
-    solution, ok = solve_fold(with_parameter(problem, where, value), start)
+    solution, ok = solve_fold(problem.with_params(with_parameter(problem.params, where, value)),
+                              start)
     if not bool(ok):
         return solution, jnp.full_like(solution, jnp.nan), ok
     return solution, _derivative(problem, where, value, solution), ok
+
+
+def fold_curve_problem(problem: ContinuationProblem, fold_solution: Float[Array, " 2n+1"],
+                       where: Callable | str) -> ContinuationProblem:
+    """The `ContinuationProblem` of a fold in a second parameter: unknowns
+    (u, p, w) of the Moore-Spence extended system (`FoldSystem`), the continued
+    parameter `where` (Kuznetsov, *Elements of Applied Bifurcation Theory*,
+    Sect. 10.2.2: two-parameter continuation of folds).
+
+    **Arguments:**
+
+    - `problem`: the one-parameter problem whose fold is followed (for example
+        `limit_cycle_problem`), at the parameters of `fold_solution`.
+    - `fold_solution`: a solution (u, p, w) of its extended system, shape (2n + 1,).
+    - `where`: the second parameter, a name (`"xi"`) or a lens.
+    """
+    return ContinuationProblem(residual=FoldSystem(problem),
+                               u0=jnp.asarray(fold_solution, dtype=float),
+                               params=problem.params, where=where)
+
+
+def _hermite(branch: Branch, value: float) -> list[np.ndarray]:
+    """Points z = (u, p, w, value) on the branch where its parameter crosses `value`:
+    cubic Hermite interpolation in arclength between two converged neighbours,
+    from their positions and unit tangents (error O(ds^4))."""
+    ok = np.asarray(branch.converged)
+    z = np.concatenate([np.asarray(branch.u), np.asarray(branch.p)[:, None]], axis=1)[ok]
+    t = np.asarray(branch.tangent)[ok]
+    out = []
+    for a in range(len(z) - 1):
+        b = a + 1
+        if (z[a, -1] - value) * (z[b, -1] - value) > 0:
+            continue
+        h = np.linalg.norm(z[b] - z[a])
+        # p(s) = c3 s^3 + c2 s^2 + c1 s + c0 on s in [0, 1]
+        pa, pb, ma, mb = z[a, -1], z[b, -1], h * t[a, -1], h * t[b, -1]
+        coeffs = [2 * pa + ma - 2 * pb + mb, -3 * pa - 2 * ma + 3 * pb - mb, ma, pa - value]
+        roots = [r.real for r in np.roots(coeffs) if abs(r.imag) < 1e-12 and
+                 -1e-12 <= r.real <= 1 + 1e-12]
+        if not roots:
+            continue
+        s = roots[0]
+        h00, h10 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s
+        h01, h11 = -2 * s**3 + 3 * s**2, s**3 - s**2
+        out.append(h00 * z[a] + h10 * h * t[a] + h01 * z[b] + h11 * h * t[b])
+    return out
 
 
 class BoundaryCurves(eqx.Module):
@@ -60,6 +116,10 @@ class BoundaryCurves(eqx.Module):
     - `d_hopf`, `d_fold`: their derivatives in the second parameter (implicit
         differentiation), shape (n_values,).
     - `converged`: whether the fold was found, shape (n_values,).
+    - `solutions`: the fold's extended-system solution (u, p, w) at each value,
+        shape (n_values, 2n + 1); NaN where not found.
+    - `branches`: the fold curve as continued (`Branch`es of
+        `fold_curve_problem`), one for each direction from the start.
 
     Between `hopf_vd` and `fold_vd` steady sliding and stick-slip are both stable.
     """
@@ -70,66 +130,105 @@ class BoundaryCurves(eqx.Module):
     d_hopf: Float[Array, " n_values"]
     d_fold: Float[Array, " n_values"]
     converged: Bool[Array, " n_values"]
+    solutions: Float[Array, "n_values 2n+1"]
+    branches: tuple[Branch, ...]
 
 
-def follow_fold(problem: ContinuationProblem, where: Callable, value: float,
-                solution: Float[Array, " 2n+1"], derivative: Float[Array, " 2n+1"],
-                target: float, max_halvings: int = 6):
-    """Walk the fold's extended-system solution from `where(params) = value` to
-    `target` with the tangent predictor solution + step * derivative; a failed step
-    is halved, at most `max_halvings` times. Returns (solution, derivative, ok) at
-    `target`, or at the last value reached with ok False."""
-    step, halvings = target - value, 0
-    while abs(target - value) > 1e-14:
-        step = np.sign(step) * min(abs(step), abs(target - value))
-        new, new_derivative, ok = fold_and_derivative(
-            problem, where, value + step, solution + step * derivative)
-        if bool(ok):
-            value, solution, derivative = value + step, new, new_derivative
-        else:
-            step, halvings = step / 2, halvings + 1
-            if halvings > max_halvings:
-                return solution, derivative, False
-    return solution, derivative, True
+#: Steps of the fold curve in (u, p, w, second parameter).
+FOLD_CURVE_OPTIONS = ContinuationOptions(ds=0.02, ds_min=1e-6, ds_max=0.1, max_points=200)
 
 
-def _walk(problem, where, start, base, targets, max_halvings, bar):
-    """`follow_fold` from `base` through `targets` (sorted away from base); stops at
-    the first target it cannot reach."""
-    out = {}
-    value = base
-    solution, derivative, _ = fold_and_derivative(problem, where, base, start)
-    for target in targets:
-        solution, derivative, ok = follow_fold(problem, where, value, solution, derivative,
-                                               target, max_halvings)
-        if not ok:
-            break
-        value = target
-        out[target] = (solution, derivative)
-        bar.update()
-    return out
+def fold_curve(problem: ContinuationProblem, fold_solution: Float[Array, " 2n+1"],
+               where: Callable | str, values, *,
+               options: ContinuationOptions = FOLD_CURVE_OPTIONS,
+               algorithm: PseudoArclength = PseudoArclength(),
+               progress: bool = False):
+    """The fold of `problem` at each of `values` of a second parameter.
+
+    The fold's extended system is continued in (u, p, w, value) by the one
+    pseudo-arclength loop (`continuation` of `fold_curve_problem`), both ways from
+    the start until the parameter leaves the range of `values`; its step control
+    keeps every corrector inside Newton's basin, which at small eps is narrow.
+    At each requested value the branch is interpolated (cubic Hermite, from the
+    two neighbouring points and tangents) and Newton's method on the extended
+    system at that value polishes it (`fold_and_derivative`).
+
+    **Arguments:**
+
+    - `problem`: the one-parameter problem, at the parameters of `fold_solution`.
+    - `fold_solution`: a solution (u, p, w) of its extended system, or a point
+        within Newton's basin of one (it is polished first).
+    - `where`: the second parameter, a name or a lens.
+    - `values`: the values wanted.
+    - `options`: steps of the continuation; `p_min`, `p_max` and `direction` are
+        set here.
+    - `algorithm`: `PseudoArclength`.
+    - `progress`: show tqdm bars.
+
+    **Returns:**
+
+    (solutions of shape (n_values, 2n + 1), derivatives in the value of the same
+    shape, converged of shape (n_values,), the two `Branch`es). NaN where a value
+    was not reached.
+
+    **Raises:**
+
+    `ValueError` if `values` is empty or Newton's method does not converge from
+    `fold_solution`.
+    """
+    values = np.asarray(values, dtype=float)
+    if values.size == 0:
+        raise ValueError("values must not be empty")
+    fold_solution, ok = solve_fold(problem, jnp.asarray(fold_solution, dtype=float))
+    if not bool(ok):
+        raise ValueError("fold_solution is not near a fold of problem: Newton's method on "
+                         "the extended system did not converge from it")
+    curve = fold_curve_problem(problem, fold_solution, where)
+    base = float(parameter_value(problem.params, where))
+    span = max(values.max() - values.min(), 1e-3 * max(abs(base), 1.0))
+    lo, hi = min(values.min(), base) - 0.05 * span, max(values.max(), base) + 0.05 * span
+    branches = []
+    for direction, needed in ((1, values.max() > base), (-1, values.min() < base)):
+        if needed:
+            branches.append(continuation(curve, algorithm, eqx.tree_at(
+                lambda o: (o.p_min, o.p_max, o.direction), options, (lo, hi, direction)),
+                progress=progress))
+    n = fold_solution.size
+    solutions = np.full((values.size, n), np.nan)
+    derivatives = np.full((values.size, n), np.nan)
+    converged = np.zeros(values.size, dtype=bool)
+    for i, value in enumerate(values):
+        starts = [np.asarray(fold_solution)] if value == base else []
+        for branch in branches:
+            starts += [z[:-1] for z in _hermite(branch, value)]
+        for start in starts[:1]:
+            solution, derivative, ok = fold_and_derivative(problem, where, value,
+                                                           jnp.asarray(start))
+            if bool(ok):
+                solutions[i], derivatives[i], converged[i] = solution, derivative, True
+    return solutions, derivatives, converged, branches
 
 
 def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 2n+1"],
-                    where: Callable, values, *, max_halvings: int = 6,
+                    where: Callable | str, values, *,
+                    options: ContinuationOptions = FOLD_CURVE_OPTIONS,
                     progress: bool = False) -> BoundaryCurves:
     """Continue the Hopf point of steady sliding and the fold of limit cycles in a
-    second parameter: the fold by its extended system (`solve_fold`), step by step
-    with the tangent predictor that implicit differentiation gives
-    (d(u, p, w)/d value from optimistix's `ImplicitAdjoint`), the Hopf point by
-    Newton's method at each value (`hopf_vd`).
+    second parameter: the fold by `fold_curve` (pseudo-arclength continuation of
+    its extended system, polished at each value), the Hopf point by Newton's
+    method at each value (`hopf_vd`); both derivatives by implicit
+    differentiation.
 
     **Arguments:**
 
     - `problem`: the limit cycles' `ContinuationProblem` (`limit_cycle_problem`),
         at the parameters of `fold_solution`.
     - `fold_solution`: a solution (u, p, w) of the extended system there (from
-        `solve_fold`).
-    - `where`: lens of the second parameter, e.g. `lambda p: p.xi`.
-    - `values`: the values to visit; the walk starts at the current value and goes
-        both ways.
-    - `max_halvings`: how often a failed step is halved before the walk stops.
-    - `progress`: show a tqdm bar.
+        `solve_fold` or `fold_point`).
+    - `where`: the second parameter, a name (`"xi"`, `"mu_st"`) or a lens.
+    - `values`: the values to visit, on either side of the current one.
+    - `options`: steps of the fold curve's continuation.
+    - `progress`: show tqdm bars.
 
     **Returns:**
 
@@ -137,33 +236,15 @@ def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 
 
     **Raises:**
 
-    `ValueError` if `values` is empty.
+    `ValueError` if `values` is empty or `fold_solution` is not a solution.
     """
     values = np.sort(np.asarray(values, dtype=float))
-    if values.size == 0:
-        raise ValueError("values must not be empty")
-    base = float(where(problem.params))
+    solutions, derivatives, converged, branches = fold_curve(
+        problem, fold_solution, where, values, options=options, progress=progress)
+    hopf = [hopf_vd_and_derivative(problem.params, where, v) for v in values]
     n = problem.u0.size
-    with tqdm(total=values.size, desc="fold vs parameter", disable=not progress,
-              leave=False) as bar:
-        found = _walk(problem, where, fold_solution, base, list(values[values >= base]),
-                      max_halvings, bar)
-        found |= _walk(problem, where, fold_solution, base,
-                       list(values[values < base][::-1]), max_halvings, bar)
-    hopf, d_hopf = [], []
-    for v in values:
-        h, dh = jax.jvp(lambda x: hopf_vd(where_set(problem.params, where, x)),
-                        (jnp.asarray(v),), (jnp.asarray(1.0),))
-        hopf.append(h)
-        d_hopf.append(dh)
-    nan = jnp.full(2 * n + 1, jnp.nan)
-    fold = [found.get(v, (nan, nan)) for v in values]
     return BoundaryCurves(
-        values=jnp.asarray(values), hopf_vd=jnp.stack(hopf), d_hopf=jnp.stack(d_hopf),
-        fold_vd=jnp.stack([s[n] for s, _ in fold]), d_fold=jnp.stack([d[n] for _, d in fold]),
-        converged=jnp.asarray([v in found for v in values]))
-
-
-def where_set(params: ChainParams, where: Callable, value) -> ChainParams:
-    """`params` with `where(params)` set to `value`."""
-    return eqx.tree_at(where, params, value)
+        values=jnp.asarray(values), hopf_vd=jnp.stack([h for h, _ in hopf]),
+        d_hopf=jnp.stack([d for _, d in hopf]), fold_vd=jnp.asarray(solutions[:, n]),
+        d_fold=jnp.asarray(derivatives[:, n]), converged=jnp.asarray(converged),
+        solutions=jnp.asarray(solutions), branches=tuple(branches))

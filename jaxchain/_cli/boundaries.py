@@ -9,8 +9,8 @@ from .._boundaries import boundaries, fig3a_simulations
 from .._params import ChainParams
 from .._plots.bifurcation import plot_bifurcation_diagram, plot_bistable_region
 from .common import (UsageError, add_output_options, comma_list, json_ready,
-                     positive_float, positive_int, show_progress, usage_message,
-                     writable_folder)
+                     param_default, positive_float, positive_int, save_figure,
+                     show_progress, writable_folder)
 
 HELP = "Hopf and fold belt speeds of the bistable range (gradients, continuation)"
 DESCRIPTION = """\
@@ -43,10 +43,10 @@ def add_parser(sub):
     g = p.add_argument_group("model (eq. (5) of the paper; other parameters eq. (7))")
     g.add_argument("--n-osc", type=positive_int, default=20, metavar="N",
                    help="number of oscillators on the ring (default 20)")
-    g.add_argument("--eps", type=positive_float, default=ChainParams().eps,
-                   help=f"tanh smoothing velocity (default {ChainParams().eps:g})")
-    g.add_argument("--xi", type=positive_float, default=ChainParams().xi,
-                   help=f"damping ratio (default {ChainParams().xi:g})")
+    g.add_argument("--eps", type=positive_float, default=param_default("eps"),
+                   help=f"tanh smoothing velocity (default {param_default('eps'):g})")
+    g.add_argument("--xi", type=positive_float, default=param_default("xi"),
+                   help=f"damping ratio (default {param_default('xi'):g})")
     g = p.add_argument_group("analysis")
     g.add_argument("--target", type=positive_float, default=0.5,
                    help="design: the bistable window width to stay below (default 0.5)")
@@ -64,11 +64,8 @@ def add_parser(sub):
     return p
 
 
-def run(args) -> int:
-    try:
-        params = ChainParams(n_osc=args.n_osc, eps=args.eps, xi=args.xi)
-    except ValueError as err:
-        raise UsageError(usage_message(err)) from None
+def run(args) -> None:
+    params = ChainParams(n_osc=args.n_osc, eps=args.eps, xi=args.xi)
     for name in ("xi_values", "ratio_values"):
         values = getattr(args, name)
         if not values or min(values) <= 0:
@@ -87,10 +84,10 @@ def run(args) -> int:
                                    float(found.fold.record.energy), sims,
                                    title=f"single oscillator (Fig. 3(a)), eps = {args.eps:g}")
     single_png = args.out / "bifurcation_single.png"
-    fig.savefig(single_png, dpi=150)
+    save_figure(fig, single_png)
     region_png = args.out / "bistable_region.png"
-    plot_bistable_region(found.curves_xi, found.curves_ratio, float(params.mu_d),
-                         found.design).savefig(region_png, dpi=150)
+    save_figure(plot_bistable_region(found.curves_xi, found.curves_ratio,
+                                     float(params.mu_d), found.design), region_png)
     s |= {"wall_time_s": time.perf_counter() - start,
           "figures": [str(single_png), str(region_png)]}
     if sims is not None:
@@ -99,7 +96,7 @@ def run(args) -> int:
     (args.out / "boundaries.json").write_text(text)
     if args.json:
         print(text)
-        return 0
+        return
     d = s["design"]
     print(f"single oscillator, eps = {s['eps']:g}:")
     print(f"  Hopf   v_d = {s['hopf_vd']:.10f}  (analytic eps -> 0: "
@@ -132,4 +129,3 @@ def run(args) -> int:
                       f"{'stable' if k['stable'] else 'unstable'} (|multipliers| "
                       f"{k['multipliers'][0]:.4f}, {k['multipliers'][1]:.4f})")
     print(f"figures: {single_png}, {region_png}; {s['wall_time_s']:.0f} s")
-    return 0

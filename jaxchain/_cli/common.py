@@ -1,11 +1,15 @@
 """What every `jaxchain` command shares: option names, the parser that fails in one
-line, and the solver table."""
+line, the errors that `main` turns into one line and an exit status, and the solver
+table."""
 
 import argparse
 import math
 import sys
 import tempfile
 from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
 
 from .._params import ChainParams
 from .._solvers import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
@@ -14,6 +18,7 @@ from .._solvers import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the 
 #: Field names in error messages, as the options a user typed.
 OPTION_NAMES = {
     "ChainParams.v_d": "--vd", "ChainParams.n_osc": "--n-osc", "ChainParams.eps": "--eps",
+    "ChainParams.xi": "--xi",
     "SimulationOptions.t_end": "--t-end", "SimulationOptions.transient": "--transient",
     "SimulationOptions.rtol": "--rtol", "SimulationOptions.atol": "--atol",
     "SimulationOptions.max_steps": "--max-steps",
@@ -22,8 +27,19 @@ OPTION_NAMES = {
 }
 
 
+def param_default(name: str) -> float:
+    """The default of a `ChainParams` field as a Python float (the fields are
+    NumPy arrays), for an option's default and help."""
+    return float(getattr(ChainParams(), name))
+
+
 class UsageError(Exception):
     """A bad option or value: reported in one line, exit status 2."""
+
+
+class RunsFailed(Exception):
+    """Some runs failed; the others' results are written and the failed ones marked.
+    Raised by a command after its output: reported in one line, exit status 1."""
 
 
 class Parser(argparse.ArgumentParser):
@@ -71,7 +87,7 @@ def add_model_options(p: argparse.ArgumentParser, *, vd: float, n_osc: int) -> N
                    help=f"belt speed v_d, dimensionless (default {vd})")
     g.add_argument("--n-osc", type=positive_int, default=n_osc, metavar="N",
                    help=f"number of oscillators on the ring (default {n_osc})")
-    eps = ChainParams().eps
+    eps = param_default("eps")
     g.add_argument("--eps", type=positive_float, default=eps,
                    help=f"tanh smoothing velocity of sign(v_rel) (default {eps:g})")
 
@@ -106,9 +122,22 @@ def add_output_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
 
-def usage_message(err: ValueError) -> str:
-    """A ValueError from the library, with field names replaced by option names."""
+def one_line(err: BaseException) -> str:
+    """The message of `err` in one line: the first non-empty line, and for an error
+    raised inside compiled code (`eqx.error_if`) the message itself rather than the
+    stack that equinox puts before it."""
     text = str(err)
+    marker = "EquinoxRuntimeError: "
+    if marker in text:
+        text = text.split(marker, 1)[1]
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    return lines[0] if lines else type(err).__name__
+
+
+def usage_message(err: Exception) -> str:
+    """A ValueError from the library in one line, with field names replaced by
+    option names."""
+    text = one_line(err)
     for field, option in OPTION_NAMES.items():
         text = text.replace(field, option)
     return text
@@ -128,12 +157,20 @@ def writable_folder(path: Path) -> None:
         raise UsageError(f"--out {path}: cannot write there ({err.strerror})") from None
 
 
+def save_figure(fig, path: Path, dpi: int = 150) -> None:
+    """Write a pyplot figure to `path` and close it (a command makes several)."""
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
 def json_ready(obj):
     """Replace non-finite floats (failed runs) by None, so that the output is JSON."""
     if isinstance(obj, dict):
         return {k: json_ready(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [json_ready(v) for v in obj]
+    if isinstance(obj, (np.ndarray, np.generic)):
+        return json_ready(obj.tolist())
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj

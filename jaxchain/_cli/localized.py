@@ -14,8 +14,8 @@ from .._params import ChainParams
 from .._plots.localized import plot_localized_states
 from .._results import save_dataset
 from .._simulate import STATUS
-from .common import (SOLVERS, UsageError, add_model_options, add_output_options,
-                     add_run_options, json_ready, show_progress, usage_message,
+from .common import (SOLVERS, RunsFailed, add_model_options, add_output_options,
+                     add_run_options, json_ready, save_figure, show_progress,
                      writable_folder)
 
 HELP = "localized states at one belt speed, N initial conditions (Fig. 4)"
@@ -45,14 +45,10 @@ def add_parser(sub):
     return p
 
 
-def run(args) -> int:
-    try:
-        params = ChainParams(n_osc=args.n_osc, v_d=args.vd, eps=args.eps)
-        options = SimulationOptions(t_end=args.t_end, transient=args.transient,
-                                    rtol=args.rtol, atol=args.atol,
-                                    max_steps=args.max_steps)
-    except ValueError as err:
-        raise UsageError(usage_message(err)) from None
+def run(args) -> None:
+    params = ChainParams(n_osc=args.n_osc, v_d=args.vd, eps=args.eps)
+    options = SimulationOptions(t_end=args.t_end, transient=args.transient,
+                                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     writable_folder(args.out)
     solver = SOLVERS[args.solver]()
     ics = localized_family(args.n_osc, args.ics)
@@ -67,7 +63,7 @@ def run(args) -> int:
     stem = f"localized_vd{args.vd:g}"
     nc = save_dataset(ds, args.out / f"{stem}.nc")
     png = args.out / f"{stem}.png"
-    plot_localized_states(ds).savefig(png, dpi=150)
+    save_figure(plot_localized_states(ds), png)
 
     row = ds.isel(v_d=0)
     status = [STATUS[int(s)].split(":")[0] for s in row["status"].values]
@@ -96,4 +92,7 @@ def run(args) -> int:
             ratio = f"{e / nh:8.3f}" if nh > 0 else f"{'-':>8}"
             print(f"{k:9d} {int(nh):6d} {e:9.3f} {ratio}  {s}")
         print(f"wall time {wall:.1f} s (compilation included); wrote {nc} and {png}")
-    return 0 if all(s == "ok" for s in status) else 1
+    failed = [s for s in status if s != "ok"]
+    if failed:
+        raise RunsFailed(f"{len(failed)} of {len(status)} trajectories failed "
+                         f"({', '.join(sorted(set(failed)))}); their rows are marked")

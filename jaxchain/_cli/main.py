@@ -1,9 +1,13 @@
-"""Entry point of the `jaxchain` command."""
+"""Entry point of the `jaxchain` command. Every subcommand's failure ends here, as one
+line on stderr and an exit status; no command handles its own."""
 
+import os
 import sys
 
+import matplotlib
+
 from . import boundaries, crosscheck, localized, work_precision
-from .common import Parser, UsageError
+from .common import Parser, RunsFailed, UsageError, one_line, usage_message
 
 COMMANDS = (localized, crosscheck, work_precision, boundaries)
 
@@ -21,18 +25,44 @@ def build_parser() -> Parser:
     return parser
 
 
+def exit_status(err: Exception) -> tuple[int, str]:
+    """The exit status and the one-line message of a command's failure: 2 for a usage
+    error (a bad option, or a `ValueError` of the library's validation), 1 for a
+    failed run (a `RuntimeError`, failed trajectories, or anything else)."""
+    if isinstance(err, (UsageError, ValueError)):
+        return 2, usage_message(err)
+    if isinstance(err, (RunsFailed, RuntimeError)):
+        return 1, one_line(err)
+    return 1, f"{type(err).__name__}: {one_line(err)}"
+
+
 def main(argv=None) -> int:
-    """Run the command line; returns the exit status (2 for a usage error, 1 when a
-    trajectory failed, 0 otherwise)."""
+    """Run the command line. Figures are drawn with matplotlib's Agg backend unless
+    the environment variable MPLBACKEND names another.
+
+    **Returns:**
+
+    The exit status: 0 on success, 1 when a run failed, 2 for a usage error, 130
+    when interrupted. A failure is one line on stderr, never a traceback (set
+    JAXCHAIN_TRACEBACK=1 to let the exception through).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:
         parser.error("a COMMAND is required (see jaxchain --help)")
+    if not os.environ.get("MPLBACKEND"):
+        matplotlib.use("Agg")  # the commands write figures to files, with no window
     try:
-        return args.run(args)
-    except UsageError as err:
-        print(f"jaxchain {args.command}: error: {err}", file=sys.stderr)
-        return 2
+        args.run(args)
+        return 0
+    except KeyboardInterrupt:
+        status, message = 130, "interrupted"
+    except Exception as err:
+        if os.environ.get("JAXCHAIN_TRACEBACK"):
+            raise
+        status, message = exit_status(err)
+    print(f"jaxchain {args.command}: error: {message}", file=sys.stderr)
+    return status
 
 
 if __name__ == "__main__":

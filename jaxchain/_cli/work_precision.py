@@ -10,7 +10,8 @@ from .._plots.work_precision import plot_work_precision
 from .._solvers import SOLVERS
 from .._work_precision import (SCENES, WP_EPS, WP_RTOLS, WP_SOLVERS, recommend,
                                work_precision)
-from .common import UsageError, comma_list, json_ready, positive_int, writable_folder
+from .common import (RunsFailed, UsageError, comma_list, json_ready, positive_int,
+                     save_figure, writable_folder)
 
 HELP = "error against run time of every solver and eps (work-precision diagram)"
 DESCRIPTION = f"""\
@@ -53,7 +54,7 @@ def add_parser(sub):
     return p
 
 
-def run(args) -> int:
+def run(args) -> None:
     for name in args.scenes:
         if name not in SCENES:
             raise UsageError(f"--scenes: unknown scene {name!r} (choose from "
@@ -79,7 +80,7 @@ def run(args) -> int:
     figures, advice = [], {}
     for scene in args.scenes:
         png = args.out / f"work_precision_{scene}.png"
-        plot_work_precision(rows, scene).savefig(png, dpi=130)
+        save_figure(plot_work_precision(rows, scene), png, dpi=130)
         figures.append(str(png))
         for target in (1e-2, 1e-3):
             best = recommend(rows, scene, target)
@@ -105,4 +106,6 @@ def run(args) -> int:
             print(f"{scene}, amplitude error < {100 * float(target):g} %: {text}")
         print(f"{len(rows)} runs ({failed} failed, recorded); wrote {csv_path} and "
               f"{', '.join(figures)}")
-    return 0
+    if failed:
+        raise RunsFailed(f"{failed} of {len(rows)} runs failed; they are recorded with "
+                         f"their status in {csv_path}")

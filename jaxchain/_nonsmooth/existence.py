@@ -6,14 +6,16 @@ import equinox as eqx
 import jax.numpy as jnp
 import optimistix as optx
 
-from .._params import ChainParams
+from .._params import ChainParams, with_parameter
 from .switching import mode_field
 
 
-def _slip_arc_peak(v_d, params: ChainParams, rtol: float):
+def _slip_arc_peak(v_d, args):
     """max (x' - v_d) on the slip arc that leaves stick, before it would cross the
-    belt speed: positive where the arc returns to stick, zero at grazing."""
-    p = eqx.tree_at(lambda q: q.v_d, params, v_d)
+    belt speed: positive where the arc returns to stick, zero at grazing. `args` is
+    (params, rtol)."""
+    params, rtol = args
+    p = with_parameter(params, "v_d", v_d)
     exit_state = jnp.stack([jnp.atleast_1d(p.mu_st - 2 * p.xi * v_d), jnp.atleast_1d(v_d)])
     modes = -jnp.ones(1)  # f = +mu_st at the exit: the oscillator falls behind the belt
 
@@ -32,8 +34,11 @@ def _slip_arc_peak(v_d, params: ChainParams, rtol: float):
     return sol.ys[0][-1, 1, 0] - v_d
 
 
+_peak = eqx.filter_jit(_slip_arc_peak)
+
+
 def stick_slip_existence_limit(params: ChainParams = ChainParams(n_osc=1),
-                               lower: float = 1.2, upper: float = 3.0, *,
+                               lower: float | None = None, upper: float = 3.0, *,
                                tol: float = 1e-10, rtol: float = 1e-12) -> float:
     """Largest belt speed at which the single oscillator's stick-slip cycle of the
     non-smooth model (eqs. (1)-(2) and (5) with eta_c irrelevant) exists.
@@ -51,7 +56,10 @@ def stick_slip_existence_limit(params: ChainParams = ChainParams(n_osc=1),
 
     - `params`: parameters; `xi`, `mu_d`, `mu_st` and `v0` are used.
     - `lower`, `upper`: a bracket of belt speeds, the cycle existing at `lower` and
-        not at `upper`.
+        not at `upper`. By default `lower` is the Hopf point of steady sliding
+        (`hopf_vd_analytic`), where the cycle exists whenever there is a
+        velocity-weakening Hopf point; `upper` is raised by factors of 1.5 (up to
+        20 times) until the cycle no longer exists there.
     - `tol`: absolute tolerance on the limit.
     - `rtol`: integration tolerance of the slip arc.
 
@@ -63,13 +71,26 @@ def stick_slip_existence_limit(params: ChainParams = ChainParams(n_osc=1),
 
     `ValueError` if the bracket does not contain the limit.
     """
-    peak = eqx.filter_jit(_slip_arc_peak)
-    lo, hi = (float(peak(jnp.asarray(v), params, rtol)) for v in (lower, upper))
+    if lower is None:
+        from .._bifurcation.hopf import hopf_vd_analytic  # analysis layer, for a default
+
+        lower = float(hopf_vd_analytic(params))
+        if not lower > 0:
+            raise ValueError(f"no Hopf point of steady sliding to start from (v_d,H = "
+                             f"{lower:.3g}): give lower, a belt speed with a stick-slip cycle")
+    args = (params, rtol)
+    lo, hi = (float(_peak(jnp.asarray(v, dtype=float), args)) for v in (lower, upper))
+    for _ in range(20):
+        if not (lo > 0 and hi > 0):
+            break
+        upper *= 1.5
+        hi = float(_peak(jnp.asarray(upper, dtype=float), args))
     if not (lo > 0 > hi):
         raise ValueError(f"the bracket [lower, upper] = [{lower}, {upper}] must contain "
                          f"the existence limit: the cycle must exist at lower and not at "
                          f"upper (peak x' - v_d = {lo:.3g}, {hi:.3g})")
-    sol = optx.root_find(lambda v, _: _slip_arc_peak(v, params, rtol),
-                         optx.Bisection(rtol=0.0, atol=tol), jnp.asarray(0.5 * (lower + upper)),
-                         options={"lower": lower, "upper": upper})
+    sol = optx.root_find(_slip_arc_peak, optx.Bisection(rtol=0.0, atol=tol),
+                         jnp.asarray(0.5 * (lower + upper)), args,
+                         options={"lower": jnp.asarray(lower, dtype=float),
+                                  "upper": jnp.asarray(upper, dtype=float)})
     return float(sol.value)

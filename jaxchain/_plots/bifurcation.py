@@ -1,12 +1,8 @@
 """The single oscillator's bifurcation diagram (Fig. 3(a) of the paper) and the
 bistable region against a design parameter."""
 
-import matplotlib
-
-matplotlib.use("Agg")  # figures are written to files; no screen is assumed
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 
 def _segments(x, y, flags):

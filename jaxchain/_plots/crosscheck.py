@@ -1,12 +1,8 @@
 """The cross-check of smoothed against non-smooth, as a figure."""
 
-import matplotlib
-
-matplotlib.use("Agg")  # figures are written to files; no screen is assumed
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import xarray as xr
 
 
 def plot_crosscheck(ds: xr.Dataset):

@@ -1,14 +1,10 @@
 """Fig. 4 of the paper: localized states as rows of circles."""
 
-import matplotlib
-
-matplotlib.use("Agg")  # figures are written to files; no screen is assumed
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
-from matplotlib.collections import PatchCollection  # noqa: E402
-from matplotlib.patches import Circle  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import xarray as xr
+from matplotlib.collections import PatchCollection
+from matplotlib.patches import Circle
 
 
 def plot_localized_states(ds: xr.Dataset, v_d: float | None = None, ax=None):

@@ -1,11 +1,7 @@
 """Work-precision diagrams: error against wall time, log-log."""
 
-import matplotlib
-
-matplotlib.use("Agg")  # figures are written to files; no screen is assumed
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
 _MARKERS = {"scipy LSODA": "s", "scipy Radau": "D", "reference": "*"}
 
