@@ -16,11 +16,12 @@ from ._initial import FAMILIES, excited_block
 from ._nonsmooth.options import NonsmoothOptions
 from ._nonsmooth.solve import NONSMOOTH_STATUS, run_nonsmooth
 from ._options import SimulationOptions
-from ._params import ChainParams
+from ._params import ChainParams, with_parameter
 from ._lanes import on_devices, run_lanes
-from ._results import PAPER, save_dataset
+from ._results import PAPER
 from ._simulate import STATUS
 from ._solvers import DEFAULT_SOLVER, SOLVERS
+from ._store import read_dataset, settings_key, write_dataset
 
 #: The grid of the issue: belt speeds across the bistable range and a set of
 #: eq. (8) and eq. (10) initial conditions, as (family, number excited).
@@ -76,24 +77,45 @@ def _gather(a, b) -> dict:
             "num_steps": np.asarray(a.num_steps) + np.asarray(b.num_steps)}
 
 
-def _reference_case(params, v_d, y0, options, path: Path | None, device):
-    """One reference run on `device`, read from `path` if an earlier run stored it
-    there."""
-    if path is not None and path.exists():
-        with xr.open_dataset(path, engine="h5netcdf") as stored:
-            return {k: stored[k].values for k in stored.data_vars}, stored.attrs["wall_time_s"]
+#: The kind of result in the key of a stored reference run (`settings_key`).
+_REFERENCE_KIND = "crosscheck reference"
+_REFERENCE_FIELDS = ("amplitudes", "x_max", "x_min", "n_halc", "status", "stick_fraction",
+                     "num_events", "num_steps")
+
+
+def _reference_settings(params: ChainParams, y0: np.ndarray,
+                        options: NonsmoothOptions) -> dict:
+    """Everything that determines a reference run, the key of its stored result:
+    every parameter but eps (the reference has no smoothing, so one stored run
+    serves every eps), the initial state and every reference option."""
+    return {"params": {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
+                       if f.name != "eps"},
+            "y0": y0, "options": options}
+
+
+def _reference_case(params, y0, options, label: str, folder: Path | None, device):
+    """One reference run on `device`. With a `folder`, the run is stored there
+    under the key of its settings (`_reference_settings`) and read back by a later
+    call with the same settings; a stored run of other settings is never read."""
+    settings = _reference_settings(params, y0, options)
+    path = None
+    if folder is not None:
+        key = settings_key(_REFERENCE_KIND, **settings)
+        path = Path(folder) / f"reference_{label}_{key[:16]}.nc"
+        stored = read_dataset(path, _REFERENCE_KIND, **settings)
+        if stored is not None:
+            return ({k: stored[k].values for k in _REFERENCE_FIELDS},
+                    stored.attrs["wall_time_s"])
     start = time.perf_counter()
-    v_d, y0 = jax.device_put((jnp.asarray(v_d), jnp.asarray(y0)), device)
-    obs = _reference_run(eqx.tree_at(lambda q: q.v_d, params, v_d), y0, options)
-    fields = ("amplitudes", "x_max", "x_min", "n_halc", "status", "stick_fraction",
-              "num_events", "num_steps")
-    out = {k: np.asarray(getattr(obs, k)) for k in fields}
+    v_d, y0_device = jax.device_put((jnp.asarray(params.v_d), jnp.asarray(y0)), device)
+    obs = _reference_run(with_parameter(params, "v_d", v_d), y0_device, options)
+    out = {k: np.asarray(getattr(obs, k)) for k in _REFERENCE_FIELDS}
     wall = time.perf_counter() - start
     if path is not None:
         dims = {0: (), 1: ("osc",), 2: ("half", "osc")}
         ds = xr.Dataset({k: (dims[v.ndim], v) for k, v in out.items()},
                         attrs={"wall_time_s": wall})
-        save_dataset(ds, path)
+        write_dataset(ds, path, _REFERENCE_KIND, **settings)
     return out, wall
 
 
@@ -127,7 +149,11 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
         `options` with `NonsmoothOptions`'s tolerances.
     - `tolerances`: how periodic is told from irregular (`ClassTolerances`).
     - `checkpoint`: a folder where each reference run is stored as it finishes and
-        read back on a later call (resuming an interrupted cross-check).
+        read back on a later call (resuming an interrupted cross-check). Each run
+        is stored under the key of everything that determines it (every parameter
+        but eps, which the reference does not use, the initial state and every
+        field of `reference_options`; see `jaxchain._store`), and only a run of
+        equal settings is read back: the others are computed anew.
     - `progress`: show a tqdm bar over the reference runs.
 
     The smoothed runs are lanes of `run_lanes`; the reference runs are spread over
@@ -157,7 +183,7 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
     for vd, fam, k in cases:
         if fam not in FAMILIES:
             raise ValueError(f"ics family must be one of {sorted(FAMILIES)}, got {fam!r}")
-        p = dataclasses.replace(params, v_d=vd)  # validates v_d
+        p = with_parameter(params, "v_d", vd)
         y0.append(np.asarray(FAMILIES[fam](excited_block(params.n_osc, k))(p)))
     vds = np.array([c[0] for c in cases])
     y0 = np.stack(y0)
@@ -168,9 +194,8 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
 
     def reference(i, device):
         vd, fam, k = cases[i]
-        path = None if checkpoint is None else (
-            Path(checkpoint) / f"reference_vd{vd:g}_{fam}_k{k}_{reference_options.t_end:g}.nc")
-        return _reference_case(params, vd, y0[i], reference_options, path, device)
+        return _reference_case(with_parameter(params, "v_d", vd), y0[i], reference_options,
+                               f"vd{vd:g}_{fam}_k{k}", checkpoint, device)
 
     results = on_devices(reference, len(cases), "non-smooth reference", progress)
     refs, walls = [r[0] for r in results], [r[1] for r in results]

@@ -1,8 +1,9 @@
 """Error against run time (a work-precision study) of every solver, tolerance and
 smoothing eps, measured against the event-driven non-smooth reference."""
 
-import csv
 import dataclasses
+import functools
+import math
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -20,6 +21,7 @@ from ._options import SimulationOptions
 from ._params import ChainParams
 from ._simulate import STATUS, run
 from ._solvers import SOLVERS
+from ._store import CsvStore, settings_key
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,11 +61,16 @@ SCIPY_METHODS = ("LSODA", "Radau")
 SCIPY_RTOLS = (1e-4, 1e-6, 1e-8)
 SCIPY_EPS = (1e-2, 1e-3)
 REFERENCE_RTOLS = (1e-6, 1e-8, 1e-10)
+#: Tolerance of the reference that every error is measured against.
+REFERENCE_RTOL = 1e-12
+#: Spacing of the samples from which a scipy run's extrema are taken.
+SCIPY_SAMPLE_DT = 0.05
 
-#: Columns of the CSV, one row per (scene, method, eps, rtol).
+#: Columns of the CSV, one row per (scene, method, eps, rtol). `key` is the
+#: `settings_key` of everything that determines the row (`row_settings`).
 COLUMNS = ("scene", "method", "eps", "rtol", "atol", "status", "wall_s", "compile_s",
            "num_steps", "amplitude_error", "energy_error", "trajectory_error",
-           "amplitude_max")
+           "amplitude_max", "key")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -76,15 +83,30 @@ class Reference:
     y_window: np.ndarray
 
 
-def reference(scene: Scene, rtol: float = 1e-12, timed: bool = False
+def _reference_options(scene: Scene, rtol: float) -> tuple[NonsmoothOptions, ...]:
+    """The options of the reference's observables run and of its trajectory run."""
+    return (NonsmoothOptions(t_end=scene.t_end, transient=scene.transient, rtol=rtol,
+                             atol=rtol),
+            NonsmoothOptions(t_end=scene.window, transient=0.0, rtol=rtol, atol=rtol))
+
+
+def _diffrax_options(scene: Scene, rtol: float, max_steps: int
+                     ) -> tuple[SimulationOptions, ...]:
+    """The options of a smoothed observables run and of its trajectory run, atol =
+    rtol / 100. The tolerances are traced, so each solver compiles once per scene."""
+    tol = {"rtol": jnp.asarray(rtol), "atol": jnp.asarray(rtol / 100)}
+    return (SimulationOptions(t_end=scene.t_end, transient=scene.transient,
+                              max_steps=max_steps, **tol),
+            SimulationOptions(t_end=scene.window, transient=0.0, max_steps=max_steps, **tol))
+
+
+def reference(scene: Scene, rtol: float = REFERENCE_RTOL, timed: bool = False
               ) -> tuple[Reference, float]:
     """The reference of `scene` at tolerance `rtol`, and the wall time (s) of its
     observables run, compilation excluded when `timed` (the run is then repeated;
     otherwise the time includes compilation)."""
     p, y0 = scene.params(), scene.y0()
-    observe = NonsmoothOptions(t_end=scene.t_end, transient=scene.transient, rtol=rtol,
-                               atol=rtol)
-    short = NonsmoothOptions(t_end=scene.window, transient=0.0, rtol=rtol, atol=rtol)
+    observe, short = _reference_options(scene, rtol)
     obs, wall = _timed(lambda: simulate_nonsmooth(p, y0, observe))
     if timed:
         obs, wall = _timed(lambda: simulate_nonsmooth(p, y0, observe))
@@ -128,10 +150,7 @@ def diffrax_point(scene: Scene, ref: Reference, solver_name: str, eps: float, rt
     once compiled)."""
     p = scene.params(jnp.asarray(eps))
     y0 = jnp.asarray(scene.y0())
-    tol = {"rtol": jnp.asarray(rtol), "atol": jnp.asarray(rtol / 100)}
-    observe = SimulationOptions(t_end=scene.t_end, transient=scene.transient,
-                                max_steps=max_steps, **tol)
-    short = SimulationOptions(t_end=scene.window, transient=0.0, max_steps=max_steps, **tol)
+    observe, short = _diffrax_options(scene, rtol, max_steps)
     solver = SOLVERS[solver_name]()
     compile_s = 0.0
     for opt in (observe, short):
@@ -175,7 +194,7 @@ class _OutOfTime(Exception):
 def scipy_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: float,
                 budget_s: float) -> dict:
     """One smoothed run of `scene` with `scipy.integrate.solve_ivp`, the extrema
-    taken from the same 0.05-spaced samples as `simulate`. A run longer than
+    taken from samples spaced `SCIPY_SAMPLE_DT` as in `simulate`. A run longer than
     `budget_s` is stopped and recorded as such."""
     p = scene.params(eps)
     rhs = _numpy_field(p)
@@ -188,7 +207,7 @@ def scipy_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: flo
         return 1.0
 
     samples = np.linspace(scene.transient, scene.t_end,
-                          int(round((scene.t_end - scene.transient) / 0.05)) + 1)
+                          int(round((scene.t_end - scene.transient) / SCIPY_SAMPLE_DT)) + 1)
     start = time.perf_counter()
     try:
         sol = solve_ivp(rhs, (0.0, scene.t_end), y0, method=method, rtol=rtol,
@@ -208,17 +227,38 @@ def scipy_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: flo
     return row | errors(ref, amplitudes, end.y[:, -1].reshape(2, n))
 
 
-def read_rows(path: Path) -> list[dict]:
-    """The rows of an existing CSV (to resume), or none."""
-    if not path.exists():
-        return []
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
+def row_settings(scene: Scene, method: str, eps: float, rtol: float, *,
+                 max_steps: int, scipy_budget_s: float) -> dict:
+    """Everything that determines a row of the study, the settings of its `key`
+    (`settings_key`): the scene (every field), its initial state and the options
+    of the reference that errors are measured against; then, by method, the
+    parameters (every `ChainParams` field, eps included), the solver (its class and
+    every field) and its options (every `SimulationOptions` field), or scipy's
+    method, tolerances, time budget and sample spacing, or the options of the
+    reference at `rtol`.
 
+    **Arguments:**
 
-def _key(row) -> tuple:
-    return (row["scene"], row["method"], f"{float(row['eps']):.3g}",
-            f"{float(row['rtol']):.3g}")
+    - `scene`: the scene.
+    - `method`: a name in `SOLVERS`, "scipy <method>" or "reference".
+    - `eps`, `rtol`: the point of the grid.
+    - `max_steps`, `scipy_budget_s`: as for `work_precision`.
+
+    **Returns:**
+
+    A dict of the settings, as `settings_key` takes them.
+    """
+    out = {"scene": scene, "y0": scene.y0(),
+           "reference": _reference_options(scene, REFERENCE_RTOL)}
+    if method == "reference":
+        return out | {"params": scene.params(), "options": _reference_options(scene, rtol)}
+    out["params"] = scene.params(eps)
+    if method.startswith("scipy "):
+        return out | {"solve_ivp": method.removeprefix("scipy "), "rtol": rtol,
+                      "atol": rtol / 100, "budget_s": scipy_budget_s,
+                      "sample_dt": SCIPY_SAMPLE_DT}
+    return out | {"solver": SOLVERS[method](),
+                  "options": _diffrax_options(scene, rtol, max_steps)}
 
 
 def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
@@ -228,16 +268,25 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
                    scipy_budget_s: float = 60.0, progress: Callable = lambda msg: None
                    ) -> list[dict]:
     """Measure error against wall time for every (scene, solver, eps, rtol) and
-    append each result to the CSV at `path` as soon as it is known. Rows already in
-    the CSV are kept and not recomputed, so an interrupted study resumes.
+    append each result to the CSV at `path` as soon as it is known, so that an
+    interrupted study resumes.
+
+    Each row carries the key of everything that determines it (`row_settings`,
+    `settings_key`). A row in the CSV is reused only when its key equals that of
+    the row asked for; rows of other settings (another `max_steps`, another scene
+    definition, another solver configuration) stay in the file but are never
+    read back, and the row is computed anew. A CSV of an older layout, without
+    keys, is rewritten with an empty key column.
 
     A failed run is recorded with its status. Once a (solver, eps) pair reaches
     max_steps at some rtol, its tighter rtols are recorded as skipped (they only
-    take more steps), and so are its smaller eps (stiffer problems).
+    take more steps), and so are its smaller eps (stiffer problems); a stored
+    failure counts as a new one.
 
     The outside points are `scipy.integrate.solve_ivp` (LSODA, Radau) at
     `SCIPY_EPS` x `SCIPY_RTOLS`, and the reference itself at `REFERENCE_RTOLS`
-    (method "reference", eps 0), its error taken against the reference at 1e-12.
+    (method "reference", eps 0), its error taken against the reference at
+    `REFERENCE_RTOL`.
 
     **Arguments:**
 
@@ -252,7 +301,8 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
 
     **Returns:**
 
-    All rows of the CSV, old and new, as dicts of strings.
+    The rows of this call's grid, reused or new, in the order they are run, as
+    dicts of strings: what a call into an empty folder returns, wall times aside.
 
     **Raises:**
 
@@ -266,69 +316,71 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
         if name not in SOLVERS:
             raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {name!r}")
     rtols, eps = sorted(rtols, reverse=True), sorted(eps, reverse=True)
-    rows = read_rows(path)
-    done = {_key(r) for r in rows}
-    new_file = not path.exists()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS, extrasaction="ignore")
-        if new_file:
-            writer.writeheader()
-
-        def record(row):
-            full = {c: row.get(c, "") for c in COLUMNS}
-            writer.writerow(full)
-            f.flush()
-            rows.append({k: str(v) for k, v in full.items()})
-
+    rows: list[dict] = []
+    with CsvStore(path, COLUMNS) as store:
         for scene_name in scenes:
-            scene = SCENES[scene_name]
-            progress(f"{scene_name}: non-smooth reference")
-            ref, ref_wall = reference(scene)
-            base = {"scene": scene_name}
-            if reference_points:
-                for r in REFERENCE_RTOLS:
-                    row = base | {"method": "reference", "eps": 0.0, "rtol": r, "atol": r}
-                    if _key(row) in done:
-                        continue
-                    progress(f"{scene_name}: reference at rtol {r:g}")
-                    coarse, wall = reference(scene, r, timed=True)
-                    record(row | {"status": "ok", "wall_s": wall, "compile_s": 0.0}
-                           | errors(ref, coarse.amplitudes, coarse.y_window))
-            for solver in solvers:
-                failed_eps = None
-                for e in eps:
-                    failed_rtol = None
-                    for r in rtols:
-                        row = base | {"method": solver, "eps": e, "rtol": r, "atol": r / 100}
-                        if _key(row) in done:
-                            continue
-                        if failed_eps is not None:
-                            record(row | {"status": f"skipped: max_steps at eps {failed_eps:g}"})
-                            continue
-                        if failed_rtol is not None:
-                            record(row | {"status": f"skipped: max_steps at rtol "
-                                                    f"{failed_rtol:g}"})
-                            continue
-                        progress(f"{scene_name}: {solver}, eps {e:g}, rtol {r:g}")
-                        result = diffrax_point(scene, ref, solver, e, r, max_steps)
-                        record(row | result)
-                        if result["status"].startswith("max_steps"):
-                            failed_rtol = r
-                            if r == rtols[0]:
-                                failed_eps = e
-            if scipy:
-                for method in SCIPY_METHODS:
-                    for e in SCIPY_EPS:
-                        for r in SCIPY_RTOLS:
-                            row = base | {"method": f"scipy {method}", "eps": e, "rtol": r,
-                                          "atol": r / 100}
-                            if _key(row) in done:
-                                continue
-                            progress(f"{scene_name}: scipy {method}, eps {e:g}, rtol {r:g}")
-                            record(row | scipy_point(scene, ref, method, e, r,
-                                                     scipy_budget_s))
+            _scene(store, rows, SCENES[scene_name], solvers, rtols, eps, scipy=scipy,
+                   reference_points=reference_points, max_steps=max_steps,
+                   scipy_budget_s=scipy_budget_s, progress=progress)
     return rows
+
+
+def _scene(store: CsvStore, rows: list[dict], scene: Scene, solvers, rtols, eps, *,
+           scipy, reference_points, max_steps, scipy_budget_s, progress):
+    """Append the rows of one scene to `rows` (see `work_precision`). The reference
+    is computed only if some row is."""
+
+    @functools.cache
+    def ref() -> Reference:
+        progress(f"{scene.name}: non-smooth reference")
+        return reference(scene)[0]
+
+    def point(method, e, r, atol, run: Callable[[], dict], **extra) -> dict:
+        """The row of (method, e, r), stored or computed by `run`. A skipped row
+        has its reason in `extra`, and so its own key."""
+        settings = row_settings(scene, method, e, r, max_steps=max_steps,
+                                scipy_budget_s=scipy_budget_s)
+        row = {"scene": scene.name, "method": method, "eps": e, "rtol": r, "atol": atol,
+               "key": settings_key("work-precision row", **settings, **extra)}
+
+        def compute():
+            if not extra:
+                progress(f"{scene.name}: {method}, eps {e:g}, rtol {r:g}")
+            return run()
+        rows.append(store.fetch(row, compute))
+        return rows[-1]
+
+    def reference_point(r):
+        coarse, wall = reference(scene, r, timed=True)
+        return ({"status": "ok", "wall_s": wall, "compile_s": 0.0}
+                | errors(ref(), coarse.amplitudes, coarse.y_window))
+
+    if reference_points:
+        for r in REFERENCE_RTOLS:
+            point("reference", 0.0, r, r, functools.partial(reference_point, r))
+    for solver in solvers:
+        failed_eps = None
+        for e in eps:
+            failed_rtol = None
+            for r in rtols:
+                if failed_eps is not None or failed_rtol is not None:
+                    why = (f"eps {failed_eps:g}" if failed_eps is not None
+                           else f"rtol {failed_rtol:g}")
+                    status = f"skipped: max_steps at {why}"
+                    point(solver, e, r, r / 100, lambda: {"status": status}, skipped=why)
+                    continue
+                result = point(solver, e, r, r / 100,
+                               lambda: diffrax_point(scene, ref(), solver, e, r, max_steps))
+                if result["status"].startswith("max_steps"):
+                    failed_rtol = r
+                    if r == rtols[0]:
+                        failed_eps = e
+    if scipy:
+        for method in SCIPY_METHODS:
+            for e in SCIPY_EPS:
+                for r in SCIPY_RTOLS:
+                    point(f"scipy {method}", e, r, r / 100,
+                          lambda: scipy_point(scene, ref(), method, e, r, scipy_budget_s))
 
 
 def _ok(rows, scene):
@@ -349,14 +401,20 @@ def pareto_front(rows: list[dict], scene: str) -> list[dict]:
     return front
 
 
-def _converged(run: dict, rows: list[dict], target: float) -> bool:
-    """Whether tightening rtol tenfold (same scene, solver and eps) moves the
-    largest amplitude by less than target/10: the run's error is then that of eps,
-    which carries over to other scenes, and not a lucky loose tolerance (a loose
-    rtol can even land on another attractor)."""
+def _confirmed(run: dict, rows: list[dict], target: float) -> bool:
+    """Whether the run at rtol/10 (same scene, solver and eps) succeeded and moves
+    the largest amplitude by less than a tenth of the target, relative:
+    |A(rtol) - A(rtol/10)| < (target/10) |A(rtol/10)|. The run's error is then
+    that of eps, which carries over to other scenes, and not a lucky loose
+    tolerance (a loose rtol can even land on another attractor).
+
+    The rtol/10 run is matched by a relative comparison (to 1e-9) with no absolute
+    tolerance, so that a run at a tiny rtol can never stand in for its own
+    rtol/10 run."""
+    tighter = float(run["rtol"]) / 10
     for r in _ok(rows, run["scene"]):
         if (r["method"] == run["method"] and float(r["eps"]) == float(run["eps"])
-                and np.isclose(float(r["rtol"]), float(run["rtol"]) / 10)):
+                and math.isclose(float(r["rtol"]), tighter, rel_tol=1e-9, abs_tol=0.0)):
             a, b = float(run["amplitude_max"]), float(r["amplitude_max"])
             return abs(a - b) < target / 10 * abs(b)
     return False
@@ -364,7 +422,20 @@ def _converged(run: dict, rows: list[dict], target: float) -> bool:
 
 def recommend(rows: list[dict], scene: str, target: float) -> dict | None:
     """The fastest diffrax run of `scene` whose amplitude error is below `target`
-    and whose result is converged in rtol (`_converged`)."""
+    and which a run at rtol/10 confirms (`_confirmed`): tightening rtol tenfold
+    moves its largest amplitude by less than target/10, relative.
+
+    **Arguments:**
+
+    - `rows`: rows of one study (`work_precision`).
+    - `scene`: a scene name.
+    - `target`: the relative amplitude error asked for.
+
+    **Returns:**
+
+    The row, or None when no run qualifies (a run without a successful rtol/10
+    run never does).
+    """
     fits = [r for r in _ok(rows, scene) if r["method"] in SOLVERS
-            and float(r["amplitude_error"]) < target and _converged(r, rows, target)]
+            and float(r["amplitude_error"]) < target and _confirmed(r, rows, target)]
     return min(fits, key=lambda r: float(r["wall_s"])) if fits else None

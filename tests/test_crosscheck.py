@@ -3,12 +3,15 @@
 import json
 import sys
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 import xarray as xr
 
 import jaxchain as jc
 import jaxchain._crosscheck as xc
+import jaxchain._store as store
 from jaxchain._cli.main import main
 
 SMALL = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=150.0)
@@ -35,6 +38,69 @@ def test_periodic_states_agree_within_the_smoothing_error(tmp_path, monkeypatch)
     monkeypatch.setattr(xc, "_reference_run", no_reference)
     again = xc.crosscheck(p, (1.5,), ics, options=SETTLED, checkpoint=tmp_path)
     assert np.array_equal(again["amplitudes_reference"], ds["amplitudes_reference"])
+
+
+#: A tiny cross-check, one oscillator and one case (compiled as in
+#: `test_smoothed_error_shrinks_with_eps`).
+TINY = {"params": jc.ChainParams(n_osc=1), "v_d": (1.5,), "ics": (("eq8", 1),),
+        "options": SMALL}
+#: Settings that change the reference run of `TINY`, each on its own: a parameter
+#: and a reference option.
+OTHER_SETTINGS = {
+    "xi": {"params": jc.ChainParams(n_osc=1, xi=0.06)},
+    "reference rtol": {"reference_options": jc.NonsmoothOptions(
+        t_end=SMALL.t_end, transient=SMALL.transient, rtol=1e-9, atol=1e-9)},
+}
+
+
+def _without_wall_times(ds: xr.Dataset) -> xr.Dataset:
+    return ds.drop_vars("wall_time_s_reference")
+
+
+def test_stored_reference_runs_are_read_back_only_for_equal_settings(tmp_path, monkeypatch):
+    """A cross-check resumed in a folder that holds reference runs of other
+    settings gives what a fresh one gives, case by case; a run of equal settings
+    is read back, its file untouched."""
+    stored = tmp_path / "stored"
+    first = xc.crosscheck(**TINY, checkpoint=stored)
+    for name, change in OTHER_SETTINGS.items():
+        resumed = xc.crosscheck(**TINY | change, checkpoint=stored)
+        fresh = xc.crosscheck(**TINY | change, checkpoint=tmp_path / name)
+        xr.testing.assert_equal(_without_wall_times(resumed), _without_wall_times(fresh))
+        # The change matters, so reading back `first`'s run would have shown.
+        assert not np.array_equal(resumed["amplitudes_reference"],
+                                  first["amplitudes_reference"]), name
+    files = sorted(stored.iterdir())
+    assert len(files) == 1 + len(OTHER_SETTINGS)  # one per setting, none overwritten
+    written = {f: f.stat().st_mtime_ns for f in files}
+
+    def no_reference(*args, **kwargs):
+        raise AssertionError("the stored reference run should have been read")
+    monkeypatch.setattr(xc, "_reference_run", no_reference)
+    again = xc.crosscheck(**TINY, checkpoint=stored)
+    xr.testing.assert_equal(again, first)  # the stored wall time included
+    assert {f: f.stat().st_mtime_ns for f in sorted(stored.iterdir())} == written
+
+
+def test_a_stored_result_is_read_back_only_under_its_own_key(tmp_path):
+    """Keys depend on values only (a float and a 0-d array of it agree) and change
+    with any field; a file stored under another key, or unreadable, is not read."""
+    p = jc.ChainParams(n_osc=2)
+    key = store.settings_key("test", params=p, options=SMALL)
+    assert key == store.settings_key("test", params=jc.ChainParams(n_osc=2, xi=jnp.asarray(0.05)),
+                                     options=SMALL)
+    for other in ({"params": jc.ChainParams(n_osc=3)}, {"params": jc.ChainParams(n_osc=2, v0=0.6)},
+                  {"options": jc.SimulationOptions(t_end=600.0, transient=300.0)}):
+        assert store.settings_key("test", **{"params": p, "options": SMALL} | other) != key
+    with pytest.raises(TypeError, match="traced"):
+        jax.jit(lambda xi: store.settings_key("test", xi=xi))(0.1)
+    path = tmp_path / "run.nc"
+    store.write_dataset(xr.Dataset({"a": ("x", [1.0, 2.0])}), path, "test", params=p)
+    assert store.read_dataset(path, "test", params=p)["a"].values.tolist() == [1.0, 2.0]
+    assert store.read_dataset(path, "test", params=jc.ChainParams(n_osc=2, xi=0.1)) is None
+    assert store.read_dataset(path, "other kind", params=p) is None
+    path.write_bytes(b"not netCDF")
+    assert store.read_dataset(path, "test", params=p) is None
 
 
 def test_smoothed_error_shrinks_with_eps():
