@@ -64,6 +64,8 @@ from ._simulate import Observables as Observables  # noqa: E402
 from ._simulate import simulate as simulate  # noqa: E402
 from ._solvers import SOLVERS as SOLVERS  # noqa: E402
 from ._solvers import DEFAULT_SOLVER as DEFAULT_SOLVER  # noqa: E402
+from ._stick import STICK_BAND as STICK_BAND  # noqa: E402
+from ._stick import sticks as sticks  # noqa: E402
 from ._crosscheck import crosscheck as crosscheck  # noqa: E402
 from ._bifurcation.hopf import HopfPoint as HopfPoint  # noqa: E402
 from ._bifurcation.hopf import growth_rates as growth_rates  # noqa: E402

@@ -28,15 +28,14 @@ class SimulationOptions(eqx.Module):
         samples of one chunk are reduced before the next starts, so memory is fixed
         by `chunk_length / sample_dt`, never by `t_end`.
     - `max_steps`: step budget of one chunk.
-    - `halc_tol`: an oscillator counts as on the HALC (stick-slip) when its largest
-        velocity after the transient reaches the belt speed to within this relative
-        tolerance, max x' >= (1 - halc_tol) v_d, i.e. when it sticks.
+
+    Which oscillators are on the HALC is not an option: it is the one definition of
+    `sticks`, shared with shooting and the non-smooth reference.
 
     **Raises:**
 
     `ValueError` naming the field for t_end <= 0, transient outside [0, t_end),
-    non-positive or non-finite tolerances, sample_dt, chunk_length or max_steps, or
-    halc_tol outside (0, 1).
+    or non-positive or non-finite tolerances, sample_dt, chunk_length or max_steps.
     """
 
     t_end: float = eqx.field(static=True, default=15000.0)
@@ -46,7 +45,6 @@ class SimulationOptions(eqx.Module):
     sample_dt: float = eqx.field(static=True, default=0.05)
     chunk_length: float = eqx.field(static=True, default=250.0)
     max_steps: int = eqx.field(static=True, default=200_000)
-    halc_tol: float = eqx.field(static=True, default=0.05)
 
     def __check_init__(self):
         for name in ("t_end", "rtol", "atol", "sample_dt", "chunk_length", "max_steps"):
@@ -59,9 +57,6 @@ class SimulationOptions(eqx.Module):
         if not (math.isfinite(self.transient) and 0 <= self.transient < self.t_end):
             raise ValueError(f"SimulationOptions.transient must lie in [0, t_end = "
                              f"{self.t_end}), got {self.transient!r}")
-        if not 0 < self.halc_tol < 1:
-            raise ValueError(f"SimulationOptions.halc_tol must lie in (0, 1), "
-                             f"got {self.halc_tol!r}")
 
     def chunks(self, t0: float, t1: float) -> tuple[int, float]:
         """Number and length of the equal chunks that cover [t0, t1]."""

@@ -13,6 +13,7 @@ from ._initial import AbstractInitialCondition, OutOfPhaseExcitation
 from ._options import SimulationOptions
 from ._params import ChainParams
 from ._simulate import STATUS, Observables
+from ._stick import STICK_BAND
 
 PAPER = ("Multiple spatially localized dynamical states in friction-excited "
          "oscillator chains")
@@ -38,9 +39,9 @@ def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
     **Returns:**
 
     A Dataset with dims (v_d, ic, osc) and `component` (x, v); `osc` counts 1..N
-    as in the paper. Data variables: amplitudes, on_halc, x_max, x_min, v_max
-    (v_d, ic, osc); y_initial, y_final (v_d, ic, component, osc); energy, n_halc,
-    num_steps, status (v_d, ic). When the initial conditions excite oscillators
+    as in the paper. Data variables: amplitudes, on_halc, min_slip_speed, x_max,
+    x_min, v_max (v_d, ic, osc); y_initial, y_final (v_d, ic, component, osc);
+    energy, n_halc, num_steps, status (v_d, ic). When the initial conditions excite oscillators
     (`OutOfPhaseExcitation`), `n_excited` is a coordinate along `ic`. Attributes:
     every field of `params` (but v_d), of `options`, the solver, the type of
     initial condition, the meaning of the status codes, the jaxchain version and
@@ -50,7 +51,8 @@ def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
     per_run = ("v_d", "ic")
     states = ("v_d", "ic", "component", "osc")
     data = {name: (per_osc, np.asarray(getattr(obs, name)))
-            for name in ("amplitudes", "on_halc", "x_max", "x_min", "v_max")}
+            for name in ("amplitudes", "on_halc", "min_slip_speed", "x_max", "x_min",
+                         "v_max")}
     data |= {name: (per_run, np.asarray(getattr(obs, name)))
              for name in ("energy", "n_halc", "num_steps", "status")}
     data |= {name: (states, np.asarray(getattr(obs, name)))
@@ -65,7 +67,9 @@ def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
     ds = xr.Dataset(data, coords=coords)
     ds["amplitudes"].attrs["long_name"] = "half of peak-to-peak of x_n after the transient"
     ds["energy"].attrs["long_name"] = "E = 1/2 sum A_n^2, eq. (9)"
-    ds["on_halc"].attrs["long_name"] = "oscillator on the high-amplitude limit cycle"
+    ds["on_halc"].attrs["long_name"] = ("oscillator on the high-amplitude limit cycle: "
+                                        f"it sticks, min_slip_speed <= {STICK_BAND:g} eps")
+    ds["min_slip_speed"].attrs["long_name"] = "smallest |x_n' - v_d| after the transient"
     ds["status"].attrs["flag_meanings"] = " | ".join(
         f"{i}: {s}" for i, s in enumerate(STATUS))
     attrs = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)

@@ -14,6 +14,7 @@ from ._options import SimulationOptions
 from ._params import ChainParams
 from ._progress import progress_bar, tick
 from ._solvers import DEFAULT_SOLVER, SOLVERS
+from ._stick import min_slip_speed, sticks
 
 #: Status codes of a trajectory, with what to do about each.
 STATUS = (
@@ -33,9 +34,10 @@ class Observables(eqx.Module):
 
     - `amplitudes`: half of peak-to-peak of each x_n, shape (n_osc,).
     - `energy`: E = 1/2 sum_n A_n^2, eq. (9) of the paper, shape ().
-    - `on_halc`: whether each oscillator is on the high-amplitude limit cycle (it
-        sticks: its largest velocity reaches the belt speed), shape (n_osc,).
+    - `on_halc`: whether each oscillator is on the high-amplitude limit cycle: it
+        sticks, `min_slip_speed` <= 3 eps (`sticks`), shape (n_osc,).
     - `n_halc`: number of oscillators on the HALC, shape ().
+    - `min_slip_speed`: smallest |x_n' - v_d| over the samples, shape (n_osc,).
     - `x_max`, `x_min`, `v_max`: extrema of x_n and x_n', shape (n_osc,).
     - `y_initial`, `y_final`: state at t = 0 and at t_end (where the run stopped, if
         it failed), shape (2, n_osc).
@@ -52,6 +54,7 @@ class Observables(eqx.Module):
     energy: Float[Array, "*batch"]
     on_halc: Bool[Array, "*batch n_osc"]
     n_halc: Int[Array, "*batch"]
+    min_slip_speed: Float[Array, "*batch n_osc"]
     x_max: Float[Array, "*batch n_osc"]
     x_min: Float[Array, "*batch n_osc"]
     v_max: Float[Array, "*batch n_osc"]
@@ -83,7 +86,7 @@ def terms(solver: diffrax.AbstractSolver):
 
 def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
     """Integrate one chunk [t0, t1]; reduce its `n_samples` dense samples (if any)
-    into the running extrema of `carry`."""
+    into the running extrema (x_max, x_min, v_max, min_slip_speed) of `carry`."""
     y, solver_state, controller_state, made_jump, extrema, steps, status = carry
     # Once a chunk has failed the rest of the run is skipped (a zero-length solve),
     # so a failed lane does not hold up the others under vmap.
@@ -102,9 +105,10 @@ def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
     )
     if n_samples:
         x, v = sol.ys[1][:, 0], sol.ys[1][:, 1]
-        x_max, x_min, v_max = extrema
+        x_max, x_min, v_max, slip = extrema
         extrema = (jnp.maximum(x_max, x.max(0)), jnp.minimum(x_min, x.min(0)),
-                   jnp.maximum(v_max, v.max(0)))
+                   jnp.maximum(v_max, v.max(0)),
+                   jnp.minimum(slip, min_slip_speed(v, params.v_d)))
     y_end = sol.ys[0][-1]
     code = jnp.where(jnp.all(jnp.isfinite(y_end)), _status_code(sol.result), 3)
     status = jnp.where(status == 0, code, status)
@@ -132,7 +136,7 @@ def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
     n = params.n_osc
     big = jnp.full((n,), jnp.inf)
     status = jnp.where(jnp.all(jnp.isfinite(y0)), 0, 3)
-    carry = (y0, None, None, None, (-big, big, -big), jnp.array(0), status)
+    carry = (y0, None, None, None, (-big, big, -big, big), jnp.array(0), status)
     for start, length, count, samples in _spans(options):
         # The first chunk runs outside the scan: it creates the solver and controller
         # states that the scan then carries from chunk to chunk.
@@ -151,12 +155,13 @@ def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
 
     y_final, _, _, _, extrema, steps, status = carry
     ok = status == 0
-    x_max, x_min, v_max = (jnp.where(ok, e, jnp.nan) for e in extrema)  # no partial answers
+    x_max, x_min, v_max, slip = (jnp.where(ok, e, jnp.nan) for e in extrema)  # no partial answers
     amplitudes = 0.5 * (x_max - x_min)
-    on_halc = v_max >= (1 - options.halc_tol) * params.v_d  # False where NaN
+    on_halc = sticks(slip, params.eps)  # False where NaN
     return Observables(
         amplitudes=amplitudes, energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc,
-        n_halc=jnp.where(ok, jnp.sum(on_halc), -1), x_max=x_max, x_min=x_min, v_max=v_max,
+        n_halc=jnp.where(ok, jnp.sum(on_halc), -1), min_slip_speed=slip, x_max=x_max,
+        x_min=x_min, v_max=v_max,
         y_initial=y0, y_final=y_final, num_steps=steps, status=status,
     )
 
@@ -181,6 +186,8 @@ def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
     more steps than one solve). Dense-output
     samples of each chunk after `options.transient` are reduced to running extrema
     at once: memory does not grow with `options.t_end`, and no trajectory is stored.
+    An oscillator is on the HALC when it sticks (`sticks`): its smallest sampled
+    slip speed |x_n' - v_d| lies within 3 eps of zero.
 
     **Arguments:**
 

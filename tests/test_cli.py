@@ -214,6 +214,12 @@ def test_boundaries_json_and_figures(tmp_path, capsys):
     assert abs(out["hopf_vd"] - 0.5 * np.log(10)) < 1e-6
     assert abs(out["fold_vd"] - jc.stick_slip_existence_limit()) < 0.01
     assert out["subcritical"] is True and out["eps"] == jc.ChainParams().eps
+    # every point of both curves has a fold, beside the non-smooth limit there
+    for curve in (out["xi_curve"], out["ratio_curve"]):
+        fold, limit = np.array(curve["fold_vd"]), np.array(curve["existence_limit_nonsmooth"])
+        assert np.all(np.abs(fold - limit) < 0.01)
+    assert abs(out["xi_curve"]["existence_limit_nonsmooth"][1]
+               - jc.stick_slip_existence_limit(jc.ChainParams(n_osc=1, xi=0.06))) < 1e-9
     # the design's answer, checked by simulation on both sides of it
     design = out["design"]
     assert abs(design["window"] - design["target_window"]) < 1e-6

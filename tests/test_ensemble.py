@@ -21,8 +21,8 @@ def test_ensemble_equals_runs_done_one_at_a_time():
             single = jc.simulate(jc.ChainParams(n_osc=4, v_d=vd),
                                  jc.OutOfPhaseExcitation.eq8(mask), options=SHORT)
             lane = ds.isel(v_d=i, ic=j)
-            for name in ("amplitudes", "energy", "n_halc", "v_max", "y_initial",
-                         "y_final", "num_steps", "status"):
+            for name in ("amplitudes", "energy", "n_halc", "min_slip_speed", "v_max",
+                         "y_initial", "y_final", "num_steps", "status"):
                 assert np.allclose(lane[name], getattr(single, name), rtol=1e-9,
                                    atol=1e-12), name
 

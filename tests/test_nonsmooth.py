@@ -90,8 +90,12 @@ def test_existence_limit_brackets_the_scipy_slip_arc():
 
 
 def test_existence_limit_rejects_a_bad_bracket():
+    # no stick-slip cycle at the lower end (above the limit 1.8366)
     with pytest.raises(ValueError, match="bracket"):
-        jc.stick_slip_existence_limit(ONE, lower=1.2, upper=1.5)
+        jc.stick_slip_existence_limit(ONE, lower=1.9, upper=2.5)
+    # too low an upper end is raised until the cycle is lost there
+    assert abs(jc.stick_slip_existence_limit(ONE, lower=1.2, upper=1.5, tol=1e-8)
+               - jc.stick_slip_existence_limit(ONE, tol=1e-8)) < 1e-7
 
 
 def test_failures_are_a_status_or_an_error():

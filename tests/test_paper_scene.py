@@ -1,5 +1,6 @@
 """The paper's central result, at full size: the staircase of Fig. 4 / Fig. 3(b)."""
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -11,8 +12,12 @@ from helpers import scipy_stick_slip_cycle
 def test_fig4_staircase_at_vd_1_5():
     """N = 20, v_d = 1.5, eq. (8) with k = 1..20 excited, t in [0, 15000], observed
     after 10000. The paper finds k oscillators on the HALC for every k (its
-    Fig. 4), each contributing about the same to E (Fig. 3(b)). We require it for
-    k <= 18; for k = 19 the two unexcited oscillators may be pulled onto the HALC.
+    Fig. 4), each contributing about the same to E (Fig. 3(b)). We find it for
+    k <= 18. For k = 19 the one unexcited oscillator is pulled onto the HALC
+    (`test_a_lone_sliding_oscillator_is_pumped_by_its_in_phase_neighbours`), so
+    k = 19 and k = 20 both end on the state of the whole ring, the same state (E
+    equal to the 1e-3 resolution of the amplitudes); the non-smooth reference
+    also ends k = 19 with 20 on the HALC. The paper reports 19.
 
     Each oscillator on the HALC carries about the energy A^2/2 of the single
     oscillator's non-smooth stick-slip cycle (scipy, `scipy_stick_slip_cycle`):
@@ -22,7 +27,37 @@ def test_fig4_staircase_at_vd_1_5():
     n_halc, energy = ds["n_halc"].values[0], ds["energy"].values[0]
     assert np.all(ds["status"].values == 0)
     assert n_halc[:18].tolist() == list(range(1, 19))
+    assert n_halc[18:].tolist() == [20, 20]
+    assert abs(energy[18] / energy[19] - 1) < 1e-3
     single = 0.5 * scipy_stick_slip_cycle(jc.ChainParams(n_osc=1))[0] ** 2
     assert np.all(np.abs(energy / n_halc / single - 1) < 0.1)
     order = np.argsort(n_halc, kind="stable")
     assert np.all(np.diff(energy[order][n_halc[order] < 20]) > 0)
+
+
+def test_a_lone_sliding_oscillator_is_pumped_by_its_in_phase_neighbours():
+    """Why eq. (8) with k = 19 of N = 20 ends with 20 on the HALC: physics, not the
+    placement of the block. Any 19 excited oscillators leave one at steady sliding
+    whose neighbours n - 1 and n + 1 start at the same displacement (the pattern
+    2 (-1)^n; N even, so the pattern has no defect where the block wraps). The
+    state is mirror-symmetric about the lone oscillator: its neighbours
+    stick-slip exactly in phase and their coupling forces add, near its
+    resonance, against the weak damping 2 xi - mu'(v_d) = 0.05 of steady sliding.
+    Its amplitude grows until it crosses the unstable cycle and sticks, at about
+    t = 270. With the neighbours started in antiphase (the excitation's sign
+    flipped on oscillators 12..20, a phase defect inside the block) their forces
+    cancel and it still slides over the same time."""
+    p = jc.ChainParams()
+    mask = jc.excited_block(20, 19)
+    assert not mask[0] and mask[1:].all()  # oscillator 1 is the one left out
+    opts = jc.SimulationOptions(t_end=400.0, transient=300.0, chunk_length=100.0)
+    y0 = jc.OutOfPhaseExcitation.eq8(mask)(p)
+    symmetric = jc.simulate(p, y0, options=opts)
+    assert int(symmetric.n_halc) == 20 and bool(symmetric.on_halc[0])
+    assert float(symmetric.amplitudes[19]) == pytest.approx(float(symmetric.amplitudes[1]),
+                                                            rel=1e-6)
+    base = jc.steady_sliding(p)[0]
+    flip = jnp.where(jnp.arange(1, 21) >= 12, -1.0, 1.0)
+    antiphase = jc.simulate(p, y0.at[0].set(base + (y0[0] - base) * flip), options=opts)
+    assert int(antiphase.n_halc) == 19 and not bool(antiphase.on_halc[0])
+    assert float(antiphase.amplitudes[0]) < 0.2

@@ -9,6 +9,7 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 from helpers import SHORT, reference_rhs, scipy_stick_slip_cycle
+from jaxchain._bifurcation.shooting import describe_orbit, pack
 
 
 def scipy_flow(params, y, period):
@@ -31,6 +32,32 @@ def test_stable_stick_slip_cycle_agrees_with_long_simulation():
     # the smoothed period is near the non-smooth cycle's (difference O(eps))
     _, period = scipy_stick_slip_cycle(params)
     assert abs(float(orbit.period) / period - 1) < 1e-3
+
+
+@pytest.mark.parametrize("state", ["stick-slip", "steady sliding"])
+def test_n_halc_agrees_between_simulation_shooting_and_reference(state):
+    """One definition of the HALC (`jc.sticks`) for the smoothed run, shooting and
+    the non-smooth reference. At v_d = 1.5 the single oscillator is bistable
+    (v_d,H = 1.15): from x = 2 it reaches the stick-slip cycle, on the HALC for all
+    three; at steady sliding (an equilibrium, a periodic orbit of any period) it
+    stays at slip speed v_d, on the HALC for none."""
+    params = jc.ChainParams(n_osc=1, v_d=1.5)
+    sliding = state == "steady sliding"
+    y0 = jc.steady_sliding(params) if sliding else jnp.array([[2.0], [0.0]])
+    obs = jc.simulate(params, y0, options=SHORT)
+    ref = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions(
+        t_end=SHORT.t_end, transient=SHORT.transient))
+    if sliding:
+        orbit = describe_orbit(params, pack(y0, 2 * np.pi), jc.ShootingOptions())
+    else:
+        orbit = jc.periodic_orbit(params, obs.y_final, 6.3)
+    expected = 0 if sliding else 1
+    assert int(obs.n_halc) == int(orbit.n_halc) == int(ref.n_halc) == expected
+    if sliding:  # both models rest at x' = 0
+        assert np.allclose([obs.min_slip_speed[0], ref.min_slip_speed[0]], 1.5)
+    else:  # stick: inside the band, and exactly zero without smoothing
+        assert 0 < float(obs.min_slip_speed[0]) < jc.STICK_BAND * params.eps
+        assert float(ref.min_slip_speed[0]) == 0.0
 
 
 def test_small_hopf_cycle_monodromy_against_finite_differences():

@@ -11,6 +11,7 @@ from jaxtyping import Array, Bool, Complex, Float
 from .._custom_types import State
 from .._model import vector_field
 from .._params import ChainParams
+from .._stick import min_slip_speed, sticks
 
 
 class ShootingOptions(eqx.Module):
@@ -125,11 +126,11 @@ def floquet_multipliers(params: ChainParams, y0: State, period, options: Shootin
 def orbit_extrema(params: ChainParams, y0: State, period, options: ShootingOptions
                   ) -> tuple[Float[Array, " n_osc"], Float[Array, " n_osc"],
                              Float[Array, " n_osc"]]:
-    """(x_max, x_min, v_max) of each oscillator over one period, from
-    `options.n_samples` dense-output samples."""
+    """(x_max, x_min, smallest slip speed |x' - v_d|) of each oscillator over one
+    period, from `options.n_samples` dense-output samples."""
     ts = period * jnp.linspace(0.0, 1.0, options.n_samples)
     ys = flow(params, y0, period, options, diffrax.SaveAt(ts=ts)).ys
-    return ys[:, 0].max(0), ys[:, 0].min(0), ys[:, 1].max(0)
+    return ys[:, 0].max(0), ys[:, 0].min(0), min_slip_speed(ys[:, 1], params.v_d)
 
 
 class PeriodicOrbit(eqx.Module):
@@ -142,7 +143,9 @@ class PeriodicOrbit(eqx.Module):
     - `period`: T, shape ().
     - `amplitudes`: half of peak-to-peak of each x_n, shape (n_osc,).
     - `energy`: E = 1/2 sum_n A_n^2 (eq. (9) of the paper), shape ().
-    - `n_halc`: oscillators that stick (max x_n' reaches v_d to 1 %), shape ().
+    - `n_halc`: oscillators on the HALC: they stick, their smallest slip speed
+        |x_n' - v_d| over `options.n_samples` samples of the period is <= 3 eps
+        (`sticks`), shape ().
     - `multipliers`: Floquet multipliers by decreasing modulus, shape (2 n_osc,).
     - `trivial`: index of the trivial multiplier, shape ().
     - `stable`: all non-trivial multipliers inside the unit circle, shape ().
@@ -176,13 +179,14 @@ def describe_orbit(params: ChainParams, u: Float[Array, " 2n+1"], options: Shoot
     """The `PeriodicOrbit` of the shooting unknowns `u` (traceable)."""
     y0, period = unpack(u)
     multipliers, trivial = floquet_multipliers(params, y0, period, options)
-    x_max, x_min, v_max = orbit_extrema(params, y0, period, options)
+    x_max, x_min, slip_speed = orbit_extrema(params, y0, period, options)
     amplitudes = 0.5 * (x_max - x_min)
     others = jnp.where(jnp.arange(multipliers.size) == trivial, 0.0, jnp.abs(multipliers))
     residual = jnp.max(jnp.abs(shooting_residual(u, params, options)))
+    n_halc = jnp.sum(sticks(slip_speed, params.eps))
     return PeriodicOrbit(
         params=params, y0=y0, period=period, amplitudes=amplitudes,
-        energy=0.5 * jnp.sum(amplitudes**2), n_halc=jnp.sum(v_max >= 0.99 * params.v_d),
+        energy=0.5 * jnp.sum(amplitudes**2), n_halc=n_halc,
         multipliers=multipliers, trivial=trivial, stable=jnp.all(others < 1),
         residual=residual, converged=jnp.asarray(converged))
 

@@ -5,10 +5,10 @@ import argparse
 import json
 import time
 
-from .._boundaries import boundaries, fig3a_simulations
+from .._boundaries import RATIO_VALUES, XI_VALUES, boundaries, fig3a_simulations
 from .._params import ChainParams
 from .._plots.bifurcation import plot_bifurcation_diagram, plot_bistable_region
-from .common import (UsageError, add_output_options, comma_list, json_ready,
+from .common import (RunsFailed, UsageError, add_output_options, comma_list, json_ready,
                      param_default, positive_float, positive_int, save_figure,
                      show_progress, writable_folder)
 
@@ -50,12 +50,12 @@ def add_parser(sub):
     g = p.add_argument_group("analysis")
     g.add_argument("--target", type=positive_float, default=0.5,
                    help="design: the bistable window width to stay below (default 0.5)")
-    g.add_argument("--xi-values", type=comma_list(float),
-                   default=[0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.1], metavar="X,X,...",
-                   help="damping ratios of the two-parameter curves")
-    g.add_argument("--ratio-values", type=comma_list(float),
-                   default=[1.6, 1.8, 2.0, 2.2, 2.4], metavar="R,R,...",
-                   help="values of mu_st/mu_d of the two-parameter curves")
+    g.add_argument("--xi-values", type=comma_list(float), default=list(XI_VALUES),
+                   metavar="X,X,...", help="damping ratios of the two-parameter curves "
+                   f"(default {','.join(map(str, XI_VALUES))})")
+    g.add_argument("--ratio-values", type=comma_list(float), default=list(RATIO_VALUES),
+                   metavar="R,R,...", help="values of mu_st/mu_d of the two-parameter curves "
+                   f"(default {','.join(map(str, RATIO_VALUES))})")
     g.add_argument("--no-ring", action="store_true", help="skip the ring")
     g.add_argument("--no-simulation", action="store_true",
                    help="skip the simulation dots of Fig. 3(a)")
@@ -94,9 +94,17 @@ def run(args) -> None:
         s["simulation_energy"] = {"v_d": sims[0].tolist(), "energy": sims[1].tolist()}
     text = json.dumps(json_ready(s), allow_nan=False)
     (args.out / "boundaries.json").write_text(text)
+    missing = sum(f is None for c in ("xi_curve", "ratio_curve") for f in s[c]["fold_vd"])
     if args.json:
         print(text)
-        return
+    else:
+        _print_summary(s, single_png, region_png)
+    if missing:
+        raise RunsFailed(f"the fold was not found at {missing} points of the two-parameter "
+                         f"curves (null in {args.out / 'boundaries.json'})")
+
+
+def _print_summary(s: dict, single_png, region_png) -> None:
     d = s["design"]
     print(f"single oscillator, eps = {s['eps']:g}:")
     print(f"  Hopf   v_d = {s['hopf_vd']:.10f}  (analytic eps -> 0: "
@@ -112,6 +120,14 @@ def run(args) -> None:
     print(f"  d v_d,H/d xi = {s['d_hopf_vd_d_xi']:.4f}, d v_d,fold/d xi = "
           f"{s['d_fold_vd_d_xi']:.4f}; d/d(mu_st/mu_d): {s['d_hopf_vd_d_ratio']:.4f}, "
           f"{s['d_fold_vd_d_ratio']:.4f}")
+    for key, name in (("xi_curve", "xi"), ("ratio_curve", "mu_st/mu_d")):
+        c = s[key]
+        print(f"  {name:>10}  Hopf v_d   fold v_d   non-smooth limit   fold - limit")
+        for v, h, f, e in zip(c[name], c["hopf_vd"], c["fold_vd"],
+                              c["existence_limit_nonsmooth"]):
+            fold = "not found" if f is None else f"{f:.6f}"
+            diff = "" if f is None else f"{f - e:+.4f}"
+            print(f"  {v:>10g}  {h:.6f}   {fold:>9}  {e:.6f}           {diff}")
     print(f"  design: window < {d['target_window']:g} for xi >= {d['xi']:.6f} "
           f"({d['optax_iterations']} optax iterations); simulation check "
           f"{'holds' if d['simulation_check']['holds'] else 'FAILS'}")

@@ -12,6 +12,7 @@ from .._initial import AbstractInitialCondition, GivenState
 from .._params import ChainParams
 from .._progress import progress_bar, tick
 from .._simulate import STATUS
+from .._stick import sticks
 from .options import NonsmoothOptions
 from .switching import guard, initial_modes, mode_field, switch, turning_directions
 
@@ -32,8 +33,14 @@ class NonsmoothObservables(eqx.Module):
         taken at turning points located as events, so they are exact to the
         integration tolerance, with no sampling error.
     - `energy`: E = 1/2 sum_n A_n^2, eq. (9) of the paper, shape ().
-    - `on_halc`: whether each oscillator sticks during the window, shape (n_osc,).
+    - `on_halc`: whether each oscillator is on the HALC: it sticks during the
+        window, `min_slip_speed` = 0 (`sticks` with eps = 0), shape (n_osc,).
     - `n_halc`: number of oscillators on the HALC, shape ().
+    - `min_slip_speed`: smallest |x_n' - v_d| over the window: exactly 0 for an
+        oscillator that sticks (x_n' = v_d in stick); for one that only slips, the
+        smallest value at the window's events and chunk ends, an upper bound of the
+        true minimum (a slip reversal, v_rel passing through 0 at one instant
+        without stick, is left out), shape (n_osc,).
     - `stick_fraction`: fraction of the window each oscillator spends in stick,
         shape (n_osc,).
     - `x_max`, `x_min`: extrema of x_n over each half of the window, shape
@@ -61,6 +68,7 @@ class NonsmoothObservables(eqx.Module):
     energy: Float[Array, "*batch"]
     on_halc: Bool[Array, "*batch n_osc"]
     n_halc: Int[Array, "*batch"]
+    min_slip_speed: Float[Array, "*batch n_osc"]
     stick_fraction: Float[Array, "*batch n_osc"]
     x_max: Float[Array, "*batch 2 n_osc"]
     x_min: Float[Array, "*batch 2 n_osc"]
@@ -86,6 +94,7 @@ class _Carry(eqx.Module):
     x_max: Float[Array, "2 n_osc"]
     x_min: Float[Array, "2 n_osc"]
     stick_time: Float[Array, " n_osc"]
+    slip_speed: Float[Array, " n_osc"]
     log_time: Float[Array, " log"]
     log_osc: Int[Array, " log"]
     log_kind: Int[Array, " log"]
@@ -119,6 +128,11 @@ def _segment(params, options, observe, half, t_stop, c: _Carry) -> _Carry:
     stick_time = c.stick_time + jnp.where(observe & (c.modes == 0), tau, 0.0)
     y_new, modes, kind, turned, resolved = switch(params, y, c.modes, sigma, observe,
                                                   options.switch_tol)
+    # Slip speed: 0 in stick; at the segment's end for an oscillator that slips on
+    # (one that switches here is at v_rel ~ 0 only for an instant).
+    speed = jnp.where(c.modes == 0, 0.0,
+                      jnp.where(event & (kind >= 0), jnp.inf, jnp.abs(y[1] - params.v_d)))
+    slip_speed = jnp.where(observe, jnp.minimum(c.slip_speed, speed), c.slip_speed)
     # An event that no guard accounts for would repeat forever: stop the run.
     code = jnp.where((code == 0) & event & ~resolved, 4, code)
     modes = jnp.where(event, modes, c.modes)
@@ -137,7 +151,7 @@ def _segment(params, options, observe, half, t_stop, c: _Carry) -> _Carry:
     slot = jnp.where(logged, (c.log_count + jnp.cumsum(logged) - 1) % size, size)
     return _Carry(
         t=t_new, y=y, work=work, modes=modes, x_max=x_max, x_min=x_min,
-        stick_time=stick_time,
+        stick_time=stick_time, slip_speed=slip_speed,
         log_time=c.log_time.at[slot].set(t_new, mode="drop"),
         log_osc=c.log_osc.at[slot].set(jnp.arange(params.n_osc), mode="drop"),
         log_kind=c.log_kind.at[slot].set(kind, mode="drop"),
@@ -184,7 +198,8 @@ def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
     c = _Carry(
         t=jnp.array(0.0), y=y, work=jnp.zeros(2), modes=modes,
         x_max=jnp.full((2, n), -jnp.inf), x_min=jnp.full((2, n), jnp.inf),
-        stick_time=jnp.zeros(n), log_time=jnp.full(size, jnp.nan),
+        stick_time=jnp.zeros(n), slip_speed=jnp.full(n, jnp.inf),
+        log_time=jnp.full(size, jnp.nan),
         log_osc=jnp.full(size, -1), log_kind=jnp.full(size, -1), log_count=jnp.array(0),
         events=jnp.array(0), chunk_events=jnp.array(0), steps=jnp.array(0),
         status=jnp.where(jnp.all(jnp.isfinite(y0)), 0, 3),
@@ -205,12 +220,14 @@ def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
                                   jnp.max(jnp.abs(x_min[0] - x_min[1]))) / scale
     window = options.t_end - options.transient
     stick_fraction = jnp.where(ok, c.stick_time / window, jnp.nan)
-    on_halc = stick_fraction > 0
+    slip_speed = jnp.where(ok, c.slip_speed, jnp.nan)
+    on_halc = sticks(slip_speed, 0.0)  # no smoothing: the stick band is v_rel = 0
     # Oldest first in the ring buffer of the log.
     order = (c.log_count + jnp.arange(size)) % size
     return NonsmoothObservables(
         amplitudes=amplitudes, energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc,
-        n_halc=jnp.where(ok, jnp.sum(on_halc), -1), stick_fraction=stick_fraction,
+        n_halc=jnp.where(ok, jnp.sum(on_halc), -1), min_slip_speed=slip_speed,
+        stick_fraction=stick_fraction,
         x_max=x_max, x_min=x_min, half_difference=half_difference, y_initial=y0,
         y_final=c.y, modes_final=c.modes, friction_work=c.work[0],
         viscous_dissipation=c.work[1], log_time=c.log_time[order],
