@@ -30,8 +30,10 @@ series. A state is periodic when its extrema over the two halves of the window
 agree (to 1e-6 for the reference, 1e-3 for the sampled smoothed model).
 
 Writes <out>/crosscheck.nc and <out>/crosscheck.png; each reference run is stored
-in <out>/crosscheck_cases/ as it finishes, and a later run with the same options
-reads it back (resume). About 5 minutes on 2 CPU cores with the defaults."""
+in <out>/crosscheck_cases/ as it finishes, under a hash of everything that
+determines it (parameters, initial state, reference options); a later run reads
+back only runs of equal settings (resume) and recomputes the others. About 5
+minutes on 2 CPU cores with the defaults."""
 
 
 def add_parser(sub):

@@ -24,10 +24,13 @@ non-smooth reference: on the amplitudes and E over the window, and on the
 trajectory at t = 20, before it diverges. Compilation is timed apart from the run.
 scipy's LSODA and Radau and the reference at looser tolerances are outside points.
 
-Writes <out>/work_precision.csv as it goes (a later run with the same --out resumes
-it) and <out>/work_precision_<scene>.png, and prints the fastest settings for 1 %
-and 0.1 % amplitude error. The full study takes tens of minutes on 2 CPU cores;
-use --scenes, --solvers, --rtols, --eps to run part of it."""
+Writes <out>/work_precision.csv as it goes, each row with a hash of everything
+that determines it (a later run with the same --out reuses only rows of equal
+settings and computes the rest), and <out>/work_precision_<scene>.png for the runs
+asked for, and prints the fastest settings for 1 % and 0.1 % amplitude error. A
+failed run is recorded with its status and makes the command exit with status 1.
+The full study takes tens of minutes on 2 CPU cores; use --scenes, --solvers,
+--rtols, --eps to run part of it."""
 
 
 def add_parser(sub):
