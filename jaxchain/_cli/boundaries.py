@@ -86,8 +86,9 @@ def run(args) -> None:
     single_png = args.out / "bifurcation_single.png"
     save_figure(fig, single_png)
     region_png = args.out / "bistable_region.png"
+    limits = [s[c]["existence_limit_nonsmooth"] for c in ("xi_curve", "ratio_curve")]
     save_figure(plot_bistable_region(found.curves_xi, found.curves_ratio,
-                                     float(params.mu_d), found.design), region_png)
+                                     float(params.mu_d), found.design, limits), region_png)
     s |= {"wall_time_s": time.perf_counter() - start,
           "figures": [str(single_png), str(region_png)]}
     if sims is not None:

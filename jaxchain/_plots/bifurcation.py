@@ -61,15 +61,19 @@ def plot_bifurcation_diagram(branch, hopf_vd: float, fold_vd: float, fold_energy
     return fig
 
 
-def plot_bistable_region(curves_xi, curves_ratio, mu_d: float, design=None):
+def plot_bistable_region(curves_xi, curves_ratio, mu_d: float, design=None,
+                         limits=None):
     """The bistable range of belt speeds (between the Hopf point and the fold)
-    against the damping ratio xi and against mu_st/mu_d.
+    against the damping ratio xi and against mu_st/mu_d. The fold is drawn along
+    its continued branch, with markers at the requested values.
 
     **Arguments:**
 
     - `curves_xi`, `curves_ratio`: `BoundaryCurves` in xi and in mu_st.
     - `mu_d`: the dynamic friction coefficient (to turn mu_st into the ratio).
     - `design`: a `DampingDesign` to mark, or None.
+    - `limits`: the non-smooth existence limits at the values of each curve, two
+        sequences, or None.
 
     **Returns:**
 
@@ -83,8 +87,19 @@ def plot_bistable_region(curves_xi, curves_ratio, mu_d: float, design=None):
         ax.fill_between(x, hopf, fold, color="C0", alpha=0.25,
                         label="bistable: steady sliding and stick-slip")
         ax.plot(x, hopf, "o-", color="C1", label="Hopf v_d,H")
-        ax.plot(x, fold, "s-", color="C2", label="fold of limit cycles")
-        ax.set(xlabel=name, ylabel="belt speed v_d")
+        for i, branch in enumerate(curves.branches):
+            # the fold curve's unknowns are (u, fold v_d, w), u and w of one size
+            ok = np.asarray(branch.converged)
+            on = np.asarray(branch.p)[ok] * scale
+            fold_vd = np.asarray(branch.u)[ok, (branch.u.shape[1] - 1) // 2]
+            ax.plot(on, fold_vd, "-", color="C2", lw=1,
+                    label="fold, continued" if i == 0 else None)
+        ax.plot(x, fold, "s", color="C2", label="fold of limit cycles")
+        if limits is not None:
+            ax.plot(x, limits[ax is axes[1]], "x", color="k",
+                    label="non-smooth existence limit")
+        pad = 0.03 * (x.max() - x.min())
+        ax.set(xlabel=name, ylabel="belt speed v_d", xlim=(x.min() - pad, x.max() + pad))
     if design is not None:
         axes[0].plot([design.xi, design.xi], [design.hopf_vd, design.fold_vd], "k-", lw=2,
                      label=f"design: xi = {design.xi:.4f}, window {design.window:.3f}")
