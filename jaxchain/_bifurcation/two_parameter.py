@@ -201,11 +201,12 @@ def fold_curve(problem: ContinuationProblem, fold_solution: Float[Array, " 2n+1"
         starts = [np.asarray(fold_solution)] if value == base else []
         for branch in branches:
             starts += [z[:-1] for z in _hermite(branch, value)]
-        for start in starts[:1]:
+        for start in starts:
             solution, derivative, ok = fold_and_derivative(problem, where, value,
                                                            jnp.asarray(start))
             if bool(ok):
                 solutions[i], derivatives[i], converged[i] = solution, derivative, True
+                break
     return solutions, derivatives, converged, branches
 
 
@@ -236,7 +237,8 @@ def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 
 
     **Raises:**
 
-    `ValueError` if `values` is empty or `fold_solution` is not a solution.
+    `ValueError` if `values` is empty or Newton's method does not converge from
+    `fold_solution`.
     """
     values = np.sort(np.asarray(values, dtype=float))
     solutions, derivatives, converged, branches = fold_curve(

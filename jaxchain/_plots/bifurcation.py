@@ -98,7 +98,7 @@ def plot_bistable_region(curves_xi, curves_ratio, mu_d: float, design=None,
         if limits is not None:
             ax.plot(x, limits[ax is axes[1]], "x", color="k",
                     label="non-smooth existence limit")
-        pad = 0.03 * (x.max() - x.min())
+        pad = 0.03 * (x.max() - x.min()) or 0.05 * max(abs(x.max()), 1e-3)  # one value
         ax.set(xlabel=name, ylabel="belt speed v_d", xlim=(x.min() - pad, x.max() + pad))
     if design is not None:
         axes[0].plot([design.xi, design.xi], [design.hopf_vd, design.fold_vd], "k-", lw=2,
