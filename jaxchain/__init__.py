@@ -93,6 +93,8 @@ from ._bifurcation.fold import solve_fold as solve_fold  # noqa: E402
 from ._bifurcation.two_parameter import BoundaryCurves as BoundaryCurves  # noqa: E402
 from ._bifurcation.two_parameter import boundary_curves as boundary_curves  # noqa: E402
 from ._bifurcation.two_parameter import fold_and_derivative as fold_and_derivative  # noqa: E402
+from ._bifurcation.two_parameter import fold_curve as fold_curve  # noqa: E402
+from ._bifurcation.two_parameter import fold_curve_problem as fold_curve_problem  # noqa: E402,E501
 from ._bifurcation.two_parameter import hopf_vd as hopf_vd  # noqa: E402
 from ._bifurcation.design import DampingDesign as DampingDesign  # noqa: E402
 from ._bifurcation.design import smallest_damping as smallest_damping  # noqa: E402
