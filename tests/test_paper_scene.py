@@ -1,4 +1,5 @@
-"""The paper's central result, at full size: the staircase of Fig. 4 / Fig. 3(b)."""
+"""The paper's central result: the staircase of Fig. 4 / Fig. 3(b). The full-size
+run (t_end = 15000) is `benchmarks/paper_scene.py`."""
 
 import jax.numpy as jnp
 import numpy as np
@@ -10,8 +11,10 @@ from helpers import scipy_stick_slip_cycle
 
 @pytest.mark.slow
 def test_fig4_staircase_at_vd_1_5():
-    """N = 20, v_d = 1.5, eq. (8) with k = 1..20 excited, t in [0, 15000], observed
-    after 10000. The paper finds k oscillators on the HALC for every k (its
+    """N = 20, v_d = 1.5, eq. (8) with k = 1..20 excited, t in [0, 5000], observed
+    after 4000: the states have settled by then (the paper integrates to 15000,
+    observed after 10000; `benchmarks/paper_scene.py` checks that horizon, with
+    the same n_HALC). The paper finds k oscillators on the HALC for every k (its
     Fig. 4), each contributing about the same to E (Fig. 3(b)). We find it for
     k <= 18. For k = 19 the one unexcited oscillator is pulled onto the HALC
     (`test_a_lone_sliding_oscillator_is_pumped_by_its_in_phase_neighbours`), so
@@ -23,7 +26,9 @@ def test_fig4_staircase_at_vd_1_5():
     oscillator's non-smooth stick-slip cycle (scipy, `scipy_stick_slip_cycle`):
     E / n_HALC lies within 10 % of it, the coupling eta_c = 0.01 and the small
     oscillations of the neighbours on steady sliding making up the difference."""
-    ds = jc.ensemble(jc.ChainParams(), [1.5], jc.localized_family(20), progress=False)
+    settled = jc.SimulationOptions(t_end=5000.0, transient=4000.0)
+    ds = jc.ensemble(jc.ChainParams(), [1.5], jc.localized_family(20), options=settled,
+                     progress=False)
     n_halc, energy = ds["n_halc"].values[0], ds["energy"].values[0]
     assert np.all(ds["status"].values == 0)
     assert n_halc[:18].tolist() == list(range(1, 19))
