@@ -9,12 +9,10 @@ import xarray as xr
 from jaxtyping import ArrayLike, Float
 
 from ._initial import AbstractInitialCondition
-from ._lanes import padded_lanes, run_lanes
+from ._lanes import run_lanes
 from ._options import SimulationOptions
 from ._params import ChainParams, with_parameter
-from ._progress import progress_bar
 from ._results import to_dataset
-from ._simulate import n_ticks
 from ._solvers import DEFAULT_SOLVER, SOLVERS
 
 
@@ -33,15 +31,15 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
              ics: AbstractInitialCondition,
              solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
              options: SimulationOptions = SimulationOptions(), *,
-             progress: bool = True) -> xr.Dataset:
-    """Run every (belt speed, initial condition) pair of a grid, vmapped and spread
-    over the devices (on a CPU, one per core), in one compiled function.
-    Trajectories never raise: each has a `status` (0 = ok, see `STATUS`), so one
-    failing lane never discards the others.
+             engine: str | None = None, progress: bool = True) -> xr.Dataset:
+    """Run every (belt speed, initial condition) pair of a grid, spread over the
+    devices (on a CPU, one per core) by `run_lanes`. Trajectories never raise: each
+    has a `status` (0 = ok, see `STATUS`), so one failing lane never discards the
+    others.
 
-    Under vmap every lane waits for the slowest one of its device within each
-    chunk, so an ensemble costs about (lanes per device) x (steps of the slowest
-    lane). Lanes are dealt to devices in turn (`lane_order`).
+    On a CPU each core integrates one trajectory at a time and takes the next when
+    it finishes (a work queue), so an ensemble costs about (total steps) / (cores).
+    On a GPU the trajectories are vmapped lanes.
 
     **Arguments:**
 
@@ -53,7 +51,9 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
         each belt speed, so that eq. (8) starts from that speed's steady sliding.
     - `solver`: a diffrax solver, `diffrax.Bosh3()` by default (`DEFAULT_SOLVER`).
     - `options`: `SimulationOptions`.
-    - `progress`: show a tqdm bar over the chunks of all trajectories.
+    - `engine`: "queue" or "vmap" (see `run_lanes`); by default the queue on a CPU
+        and vmap elsewhere. The result does not depend on it.
+    - `progress`: show a tqdm bar over the trajectories.
 
     **Returns:**
 
@@ -63,8 +63,8 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
 
     **Raises:**
 
-    `ValueError` for belt speeds that are not finite and > 0, or initial conditions
-    of the wrong shape.
+    `ValueError` for belt speeds that are not finite and > 0, initial conditions
+    of the wrong shape, or an unknown engine.
     """
     v_d = jnp.atleast_1d(jnp.asarray(v_d, dtype=float))
     if v_d.ndim != 1 or not bool(jnp.all(jnp.isfinite(v_d) & (v_d > 0))):
@@ -78,11 +78,8 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     y0 = _initial_states(params, v_d, ics)
     shape = y0.shape[:2]
     lanes_vd = jnp.broadcast_to(v_d[:, None], shape).reshape(-1)
-    total = padded_lanes(lanes_vd.shape[0]) * n_ticks(options)
-    with progress_bar(total, f"{len(v_d)}x{n_ic} trajectories", progress):
-        obs = run_lanes(params, lanes_vd, y0.reshape(-1, *y0.shape[2:]), solver, options,
-                        progress)
-        jax.block_until_ready(obs)
+    obs = run_lanes(params, lanes_vd, y0.reshape(-1, *y0.shape[2:]), solver, options,
+                    engine=engine, progress=progress)
     obs = jax.tree_util.tree_map(lambda x: x.reshape(*shape, *x.shape[1:]), obs)
     return to_dataset(obs, params, v_d, ics, solver, options)
 

@@ -1,20 +1,21 @@
-"""Independent trajectories spread over the devices: as lanes (`jax.vmap` within a
-device, `jax.shard_map` across devices), or as separate tasks, one per device at a
-time (`on_devices`).
+"""Independent trajectories spread over the devices (`run_lanes`): as a work queue
+of separate tasks, one per device at a time (`on_devices`), or as vmapped lanes
+(`jax.vmap` within a device, `jax.shard_map` across devices).
 
-On a CPU, jaxchain exposes one JAX device per core (see `__init__`), because XLA
-runs one vmapped integration on one core: two devices run two halves of an
-ensemble side by side, about twice as fast on 2 cores. On a GPU there is usually
-one device and this is a plain vmap."""
+On a CPU, jaxchain exposes one JAX device per core (see `__init__`): XLA runs one
+compiled integration on one core, so two devices run twice the trajectories in the
+same time on 2 cores. The queue suits CPUs: a vmapped lane that finishes early
+waits, masked, for the slowest lane of its batch (44 % of the lane-steps of the
+Fig. 4 scene), and a vmapped loop is too large for XLA to compile into one kernel.
+On a GPU, with one device running thousands of lanes, vmap is the engine."""
 
 import queue
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import diffrax
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
@@ -22,16 +23,34 @@ from jaxtyping import ArrayLike, Float
 from tqdm.auto import tqdm
 
 from ._options import SimulationOptions
+from ._friction import smoothed_friction_force
 from ._params import ChainParams, with_parameter
 from ._simulate import Observables, run
 
 
+#: How `run_lanes` runs its lanes: "queue" (each device integrates one block of
+#: trajectories at a time, taking the next block when it finishes; the default on
+#: CPUs) or "vmap" (all lanes of a batch in lockstep, one vmapped program per
+#: device; the default on GPUs).
+ENGINES = ("queue", "vmap")
+
+
+def _run_one(params, v_d, y0, solver, options):
+    return run(with_parameter(params, "v_d", v_d), y0, solver, options)
+
+
 @eqx.filter_jit
-def _sharded(params, v_d, y0, solver, options, progress, mesh):
+def _run_block(params, v_d, y0, solver, options):
+    """A block of trajectories, one after the other (`lax.map`): no lane waits for
+    another, and the step loop stays one small while loop, which XLA's CPU backend
+    compiles into one kernel (see `__init__`)."""
+    return jax.lax.map(lambda a: _run_one(params, a[0], a[1], solver, options), (v_d, y0))
+
+
+@eqx.filter_jit
+def _run_vmapped(params, v_d, y0, solver, options, mesh):
     def local(vd, y):
-        def one(a, b):
-            return run(with_parameter(params, "v_d", a), b, solver, options, progress)
-        return jax.vmap(one)(vd, y)
+        return jax.vmap(lambda a, b: _run_one(params, a, b, solver, options))(vd, y)
 
     # check_vma=False: diffrax's loops carry unsharded initial values (solver state)
     # next to per-device ones, which the varying-axes check rejects.
@@ -49,53 +68,102 @@ def lane_order(n_lanes: int, n_devices: int) -> np.ndarray:
     return np.argsort(np.arange(total) % n_devices, kind="stable")
 
 
+def block_size(n_lanes: int, n_devices: int) -> int:
+    """Trajectories per task of the queue engine: 1 up to 16 tasks per device, then
+    larger blocks so that there are about 16 per device (balance within 1/16 of the
+    work of one device, and few dispatches for large ensembles)."""
+    return max(1, n_lanes // (16 * n_devices))
+
+
+def expected_cost(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"]) -> np.ndarray:
+    """A proxy of each lane's cost for ordering the lanes of the vmap engine: the
+    distance of the initial state from steady sliding. Lanes that start far from it
+    (more oscillators excited) stick and slip more, and take more steps."""
+    x0 = np.asarray(smoothed_friction_force(params, -np.asarray(params.v_d)))
+    y0 = np.asarray(y0)
+    return np.sqrt(np.sum((y0[:, 0] - x0) ** 2 + y0[:, 1] ** 2, -1))
+
+
 def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
               y0: Float[ArrayLike, "lanes 2 n_osc"], solver: diffrax.AbstractSolver,
-              options: SimulationOptions, progress: bool = False) -> Observables:
+              options: SimulationOptions, *, engine: str | None = None,
+              devices: Sequence | None = None, batch_size: int = 4096,
+              progress: bool = False) -> Observables:
     """Run `run` (one trajectory of eq. (5)) for each lane, in parallel over the
-    devices of JAX's default backend.
+    devices.
 
     **Arguments:**
 
     - `params`: chain parameters; its `v_d` is replaced by each lane's.
     - `v_d`: belt speed of each lane, shape (lanes,), dimensionless.
     - `y0`: initial state of each lane, shape (lanes, 2, n_osc).
-    - `solver`, `options`, `progress`: as for `simulate`.
+    - `solver`, `options`: as for `simulate`.
+    - `engine`: "queue" or "vmap" (`ENGINES`); by default "queue" on a CPU and
+        "vmap" on other platforms. The queue keeps no lane waiting: each device
+        integrates a block of trajectories one after the other (`block_size`) and
+        takes the next block when done. The vmap engine integrates the lanes of a
+        batch in lockstep (each waits for the slowest), in batches of
+        `batch_size` lanes ordered by `expected_cost`, dealt to the devices.
+    - `devices`: the devices to use, all of JAX's default backend by default.
+    - `progress`: a tqdm bar over trajectories (queue) or batches (vmap).
 
     **Returns:**
 
     `Observables` whose fields carry a leading (lanes,) axis, in the order given.
-    Under vmap a lane that fails keeps its status and does not hold up the others.
+    The engines and the device count change nothing in the result: each lane is
+    the same compiled integration.
+
+    **Raises:**
+
+    `ValueError` for an unknown engine or an empty list of lanes.
     """
-    v_d = jnp.asarray(v_d, dtype=float)
-    y0 = jnp.asarray(y0, dtype=float)
+    v_d = np.asarray(v_d, dtype=float)
+    y0 = np.asarray(y0, dtype=float)
     n_lanes = v_d.shape[0]
-    devices = _devices(n_lanes)
-    order = lane_order(n_lanes, len(devices))
-    pick = np.minimum(order, n_lanes - 1)  # padding repeats the last lane
+    if n_lanes == 0:
+        raise ValueError("run_lanes needs at least one lane, got 0")
+    devices = list(devices or jax.devices())[:n_lanes]
+    if engine is None:
+        engine = "queue" if devices[0].platform == "cpu" else "vmap"
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+    if engine == "queue":
+        size = block_size(n_lanes, len(devices))
+        starts = range(0, n_lanes, size)
+
+        def task(i, device):
+            pick = np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)
+            inputs = jax.device_put((v_d[pick], y0[pick]), device)
+            out = _run_block(params, *inputs, solver, options)
+            return jax.tree_util.tree_map(lambda x: np.asarray(x)[:len(pick)], out)
+
+        blocks = on_devices(task, len(starts), "trajectories", progress, devices=devices,
+                            sizes=[min(size, n_lanes - s) for s in starts])
+        obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x), *blocks)
+        return jax.tree_util.tree_map(lambda x: x[:n_lanes], obs)
+    by_cost = np.argsort(expected_cost(params, y0), kind="stable")
     mesh = Mesh(np.array(devices), ("lanes",))
-    obs = _sharded(params, v_d[pick], y0[pick], solver, options, progress, mesh)
-    back = np.argsort(order)[:n_lanes]
-    return jax.tree_util.tree_map(lambda x: x[back], obs)
+    parts = []
+    for s in tqdm(range(0, n_lanes, batch_size), desc="batches", disable=not progress,
+                  leave=False):
+        batch = by_cost[s:s + batch_size]
+        order = lane_order(len(batch), len(devices))
+        pick = batch[np.minimum(order, len(batch) - 1)]  # padding repeats a lane
+        out = _run_vmapped(params, v_d[pick], y0[pick], solver, options, mesh)
+        back = np.argsort(order)[:len(batch)]
+        parts.append(jax.tree_util.tree_map(lambda x: np.asarray(x)[back], out))
+    obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x), *parts)
+    return jax.tree_util.tree_map(lambda x: x[np.argsort(by_cost)], obs)
 
 
-def padded_lanes(n_lanes: int) -> int:
-    """How many lanes `run_lanes` integrates for `n_lanes` (padding included), for
-    sizing a progress bar."""
-    return len(lane_order(n_lanes, len(_devices(n_lanes))))
-
-
-def _devices(n_tasks: int) -> list:
-    """The devices of JAX's default backend that `n_tasks` tasks or lanes use."""
-    return jax.devices()[:max(1, n_tasks)]
-
-
-
-def on_devices(task: Callable, n_tasks: int, desc: str, progress: bool = False) -> list:
-    """Call `task(i, device)` for i = 0..n_tasks-1, one call at a time per device of
-    JAX's default backend, each device taking the next i as soon as it is free (so
-    long and short tasks balance). `task` should put its inputs on `device`
-    (`jax.device_put`) so that its computation runs there.
+def on_devices(task: Callable, n_tasks: int, desc: str, progress: bool = False, *,
+               devices: Sequence | None = None, sizes: Sequence[int] | None = None
+               ) -> list:
+    """Call `task(i, device)` for i = 0..n_tasks-1, one call at a time per device
+    (all of JAX's default backend, or `devices`), each device taking the next i as
+    soon as it is free (so long and short tasks balance). `task` should put its
+    inputs on `device` (`jax.device_put`) so that its computation runs there. The
+    progress bar counts tasks, or `sizes[i]` for task i.
 
     **Returns:**
 
@@ -110,7 +178,8 @@ def on_devices(task: Callable, n_tasks: int, desc: str, progress: bool = False) 
         todo.put(i)
     results: list = [None] * n_tasks
     errors: list = []
-    bar = tqdm(total=n_tasks, desc=desc, disable=not progress, leave=False)
+    sizes = list(sizes) if sizes is not None else [1] * n_tasks
+    bar = tqdm(total=sum(sizes), desc=desc, disable=not progress, leave=False)
     lock = threading.Lock()
 
     def worker(device):
@@ -125,10 +194,10 @@ def on_devices(task: Callable, n_tasks: int, desc: str, progress: bool = False) 
                 errors.append(err)
                 return
             with lock:
-                bar.update()
+                bar.update(sizes[i])
 
     threads = [threading.Thread(target=worker, args=(d,), daemon=True)
-               for d in _devices(n_tasks)]
+               for d in list(devices or jax.devices())[:max(1, n_tasks)]]
     for t in threads:
         t.start()
     for t in threads:

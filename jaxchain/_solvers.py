@@ -3,6 +3,8 @@
 import diffrax
 import optimistix as optx
 
+from ._rosenbrock import Ros34PW2
+
 
 def _imex(cls):
     """An IMEX KenCarp solver with the friction force implicit (see `terms`). Its
@@ -25,6 +27,7 @@ SOLVERS = {
     "kencarp3": _imex(diffrax.KenCarp3),
     "kencarp4": _imex(diffrax.KenCarp4),
     "kencarp5": _imex(diffrax.KenCarp5),
+    "ros34pw2": Ros34PW2,
 }
 
 #: The solver of `simulate`, `ensemble`, `crosscheck` and the commands when none is

@@ -1,4 +1,5 @@
 import os
+import re
 import threading
 
 import jax
@@ -9,7 +10,7 @@ from hypothesis import strategies as st
 
 import jaxchain as jc
 from helpers import SHORT
-from jaxchain._lanes import lane_order, on_devices, run_lanes
+from jaxchain._lanes import _run_block, block_size, lane_order, on_devices, run_lanes
 from jaxchain._solvers import DEFAULT_SOLVER, SOLVERS
 
 
@@ -42,6 +43,47 @@ def test_run_lanes_with_padding_equals_runs_done_one_at_a_time():
         single = jc.simulate(jc.ChainParams(n_osc=2, v_d=v), y0[i], options=SHORT)
         assert np.allclose(obs.amplitudes[i], single.amplitudes, rtol=1e-9)
         assert int(obs.num_steps[i]) == int(single.num_steps)
+
+
+@pytest.mark.skipif(len(jax.devices()) < 2, reason="needs two devices (two cores)")
+def test_one_device_two_devices_and_both_engines_give_the_same_results():
+    """5 lanes, with the work queue on one device and on two (each lane the same
+    compiled integration, whichever device takes it), and vmapped in lockstep on
+    two: every field is equal."""
+    p = jc.ChainParams(n_osc=3)
+    v_d = np.array([1.3, 1.5, 1.7, 1.5, 1.6])
+    y0 = np.stack([jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1 + k % 3))(
+        jc.ChainParams(n_osc=3, v_d=v)) for k, v in enumerate(v_d)])
+    solver = SOLVERS[DEFAULT_SOLVER]()
+    one = run_lanes(p, v_d, y0, solver, SHORT, engine="queue", devices=jax.devices()[:1])
+    two = run_lanes(p, v_d, y0, solver, SHORT, engine="queue", devices=jax.devices()[:2])
+    vmapped = run_lanes(p, v_d, y0, solver, SHORT, engine="vmap", devices=jax.devices()[:2])
+    for field in ("amplitudes", "energy", "n_halc", "y_final", "num_steps", "status"):
+        a, b, c = (np.asarray(getattr(o, field)) for o in (one, two, vmapped))
+        assert np.array_equal(a, b), field
+        assert np.allclose(a, c, rtol=1e-12, atol=0), field
+
+
+def test_compiled_run_holds_no_callback_custom_call_or_scatter():
+    """The optimised program of the queue engine's run holds no host callback (it
+    could not be cached, and the loop would run op by op), no custom call (LAPACK)
+    and no scatter: nothing that keeps XLA's CPU backend from compiling the step
+    loop into one kernel."""
+    p = jc.ChainParams(n_osc=3)
+    y0 = np.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1))(p))[None]
+    for name in (DEFAULT_SOLVER, "bosh3"):
+        compiled = _run_block.lower(p, np.array([1.5]), y0, SOLVERS[name](), SHORT).compile()
+        ops = set(re.findall(r" ([a-z][a-z0-9-]*)\(", compiled.compiled.as_text()))
+        assert "while" in ops and "tanh" in ops  # the step loop is there
+        # a host callback is a custom call on the CPU
+        assert not ops & {"custom-call", "scatter", "send", "recv", "infeed", "outfeed"}, name
+
+
+@given(st.integers(1, 10**5), st.integers(1, 16))
+def test_block_size_keeps_every_device_busy(n_lanes, n_devices):
+    size = block_size(n_lanes, n_devices)
+    n_blocks = -(-n_lanes // size)
+    assert size >= 1 and n_blocks >= min(n_lanes, 16 * n_devices)
 
 
 def test_on_devices_keeps_order_and_uses_every_device():

@@ -4,7 +4,9 @@ line on stderr and an exit status; no command handles its own."""
 import os
 import sys
 
+import jax
 import matplotlib
+import platformdirs
 
 from . import boundaries, crosscheck, localized, work_precision
 from .common import Parser, RunsFailed, UsageError, one_line, usage_message
@@ -36,9 +38,33 @@ def exit_status(err: Exception) -> tuple[int, str]:
     return 1, f"{type(err).__name__}: {one_line(err)}"
 
 
+def compilation_cache() -> str | None:
+    """Turn on JAX's persistent compilation cache, so that a command's second run
+    skips compilation: in the folder named by the environment variable
+    JAXCHAIN_CACHE_DIR, or else in the user's cache folder
+    (platformdirs.user_cache_dir("jaxchain")/xla). JAXCHAIN_CACHE_DIR set to an
+    empty string turns it off. Programs are cached when their compilation took
+    0.5 s or more; jaxchain's compiled runs hold no host callbacks, which JAX
+    never caches.
+
+    **Returns:**
+
+    The folder, or None when the cache is off.
+    """
+    folder = os.environ.get("JAXCHAIN_CACHE_DIR")
+    if folder is None:
+        folder = os.path.join(platformdirs.user_cache_dir("jaxchain"), "xla")
+    if not folder:
+        return None
+    jax.config.update("jax_compilation_cache_dir", folder)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    return folder
+
+
 def main(argv=None) -> int:
     """Run the command line. Figures are drawn with matplotlib's Agg backend unless
-    the environment variable MPLBACKEND names another.
+    the environment variable MPLBACKEND names another. Compiled programs are kept
+    in a persistent cache (`compilation_cache`).
 
     **Returns:**
 
@@ -52,6 +78,7 @@ def main(argv=None) -> int:
         parser.error("a COMMAND is required (see jaxchain --help)")
     if not os.environ.get("MPLBACKEND"):
         matplotlib.use("Agg")  # the commands write figures to files, with no window
+    compilation_cache()
     try:
         args.run(args)
         return 0
