@@ -72,7 +72,6 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     leaves = [x for x in jax.tree_util.tree_leaves(ics) if eqx.is_array(x)]
     if not leaves:
         raise ValueError("ics must carry a leading batch axis on its array fields")
-    n_ic = leaves[0].shape[0]
     ics_first = jax.tree_util.tree_map(lambda x: x[0] if eqx.is_array(x) else x, ics)
     ics_first(with_parameter(params, "v_d", v_d[0]))  # shape check, may raise
     y0 = _initial_states(params, v_d, ics)
