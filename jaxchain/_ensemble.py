@@ -49,7 +49,8 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
         fields, n_ic of them (for example `localized_family(n_osc)` or
         `GivenState(y0)` with y0 of shape (n_ic, 2, n_osc)). They are evaluated at
         each belt speed, so that eq. (8) starts from that speed's steady sliding.
-    - `solver`: a diffrax solver, `diffrax.Bosh3()` by default (`DEFAULT_SOLVER`).
+    - `solver`: a diffrax solver, `Ros34PW2()` by default (`DEFAULT_SOLVER`; a
+        solver of `SPLIT_SOLVERS` gets the friction force as its stiff term).
     - `options`: `SimulationOptions`.
     - `engine`: "queue" or "vmap" (see `run_lanes`); by default the queue on a CPU
         and vmap elsewhere. The result does not depend on it.

@@ -40,8 +40,8 @@ class SimulationOptions(eqx.Module):
 
     t_end: float = eqx.field(static=True, default=15000.0)
     transient: float = eqx.field(static=True, default=10000.0)
-    rtol: float = 1e-6
-    atol: float = 1e-8
+    rtol: float = 1e-5
+    atol: float = 1e-7
     sample_dt: float = eqx.field(static=True, default=0.05)
     chunk_length: float = eqx.field(static=True, default=250.0)
     max_steps: int = eqx.field(static=True, default=200_000)

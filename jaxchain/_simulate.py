@@ -223,7 +223,8 @@ def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
     - `params`: the chain parameters (`ChainParams`).
     - `y0`: an initial condition (`OutOfPhaseExcitation`, `GivenState`, ...) or a
         state array of shape (2, n_osc) or (2 n_osc,).
-    - `solver`: a diffrax solver, `diffrax.Bosh3()` by default (`DEFAULT_SOLVER`).
+    - `solver`: a diffrax solver, `Ros34PW2()` by default (`DEFAULT_SOLVER`; a
+        solver of `SPLIT_SOLVERS` gets the friction force as its stiff term).
     - `options`: `SimulationOptions` (horizon, tolerances, sampling).
     - `throw`: raise on failure (default) or return the status.
     - `progress`: show a tqdm bar, one tick per chunk.

@@ -31,9 +31,10 @@ SOLVERS = {
 }
 
 #: The solver of `simulate`, `ensemble`, `crosscheck` and the commands when none is
-#: given. At the default eps = 1e-3 the step size is bounded by the stiff stick
-#: phases rather than by accuracy, so a cheap low-order method wins: on the chain
-#: scene of the work-precision study Bosh3 at rtol 1e-6 has the error of Tsit5 (the
-#: eps floor, 0.23 %) in 0.8x the time, and on the Fig. 4 scene 0.6x (README,
-#: "Choice of eps and solver").
-DEFAULT_SOLVER = "bosh3"
+#: given. At the default eps = 1e-3 an explicit method's step size is bounded by the
+#: stiff stick phases rather than by accuracy (Bosh3 takes 44M steps on the Fig. 4
+#: scene at rtol 1e-5, 50M at 1e-6). ROS34PW2, linearly implicit in the diagonal
+#: friction Jacobian, is not: 15M steps at rtol 1e-5, with the error of the eps
+#: floor (0.24 % on the work-precision chain scene), at about twice the cost per
+#: step (README, "Choice of eps and solver").
+DEFAULT_SOLVER = "ros34pw2"

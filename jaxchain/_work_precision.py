@@ -54,7 +54,8 @@ SCENES = {
     "single": Scene("single", 1, 1.5, 1, 200.0, 400.0, 20.0),
     "chain": Scene("chain", 20, 1.5, 1, 1000.0, 1500.0, 20.0),
 }
-WP_SOLVERS = ("tsit5", "dopri5", "dopri8", "bosh3", "kvaerno3", "kvaerno5", "kencarp4")
+WP_SOLVERS = ("tsit5", "dopri5", "dopri8", "bosh3", "kvaerno3", "kvaerno5", "kencarp4",
+              "ros34pw2")
 WP_RTOLS = tuple(10.0**-k for k in range(3, 11))
 WP_EPS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5)
 SCIPY_METHODS = ("LSODA", "Radau")

@@ -11,6 +11,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
+from .._options import SimulationOptions
 from .._params import ChainParams
 from .._solvers import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
 
@@ -26,6 +27,9 @@ OPTION_NAMES = {
     "NonsmoothOptions.t_end": "--t-end", "NonsmoothOptions.transient": "--transient",
 }
 
+
+#: The library's simulation defaults, which the options repeat.
+DEFAULTS = SimulationOptions()
 
 def param_default(name: str) -> float:
     """The default of a `ChainParams` field as a Python float (the fields are
@@ -101,12 +105,13 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
                    help="observables are taken after this time (default 10000)")
     g.add_argument("--solver", choices=sorted(SOLVERS), default=DEFAULT_SOLVER,
                    help=f"diffrax solver (default {DEFAULT_SOLVER}, the fastest at the "
-                        "default eps and rtol); kencarp* are IMEX, with the friction "
-                        "force implicit")
-    g.add_argument("--rtol", type=positive_float, default=1e-6,
-                   help="relative tolerance (default 1e-6)")
-    g.add_argument("--atol", type=positive_float, default=1e-8,
-                   help="absolute tolerance (default 1e-8)")
+                        "default eps and rtol: a Rosenbrock-W method whose W is the "
+                        "diagonal friction Jacobian); kencarp* are IMEX, with the "
+                        "friction force implicit")
+    g.add_argument("--rtol", type=positive_float, default=DEFAULTS.rtol,
+                   help=f"relative tolerance (default {DEFAULTS.rtol:g})")
+    g.add_argument("--atol", type=positive_float, default=DEFAULTS.atol,
+                   help=f"absolute tolerance (default {DEFAULTS.atol:g})")
     g.add_argument("--max-steps", type=positive_int, default=200_000,
                    help="step budget per chunk of 250 time units (default 200000)")
 

@@ -16,7 +16,8 @@ from .common import (RunsFailed, UsageError, comma_list, json_ready, positive_in
 HELP = "error against run time of every solver and eps (work-precision diagram)"
 DESCRIPTION = f"""\
 Measure error against wall time for the diffrax solvers {', '.join(WP_SOLVERS)}
-(kencarp4 is IMEX with the friction force implicit), rtol = 1e-3 ... 1e-10 (atol =
+(kencarp4 is IMEX with the friction force implicit; ros34pw2 a Rosenbrock-W method,
+linearly implicit in the diagonal friction Jacobian), rtol = 1e-3 ... 1e-10 (atol =
 rtol/100) and eps = 1e-1 ... 1e-5, on two scenes at v_d = 1.5: the single
 oscillator (window [200, 400]) and the chain of N = 20 with one oscillator excited
 (eq. (8), window [1000, 1500]). Errors are measured against the event-driven
