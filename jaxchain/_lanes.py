@@ -137,6 +137,11 @@ def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
             out = _run_block(params, *inputs, solver, options)
             return jax.tree_util.tree_map(lambda x: np.asarray(x)[:len(pick)], out)
 
+        # Trace and lower once, here: the device threads then find the program
+        # traced and only compile it for their device (or load it from the cache),
+        # rather than tracing it side by side under the GIL.
+        first = np.minimum(np.arange(size), n_lanes - 1)
+        _run_block.lower(params, v_d[first], y0[first], solver, options)
         blocks = on_devices(task, len(starts), "trajectories", progress, devices=devices,
                             sizes=[min(size, n_lanes - s) for s in starts])
         obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x), *blocks)
