@@ -76,7 +76,7 @@ def block_size(n_lanes: int, n_devices: int) -> int:
 
 
 def expected_cost(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"]) -> np.ndarray:
-    """A proxy of each lane's cost for ordering the lanes of the vmap engine: the
+    """A proxy of each lane's cost, for ordering the lanes of either engine: the
     distance of the initial state from steady sliding. Lanes that start far from it
     (more oscillators excited) stick and slip more, and take more steps."""
     x0 = np.asarray(smoothed_friction_force(params, -np.asarray(params.v_d)))
@@ -101,9 +101,10 @@ def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
     - `engine`: "queue" or "vmap" (`ENGINES`); by default "queue" on a CPU and
         "vmap" on other platforms. The queue keeps no lane waiting: each device
         integrates a block of trajectories one after the other (`block_size`) and
-        takes the next block when done. The vmap engine integrates the lanes of a
-        batch in lockstep (each waits for the slowest), in batches of
-        `batch_size` lanes ordered by `expected_cost`, dealt to the devices.
+        takes the next block when done, the costliest first (`expected_cost`).
+        The vmap engine integrates the lanes of a batch in lockstep (each waits
+        for the slowest), in batches of `batch_size` lanes ordered by
+        `expected_cost`, dealt to the devices.
     - `devices`: the devices to use, all of JAX's default backend by default.
     - `progress`: a tqdm bar over trajectories (queue) or batches (vmap).
 
@@ -130,9 +131,12 @@ def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
     if engine == "queue":
         size = block_size(n_lanes, len(devices))
         starts = range(0, n_lanes, size)
+        # The costliest lanes first (longest processing time first): the short ones
+        # at the end then fill the gaps, and no device is left with a long tail.
+        by_cost = np.argsort(-expected_cost(params, y0), kind="stable")
 
         def task(i, device):
-            pick = np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)
+            pick = by_cost[np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)]
             inputs = jax.device_put((v_d[pick], y0[pick]), device)
             out = _run_block(params, *inputs, solver, options)
             return jax.tree_util.tree_map(lambda x: np.asarray(x)[:len(pick)], out)
@@ -144,8 +148,8 @@ def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
         _run_block.lower(params, v_d[first], y0[first], solver, options)
         blocks = on_devices(task, len(starts), "trajectories", progress, devices=devices,
                             sizes=[min(size, n_lanes - s) for s in starts])
-        obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x), *blocks)
-        return jax.tree_util.tree_map(lambda x: x[:n_lanes], obs)
+        obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x)[:n_lanes], *blocks)
+        return jax.tree_util.tree_map(lambda x: x[np.argsort(by_cost)], obs)
     by_cost = np.argsort(expected_cost(params, y0), kind="stable")
     mesh = Mesh(np.array(devices), ("lanes",))
     parts = []
