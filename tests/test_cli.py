@@ -179,10 +179,15 @@ def test_failed_runs_give_valid_json_with_nulls_and_exit_1(tmp_path, capsys):
 
 @pytest.mark.skipif(SCRIPT is None, reason="the jaxchain console script is not installed")
 def test_installed_command_table_and_usage_error(tmp_path):
-    """The console script as a user runs it, in a fresh process."""
+    """The console script as a user runs it, in a fresh process. It keeps the
+    compiled integration in the persistent compilation cache (JAXCHAIN_CACHE_DIR,
+    off elsewhere in the tests), which holds no host callback."""
+    cache = tmp_path / "cache"
+    env = dict(os.environ, JAXCHAIN_CACHE_DIR=str(cache))
     run = subprocess.run([SCRIPT, "localized", *SMALL, "--out", str(tmp_path)],
-                         capture_output=True, text=True)
+                         capture_output=True, text=True, env=env)
     assert run.returncode == 0, run.stderr
+    assert any(p.name.startswith("jit__run_block") for p in cache.iterdir())
     lines = run.stdout.splitlines()
     assert lines[1].split()[:3] == ["n_excited", "n_HALC", "E"]
     assert len(lines) == 2 + 3 + 1

@@ -20,7 +20,12 @@ def build_parser() -> Parser:
         description="Simulate rings of friction-excited oscillators (eq. (5) of "
                     "'Multiple spatially localized dynamical states in "
                     "friction-excited oscillator chains'). All quantities are "
-                    "dimensionless, eqs. (4)-(6).")
+                    "dimensionless, eqs. (4)-(6).",
+        epilog="Compiled programs are kept between runs in JAX's persistent "
+               "compilation cache, in the folder named by JAXCHAIN_CACHE_DIR (an "
+               "empty value turns it off) or else in the user's cache folder "
+               "(platformdirs.user_cache_dir('jaxchain')/xla). "
+               "JAXCHAIN_TRACEBACK=1 shows a failure's traceback.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     for command in COMMANDS:
         command.add_parser(sub)
