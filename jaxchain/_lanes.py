@@ -75,11 +75,13 @@ def block_size(n_lanes: int, n_devices: int) -> int:
     return max(1, n_lanes // (16 * n_devices))
 
 
-def expected_cost(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"]) -> np.ndarray:
+def expected_cost(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
+                  y0: Float[ArrayLike, "lanes 2 n_osc"]) -> Float[np.ndarray, " lanes"]:
     """A proxy of each lane's cost, for ordering the lanes of either engine: the
-    distance of the initial state from steady sliding. Lanes that start far from it
-    (more oscillators excited) stick and slip more, and take more steps."""
-    x0 = np.asarray(smoothed_friction_force(params, -np.asarray(params.v_d)))
+    distance of its initial state from steady sliding at its belt speed. Lanes that
+    start far from it (more oscillators excited) stick and slip more, and take more
+    steps."""
+    x0 = np.asarray(smoothed_friction_force(params, -np.asarray(v_d)))[:, None]
     y0 = np.asarray(y0)
     return np.sqrt(np.sum((y0[:, 0] - x0) ** 2 + y0[:, 1] ** 2, -1))
 
@@ -133,7 +135,7 @@ def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
         starts = range(0, n_lanes, size)
         # The costliest lanes first (longest processing time first): the short ones
         # at the end then fill the gaps, and no device is left with a long tail.
-        by_cost = np.argsort(-expected_cost(params, y0), kind="stable")
+        by_cost = np.argsort(-expected_cost(params, v_d, y0), kind="stable")
 
         def task(i, device):
             pick = by_cost[np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)]
@@ -150,7 +152,7 @@ def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
                             sizes=[min(size, n_lanes - s) for s in starts])
         obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x)[:n_lanes], *blocks)
         return jax.tree_util.tree_map(lambda x: x[np.argsort(by_cost)], obs)
-    by_cost = np.argsort(expected_cost(params, y0), kind="stable")
+    by_cost = np.argsort(expected_cost(params, v_d, y0), kind="stable")
     mesh = Mesh(np.array(devices), ("lanes",))
     parts = []
     for s in tqdm(range(0, n_lanes, batch_size), desc="batches", disable=not progress,

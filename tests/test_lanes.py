@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 
 import jaxchain as jc
 from helpers import SHORT
-from jaxchain._lanes import _run_block, block_size, lane_order, on_devices, run_lanes
+from jaxchain._lanes import (_run_block, block_size, expected_cost, lane_order, on_devices,
+                             run_lanes)
 from jaxchain._solvers import DEFAULT_SOLVER, SOLVERS
 
 
@@ -80,6 +81,17 @@ def test_compiled_run_holds_no_callback_custom_call_or_scatter():
         assert "while" in ops and "tanh" in ops  # the step loop is there
         # a host callback is a custom call on the CPU
         assert not ops & {"custom-call", "scatter", "send", "recv", "infeed", "outfeed"}, name
+
+
+def test_expected_cost_grows_with_the_excited_block_and_is_zero_at_steady_sliding():
+    p = jc.ChainParams(n_osc=6)
+    v_d = np.array([1.2, 1.5, 1.5, 1.8])
+    y0 = np.stack([np.asarray(jc.steady_sliding(jc.ChainParams(n_osc=6, v_d=v_d[0])))]
+                  + [np.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(6, k))(
+                      jc.ChainParams(n_osc=6, v_d=v))) for k, v in zip((1, 3), v_d[1:3])]
+                  + [np.asarray(jc.steady_sliding(jc.ChainParams(n_osc=6, v_d=v_d[3])))])
+    cost = expected_cost(p, v_d, y0)
+    assert cost[0] == 0 and cost[3] == 0 and 0 < cost[1] < cost[2]
 
 
 @given(st.integers(1, 10**5), st.integers(1, 16))
