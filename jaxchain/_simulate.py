@@ -4,7 +4,6 @@ import contextlib
 import threading
 
 import diffrax
-import equinox
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -103,12 +102,12 @@ def _checks_as_nan():
     equinox reads its `EQX_ON_ERROR` setting at trace time, and it is restored at
     once (under a lock, as devices may trace in parallel threads)."""
     with _checks_lock:
-        before = equinox._errors.EQX_ON_ERROR
-        equinox._errors.EQX_ON_ERROR = "nan"
+        before = eqx._errors.EQX_ON_ERROR
+        eqx._errors.EQX_ON_ERROR = "nan"
         try:
             yield
         finally:
-            equinox._errors.EQX_ON_ERROR = before
+            eqx._errors.EQX_ON_ERROR = before
 
 
 def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
