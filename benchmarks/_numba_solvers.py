@@ -146,6 +146,20 @@ def _observe(y, x_max, x_min):
 
 
 @njit(cache=True)
+def _finish_step(y, y1, err, rtol, atol, tprev, tnext, t1, floor, transient, x_max, x_min):
+    """The end of every step, whatever the method: the scaled error, the
+    controller's decision, and on acceptance y <- y1 and the extrema (if the step
+    started after the transient). Returns (keep, next tprev, next tnext)."""
+    error = _scaled_error(y, y1, err, rtol, atol)
+    keep, tprev_new, tnext_new = _control(tprev, tnext, t1, floor, error)
+    if keep:
+        y[:] = y1
+        if tprev >= transient:
+            _observe(y, x_max, x_min)
+    return keep, tprev_new, tnext_new
+
+
+@njit(cache=True)
 def integrate_ros34pw2(y0, p, starts, ends, transient, rtol, atol, max_steps):
     """ROS34PW2 over jaxchain's chunks. Returns (y_end, num_steps (accepted plus
     rejected), accepted, x_max, x_min at accepted step ends in [transient, end],
@@ -204,18 +218,14 @@ def integrate_ros34pw2(y0, p, starts, ends, transient, rtol, atol, max_steps):
                 y1[k] = a
                 err[k] = e
             _rhs(y1, p, f1, d1, True)
-            error = _scaled_error(y, y1, err, rtol, atol)
-            keep, tprev_new, tnext = _control(tprev, tnext, t1, floor, error)
+            keep, tprev, tnext = _finish_step(y, y1, err, rtol, atol, tprev, tnext, t1,
+                                              floor, transient, x_max, x_min)
             steps += 1
             chunk_steps += 1
             if keep:
                 accepted += 1
-                y[:] = y1
                 f0[:] = f1
                 d0[:] = d1
-                if tprev >= transient:
-                    _observe(y, x_max, x_min)
-            tprev = tprev_new
     return y, steps, accepted, x_max, x_min, 0
 
 
@@ -292,17 +302,13 @@ def integrate_bosh3(y0, p, starts, ends, transient, rtol, atol, max_steps):
             for k in range(m):
                 err[k] = h * (_B3_ERR[0] * k0[k] + _B3_ERR[1] * k1[k] + _B3_ERR[2] * k2[k]
                               + _B3_ERR[3] * k3[k])
-            error = _scaled_error(y, y1, err, rtol, atol)
-            keep, tprev_new, tnext = _control(tprev, tnext, t1, floor, error)
+            keep, tprev, tnext = _finish_step(y, y1, err, rtol, atol, tprev, tnext, t1,
+                                              floor, transient, x_max, x_min)
             steps += 1
             chunk_steps += 1
             if keep:
                 accepted += 1
-                y[:] = y1
                 k0[:] = k3
-                if tprev >= transient:
-                    _observe(y, x_max, x_min)
-            tprev = tprev_new
     return y, steps, accepted, x_max, x_min, 0
 
 
