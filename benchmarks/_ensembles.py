@@ -112,7 +112,8 @@ def compare_sizes(settings: Settings, start: float) -> tuple[list[Row], dict]:
         walls = []
         for _ in range(2):
             t0 = time.perf_counter()
-            obs = run_lanes(params, vd, y0, solver, options, engine="queue")
+            obs = run_lanes(jc.with_parameter(params, "v_d", vd), y0, solver, options,
+                            engine="queue")
             walls.append(time.perf_counter() - t0)
         failed = int(np.sum(np.asarray(obs.status) != 0))
         results.append(dict(size=size, wall_s=walls[1], first_s=walls[0], measured=True,
@@ -126,7 +127,7 @@ def compare_sizes(settings: Settings, start: float) -> tuple[list[Row], dict]:
         if predicted <= settings.big_size_budget_s:
             y0 = _lanes(size, rng)
             t0 = time.perf_counter()
-            obs = run_lanes(params, np.full(size, V_D), y0, solver, options, engine="queue")
+            obs = run_lanes(params, y0, solver, options, engine="queue")
             wall = time.perf_counter() - t0
             results.append(dict(size=size, wall_s=wall, first_s=wall, measured=True,
                                 steps=int(np.sum(obs.num_steps)),

@@ -116,5 +116,12 @@ from ._bifurcation.two_parameter import hopf_vd as hopf_vd  # noqa: E402
 from ._bifurcation.design import DampingDesign as DampingDesign  # noqa: E402
 from ._bifurcation.design import smallest_damping as smallest_damping  # noqa: E402
 from ._work_precision import work_precision as work_precision  # noqa: E402
+from ._sweep.sweep import open_sweep as open_sweep  # noqa: E402
+from ._sweep.sweep import sweep as sweep  # noqa: E402
+from ._sweep.fronts import front_fractions as front_fractions  # noqa: E402
+from ._sweep.fronts import front_ranges as front_ranges  # noqa: E402
+from ._sweep.fronts import propagating_fronts as propagating_fronts  # noqa: E402
+from ._params import parameter_name as parameter_name  # noqa: E402
+from ._plots.sweep import plot_bifurcation_diagram as plot_bifurcation_diagram  # noqa: E402
 from ._plots.crosscheck import plot_crosscheck as plot_crosscheck  # noqa: E402
 from ._plots.work_precision import plot_work_precision as plot_work_precision  # noqa: E402

@@ -61,8 +61,9 @@ def _smoothed(params, v_d, y0, solver, options):
     mid = 0.5 * (options.transient + options.t_end)
     first = dataclasses.replace(options, t_end=mid)
     second = dataclasses.replace(options, t_end=options.t_end - mid, transient=0.0)
-    a = run_lanes(params, v_d, y0, solver, first)
-    b = run_lanes(params, v_d, a.y_final, solver, second)
+    params = with_parameter(params, "v_d", v_d)
+    a = run_lanes(params, y0, solver, first)
+    b = run_lanes(params, a.y_final, solver, second)
     return a, b
 
 

@@ -78,8 +78,8 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     y0 = _initial_states(params, v_d, ics)
     shape = y0.shape[:2]
     lanes_vd = jnp.broadcast_to(v_d[:, None], shape).reshape(-1)
-    obs = run_lanes(params, lanes_vd, y0.reshape(-1, *y0.shape[2:]), solver, options,
-                    engine=engine, progress=progress)
+    obs = run_lanes(with_parameter(params, "v_d", lanes_vd), y0.reshape(-1, *y0.shape[2:]),
+                    solver, options, engine=engine, progress=progress)
     obs = jax.tree_util.tree_map(lambda x: x.reshape(*shape, *x.shape[1:]), obs)
     return to_dataset(obs, params, v_d, ics, solver, options)
 

@@ -9,6 +9,8 @@ waits, masked, for the slowest lane of its batch (44 % of the lane-steps of the
 Fig. 4 scene), and a vmapped loop is too large for XLA to compile into one kernel.
 On a GPU, with one device running thousands of lanes, vmap is the engine."""
 
+import contextlib
+import dataclasses
 import queue
 import threading
 from collections.abc import Callable, Sequence
@@ -24,7 +26,7 @@ from tqdm.auto import tqdm
 
 from ._options import SimulationOptions
 from ._friction import smoothed_friction_force
-from ._params import ChainParams, with_parameter
+from ._params import ChainParams
 from ._simulate import Observables, run
 
 
@@ -35,27 +37,45 @@ from ._simulate import Observables, run
 ENGINES = ("queue", "vmap")
 
 
-def _run_one(params, v_d, y0, solver, options):
-    return run(with_parameter(params, "v_d", v_d), y0, solver, options)
-
-
 @eqx.filter_jit
-def _run_block(params, v_d, y0, solver, options):
+def _run_block(params, y0, solver, options):
     """A block of trajectories, one after the other (`lax.map`): no lane waits for
     another, and the step loop stays one small while loop, which XLA's CPU backend
     compiles into one kernel (see `__init__`)."""
-    return jax.lax.map(lambda a: _run_one(params, a[0], a[1], solver, options), (v_d, y0))
+    return jax.lax.map(lambda a: run(a[0], a[1], solver, options), (params, y0))
 
 
 @eqx.filter_jit
-def _run_vmapped(params, v_d, y0, solver, options, mesh):
-    def local(vd, y):
-        return jax.vmap(lambda a, b: _run_one(params, a, b, solver, options))(vd, y)
+def _run_vmapped(params, y0, solver, options, mesh):
+    def local(p, y):
+        return jax.vmap(lambda a, b: run(a, b, solver, options))(p, y)
 
     # check_vma=False: diffrax's loops carry unsharded initial values (solver state)
     # next to per-device ones, which the varying-axes check rejects.
     return jax.shard_map(local, mesh=mesh, in_specs=P("lanes"), out_specs=P("lanes"),
-                         check_vma=False)(v_d, y0)
+                         check_vma=False)(params, y0)
+
+
+def lane_params(params: ChainParams, n_lanes: int) -> ChainParams:
+    """`params` with every field broadcast to shape (n_lanes,): the parameters of
+    each lane, as `run_lanes` takes them.
+
+    **Raises:**
+
+    `ValueError` when a field's shape does not broadcast to (n_lanes,).
+    """
+    try:
+        return jax.tree_util.tree_map(
+            lambda x: np.broadcast_to(np.asarray(x, dtype=float), (n_lanes,)), params)
+    except ValueError:
+        shapes = {f.name: np.shape(getattr(params, f.name))
+                  for f in dataclasses.fields(params) if f.name != "n_osc"}
+        raise ValueError(f"every parameter must be a scalar or have shape ({n_lanes},) "
+                         f"(one value per lane), got {shapes}") from None
+
+
+def _take(tree, index):
+    return jax.tree_util.tree_map(lambda x: x[index], tree)
 
 
 def lane_order(n_lanes: int, n_devices: int) -> np.ndarray:
@@ -75,29 +95,30 @@ def block_size(n_lanes: int, n_devices: int) -> int:
     return max(1, n_lanes // (16 * n_devices))
 
 
-def expected_cost(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
-                  y0: Float[ArrayLike, "lanes 2 n_osc"]) -> Float[np.ndarray, " lanes"]:
+def expected_cost(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"]
+                  ) -> Float[np.ndarray, " lanes"]:
     """A proxy of each lane's cost, for ordering the lanes of either engine: the
     distance of its initial state from steady sliding at its belt speed. Lanes that
     start far from it (more oscillators excited) stick and slip more, and take more
-    steps."""
-    x0 = np.asarray(smoothed_friction_force(params, -np.asarray(v_d)))[:, None]
+    steps. `params` holds each lane's parameters (`lane_params`)."""
+    x0 = np.asarray(smoothed_friction_force(params, -np.asarray(params.v_d)))[:, None]
     y0 = np.asarray(y0)
     return np.sqrt(np.sum((y0[:, 0] - x0) ** 2 + y0[:, 1] ** 2, -1))
 
 
-def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
-              y0: Float[ArrayLike, "lanes 2 n_osc"], solver: diffrax.AbstractSolver,
-              options: SimulationOptions, *, engine: str | None = None,
-              devices: Sequence | None = None, batch_size: int = 4096,
-              progress: bool = False) -> Observables:
+def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
+              solver: diffrax.AbstractSolver, options: SimulationOptions, *,
+              engine: str | None = None, devices: Sequence | None = None,
+              batch_size: int = 4096, block: int | None = None,
+              progress: bool | tqdm = False) -> Observables:
     """Run `run` (one trajectory of eq. (5)) for each lane, in parallel over the
     devices.
 
     **Arguments:**
 
-    - `params`: chain parameters; its `v_d` is replaced by each lane's.
-    - `v_d`: belt speed of each lane, shape (lanes,), dimensionless.
+    - `params`: chain parameters, each field a scalar (shared by every lane) or of
+        shape (lanes,) (one value per lane: for example
+        `with_parameter(params, "v_d", v_d)` for one belt speed per lane).
     - `y0`: initial state of each lane, shape (lanes, 2, n_osc).
     - `solver`, `options`: as for `simulate`.
     - `engine`: "queue" or "vmap" (`ENGINES`); by default "queue" on a CPU and
@@ -107,8 +128,12 @@ def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
         The vmap engine integrates the lanes of a batch in lockstep (each waits
         for the slowest), in batches of `batch_size` lanes ordered by
         `expected_cost`, dealt to the devices.
-    - `devices`: the devices to use, all of JAX's default backend by default.
-    - `progress`: a tqdm bar over trajectories (queue) or batches (vmap).
+    - `devices`: the devices to use, by default all of this process's devices of
+        JAX's default backend (`jax.local_devices()`).
+    - `block`: trajectories per task of the queue engine, `block_size` by default.
+        Calls with the same block compile the same program.
+    - `progress`: a tqdm bar over trajectories, or a tqdm bar to advance (by the
+        trajectories of each finished task, or of each vmapped batch).
 
     **Returns:**
 
@@ -118,63 +143,80 @@ def run_lanes(params: ChainParams, v_d: Float[ArrayLike, " lanes"],
 
     **Raises:**
 
-    `ValueError` for an unknown engine or an empty list of lanes.
+    `ValueError` for an unknown engine, an empty list of lanes, or parameters
+    whose shape is not () or (lanes,).
     """
-    v_d = np.asarray(v_d, dtype=float)
     y0 = np.asarray(y0, dtype=float)
-    n_lanes = v_d.shape[0]
+    n_lanes = y0.shape[0]
     if n_lanes == 0:
         raise ValueError("run_lanes needs at least one lane, got 0")
-    devices = list(devices or jax.devices())[:n_lanes]
+    params = lane_params(params, n_lanes)
+    devices = list(devices or jax.local_devices())[:n_lanes]
     if engine is None:
         engine = "queue" if devices[0].platform == "cpu" else "vmap"
     if engine not in ENGINES:
         raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
     if engine == "queue":
-        size = block_size(n_lanes, len(devices))
+        size = block or block_size(n_lanes, len(devices))
         starts = range(0, n_lanes, size)
         # The costliest lanes first (longest processing time first): the short ones
         # at the end then fill the gaps, and no device is left with a long tail.
-        by_cost = np.argsort(-expected_cost(params, v_d, y0), kind="stable")
+        by_cost = np.argsort(-expected_cost(params, y0), kind="stable")
 
         def task(i, device):
             pick = by_cost[np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)]
-            inputs = jax.device_put((v_d[pick], y0[pick]), device)
-            out = _run_block(params, *inputs, solver, options)
+            inputs = jax.device_put((_take(params, pick), y0[pick]), device)
+            out = _run_block(*inputs, solver, options)
             return jax.tree_util.tree_map(lambda x: np.asarray(x)[:len(pick)], out)
 
         # Trace and lower once, here: the device threads then find the program
         # traced and only compile it for their device (or load it from the cache),
         # rather than tracing it side by side under the GIL.
         first = np.minimum(np.arange(size), n_lanes - 1)
-        _run_block.lower(params, v_d[first], y0[first], solver, options)
+        _run_block.lower(_take(params, first), y0[first], solver, options)
         blocks = on_devices(task, len(starts), "trajectories", progress, devices=devices,
                             sizes=[min(size, n_lanes - s) for s in starts])
         obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x)[:n_lanes], *blocks)
         return jax.tree_util.tree_map(lambda x: x[np.argsort(by_cost)], obs)
-    by_cost = np.argsort(expected_cost(params, v_d, y0), kind="stable")
+    by_cost = np.argsort(expected_cost(params, y0), kind="stable")
     mesh = Mesh(np.array(devices), ("lanes",))
     parts = []
-    for s in tqdm(range(0, n_lanes, batch_size), desc="batches", disable=not progress,
-                  leave=False):
-        batch = by_cost[s:s + batch_size]
-        order = lane_order(len(batch), len(devices))
-        pick = batch[np.minimum(order, len(batch) - 1)]  # padding repeats a lane
-        out = _run_vmapped(params, v_d[pick], y0[pick], solver, options, mesh)
-        back = np.argsort(order)[:len(batch)]
-        parts.append(jax.tree_util.tree_map(lambda x: np.asarray(x)[back], out))
+    with _bar(progress, n_lanes, "trajectories") as bar:
+        for s in range(0, n_lanes, batch_size):
+            batch = by_cost[s:s + batch_size]
+            order = lane_order(len(batch), len(devices))
+            pick = batch[np.minimum(order, len(batch) - 1)]  # padding repeats a lane
+            out = _run_vmapped(_take(params, pick), y0[pick], solver, options, mesh)
+            back = np.argsort(order)[:len(batch)]
+            parts.append(jax.tree_util.tree_map(lambda x: np.asarray(x)[back], out))
+            bar.update(len(batch))
     obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x), *parts)
     return jax.tree_util.tree_map(lambda x: x[np.argsort(by_cost)], obs)
 
 
-def on_devices(task: Callable, n_tasks: int, desc: str, progress: bool = False, *,
+@contextlib.contextmanager
+def _bar(progress: bool | tqdm, total: int, desc: str):
+    """A new tqdm bar of `total` (hidden unless `progress`), closed at the end; or
+    the bar `progress` itself, left open for its owner."""
+    if isinstance(progress, tqdm):
+        yield progress
+        return
+    bar = tqdm(total=total, desc=desc, disable=not progress, leave=False)
+    try:
+        yield bar
+    finally:
+        bar.close()
+
+
+def on_devices(task: Callable, n_tasks: int, desc: str, progress: bool | tqdm = False, *,
                devices: Sequence | None = None, sizes: Sequence[int] | None = None
                ) -> list:
     """Call `task(i, device)` for i = 0..n_tasks-1, one call at a time per device
-    (all of JAX's default backend, or `devices`), each device taking the next i as
-    soon as it is free (so long and short tasks balance). `task` should put its
-    inputs on `device` (`jax.device_put`) so that its computation runs there. The
-    progress bar counts tasks, or `sizes[i]` for task i.
+    (this process's devices of JAX's default backend, or `devices`), each device
+    taking the next i as soon as it is free (so long and short tasks balance).
+    `task` should put its inputs on `device` (`jax.device_put`) so that its
+    computation runs there. The progress bar (a new one if `progress` is True, or
+    the tqdm bar `progress`) counts tasks, or `sizes[i]` for task i.
 
     **Returns:**
 
@@ -190,7 +232,6 @@ def on_devices(task: Callable, n_tasks: int, desc: str, progress: bool = False, 
     results: list = [None] * n_tasks
     errors: list = []
     sizes = list(sizes) if sizes is not None else [1] * n_tasks
-    bar = tqdm(total=sum(sizes), desc=desc, disable=not progress, leave=False)
     lock = threading.Lock()
 
     def worker(device):
@@ -207,13 +248,13 @@ def on_devices(task: Callable, n_tasks: int, desc: str, progress: bool = False, 
             with lock:
                 bar.update(sizes[i])
 
-    threads = [threading.Thread(target=worker, args=(d,), daemon=True)
-               for d in list(devices or jax.devices())[:max(1, n_tasks)]]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join()
-    bar.close()
+    with _bar(progress, sum(sizes), desc) as bar:
+        threads = [threading.Thread(target=worker, args=(d,), daemon=True)
+                   for d in list(devices or jax.local_devices())[:max(1, n_tasks)]]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
     if errors:
         raise errors[0]
     return results

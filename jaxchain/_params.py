@@ -135,6 +135,45 @@ def parameter_lens(where: Callable | str) -> Callable:
     return _Field(where)
 
 
+def parameter_name(where: Callable | str) -> str:
+    """The name of the one `ChainParams` field that `where` picks: `where` itself
+    when it is a name, or else found by applying the lens to parameters whose
+    fields hold distinct values. A sweep keys and labels its results by this name,
+    never by the lens (two lambdas cannot be compared by content).
+
+    **Arguments:**
+
+    - `where`: a field name such as `"eta_c"`, or a lens such as `lambda p: p.eta_c`.
+
+    **Returns:**
+
+    The field name.
+
+    **Raises:**
+
+    `ValueError` for an unknown name, for n_osc (it sets the shapes: it cannot vary
+    within one compiled run), or for a lens that does not return one field.
+    """
+    names = [f.name for f in dataclasses.fields(ChainParams) if f.name != "n_osc"]
+    if isinstance(where, str):
+        parameter_lens(where)  # raises for an unknown name
+        return where
+    probe = ChainParams(**{name: 0.125 * (i + 1) for i, name in enumerate(names)})
+    try:
+        picked = where(probe)
+    except Exception as err:
+        raise ValueError(f"where must pick one field of ChainParams, got a lens that "
+                         f"raised {type(err).__name__}: {err}") from None
+    if picked is probe.n_osc and isinstance(picked, int):
+        raise ValueError("n_osc cannot be swept: it sets the shapes of a compiled run; "
+                         "run one sweep per n_osc")
+    for name in names:
+        if picked is getattr(probe, name):
+            return name
+    raise ValueError(f"where must pick one field of ChainParams ({', '.join(names)}), "
+                     f"got a lens that returns {picked!r}")
+
+
 def parameter_value(params: ChainParams, where: Callable | str):
     """The value of the parameter `where` (a name or a lens) in `params`."""
     return parameter_lens(where)(params)

@@ -26,6 +26,49 @@ def _package_version() -> str:
         return "unknown"
 
 
+#: Descriptions of the observables, as the `long_name` of their variables.
+LONG_NAMES = {
+    "amplitudes": "half of peak-to-peak of x_n after the transient",
+    "energy": "E = 1/2 sum A_n^2, eq. (9)",
+    "on_halc": ("oscillator on the high-amplitude limit cycle: it sticks, "
+                f"min_slip_speed <= {STICK_BAND:g} eps"),
+    "n_halc_halves": "n_halc over the first and over the second half of the window",
+    "min_slip_speed": "smallest |x_n' - v_d| after the transient",
+}
+
+
+def observables_variables(obs: Observables, lead: tuple[str, ...]) -> dict:
+    """Every field of `obs` as an `xarray.Variable` whose leading dims are `lead`
+    (the batch axes of `obs`), then `osc`, `half` or (`component`, `osc`), with its
+    `long_name` and, for `status`, the meaning of each code."""
+    trailing = {"n_halc_halves": ("half",), "y_initial": ("component", "osc"),
+                "y_final": ("component", "osc")}
+    out = {}
+    for f in dataclasses.fields(obs):
+        value = np.asarray(getattr(obs, f.name))
+        dims = lead + trailing.get(f.name, ("osc",) if value.ndim > len(lead) else ())
+        attrs = {"long_name": LONG_NAMES[f.name]} if f.name in LONG_NAMES else {}
+        if f.name == "status":
+            attrs["flag_meanings"] = " | ".join(f"{i}: {s}" for i, s in enumerate(STATUS))
+        out[f.name] = xr.Variable(dims, value, attrs)
+    return out
+
+
+def run_attributes(params: ChainParams, solver: diffrax.AbstractSolver,
+                   options: SimulationOptions, ics: str, varying: str) -> dict:
+    """The attributes of a Dataset of runs: every field of `params` but `varying`
+    (the parameter along a dim of the Dataset), of `options`, the solver, the
+    initial conditions, the jaxchain version and the paper, as plain numbers and
+    strings (netCDF and zarr keep them)."""
+    attrs = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
+             if f.name != varying}
+    attrs |= {f.name: getattr(options, f.name) for f in dataclasses.fields(options)}
+    attrs |= {"solver": type(solver).__name__, "ics": ics,
+              "jaxchain_version": _package_version(), "paper": PAPER,
+              "units": "dimensionless, eqs. (4)-(6) of the paper"}
+    return {k: (float(v) if not isinstance(v, (str, int)) else v) for k, v in attrs.items()}
+
+
 def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
                ics: AbstractInitialCondition, solver: diffrax.AbstractSolver,
                options: SimulationOptions) -> xr.Dataset:
@@ -38,49 +81,25 @@ def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
 
     **Returns:**
 
-    A Dataset with dims (v_d, ic, osc) and `component` (x, v); `osc` counts 1..N
-    as in the paper. Data variables: amplitudes, on_halc, min_slip_speed, x_max,
-    x_min, v_max (v_d, ic, osc); y_initial, y_final (v_d, ic, component, osc);
-    energy, n_halc, num_steps, status (v_d, ic). When the initial conditions excite oscillators
-    (`OutOfPhaseExcitation`), `n_excited` is a coordinate along `ic`. Attributes:
-    every field of `params` (but v_d), of `options`, the solver, the type of
-    initial condition, the meaning of the status codes, the jaxchain version and
-    the paper.
+    A Dataset with dims (v_d, ic, osc), `half` and `component` (x, v); `osc` counts
+    1..N as in the paper. Data variables: amplitudes, on_halc, min_slip_speed,
+    x_max, x_min, v_max (v_d, ic, osc); n_halc_halves (v_d, ic, half); y_initial,
+    y_final (v_d, ic, component, osc); energy, n_halc, num_steps, status (v_d, ic).
+    When the initial conditions excite oscillators (`OutOfPhaseExcitation`),
+    `n_excited` is a coordinate along `ic`. Attributes: every field of `params`
+    (but v_d), of `options`, the solver, the type of initial condition, the
+    meaning of the status codes, the jaxchain version and the paper.
     """
-    per_osc = ("v_d", "ic", "osc")
-    per_run = ("v_d", "ic")
-    states = ("v_d", "ic", "component", "osc")
-    data = {name: (per_osc, np.asarray(getattr(obs, name)))
-            for name in ("amplitudes", "on_halc", "min_slip_speed", "x_max", "x_min",
-                         "v_max")}
-    data |= {name: (per_run, np.asarray(getattr(obs, name)))
-             for name in ("energy", "n_halc", "num_steps", "status")}
-    data |= {name: (states, np.asarray(getattr(obs, name)))
-             for name in ("y_initial", "y_final")}
-    n_vd, n_ic, n_osc = data["amplitudes"][1].shape
+    data = observables_variables(obs, ("v_d", "ic"))
+    n_vd, n_ic, n_osc = data["amplitudes"].shape
     coords = {"v_d": np.asarray(v_d, dtype=float).reshape(n_vd),
               "ic": np.arange(n_ic), "osc": np.arange(1, n_osc + 1),
               "component": ["x", "v"]}
     if isinstance(ics, OutOfPhaseExcitation):
         excited = np.broadcast_to(np.asarray(ics.excited), (n_ic, n_osc))
         coords["n_excited"] = ("ic", excited.sum(-1))
-    ds = xr.Dataset(data, coords=coords)
-    ds["amplitudes"].attrs["long_name"] = "half of peak-to-peak of x_n after the transient"
-    ds["energy"].attrs["long_name"] = "E = 1/2 sum A_n^2, eq. (9)"
-    ds["on_halc"].attrs["long_name"] = ("oscillator on the high-amplitude limit cycle: "
-                                        f"it sticks, min_slip_speed <= {STICK_BAND:g} eps")
-    ds["min_slip_speed"].attrs["long_name"] = "smallest |x_n' - v_d| after the transient"
-    ds["status"].attrs["flag_meanings"] = " | ".join(
-        f"{i}: {s}" for i, s in enumerate(STATUS))
-    attrs = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
-             if f.name != "v_d"}
-    attrs |= {f.name: getattr(options, f.name) for f in dataclasses.fields(options)}
-    attrs |= {"solver": type(solver).__name__, "ics": type(ics).__name__,
-              "jaxchain_version": _package_version(), "paper": PAPER,
-              "units": "dimensionless, eqs. (4)-(6) of the paper"}
-    ds.attrs = {k: (float(v) if not isinstance(v, (str, int)) else v)
-                for k, v in attrs.items()}
-    return ds
+    attrs = run_attributes(params, solver, options, type(ics).__name__, "v_d")
+    return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
 def save_dataset(ds: xr.Dataset, path: str | Path) -> Path:

@@ -42,6 +42,10 @@ class Observables(eqx.Module):
         sticks, `min_slip_speed` <= 3 eps (`sticks`), shape (n_osc,).
     - `n_halc`: number of oscillators on the HALC, shape ().
     - `min_slip_speed`: smallest |x_n' - v_d| over the samples, shape (n_osc,).
+    - `n_halc_halves`: n_halc over the first and over the second half of the
+        observed window, shape (2,): they differ when stick-slip invades the
+        sliding oscillators, or recedes from them, during the window (a
+        propagating front).
     - `x_max`, `x_min`, `v_max`: extrema of x_n and x_n', shape (n_osc,).
     - `y_initial`, `y_final`: state at t = 0 and at t_end (where the run stopped, if
         it failed), shape (2, n_osc).
@@ -58,6 +62,7 @@ class Observables(eqx.Module):
     energy: Float[Array, "*batch"]
     on_halc: Bool[Array, "*batch n_osc"]
     n_halc: Int[Array, "*batch"]
+    n_halc_halves: Int[Array, "*batch 2"]
     min_slip_speed: Float[Array, "*batch n_osc"]
     x_max: Float[Array, "*batch n_osc"]
     x_min: Float[Array, "*batch n_osc"]
@@ -112,14 +117,16 @@ def _checks_as_nan():
 
 def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
     """Integrate one chunk [t0, t1]; reduce its `n_samples` dense samples (if any)
-    into the running extrema (x_max, x_min, v_max, min_slip_speed) of `carry`."""
+    into the running extrema of `carry`: x_max, x_min, v_max, and the smallest slip
+    speed over the first and over the second half of the observed window."""
     y, solver_state, controller_state, made_jump, extrema, steps, status = carry
     # Once a chunk has failed the rest of the run is skipped (a zero-length solve),
     # so a failed lane does not hold up the others under vmap.
     t1 = jnp.where(status == 0, t1, t0)
     subs = [diffrax.SubSaveAt(t1=True)]
     if n_samples:
-        subs.append(diffrax.SubSaveAt(ts=t0 + (t1 - t0) * jnp.linspace(0.0, 1.0, n_samples)))
+        ts = t0 + (t1 - t0) * jnp.linspace(0.0, 1.0, n_samples)
+        subs.append(diffrax.SubSaveAt(ts=ts))
     with _checks_as_nan():
         sol = diffrax.diffeqsolve(
             terms(solver), solver, t0, t1, None, y, params,
@@ -133,10 +140,14 @@ def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
         )
     if n_samples:
         x, v = sol.ys[1][:, 0], sol.ys[1][:, 1]
-        x_max, x_min, v_max, slip = extrema
+        x_max, x_min, v_max, slip_early, slip_late = extrema
+        late = (ts >= 0.5 * (options.transient + options.t_end))[:, None]
         extrema = (jnp.maximum(x_max, x.max(0)), jnp.minimum(x_min, x.min(0)),
                    jnp.maximum(v_max, v.max(0)),
-                   jnp.minimum(slip, min_slip_speed(v, params.v_d)))
+                   jnp.minimum(slip_early, min_slip_speed(jnp.where(late, jnp.inf, v),
+                                                          params.v_d)),
+                   jnp.minimum(slip_late, min_slip_speed(jnp.where(late, v, jnp.inf),
+                                                         params.v_d)))
     y_end = sol.ys[0][-1]
     code = jnp.where(jnp.all(jnp.isfinite(y_end)), _status_code(sol.result), 3)
     status = jnp.where(status == 0, code, status)
@@ -164,7 +175,7 @@ def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
     n = params.n_osc
     big = jnp.full((n,), jnp.inf)
     status = jnp.where(jnp.all(jnp.isfinite(y0)), 0, 3)
-    carry = (y0, None, None, None, (-big, big, -big, big), jnp.array(0), status)
+    carry = (y0, None, None, None, (-big, big, -big, big, big), jnp.array(0), status)
     for start, length, count, samples in _spans(options):
         # The first chunk runs outside the scan: it creates the solver and controller
         # states that the scan then carries from chunk to chunk.
@@ -183,12 +194,17 @@ def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
 
     y_final, _, _, _, extrema, steps, status = carry
     ok = status == 0
-    x_max, x_min, v_max, slip = (jnp.where(ok, e, jnp.nan) for e in extrema)  # no partial answers
+    # no partial answers
+    x_max, x_min, v_max, slip_early, slip_late = (jnp.where(ok, e, jnp.nan) for e in extrema)
     amplitudes = 0.5 * (x_max - x_min)
+    slip = jnp.minimum(slip_early, slip_late)
     on_halc = sticks(slip, params.eps)  # False where NaN
+    halves = jnp.stack([jnp.sum(sticks(slip_early, params.eps)),
+                        jnp.sum(sticks(slip_late, params.eps))])
     return Observables(
         amplitudes=amplitudes, energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc,
-        n_halc=jnp.where(ok, jnp.sum(on_halc), -1), min_slip_speed=slip, x_max=x_max,
+        n_halc=jnp.where(ok, jnp.sum(on_halc), -1),
+        n_halc_halves=jnp.where(ok, halves, -1), min_slip_speed=slip, x_max=x_max,
         x_min=x_min, v_max=v_max,
         y_initial=y0, y_final=y_final, num_steps=steps, status=status,
     )

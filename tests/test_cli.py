@@ -59,6 +59,15 @@ def test_bad_option_exits_2_with_one_line(argv, says, capsys):
     (["work-precision", "--solvers", "euler"], "--solvers"),
     (["work-precision", "--max-steps", "-3"], "--max-steps"),
     (["boundaries", "--xi", "nan"], "--xi"),
+    (["sweep", "--vd", "1.0:2.0:0"], "--vd"),
+    (["sweep", "--vd", ""], "--vd"),
+    (["sweep", "--vd", "1.2,x"], "--vd"),
+    (["sweep", "--vd", "0,1.5"], "--vd"),
+    (["sweep", "--ics", "eq8,eq9"], "--ics"),
+    (["sweep", "--batch-size", "0"], "--batch-size"),
+    (["sweep", "--transient", "20000"], "--transient"),
+    (["sweep", "--resume", "--overwrite"], "--resume"),
+    (["sweep", "--out", __file__], "--out"),
 ])
 def test_every_command_bad_value_exits_2_with_one_line(argv, says, capsys):
     with pytest.raises(SystemExit) as exc:

@@ -45,7 +45,7 @@ def test_dataset_round_trip_keeps_parameters(tmp_path):
     ds = jc.ensemble(p, [1.5], ics, options=SHORT, progress=False)
     path = jc.save_dataset(ds, tmp_path / "out" / "run.nc")
     back = xr.load_dataset(path)
-    assert dict(back.sizes) == {"v_d": 1, "ic": 3, "osc": 3, "component": 2}
+    assert dict(back.sizes) == {"v_d": 1, "ic": 3, "osc": 3, "half": 2, "component": 2}
     assert back.attrs["eps"] == 2e-2 and back.attrs["n_osc"] == 3
     assert back.attrs["t_end"] == SHORT.t_end
     assert back.attrs["solver"] == type(jc.SOLVERS[jc.DEFAULT_SOLVER]()).__name__

@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 
 import jaxchain as jc
 from helpers import SHORT
-from jaxchain._lanes import (_run_block, block_size, expected_cost, lane_order, on_devices,
-                             run_lanes)
+from jaxchain._lanes import (_run_block, block_size, expected_cost, lane_order, lane_params,
+                             on_devices, run_lanes)
 from jaxchain._solvers import DEFAULT_SOLVER, SOLVERS
 
 
@@ -38,7 +38,7 @@ def test_run_lanes_with_padding_equals_runs_done_one_at_a_time():
     v_d = np.array([1.3, 1.5, 1.7])
     y0 = np.stack([jc.OutOfPhaseExcitation.eq8([True, k > 0])(jc.ChainParams(n_osc=2, v_d=v))
                    for k, v in enumerate(v_d)])
-    obs = run_lanes(p, v_d, y0, SOLVERS[DEFAULT_SOLVER](), SHORT)
+    obs = run_lanes(jc.with_parameter(p, "v_d", v_d), y0, SOLVERS[DEFAULT_SOLVER](), SHORT)
     assert obs.amplitudes.shape == (3, 2)
     for i, v in enumerate(v_d):
         single = jc.simulate(jc.ChainParams(n_osc=2, v_d=v), y0[i], options=SHORT)
@@ -58,9 +58,10 @@ def test_one_device_two_devices_and_both_engines_give_the_same_results():
     y0 = np.stack([jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1 + k % 3))(
         jc.ChainParams(n_osc=3, v_d=v)) for k, v in enumerate(v_d)])
     solver = SOLVERS[DEFAULT_SOLVER]()
-    one = run_lanes(p, v_d, y0, solver, SHORT, engine="queue", devices=jax.devices()[:1])
-    two = run_lanes(p, v_d, y0, solver, SHORT, engine="queue", devices=jax.devices()[:2])
-    vmapped = run_lanes(p, v_d, y0, solver, SHORT, engine="vmap", devices=jax.devices()[:2])
+    p = jc.with_parameter(p, "v_d", v_d)
+    one = run_lanes(p, y0, solver, SHORT, engine="queue", devices=jax.devices()[:1])
+    two = run_lanes(p, y0, solver, SHORT, engine="queue", devices=jax.devices()[:2])
+    vmapped = run_lanes(p, y0, solver, SHORT, engine="vmap", devices=jax.devices()[:2])
     for field in ("amplitudes", "energy", "n_halc", "y_final", "num_steps", "status"):
         assert np.array_equal(getattr(one, field), getattr(two, field)), field
     for field in ("n_halc", "status"):
@@ -76,7 +77,7 @@ def test_compiled_run_holds_no_callback_custom_call_or_scatter():
     p = jc.ChainParams(n_osc=3)
     y0 = np.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1))(p))[None]
     for name in (DEFAULT_SOLVER, "bosh3"):
-        compiled = _run_block.lower(p, np.array([1.5]), y0, SOLVERS[name](), SHORT).compile()
+        compiled = _run_block.lower(lane_params(p, 1), y0, SOLVERS[name](), SHORT).compile()
         ops = set(re.findall(r" ([a-z][a-z0-9-]*)\(", compiled.compiled.as_text()))
         assert "while" in ops and "tanh" in ops  # the step loop is there
         # a host callback is a custom call on the CPU
@@ -90,7 +91,7 @@ def test_expected_cost_grows_with_the_excited_block_and_is_zero_at_steady_slidin
                   + [np.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(6, k))(
                       jc.ChainParams(n_osc=6, v_d=v))) for k, v in zip((1, 3), v_d[1:3])]
                   + [np.asarray(jc.steady_sliding(jc.ChainParams(n_osc=6, v_d=v_d[3])))])
-    cost = expected_cost(p, v_d, y0)
+    cost = expected_cost(lane_params(jc.with_parameter(p, "v_d", v_d), 4), y0)
     assert cost[0] == 0 and cost[3] == 0 and 0 < cost[1] < cost[2]
 
 

@@ -32,3 +32,13 @@ def test_invalid_parameter_raises_value_error_naming_field(field, value):
 def test_invalid_option_raises_value_error_naming_field(kwargs, field):
     with pytest.raises(ValueError, match=f"SimulationOptions.{field}"):
         jc.SimulationOptions(**kwargs)
+
+
+def test_parameter_name_of_a_lens_or_a_name():
+    assert jc.parameter_name(lambda p: p.eta_c) == "eta_c"
+    assert jc.parameter_name(lambda p: p.v_d) == jc.parameter_name("v_d") == "v_d"
+    for bad, says in ((lambda p: p.n_osc, "n_osc cannot be swept"),
+                      (lambda p: 2 * p.xi, "one field"), (lambda p: p.nope, "one field"),
+                      ("nope", "unknown parameter")):
+        with pytest.raises(ValueError, match=says):
+            jc.parameter_name(bad)

@@ -178,3 +178,22 @@ def test_imex_kencarp_matches_an_explicit_solver():
     a = jc.simulate(p, ic, diffrax.Tsit5(), tight).amplitudes
     b = jc.simulate(p, ic, jc.SOLVERS["kencarp4"](), tight).amplitudes
     assert np.allclose(a, b, rtol=1e-5)
+
+
+def test_n_halc_halves_split_the_window_where_scipy_first_sticks():
+    """Below the Hopf point a perturbation of steady sliding grows (rate about
+    (mu'(v_d) - 2 xi) / 2 = 0.018) into the stick-slip cycle. scipy (LSODA at rtol
+    1e-9) finds the first stick (|x' - v_d| <= 3 eps) between the middle and the
+    end of the observed window [300, 600] of `SHORT`: n_HALC is 0 over the first
+    half and 1 over the second. (The perturbation, 1e-4, is well above the
+    tolerance rtol |x| = 5e-6; one below it is not resolved and decays.)"""
+    p = jc.ChainParams(n_osc=1, v_d=1.0)
+    y0 = np.asarray(jc.steady_sliding(p)) + np.array([[1e-4], [0.0]])
+    ref = solve_ivp(reference_rhs(p), (0.0, SHORT.t_end), y0.ravel(), method="LSODA",
+                    rtol=1e-9, atol=1e-11, dense_output=True)
+    ts = np.linspace(SHORT.transient, SHORT.t_end, 60001)
+    first_stick = ts[np.argmax(np.abs(ref.sol(ts)[1] - p.v_d) <= jc.STICK_BAND * p.eps)]
+    middle = 0.5 * (SHORT.transient + SHORT.t_end)
+    assert middle + 20 < first_stick < SHORT.t_end - 20
+    obs = jc.simulate(p, y0, options=SHORT)
+    assert obs.n_halc_halves.tolist() == [0, 1] and int(obs.n_halc) == 1

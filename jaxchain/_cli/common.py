@@ -22,7 +22,7 @@ OPTION_NAMES = {
     "ChainParams.xi": "--xi",
     "SimulationOptions.t_end": "--t-end", "SimulationOptions.transient": "--transient",
     "SimulationOptions.rtol": "--rtol", "SimulationOptions.atol": "--atol",
-    "SimulationOptions.max_steps": "--max-steps",
+    "SimulationOptions.max_steps": "--max-steps", "batch_size": "--batch-size",
     "NonsmoothOptions.rtol": "--ref-rtol", "NonsmoothOptions.atol": "--ref-rtol",
     "NonsmoothOptions.t_end": "--t-end", "NonsmoothOptions.transient": "--transient",
 }
@@ -89,6 +89,11 @@ def add_model_options(p: argparse.ArgumentParser, *, vd: float, n_osc: int) -> N
     g = p.add_argument_group("model (eq. (5) of the paper; other parameters eq. (7))")
     g.add_argument("--vd", type=float, default=vd, metavar="V",
                    help=f"belt speed v_d, dimensionless (default {vd})")
+    add_ring_options(g, n_osc=n_osc)
+
+
+def add_ring_options(g, *, n_osc: int = 20) -> None:
+    """--n-osc and --eps, in the argument group (or parser) `g`."""
     g.add_argument("--n-osc", type=positive_int, default=n_osc, metavar="N",
                    help=f"number of oscillators on the ring (default {n_osc})")
     eps = param_default("eps")

@@ -11,9 +11,9 @@ from .._options import SimulationOptions
 from .._params import ChainParams, with_parameter
 from .._plots.crosscheck import plot_crosscheck
 from .._results import save_dataset
-from .common import (SOLVERS, RunsFailed, UsageError, add_output_options, add_run_options,
-                     comma_list, json_ready, param_default, positive_float, positive_int,
-                     save_figure, show_progress, writable_folder)
+from .common import (SOLVERS, RunsFailed, UsageError, add_output_options, add_ring_options,
+                     add_run_options, comma_list, json_ready, positive_float, save_figure,
+                     show_progress, writable_folder)
 
 HELP = "smoothed model against the non-smooth stick/slip reference"
 DESCRIPTION = f"""\
@@ -50,11 +50,7 @@ def add_parser(sub):
     g.add_argument("--eq10", type=comma_list(int), default=default10, metavar="K,K,...",
                    help="the same for eq. (10) (default "
                         f"{','.join(map(str, default10))}; '' for none)")
-    g.add_argument("--n-osc", type=positive_int, default=20, metavar="N",
-                   help="number of oscillators on the ring (default 20)")
-    eps = param_default("eps")
-    g.add_argument("--eps", type=positive_float, default=eps,
-                   help=f"tanh smoothing of the smoothed model (default {eps:g})")
+    add_ring_options(g)
     add_run_options(p)
     g = p.add_argument_group("reference")
     g.add_argument("--ref-rtol", type=positive_float, default=NonsmoothOptions().rtol,

@@ -1,0 +1,179 @@
+"""`jaxchain sweep`: the bifurcation diagram over belt speeds (Fig. 3(b) of the
+paper), stored batch by batch and resumable."""
+
+import argparse
+import json
+import sys
+import time
+
+import numpy as np
+
+from .._initial import FAMILIES, localized_family
+from .._options import SimulationOptions
+from .._params import ChainParams
+from .._plots.sweep import plot_bifurcation_diagram
+from .._simulate import STATUS
+from .._sweep.fronts import front_fractions, front_ranges
+from .._sweep.sweep import sweep
+from .common import (SOLVERS, RunsFailed, add_output_options, add_ring_options,
+                     add_run_options, json_ready, positive_int, save_figure, show_progress,
+                     writable_folder)
+
+HELP = "bifurcation diagram over belt speeds, stored as it runs (Fig. 3(b))"
+DESCRIPTION = """\
+Reproduce the bifurcation diagram of Fig. 3(b) of the paper: every belt speed of
+--vd x every initial condition of --ics (k = 1..N oscillators excited by eq. (8)
+and/or eq. (10)) is integrated to --t-end, and the energy E of eq. (9) and the
+number of oscillators on the high-amplitude limit cycle (n_HALC) are taken after
+--transient. With no options: v_d = 1.0, 1.05, ..., 2.0, eq. (8), N = 20,
+t_end = 15000, transient = 10000 (420 trajectories, about 5 minutes on 2 CPU
+cores).
+
+The trajectories run in batches of --batch-size over all cores. Each finished
+batch is written to <out>/sweep.zarr (a zarr store, read with
+xarray.open_zarr or jaxchain.open_sweep) before the next starts, so a crash or a
+kill loses at most the batches running; --resume skips the stored ones. The store
+records a hash of every setting: it is never resumed with other settings.
+
+Prints, per belt speed, the distinct states found (n_HALC values) and the
+fraction of initial conditions that make a propagating front: stick-slip invades
+the sliding oscillators or recedes from them (n_HALC differs between the two
+halves of the observed window, or from the number excited). Writes
+<out>/sweep.png: E against v_d coloured by n_HALC, with the ranges of fronts
+shaded (the paper's red dashed lines). A failed trajectory is marked in the store
+and the exit status is 1."""
+
+
+def belt_speeds(text: str) -> list[float]:
+    """An argparse type: a comma-separated list of belt speeds, or START:STOP:NUM
+    (NUM equally spaced values from START to STOP, both included)."""
+    try:
+        if ":" in text:
+            start, stop, num = text.split(":")
+            num = int(num)
+            if num < 1:
+                raise argparse.ArgumentTypeError(f"NUM must be >= 1, got {text!r}")
+            values = np.linspace(float(start), float(stop), num).round(12).tolist()
+        else:
+            values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a list V1,V2,... or START:STOP:NUM, got {text!r}") from None
+    if not values:
+        raise argparse.ArgumentTypeError(f"expected at least one belt speed, got {text!r}")
+    if not all(np.isfinite(v) and v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"belt speeds must be finite and > 0, got {text!r}")
+    return values
+
+
+def families(text: str) -> list[str]:
+    """An argparse type: a comma-separated list of initial-condition families."""
+    names = [v.strip() for v in text.split(",") if v.strip()]
+    unknown = [v for v in names if v not in FAMILIES]
+    if not names or unknown:
+        raise argparse.ArgumentTypeError(
+            f"expected a list of {', '.join(sorted(FAMILIES))}, got {text!r}")
+    return list(dict.fromkeys(names))
+
+
+def add_parser(sub):
+    p = sub.add_parser("sweep", help=HELP, description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    g = p.add_argument_group("grid (eq. (5) of the paper; other parameters eq. (7))")
+    g.add_argument("--vd", type=belt_speeds, default=belt_speeds("1.0:2.0:21"),
+                   metavar="LIST|START:STOP:NUM",
+                   help="belt speeds: V1,V2,... or START:STOP:NUM, both ends included "
+                        "(default 1.0:2.0:21)")
+    g.add_argument("--ics", type=families, default=["eq8"], metavar="eq8,eq10",
+                   help="initial-condition families, each with k = 1..N excited "
+                        "oscillators around oscillator N//2+1 (default eq8)")
+    add_ring_options(g)
+    add_run_options(p)
+    s = p.add_argument_group("storage")
+    s.add_argument("--batch-size", type=positive_int, default=64, metavar="B",
+                   help="trajectories per stored batch (default 64); memory is set by "
+                        "it, never by the grid")
+    s.add_argument("--resume", action="store_true",
+                   help="continue the sweep stored in <out>/sweep.zarr, skipping its "
+                        "finished batches (refused if it was made with other settings)")
+    s.add_argument("--overwrite", action="store_true",
+                   help="delete <out>/sweep.zarr and start again")
+    add_output_options(p)
+    p.set_defaults(run=run)
+    return p
+
+
+def run(args) -> None:
+    params = ChainParams(n_osc=args.n_osc, eps=args.eps)
+    options = SimulationOptions(t_end=args.t_end, transient=args.transient,
+                                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+    if args.resume and args.overwrite:
+        raise ValueError("--resume and --overwrite exclude each other")
+    writable_folder(args.out)
+    ics = {name: localized_family(args.n_osc, name) for name in args.ics}
+    store = args.out / "sweep.zarr"
+
+    start = time.perf_counter()
+    ds = sweep(params, args.vd, ics, SOLVERS[args.solver](), options,
+               batch_size=args.batch_size, store=store, resume=args.resume,
+               overwrite=args.overwrite, progress=show_progress(args)).load()
+    wall = time.perf_counter() - start
+    png = args.out / "sweep.png"
+    save_figure(plot_bifurcation_diagram(ds), png)
+
+    v_d = ds["v_d"].values
+    status = np.array([[STATUS[s].split(":")[0] if s >= 0 else "not run" for s in row]
+                       for row in ds["status"].values])
+    ok = ds["status"].values == 0
+    n_halc = ds["n_halc"].values
+    states = [sorted(set(n_halc[i][ok[i]].tolist())) for i in range(v_d.size)]
+    fractions = front_fractions(ds)
+    share = {kind: fractions.sel(direction=sign).values
+             for kind, sign in (("invading", 1), ("receding", -1))}
+    ranges = {kind: front_ranges(v_d, f > 0) for kind, f in share.items()}
+    summary = (f"sweep: {ds.attrs['batches_done']}/{ds.attrs['batches_total']} batches "
+               f"of {args.batch_size} ({ds.attrs['batches_run']} run now), "
+               f"{n_halc.size} trajectories, {wall:.1f} s; {int((~ok).sum())} failed; "
+               f"fronts invading at v_d in {_ranges_text(ranges['invading'])}, receding "
+               f"at {_ranges_text(ranges['receding'])}; wrote {store} and {png}")
+    if args.json:
+        print(json.dumps(json_ready({
+            "v_d": v_d.tolist(),
+            "family": ds["family"].values.tolist(),
+            "n_excited": ds["n_excited"].values.tolist(),
+            "n_halc": n_halc.tolist(),
+            "energy": ds["energy"].values.tolist(),
+            "status": status.tolist(),
+            "fronts": ds["front"].values.tolist(),
+            "front_ranges": ranges,
+            "front_fraction": {k: f.tolist() for k, f in share.items()},
+            "n_states": [len(s) for s in states],
+            "batches_done": ds.attrs["batches_done"],
+            "batches_total": ds.attrs["batches_total"],
+            "batches_run": ds.attrs["batches_run"],
+            "wall_time_s": wall,
+            "eps": args.eps,
+            "solver": args.solver,
+            "store": str(store),
+            "figure": str(png),
+        }), allow_nan=False))
+        print(summary, file=sys.stderr)
+    else:
+        print(f"N = {args.n_osc}, eps = {args.eps:g}, {args.solver}, ics = "
+              f"{','.join(args.ics)}, t_end = {args.t_end:g}, transient = {args.transient:g}")
+        print(f"{'v_d':>6} {'states':>6} {'invading':>8} {'receding':>8}  n_HALC found")
+        for i, v in enumerate(v_d):
+            print(f"{v:6.3g} {len(states[i]):6d} {share['invading'][i]:8.0%} "
+                  f"{share['receding'][i]:8.0%}  {' '.join(map(str, states[i]))}")
+        print(summary)
+    failed = int((~ok).sum())
+    if failed:
+        kinds = sorted(set(status[~ok].tolist()))
+        raise RunsFailed(f"{failed} of {n_halc.size} trajectories failed "
+                         f"({', '.join(kinds)}); they are marked in the store")
+
+
+def _ranges_text(ranges) -> str:
+    if not ranges:
+        return "none"
+    return ", ".join(f"[{lo:g}, {hi:g}]" for lo, hi in ranges)

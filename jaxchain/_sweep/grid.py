@@ -1,0 +1,126 @@
+"""The grid of a sweep: the values of one parameter x families of initial
+conditions, laid out as one flat list of trajectories and cut into batches."""
+
+import dataclasses
+from collections.abc import Mapping
+
+import equinox as eqx
+import jax
+import numpy as np
+
+from .._initial import AbstractInitialCondition, OutOfPhaseExcitation
+from .._lanes import lane_params
+from .._params import ChainParams, parameter_name, with_parameter
+
+
+@eqx.filter_jit
+def _initial_states(params, ics):
+    """The initial state of each lane, shape (lanes, 2, n_osc): lane i is
+    `ics[i](params[i])`, so that eq. (8) starts from its own steady sliding."""
+    return eqx.filter_vmap(lambda p, ic: ic(p))(params, ics)
+
+
+def _take(tree, index):
+    return jax.tree_util.tree_map(lambda x: x[index] if eqx.is_array(x) else x, tree)
+
+
+def _batch_length(ic: AbstractInitialCondition) -> int:
+    """The number of initial conditions in a batched `ic`: the common leading axis
+    of its array fields."""
+    lengths = {np.shape(x)[0] for x in jax.tree_util.tree_leaves(ic)
+               if eqx.is_array(x) and np.ndim(x) > 0}
+    if len(lengths) != 1:
+        raise ValueError(f"ics: a family must have one leading batch axis on its array "
+                         f"fields, got leading lengths {sorted(lengths)}")
+    return lengths.pop()
+
+
+@dataclasses.dataclass(frozen=True)
+class SweepGrid:
+    """Values of one parameter x initial conditions. Trajectory t of the flat list
+    runs value t // n_ics with initial condition t % n_ics; batch b holds the
+    trajectories [b B, (b + 1) B) for a batch size B.
+
+    **Arguments:**
+
+    - `params`: the chain parameters; the field `name` is replaced by each value.
+    - `name`: the swept field of `ChainParams` (see `parameter_name`).
+    - `values`: its values, shape (n_values,).
+    - `families`: initial conditions by family name, each batched along the
+        leading axis of its array fields (for example `localized_family(N)`).
+
+    **Raises:**
+
+    `ValueError` for an empty or non-finite list of values, a value that
+    `ChainParams` rejects (naming the field), no families, a family without a batch
+    axis, or initial states of the wrong shape.
+    """
+
+    params: ChainParams
+    name: str
+    values: np.ndarray
+    families: Mapping[str, AbstractInitialCondition]
+
+    @classmethod
+    def build(cls, params, where, values, ics) -> "SweepGrid":
+        name = parameter_name(where)
+        values = np.atleast_1d(np.asarray(values, dtype=float))
+        if values.ndim != 1 or values.size == 0:
+            raise ValueError(f"{name}: the sweep needs a 1-d list of at least one value, "
+                             f"got shape {values.shape}")
+        with_parameter(params, name, values)  # validates every value, naming the field
+        families = dict(ics) if isinstance(ics, Mapping) else {type(ics).__name__: ics}
+        if not families:
+            raise ValueError("ics: the sweep needs at least one family of initial "
+                             "conditions")
+        grid = cls(params, name, values, families)
+        for family in families.values():  # shapes checked before anything runs
+            _batch_length(family)
+            _initial_states(lane_params(with_parameter(params, name, values[0]), 1),
+                            _take(family, np.array([0])))
+        return grid
+
+    @property
+    def sizes(self) -> list[int]:
+        return [_batch_length(f) for f in self.families.values()]
+
+    @property
+    def n_ics(self) -> int:
+        return sum(self.sizes)
+
+    @property
+    def n_trajectories(self) -> int:
+        return self.values.size * self.n_ics
+
+    def ic_coords(self) -> dict:
+        """Coordinates along `ic`: `family` (the family's name) and `n_excited` (the
+        number of excited oscillators of an eq. (8)/(10) excitation, -1 for other
+        initial conditions)."""
+        family, excited = [], []
+        for name, ics in self.families.items():
+            n = _batch_length(ics)
+            family += [name] * n
+            if isinstance(ics, OutOfPhaseExcitation):
+                mask = np.broadcast_to(np.asarray(ics.excited), (n, self.params.n_osc))
+                excited += mask.sum(-1).tolist()
+            else:
+                excited += [-1] * n
+        return {"family": ("ic", np.array(family, dtype=object)),
+                "n_excited": ("ic", np.array(excited))}
+
+    def lanes(self, start: int, stop: int) -> tuple[ChainParams, np.ndarray]:
+        """The parameters (every field of shape (lanes,), see `lane_params`) and the
+        initial states, shape (lanes, 2, n_osc), of trajectories [start, stop)."""
+        t = np.arange(start, stop)
+        value, ic = t // self.n_ics, t % self.n_ics
+        params = lane_params(with_parameter(self.params, self.name, self.values[value]),
+                             t.size)
+        y0 = np.empty((t.size, 2, self.params.n_osc))
+        first = 0
+        for family, n in zip(self.families.values(), self.sizes):
+            here = (ic >= first) & (ic < first + n)
+            if here.any():
+                y0[here] = np.asarray(_initial_states(_take(params, here),
+                                                      _take(family, ic[here] - first)))
+            first += n
+        return params, y0

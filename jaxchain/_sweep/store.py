@@ -1,0 +1,132 @@
+"""The zarr store of a sweep: one flat `trajectory` axis cut in chunks of one batch,
+a completion flag per batch, and the key of every setting that made it."""
+
+import json
+import os
+import shutil
+import uuid
+from pathlib import Path
+
+import dask.array as da
+import numpy as np
+import xarray as xr
+
+#: Unwritten entries of a batch that has not finished, as they are read back.
+_MISSING = {"f": np.nan, "i": -1, "u": 0, "b": False}
+
+
+class SweepStore:
+    """A sweep's results at `path` (a zarr store, written with xarray).
+
+    - `create` writes the layout once: every variable along `trajectory` in chunks
+        of one batch, the flags `batch_done` (one chunk per batch), the grid's
+        coordinates, and the attributes `settings_key` and `settings`. It writes
+        to a temporary folder that is renamed into place, so that a store is
+        complete or absent, and two hosts creating it at once make one.
+    - `write` writes a batch into its own chunks (`to_zarr(region=...)`), then
+        flags it done. zarr writes each chunk to a temporary file renamed into
+        place, so a flag is either set or not; a batch whose writing was cut
+        short is unflagged, and is redone.
+
+    **Arguments:**
+
+    - `path`: the store's folder, conventionally `*.zarr`.
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+
+    def exists(self) -> bool:
+        return (self.path / "zarr.json").exists() or (self.path / ".zgroup").exists()
+
+    def settings(self) -> tuple[str, dict]:
+        """The key and the settings (as JSON data) that made the store."""
+        attrs = xr.open_zarr(self.path, consolidated=False).attrs
+        return attrs["settings_key"], json.loads(attrs["settings"])
+
+    def check(self, key: str, settings: str) -> None:
+        """**Raises:** `ValueError`, in one line naming the settings that differ,
+        when the store was made with settings other than those of `key`."""
+        stored_key, stored = self.settings()
+        if stored_key == key:
+            return
+        new = json.loads(settings)
+        differ = sorted(_differences(stored, new)) or ["the format version"]
+        raise ValueError(f"{self.path} holds a sweep made with other settings "
+                         f"({', '.join(differ)} differ): choose another store, or "
+                         "overwrite it")
+
+    def remove(self) -> None:
+        shutil.rmtree(self.path)
+
+    def create(self, batch: xr.Dataset, n_trajectories: int, batch_size: int,
+               coords: dict, attrs: dict) -> None:
+        """Write the layout of a store of `n_trajectories`, taking each variable's
+        trailing shape and dtype from the finished `batch` (dims `trajectory`, ...),
+        unless the store exists already (another host made it). Nothing is
+        computed or held for the whole grid: the variables are lazy dask arrays of
+        which only the metadata is written."""
+        n_batches = -(-n_trajectories // batch_size)
+        data = {}
+        for name, var in batch.data_vars.items():
+            shape = (n_trajectories, *var.shape[1:])
+            data[name] = (var.dims, da.full(shape, _MISSING[var.dtype.kind],
+                                            dtype=var.dtype,
+                                            chunks=(batch_size, *var.shape[1:])),
+                          var.attrs)
+        data["batch_done"] = ("batch", da.zeros(n_batches, dtype=np.uint8, chunks=1))
+        template = xr.Dataset(data, coords=coords, attrs=attrs)
+        partial = self.path.with_name(f"{self.path.name}.{uuid.uuid4().hex}.partial")
+        template.to_zarr(partial, mode="w", compute=False, consolidated=False)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.rename(partial, self.path)
+        except OSError:  # made meanwhile by another host
+            shutil.rmtree(partial, ignore_errors=True)
+            if not self.exists():
+                raise
+
+    def done(self) -> np.ndarray:
+        """Whether each batch has finished, shape (n_batches,)."""
+        return xr.open_zarr(self.path, consolidated=False)["batch_done"].values == 1
+
+    def write(self, index: int, start: int, batch: xr.Dataset) -> None:
+        """Write `batch` (trajectories start, start + 1, ...) into its region, then
+        flag batch `index` done."""
+        region = {"trajectory": slice(start, start + batch.sizes["trajectory"])}
+        batch.to_zarr(self.path, region=region, consolidated=False)
+        flag = xr.Dataset({"batch_done": ("batch", np.ones(1, dtype=np.uint8))})
+        flag.to_zarr(self.path, region={"batch": slice(index, index + 1)},
+                     consolidated=False)
+
+    def open(self) -> xr.Dataset:
+        """The stored Dataset, lazily (dask arrays), with the entries of unfinished
+        batches replaced by NaN, -1 or False."""
+        ds = xr.open_zarr(self.path, consolidated=False)
+        done = ds["batch_done"].values == 1
+        if done.all():
+            return ds
+        per_trajectory = xr.DataArray(np.repeat(done, ds.attrs["batch_size"])
+                                      [:ds.sizes["trajectory"]], dims="trajectory")
+        for name, var in ds.data_vars.items():
+            if "trajectory" in var.dims:
+                ds[name] = var.where(per_trajectory, _MISSING[var.dtype.kind])
+        return ds
+
+
+def _leaves(obj, path: tuple = ()) -> dict:
+    """Settings JSON data as {path: value}; the wrappers "settings" and "fields"
+    (`settings_json`, `canonical`) are left out of the paths."""
+    if not isinstance(obj, dict):
+        return {path: obj}
+    out = {}
+    for k, v in obj.items():
+        out |= _leaves(v, path if k in ("settings", "fields") else (*path, k))
+    return out
+
+
+def _differences(old: dict, new: dict) -> list[str]:
+    """The settings (`params.eps`, `options.t_end`, `ics.eq10`, ...) at which two
+    differ, named to two levels."""
+    old, new = _leaves(old), _leaves(new)
+    return list({".".join(p[:2]) for p in set(old) | set(new) if old.get(p) != new.get(p)})

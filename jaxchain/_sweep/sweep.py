@@ -1,0 +1,201 @@
+"""`sweep`: a grid of parameter values x initial conditions through the engine,
+batch by batch, each batch stored as it finishes; a killed sweep resumes where it
+stopped."""
+
+import dataclasses
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import diffrax
+import jax
+import numpy as np
+import xarray as xr
+from jaxtyping import ArrayLike, Float
+from tqdm.auto import tqdm
+
+from .._initial import AbstractInitialCondition
+from .._lanes import block_size, run_lanes
+from .._options import SimulationOptions
+from .._params import ChainParams
+from .._results import observables_variables, run_attributes
+from .._solvers import DEFAULT_SOLVER, SOLVERS
+from .._store import settings_json, settings_key
+from .fronts import propagating_fronts
+from .grid import SweepGrid
+from .store import SweepStore
+
+#: The kind of result in the key of a sweep's store (`settings_key`).
+KIND = "sweep"
+
+
+def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
+          ics: AbstractInitialCondition | Mapping[str, AbstractInitialCondition],
+          solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
+          options: SimulationOptions = SimulationOptions(), *,
+          where: Callable | str = "v_d", batch_size: int = 64,
+          store: str | Path | None = None, resume: bool = False, overwrite: bool = False,
+          engine: str | None = None, progress: bool = True) -> xr.Dataset:
+    """Run every (value, initial condition) pair of a grid, batch by batch, and
+    write each batch to a zarr store as it finishes: the bifurcation diagram of
+    Fig. 3(b) of the paper when `where` is the belt speed.
+
+    The trajectories are laid out value by value and cut into batches of
+    `batch_size`; each batch runs through `run_lanes` (all cores), so memory is set
+    by the batch size, never by the size of the grid. With a `store`, a finished
+    batch is written into its own zarr chunks and then flagged done; a batch cut
+    short by a crash or a kill is not flagged, and `resume=True` redoes it while
+    skipping every flagged one. The store is keyed by a hash of every setting that
+    determines the result (`settings_key`: the parameters, the swept values, the
+    initial conditions, the solver, the options and the batch size), and is never
+    resumed with other settings.
+
+    Several hosts share one sweep through JAX's distributed runtime: after
+    `jax.distributed.initialize()`, process i of n (`jax.process_index()`,
+    `jax.process_count()`) takes the batches b with b % n == i into the same store
+    on a shared file system, each calling `sweep(..., store=path, resume=True)`.
+    No process waits for another (no collective is needed): each returns what the
+    store holds when its share is done, and `open_sweep(path)` reads the whole
+    sweep once all are. The batches of a process that died stay unflagged; a rerun
+    with `resume=True`, on any number of processes, computes them.
+
+    **Arguments:**
+
+    - `params`: the chain parameters; the field `where` is replaced by each value.
+    - `values`: the values of the swept parameter, shape (n_values,),
+        dimensionless.
+    - `ics`: initial conditions, batched along the leading axis of their array
+        fields (for example `localized_family(N, "eq8")`, or `GivenState(y0)` with
+        y0 of shape (n, 2, N)), or a dict of such families by name, for example
+        `{"eq8": localized_family(N, "eq8"), "eq10": localized_family(N, "eq10")}`.
+        They are evaluated with each value, so that eq. (8) starts from that belt
+        speed's steady sliding.
+    - `solver`, `options`: as for `simulate`.
+    - `where`: the swept parameter: a name (`"v_d"`, `"eta_c"`, `"xi"`, `"eps"`,
+        ...) or a lens such as `lambda p: p.eta_c` (see `parameter_name`).
+    - `batch_size`: trajectories per batch (>= 1): the unit of storing and of
+        resuming.
+    - `store`: a folder for the zarr store (conventionally `*.zarr`), or None to
+        keep the results in memory only.
+    - `resume`: continue the sweep in `store`, skipping its finished batches.
+    - `overwrite`: delete what `store` holds and start again.
+    - `engine`: "queue" or "vmap" (see `run_lanes`).
+    - `progress`: a tqdm bar over the trajectories, with an ETA.
+
+    **Returns:**
+
+    An `xarray.Dataset` with dims (name, ic, osc), where name is the swept field
+    (`v_d` by default): every observable of `simulate` (amplitudes and the other
+    per-oscillator fields (name, ic, osc); energy, n_halc, num_steps, status
+    (name, ic); n_halc_halves (name, ic, half); y_initial, y_final (name, ic,
+    component, osc)) and `front` (`propagating_fronts`). Along `ic`, the
+    coordinates `family` and `n_excited`. Attributes: every parameter and option,
+    the solver, the settings and their key, and `batches_total`, `batches_done`
+    and `batches_run` (by this call). With a store the variables are read from it
+    lazily (dask arrays; `.load()` reads them all).
+
+    **Raises:**
+
+    `ValueError` for a bad value (naming the parameter), an empty grid, initial
+    conditions of the wrong shape, batch_size < 1, an existing store without
+    `resume` or `overwrite`, or a store made with other settings (naming the
+    settings that differ).
+    """
+    grid = SweepGrid.build(params, where, values, ics)
+    if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) \
+            or batch_size < 1:
+        raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+    if resume and overwrite:
+        raise ValueError("resume and overwrite exclude each other")
+    n, name = grid.n_trajectories, grid.name
+    n_batches = -(-n // batch_size)
+    settings = dict(
+        params={f.name: getattr(params, f.name) for f in dataclasses.fields(params)
+                if f.name != name},
+        where=name, values=grid.values, ics=grid.families, solver=solver,
+        options=options, batch_size=batch_size)
+    key, text = settings_key(KIND, **settings), settings_json(KIND, **settings)
+
+    hosts = jax.process_count()
+    if hosts > 1 and store is None:
+        raise ValueError("store: a sweep over several processes needs a shared store")
+    st = SweepStore(store) if store is not None else None
+    done = np.zeros(n_batches, dtype=bool)
+    if st is not None and st.exists():
+        if overwrite:
+            st.remove()
+        elif resume:
+            st.check(key, text)
+            done = st.done()
+        else:
+            raise ValueError(f"store {st.path} exists: resume it or overwrite it")
+    todo = [b for b in range(n_batches) if b % hosts == jax.process_index() and not done[b]]
+
+    coords = {name: grid.values, "ic": np.arange(grid.n_ics), **grid.ic_coords(),
+              "osc": np.arange(1, params.n_osc + 1),
+              "component": np.array(["x", "v"], dtype=object)}
+    attrs = run_attributes(params, solver, options, ",".join(grid.families), name)
+    attrs |= {"swept": name, "batch_size": batch_size, "settings_key": key,
+              "settings": text}
+    block = block_size(batch_size, len(jax.local_devices()))
+    parts = []
+    initial = min(n, int(done.sum()) * batch_size)
+    with tqdm(total=n, initial=initial, desc="sweep", unit="trajectory",
+              disable=not progress, smoothing=0.1) as bar:
+        for b in todo:
+            start, stop = b * batch_size, min(n, (b + 1) * batch_size)
+            lane_params, y0 = grid.lanes(start, stop)
+            obs = run_lanes(lane_params, y0, solver, options, engine=engine, block=block,
+                            progress=bar)
+            batch = xr.Dataset(observables_variables(obs, ("trajectory",)))
+            if st is None:
+                parts.append(batch)
+                continue
+            if not st.exists():
+                st.create(batch, n, batch_size, coords, attrs)
+            st.write(b, start, batch)
+
+    if st is None:
+        flat = xr.concat(parts, "trajectory").assign_coords(coords).assign_attrs(attrs)
+        n_done = n_batches
+    else:
+        flat = st.open()
+        n_done = int(np.sum(flat["batch_done"].values == 1))
+    ds = _on_grid(flat, name, grid.values.size, grid.n_ics)
+    ds.attrs |= {"batches_total": n_batches, "batches_done": n_done,
+                 "batches_run": len(todo), "store": str(st.path) if st else ""}
+    return ds
+
+
+def open_sweep(store: str | Path) -> xr.Dataset:
+    """The sweep stored in `store`, read lazily (dask arrays), as `sweep` returns
+    it. Batches that have not finished read as NaN (floats), -1 (status, n_halc)
+    or False, and `batches_done` < `batches_total`.
+
+    **Raises:**
+
+    `ValueError` when `store` holds no sweep.
+    """
+    st = SweepStore(store)
+    if not st.exists():
+        raise ValueError(f"store {store} holds no sweep")
+    flat = st.open()
+    name = flat.attrs["swept"]
+    ds = _on_grid(flat, name, flat.sizes[name], flat.sizes["ic"])
+    done = flat["batch_done"].values == 1
+    ds.attrs |= {"batches_total": done.size, "batches_done": int(done.sum()),
+                 "store": str(st.path)}
+    return ds
+
+
+def _on_grid(flat: xr.Dataset, name: str, n_values: int, n_ics: int) -> xr.Dataset:
+    """The flat `trajectory` axis of a stored sweep as the grid (name, ic), with
+    the propagating fronts flagged."""
+    data = {}
+    for k, var in flat.data_vars.items():
+        if "trajectory" in var.dims:
+            data[k] = ((name, "ic", *var.dims[1:]),
+                       var.data.reshape(n_values, n_ics, *var.shape[1:]), var.attrs)
+    coords = {c: v for c, v in flat.coords.items() if "trajectory" not in v.dims}
+    ds = xr.Dataset(data, coords=coords, attrs=dict(flat.attrs))
+    ds["front"] = propagating_fronts(ds)
+    return ds

@@ -1,0 +1,201 @@
+"""Sweeps: batches stored as they finish, resumed after a kill without recomputing a
+stored batch, never resumed with other settings; a parameter swept through a lens
+gives the runs made one by one; propagating fronts are flagged."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import jaxchain as jc
+import jaxchain._sweep.sweep as sweep_module
+from helpers import SHORT
+from jaxchain._cli.main import main
+from jaxchain._sweep.store import SweepStore
+
+#: The grid of the kill-and-resume tests: 3 belt speeds x eq. (8) with k = 1..3 on
+#: a ring of 3, in 5 batches of 2. The horizon makes a batch last about a second,
+#: so that the sweep can be killed between two batches.
+N_OSC, VD, BATCH = 3, "1.3:1.7:3", 2
+T_END, TRANSIENT = 12000.0, 11000.0
+CLI = ["sweep", "--n-osc", str(N_OSC), "--vd", VD, "--ics", "eq8", "--t-end", str(T_END),
+       "--transient", str(TRANSIENT), "--batch-size", str(BATCH), "--no-progress"]
+#: What a sweep computes; the bookkeeping (batch flags, counts, store) is left out.
+RESULTS = ["amplitudes", "energy", "n_halc", "n_halc_halves", "min_slip_speed", "x_max",
+           "x_min", "v_max", "y_initial", "y_final", "num_steps", "status", "front"]
+
+
+def _api_sweep(**kw):
+    return jc.sweep(jc.ChainParams(n_osc=N_OSC), np.linspace(1.3, 1.7, 3),
+                    {"eq8": jc.localized_family(N_OSC)},
+                    options=jc.SimulationOptions(t_end=T_END, transient=TRANSIENT),
+                    batch_size=BATCH, progress=False, **kw)
+
+
+@pytest.fixture(scope="module")
+def uninterrupted():
+    """The sweep run in one go, in memory."""
+    return _api_sweep().load()
+
+
+def _chunk_times(store, batches) -> dict:
+    """Modification times of the stored chunks of `batches` (every variable)."""
+    return {p: p.stat().st_mtime_ns for b in batches
+            for p in store.glob(f"*/c/{b}") if p.is_file()}
+
+
+def test_sweep_killed_then_resumed_equals_an_uninterrupted_run(tmp_path, uninterrupted):
+    """A sweep in its own process is killed (SIGKILL) once a batch is stored, then
+    resumed: the result equals the uninterrupted run, and only the batches not
+    stored at the kill are computed again (their count, and the stored chunks of
+    the others left untouched)."""
+    out, store = tmp_path / "out", tmp_path / "out" / "sweep.zarr"
+    env = dict(os.environ, JAXCHAIN_CACHE_DIR=str(tmp_path / "cache"))
+    cmd = [sys.executable, "-m", "jaxchain._cli.main", *CLI, "--out", str(out)]
+    proc = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 300
+    while proc.poll() is None and time.monotonic() < deadline:
+        st = SweepStore(store)
+        if st.exists() and st.done().any():
+            proc.send_signal(signal.SIGKILL)
+            break
+        time.sleep(0.02)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL, proc.stderr.read().decode()
+    done = SweepStore(store).done()
+    total = done.size
+    assert 1 <= done.sum() < total, "killed before the end, after a stored batch"
+    before = _chunk_times(store, np.flatnonzero(done))
+
+    run = subprocess.run([*cmd, "--resume", "--json"], env=env, capture_output=True,
+                         text=True)
+    assert run.returncode == 0, run.stderr
+    res = json.loads(run.stdout)
+    assert res["batches_run"] == total - done.sum()
+    assert res["batches_done"] == res["batches_total"] == total
+    assert _chunk_times(store, np.flatnonzero(done)) == before
+    resumed = jc.open_sweep(store).load()
+    xr.testing.assert_equal(resumed[RESULTS], uninterrupted[RESULTS])
+    assert res["n_halc"] == uninterrupted["n_halc"].values.tolist()
+
+
+def test_a_half_written_batch_is_redone(tmp_path, uninterrupted, monkeypatch):
+    """The process dies while it writes batch 1: some of its variables are in the
+    store, its flag is not. The resumed sweep redoes it (and it alone with the
+    batches after it), and equals the uninterrupted run."""
+    store = tmp_path / "sweep.zarr"
+    write = SweepStore.write
+
+    def dies_in_batch_1(self, index, start, batch):
+        if index == 1:
+            half = list(batch.data_vars)[: len(batch.data_vars) // 2]
+            garbage = batch[half].map(lambda v: v * 0 + 7)
+            garbage.to_zarr(self.path, region={"trajectory": slice(start, start + BATCH)},
+                            consolidated=False)
+            raise KeyboardInterrupt("killed while writing batch 1")
+        write(self, index, start, batch)
+
+    monkeypatch.setattr(SweepStore, "write", dies_in_batch_1)
+    with pytest.raises(KeyboardInterrupt):
+        _api_sweep(store=store)
+    monkeypatch.setattr(SweepStore, "write", write)
+    assert SweepStore(store).done().tolist() == [True, False, False, False, False]
+    partial = jc.open_sweep(store)
+    assert partial.attrs["batches_done"] == 1
+    assert np.all(partial["status"].values.ravel()[BATCH:] == -1)  # not read as valid
+
+    resumed = _api_sweep(store=store, resume=True)
+    assert resumed.attrs["batches_run"] == 4
+    xr.testing.assert_equal(resumed[RESULTS].load(), uninterrupted[RESULTS])
+
+
+def test_a_store_of_other_settings_is_refused_with_status_2(tmp_path, capsys):
+    out = tmp_path / "out"
+    _api_sweep(store=out / "sweep.zarr", overwrite=True)
+    before = _chunk_times(out / "sweep.zarr", range(5))
+    argv = [*CLI, "--eps", "2e-3", "--resume", "--out", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "other settings" in err and "eps" in err
+    assert main([*CLI, "--out", str(out)]) == 2  # exists: neither --resume nor --overwrite
+    assert "exists" in capsys.readouterr().err
+    assert _chunk_times(out / "sweep.zarr", range(5)) == before  # nothing lost
+
+
+def test_sweeping_eta_c_through_a_lens_equals_separate_runs(monkeypatch):
+    """eta_c swept by `where=lambda p: p.eta_c` equals one ensemble per value (the
+    same compiled run per trajectory: equal to the last bit). The engine never gets
+    more trajectories than a batch."""
+    sizes = []
+    run_lanes = sweep_module.run_lanes
+    monkeypatch.setattr(sweep_module, "run_lanes",
+                        lambda p, y0, *a, **k: sizes.append(len(y0)) or run_lanes(p, y0, *a, **k))
+    params, ics = jc.ChainParams(n_osc=3, v_d=1.5), jc.localized_family(3)
+    eta_c = [0.0, 0.01, 0.2]
+    ds = jc.sweep(params, eta_c, ics, options=SHORT, where=lambda p: p.eta_c,
+                  batch_size=4, progress=False)
+    assert max(sizes) <= 4 and sum(sizes) == 9
+    assert ds["n_halc"].dims == ("eta_c", "ic") and ds.attrs["swept"] == "eta_c"
+    for value in eta_c:
+        one = jc.ensemble(jc.with_parameter(params, "eta_c", value), [1.5], ics,
+                          options=SHORT, progress=False).isel(v_d=0)
+        row = ds.sel(eta_c=value)
+        for name in ("amplitudes", "energy", "n_halc", "n_halc_halves", "y_final",
+                     "num_steps"):
+            np.testing.assert_array_equal(row[name].values, one[name].values, name)
+
+
+def _synthetic(n_halc, halves, excited, status=None):
+    n_halc = np.asarray(n_halc)
+    return xr.Dataset(
+        {"n_halc": (("v_d", "ic"), n_halc),
+         "n_halc_halves": (("v_d", "ic", "half"), np.asarray(halves)),
+         "status": (("v_d", "ic"), np.zeros_like(n_halc) if status is None else status)},
+        coords={"v_d": [1.0, 1.5], "n_excited": ("ic", excited)})
+
+
+def test_fronts_follow_their_definition():
+    """Invading: more on the HALC in the second half, or more than excited;
+    receding: fewer; a failed run and an initial condition without n_excited
+    (-1) flag nothing beyond the halves."""
+    ds = _synthetic(n_halc=[[3, 1, 2, 2], [5, 2, 4, 2]],
+                    halves=[[[2, 3], [1, 1], [2, 2], [2, 2]],
+                            [[5, 5], [2, 1], [4, 4], [2, 2]]],
+                    excited=[2, 1, 2, -1], status=[[0, 0, 0, 0], [0, 0, 3, 0]])
+    front = jc.propagating_fronts(ds).values
+    assert front.tolist() == [[1, 0, 0, 0], [1, -1, 0, 0]]
+    assert jc.front_ranges([1.0, 1.5], (front != 0).any(1)) == [(1.0, 1.5)]
+
+
+def test_front_ranges_are_runs_of_consecutive_values():
+    values = np.array([1.2, 1.0, 1.1, 1.3, 1.4, 1.5])
+    flags = np.array([False, True, True, False, True, True])
+    assert jc.front_ranges(values, flags) == [(1.0, 1.1), (1.4, 1.5)]
+    assert jc.front_ranges(values, np.zeros(6, bool)) == []
+
+
+def test_bad_input_names_the_argument(tmp_path):
+    params, ics = jc.ChainParams(n_osc=3), jc.localized_family(3)
+    with pytest.raises(ValueError, match="v_d"):
+        jc.sweep(params, [1.5, -1.0], ics, progress=False)
+    with pytest.raises(ValueError, match="at least one value"):
+        jc.sweep(params, [], ics, progress=False)
+    with pytest.raises(ValueError, match="eta_c"):
+        jc.sweep(params, [-0.1], ics, where="eta_c", progress=False)
+    with pytest.raises(ValueError, match="n_osc cannot be swept"):
+        jc.sweep(params, [4], ics, where=lambda p: p.n_osc, progress=False)
+    with pytest.raises(ValueError, match="batch_size"):
+        jc.sweep(params, [1.5], ics, batch_size=0, progress=False)
+    with pytest.raises(ValueError, match="y0 must have shape"):
+        jc.sweep(params, [1.5], jc.GivenState(np.zeros((2, 2, 4))), progress=False)
+    with pytest.raises(ValueError, match="at least one family"):
+        jc.sweep(params, [1.5], {}, progress=False)
+    with pytest.raises(ValueError, match="holds no sweep"):
+        jc.open_sweep(tmp_path / "nothing.zarr")
