@@ -74,8 +74,9 @@ def lane_params(params: ChainParams, n_lanes: int) -> ChainParams:
                          f"(one value per lane), got {shapes}") from None
 
 
-def _take(tree, index):
-    return jax.tree_util.tree_map(lambda x: x[index], tree)
+def take_lanes(tree, index):
+    """The lanes `index` of every array leaf of `tree` (other leaves as they are)."""
+    return jax.tree_util.tree_map(lambda x: x[index] if eqx.is_array(x) else x, tree)
 
 
 def lane_order(n_lanes: int, n_devices: int) -> np.ndarray:
@@ -165,7 +166,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
 
         def task(i, device):
             pick = by_cost[np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)]
-            inputs = jax.device_put((_take(params, pick), y0[pick]), device)
+            inputs = jax.device_put((take_lanes(params, pick), y0[pick]), device)
             out = _run_block(*inputs, solver, options)
             return jax.tree_util.tree_map(lambda x: np.asarray(x)[:len(pick)], out)
 
@@ -173,7 +174,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
         # traced and only compile it for their device (or load it from the cache),
         # rather than tracing it side by side under the GIL.
         first = np.minimum(np.arange(size), n_lanes - 1)
-        _run_block.lower(_take(params, first), y0[first], solver, options)
+        _run_block.lower(take_lanes(params, first), y0[first], solver, options)
         blocks = on_devices(task, len(starts), "trajectories", progress, devices=devices,
                             sizes=[min(size, n_lanes - s) for s in starts])
         obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x)[:n_lanes], *blocks)
@@ -186,7 +187,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
             batch = by_cost[s:s + batch_size]
             order = lane_order(len(batch), len(devices))
             pick = batch[np.minimum(order, len(batch) - 1)]  # padding repeats a lane
-            out = _run_vmapped(_take(params, pick), y0[pick], solver, options, mesh)
+            out = _run_vmapped(take_lanes(params, pick), y0[pick], solver, options, mesh)
             back = np.argsort(order)[:len(batch)]
             parts.append(jax.tree_util.tree_map(lambda x: np.asarray(x)[back], out))
             bar.update(len(batch))

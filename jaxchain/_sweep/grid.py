@@ -9,7 +9,7 @@ import jax
 import numpy as np
 
 from .._initial import AbstractInitialCondition, OutOfPhaseExcitation
-from .._lanes import lane_params
+from .._lanes import lane_params, take_lanes
 from .._params import ChainParams, parameter_name, with_parameter
 
 
@@ -18,10 +18,6 @@ def _initial_states(params, ics):
     """The initial state of each lane, shape (lanes, 2, n_osc): lane i is
     `ics[i](params[i])`, so that eq. (8) starts from its own steady sliding."""
     return eqx.filter_vmap(lambda p, ic: ic(p))(params, ics)
-
-
-def _take(tree, index):
-    return jax.tree_util.tree_map(lambda x: x[index] if eqx.is_array(x) else x, tree)
 
 
 def _batch_length(ic: AbstractInitialCondition) -> int:
@@ -77,7 +73,7 @@ class SweepGrid:
         for family in families.values():  # shapes checked before anything runs
             _batch_length(family)
             _initial_states(lane_params(with_parameter(params, name, values[0]), 1),
-                            _take(family, np.array([0])))
+                            take_lanes(family, np.array([0])))
         return grid
 
     @property
@@ -120,7 +116,7 @@ class SweepGrid:
         for family, n in zip(self.families.values(), self.sizes):
             here = (ic >= first) & (ic < first + n)
             if here.any():
-                y0[here] = np.asarray(_initial_states(_take(params, here),
-                                                      _take(family, ic[here] - first)))
+                y0[here] = np.asarray(_initial_states(take_lanes(params, here),
+                                                      take_lanes(family, ic[here] - first)))
             first += n
         return params, y0
