@@ -2,29 +2,17 @@
 conditions, vmapped and spread over the devices (`run_lanes`)."""
 
 import diffrax
-import equinox as eqx
 import jax
-import jax.numpy as jnp
+import numpy as np
 import xarray as xr
 from jaxtyping import ArrayLike, Float
 
-from ._initial import AbstractInitialCondition
-from ._lanes import run_lanes
+from ._initial import AbstractInitialCondition, batch_length, initial_states
+from ._lanes import lane_params, run_lanes, take_lanes
 from ._options import SimulationOptions
 from ._params import ChainParams, with_parameter
 from ._results import to_dataset
 from ._solvers import DEFAULT_SOLVER, SOLVERS
-
-
-@eqx.filter_jit
-def _initial_states(params, v_d, ics):
-    """The initial state of every (belt speed, initial condition) pair, shape
-    (n_vd, n_ic, 2, n_osc): eq. (8) starts from each belt speed's steady sliding."""
-    def one(vd, ic):
-        return ic(with_parameter(params, "v_d", vd))
-
-    over_ics = eqx.filter_vmap(one, in_axes=(None, eqx.if_array(0)))
-    return eqx.filter_vmap(over_ics, in_axes=(0, None))(v_d, ics)
 
 
 def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
@@ -67,20 +55,17 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     `ValueError` for belt speeds that are not finite and > 0, initial conditions
     of the wrong shape, or an unknown engine.
     """
-    v_d = jnp.atleast_1d(jnp.asarray(v_d, dtype=float))
-    if v_d.ndim != 1 or not bool(jnp.all(jnp.isfinite(v_d) & (v_d > 0))):
+    v_d = np.atleast_1d(np.asarray(v_d, dtype=float))
+    if v_d.ndim != 1 or not np.all(np.isfinite(v_d) & (v_d > 0)):
         raise ValueError(f"v_d must be a 1-d array of finite belt speeds > 0, got {v_d}")
-    leaves = [x for x in jax.tree_util.tree_leaves(ics) if eqx.is_array(x)]
-    if not leaves:
-        raise ValueError("ics must carry a leading batch axis on its array fields")
-    ics_first = jax.tree_util.tree_map(lambda x: x[0] if eqx.is_array(x) else x, ics)
+    n_ic = batch_length(ics)
+    ics_first = take_lanes(ics, 0)
     ics_first(with_parameter(params, "v_d", v_d[0]))  # shape check, may raise
-    y0 = _initial_states(params, v_d, ics)
-    shape = y0.shape[:2]
-    lanes_vd = jnp.broadcast_to(v_d[:, None], shape).reshape(-1)
-    obs = run_lanes(with_parameter(params, "v_d", lanes_vd), y0.reshape(-1, *y0.shape[2:]),
-                    solver, options, engine=engine, progress=progress)
-    obs = jax.tree_util.tree_map(lambda x: x.reshape(*shape, *x.shape[1:]), obs)
+    lanes_vd, lanes_ic = np.repeat(v_d, n_ic), np.tile(np.arange(n_ic), v_d.size)
+    lanes = lane_params(with_parameter(params, "v_d", lanes_vd), lanes_vd.size)
+    y0 = initial_states(lanes, take_lanes(ics, lanes_ic))
+    obs = run_lanes(lanes, y0, solver, options, engine=engine, progress=progress)
+    obs = jax.tree_util.tree_map(lambda x: x.reshape(v_d.size, n_ic, *x.shape[1:]), obs)
     return to_dataset(obs, params, v_d, ics, solver, options)
 
 

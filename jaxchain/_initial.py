@@ -3,6 +3,7 @@
 import abc
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
@@ -119,6 +120,41 @@ class GivenState(AbstractInitialCondition):
                 f"y0 must have shape (2, {n}) or ({2 * n},), got {self.y0.shape}"
             )
         return jnp.reshape(self.y0, (2, n)).astype(float)
+
+
+def batch_length(ics: AbstractInitialCondition) -> int:
+    """The number of initial conditions in a batched `ics`: the common leading axis
+    of its array fields.
+
+    **Raises:**
+
+    `ValueError` when the array fields have no common leading axis.
+    """
+    lengths = {np.shape(x)[0] for x in jax.tree_util.tree_leaves(ics)
+               if eqx.is_array(x) and np.ndim(x) > 0}
+    if len(lengths) != 1:
+        raise ValueError(f"ics must carry one leading batch axis on its array fields, "
+                         f"got leading lengths {sorted(lengths)}")
+    return lengths.pop()
+
+
+@eqx.filter_jit
+def initial_states(params: ChainParams, ics: AbstractInitialCondition
+                   ) -> Float[Array, "lanes 2 n_osc"]:
+    """The initial state of each lane: lane i is `ics[i](params[i])`, so that
+    eq. (8) starts from that lane's own steady sliding.
+
+    **Arguments:**
+
+    - `params`: every field of shape (lanes,) (`lane_params`).
+    - `ics`: initial conditions batched along the leading axis of their array
+        fields, lanes of them.
+
+    **Returns:**
+
+    The states, shape (lanes, 2, n_osc), dimensionless.
+    """
+    return eqx.filter_vmap(lambda p, ic: ic(p))(params, ics)
 
 
 def localized_family(n_osc: int, family: str = "eq8") -> OutOfPhaseExcitation:

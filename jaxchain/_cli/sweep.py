@@ -26,7 +26,7 @@ Reproduce the bifurcation diagram of Fig. 3(b) of the paper: every belt speed of
 and/or eq. (10)) is integrated to --t-end, and the energy E of eq. (9) and the
 number of oscillators on the high-amplitude limit cycle (n_HALC) are taken after
 --transient. With no options: v_d = 1.0, 1.05, ..., 2.0, eq. (8), N = 20,
-t_end = 15000, transient = 10000 (420 trajectories, about 5 minutes on 2 CPU
+t_end = 15000, transient = 10000 (420 trajectories, about 7 minutes on 2 CPU
 cores).
 
 The trajectories run in batches of --batch-size over all cores. Each finished

@@ -4,31 +4,12 @@ conditions, laid out as one flat list of trajectories and cut into batches."""
 import dataclasses
 from collections.abc import Mapping
 
-import equinox as eqx
-import jax
 import numpy as np
 
-from .._initial import AbstractInitialCondition, OutOfPhaseExcitation
+from .._initial import (AbstractInitialCondition, OutOfPhaseExcitation, batch_length,
+                        initial_states)
 from .._lanes import lane_params, take_lanes
 from .._params import ChainParams, parameter_name, with_parameter
-
-
-@eqx.filter_jit
-def _initial_states(params, ics):
-    """The initial state of each lane, shape (lanes, 2, n_osc): lane i is
-    `ics[i](params[i])`, so that eq. (8) starts from its own steady sliding."""
-    return eqx.filter_vmap(lambda p, ic: ic(p))(params, ics)
-
-
-def _batch_length(ic: AbstractInitialCondition) -> int:
-    """The number of initial conditions in a batched `ic`: the common leading axis
-    of its array fields."""
-    lengths = {np.shape(x)[0] for x in jax.tree_util.tree_leaves(ic)
-               if eqx.is_array(x) and np.ndim(x) > 0}
-    if len(lengths) != 1:
-        raise ValueError(f"ics: a family must have one leading batch axis on its array "
-                         f"fields, got leading lengths {sorted(lengths)}")
-    return lengths.pop()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,14 +52,14 @@ class SweepGrid:
                              "conditions")
         grid = cls(params, name, values, families)
         for family in families.values():  # shapes checked before anything runs
-            _batch_length(family)
-            _initial_states(lane_params(with_parameter(params, name, values[0]), 1),
+            batch_length(family)
+            initial_states(lane_params(with_parameter(params, name, values[0]), 1),
                             take_lanes(family, np.array([0])))
         return grid
 
     @property
     def sizes(self) -> list[int]:
-        return [_batch_length(f) for f in self.families.values()]
+        return [batch_length(f) for f in self.families.values()]
 
     @property
     def n_ics(self) -> int:
@@ -94,7 +75,7 @@ class SweepGrid:
         initial conditions)."""
         family, excited = [], []
         for name, ics in self.families.items():
-            n = _batch_length(ics)
+            n = batch_length(ics)
             family += [name] * n
             if isinstance(ics, OutOfPhaseExcitation):
                 mask = np.broadcast_to(np.asarray(ics.excited), (n, self.params.n_osc))
@@ -116,7 +97,7 @@ class SweepGrid:
         for family, n in zip(self.families.values(), self.sizes):
             here = (ic >= first) & (ic < first + n)
             if here.any():
-                y0[here] = np.asarray(_initial_states(take_lanes(params, here),
+                y0[here] = np.asarray(initial_states(take_lanes(params, here),
                                                       take_lanes(family, ic[here] - first)))
             first += n
         return params, y0
