@@ -138,7 +138,7 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
               "settings": text}
     block = block_size(batch_size, len(jax.local_devices()))
     parts = []
-    initial = min(n, int(done.sum()) * batch_size)
+    initial = sum(min(n, (b + 1) * batch_size) - b * batch_size for b in np.flatnonzero(done))
     with tqdm(total=n, initial=initial, desc="sweep", unit="trajectory",
               disable=not progress, smoothing=0.1) as bar:
         for b in todo:
