@@ -27,7 +27,8 @@ from tqdm.auto import tqdm
 from ._options import SimulationOptions
 from ._friction import smoothed_friction_force
 from ._params import ChainParams
-from ._simulate import Observables, run
+from ._observers.base import AbstractObserver
+from ._simulate import Observables, check_observers, run, run_observers
 
 
 #: How `run_lanes` runs its lanes: "queue" (each device integrates one block of
@@ -37,18 +38,26 @@ from ._simulate import Observables, run
 ENGINES = ("queue", "vmap")
 
 
+def _one(params, y0, solver, options, observers):
+    """One lane: `run` (the `Observables`), or `run_observers` with `observers`."""
+    if observers is None:
+        return run(params, y0, solver, options)
+    return run_observers(params, y0, solver, options, observers)
+
+
 @eqx.filter_jit
-def _run_block(params, y0, solver, options):
+def _run_block(params, y0, solver, options, observers=None):
     """A block of trajectories, one after the other (`lax.map`): no lane waits for
     another, and the step loop stays one small while loop, which XLA's CPU backend
     compiles into one kernel (see `__init__`)."""
-    return jax.lax.map(lambda a: run(a[0], a[1], solver, options), (params, y0))
+    return jax.lax.map(lambda a: _one(a[0], a[1], solver, options, observers),
+                       (params, y0))
 
 
 @eqx.filter_jit
-def _run_vmapped(params, y0, solver, options, mesh):
+def _run_vmapped(params, y0, solver, options, mesh, observers=None):
     def local(p, y):
-        return jax.vmap(lambda a, b: run(a, b, solver, options))(p, y)
+        return jax.vmap(lambda a, b: _one(a, b, solver, options, observers))(p, y)
 
     # check_vma=False: diffrax's loops carry unsharded initial values (solver state)
     # next to per-device ones, which the varying-axes check rejects.
@@ -111,9 +120,11 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
               solver: diffrax.AbstractSolver, options: SimulationOptions, *,
               engine: str | None = None, devices: Sequence | None = None,
               batch_size: int = 4096, block: int | None = None,
-              progress: bool | tqdm = False) -> Observables:
-    """Run `run` (one trajectory of eq. (5)) for each lane, in parallel over the
-    devices.
+              progress: bool | tqdm = False,
+              observers: Sequence[AbstractObserver] | None = None
+              ) -> Observables | dict:
+    """Run one trajectory of eq. (5) for each lane, in parallel over the devices:
+    `run` (its `Observables`), or `run_observers` with the given observers only.
 
     **Arguments:**
 
@@ -135,18 +146,22 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
         Calls with the same block compile the same program.
     - `progress`: a tqdm bar over trajectories, or a tqdm bar to advance (by the
         trajectories of each finished task, or of each vmapped batch).
+    - `observers`: what to observe (`run_observers`); None for the `Observables` of `run`.
 
     **Returns:**
 
-    `Observables` whose fields carry a leading (lanes,) axis, in the order given.
+    `Observables` (or the dict of `run_observers`) whose fields carry a leading (lanes,)
+    axis, in the order given.
     The engines and the device count change nothing in the result: each lane is
     the same compiled integration.
 
     **Raises:**
 
     `ValueError` for an unknown engine, an empty list of lanes, or parameters
-    whose shape is not () or (lanes,).
+    whose shape is not () or (lanes,); see also `check_observers`.
     """
+    if observers is not None:
+        observers = check_observers(observers)
     y0 = np.asarray(y0, dtype=float)
     n_lanes = y0.shape[0]
     if n_lanes == 0:
@@ -167,14 +182,14 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
         def task(i, device):
             pick = by_cost[np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)]
             inputs = jax.device_put((take_lanes(params, pick), y0[pick]), device)
-            out = _run_block(*inputs, solver, options)
+            out = _run_block(*inputs, solver, options, observers)
             return jax.tree_util.tree_map(lambda x: np.asarray(x)[:len(pick)], out)
 
         # Trace and lower once, here: the device threads then find the program
         # traced and only compile it for their device (or load it from the cache),
         # rather than tracing it side by side under the GIL.
         first = np.minimum(np.arange(size), n_lanes - 1)
-        _run_block.lower(take_lanes(params, first), y0[first], solver, options)
+        _run_block.lower(take_lanes(params, first), y0[first], solver, options, observers)
         blocks = on_devices(task, len(starts), "trajectories", progress, devices=devices,
                             sizes=[min(size, n_lanes - s) for s in starts])
         obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x)[:n_lanes], *blocks)
@@ -187,7 +202,8 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
             batch = by_cost[s:s + batch_size]
             order = lane_order(len(batch), len(devices))
             pick = batch[np.minimum(order, len(batch) - 1)]  # padding repeats a lane
-            out = _run_vmapped(take_lanes(params, pick), y0[pick], solver, options, mesh)
+            out = _run_vmapped(take_lanes(params, pick), y0[pick], solver, options, mesh,
+                               observers)
             back = np.argsort(order)[:len(batch)]
             parts.append(jax.tree_util.tree_map(lambda x: np.asarray(x)[back], out))
             bar.update(len(batch))

@@ -2,23 +2,25 @@
 
 import contextlib
 import threading
+from collections.abc import Sequence
 
 import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from ._custom_types import State
 from ._initial import AbstractInitialCondition, GivenState
 from ._model import split_vector_field, vector_field
+from ._observers.base import AbstractObserver, Chunk
+from ._observers.extrema import Extrema
 from ._options import SimulationOptions
 from ._params import ChainParams
 from ._progress import progress_bar, tick
 from ._rosenbrock import Ros34PW2
 from ._solvers import DEFAULT_SOLVER, SOLVERS
-from ._stick import min_slip_speed, sticks
 
 #: Status codes of a trajectory, with what to do about each.
 STATUS = (
@@ -115,21 +117,27 @@ def _checks_as_nan():
             eqx._errors.EQX_ON_ERROR = before
 
 
-def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
-    """Integrate one chunk [t0, t1]; reduce its `n_samples` dense samples (if any)
-    into the running extrema of `carry`: x_max, x_min, v_max, and the smallest slip
-    speed over the first and over the second half of the observed window."""
-    y, solver_state, controller_state, made_jump, extrema, steps, status = carry
+def _advance(terms_, solver, args, options, observers, progress, tangent, carry, t0, t1,
+             n_samples):
+    """Integrate one chunk [t0, t1] and hand it to the observers: its `n_samples`
+    dense samples (if any) and, with a `tangent` (static) carried beside the state,
+    the log of its growth (it is then renormalised)."""
+    y, solver_state, controller_state, made_jump, states, steps, status = carry
     # Once a chunk has failed the rest of the run is skipped (a zero-length solve),
     # so a failed lane does not hold up the others under vmap.
     t1 = jnp.where(status == 0, t1, t0)
     subs = [diffrax.SubSaveAt(t1=True)]
+    ts = None
     if n_samples:
         ts = t0 + (t1 - t0) * jnp.linspace(0.0, 1.0, n_samples)
         subs.append(diffrax.SubSaveAt(ts=ts))
+    if tangent:
+        # The solver state holds f of the state, stale once the tangent is rescaled:
+        # it starts afresh each chunk (one more evaluation of f per chunk).
+        solver_state = None
     with _checks_as_nan():
         sol = diffrax.diffeqsolve(
-            terms(solver), solver, t0, t1, None, y, params,
+            terms_, solver, t0, t1, None, y, args,
             saveat=diffrax.SaveAt(subs=subs, solver_state=True, controller_state=True,
                                   made_jump=True),
             stepsize_controller=diffrax.PIDController(rtol=options.rtol,
@@ -138,23 +146,43 @@ def _advance(params, solver, options, progress, carry, t0, t1, n_samples):
             solver_state=solver_state, controller_state=controller_state,
             made_jump=made_jump,
         )
-    if n_samples:
-        x, v = sol.ys[1][:, 0], sol.ys[1][:, 1]
-        x_max, x_min, v_max, slip_early, slip_late = extrema
-        late = (ts >= 0.5 * (options.transient + options.t_end))[:, None]
-        extrema = (jnp.maximum(x_max, x.max(0)), jnp.minimum(x_min, x.min(0)),
-                   jnp.maximum(v_max, v.max(0)),
-                   jnp.minimum(slip_early, min_slip_speed(jnp.where(late, jnp.inf, v),
-                                                          params.v_d)),
-                   jnp.minimum(slip_late, min_slip_speed(jnp.where(late, v, jnp.inf),
-                                                         params.v_d)))
     y_end = sol.ys[0][-1]
-    code = jnp.where(jnp.all(jnp.isfinite(y_end)), _status_code(sol.result), 3)
+    samples = None if ts is None else sol.ys[1]
+    log_growth = None
+    if tangent:
+        norm = jnp.sqrt(jnp.sum(y_end[1] ** 2))
+        log_growth = jnp.log(norm)
+        y_end = jnp.stack([y_end[0], y_end[1] / norm])
+        samples = None if ts is None else samples[:, 0]
+    chunk = Chunk(t0=t0, t1=t1, ts=ts, ys=samples, log_growth=log_growth)
+    states = tuple(o.update(s, chunk, args, options) for o, s in zip(observers, states))
+    state_end = y_end[0] if tangent else y_end
+    code = jnp.where(jnp.all(jnp.isfinite(state_end)), _status_code(sol.result), 3)
     status = jnp.where(status == 0, code, status)
     if progress:
-        tick(y[0, 0])
-    return (y_end, sol.solver_state, sol.controller_state, sol.made_jump,
-            extrema, steps + sol.stats["num_steps"], status)
+        tick(jnp.ravel(y_end)[0])
+    return (y_end, sol.solver_state, sol.controller_state, sol.made_jump, states,
+            steps + sol.stats["num_steps"], status)
+
+
+def _with_tangent(terms_):
+    """The terms of the state and a tangent vector, stacked on a new leading axis:
+    each `ODETerm` f becomes (f(y), J(y) u) with J u by `jax.jvp` (the variational
+    equation). The state under the Jacobian is held constant
+    (`lax.stop_gradient`): derivatives of the stacked field, as a solver takes
+    them for its implicit or W matrix, then see J on both blocks and not the
+    second derivative of f, which such matrices may leave out. Elementwise solvers
+    (`Ros34PW2`) get their diagonal right on both blocks."""
+    if isinstance(terms_, diffrax.MultiTerm):
+        return diffrax.MultiTerm(*(_with_tangent(t) for t in terms_.terms))
+    vf = terms_.vector_field
+
+    def field(t, yu, args):
+        y, u = yu[0], yu[1]
+        _, ju = jax.jvp(lambda z: vf(t, z, args), (jax.lax.stop_gradient(y),), (u,))
+        return jnp.stack([vf(t, y, args), ju])
+
+    return diffrax.ODETerm(field)
 
 
 def _spans(options: SimulationOptions) -> list[tuple[float, float, int, int]]:
@@ -167,47 +195,126 @@ def _spans(options: SimulationOptions) -> list[tuple[float, float, int, int]]:
     return spans + [(options.transient, len_obs, n_obs, n_samples)]
 
 
-def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
-        options: SimulationOptions, progress: bool = False) -> Observables:
-    """Pure, traceable core of `simulate` for one trajectory: no checks, no
-    exceptions. `ensemble` vmaps it. With `progress` (static), each chunk ticks the
-    active progress bar through a host callback."""
-    n = params.n_osc
-    big = jnp.full((n,), jnp.inf)
+def _no_partial_answers(value, ok):
+    if jnp.issubdtype(value.dtype, jnp.bool_):
+        return value & ok
+    if jnp.issubdtype(value.dtype, jnp.integer):
+        return jnp.where(ok, value, -1)
+    return jnp.where(ok, value, jnp.nan)
+
+
+def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
+              options: SimulationOptions, observers: Sequence[AbstractObserver],
+              progress: bool = False) -> tuple[tuple[dict, ...], PyTree, Array, Array]:
+    """Integrate any ODE in chunks, observing while integrating: the pure,
+    traceable engine under `run` and `observe`, not specific to the chain.
+
+    The run is integrated with `diffrax.diffeqsolve` in chunks (see
+    `SimulationOptions.chunks`), carrying the solver and step-size-controller
+    states across chunks. After each chunk, outside the step loop, every observer
+    gets the chunk's dense samples (every `sample_dt` after `options.transient`)
+    and reduces them into its state of fixed size: memory never grows with
+    `t_end`. If an observer `needs_tangent`, a tangent vector u is integrated
+    beside the state by the variational equation u' = J(y) u (`jax.jvp` of the
+    vector field; `_with_tangent`), under the same error control, and
+    renormalised after each chunk.
+
+    **Arguments:**
+
+    - `terms_`: diffrax terms of the ODE; `args` is passed to them.
+    - `solver`, `options`: the diffrax solver and `SimulationOptions`.
+    - `y0`: the initial state (an array).
+    - `observers`: the observers (`AbstractObserver`).
+    - `progress` (static): tick the active progress bar once per chunk.
+
+    **Returns:**
+
+    (results, y_final, num_steps, status): one dict per observer (NaN, -1 or False
+    where the run failed), the state at t_end (or where it stopped), the steps
+    taken and the status code (`STATUS`).
+    """
     status = jnp.where(jnp.all(jnp.isfinite(y0)), 0, 3)
-    carry = (y0, None, None, None, (-big, big, -big, big, big), jnp.array(0), status)
+    states = tuple(o.init(y0, args, options) for o in observers)
+    lyapunov = [o for o in observers if o.needs_tangent]
+    tangent = bool(lyapunov)
+    y = y0
+    if tangent:
+        y = jnp.stack([y0, lyapunov[0].initial_tangent(y0)])
+        terms_ = _with_tangent(terms_)
+    carry = (y, None, None, None, states, jnp.array(0), status)
     for start, length, count, samples in _spans(options):
         # The first chunk runs outside the scan: it creates the solver and controller
         # states that the scan then carries from chunk to chunk.
         if carry[1] is None:
-            carry = _advance(params, solver, options, progress, carry, start, start + length,
-                             samples)
+            carry = _advance(terms_, solver, args, options, observers, progress, tangent,
+                             carry, start, start + length, samples)
             start, count = start + length, count - 1
         if count:
             t0s = start + length * jnp.arange(count)
 
             def body(c, t0, length=length, samples=samples):
-                return _advance(params, solver, options, progress, c, t0, t0 + length,
-                                samples), None
+                return _advance(terms_, solver, args, options, observers, progress,
+                                tangent, c, t0, t0 + length, samples), None
 
             carry, _ = jax.lax.scan(body, carry, t0s)
-
-    y_final, _, _, _, extrema, steps, status = carry
+    y_final, _, _, _, states, steps, status = carry
+    if tangent:
+        y_final = y_final[0]
     ok = status == 0
-    # no partial answers
-    x_max, x_min, v_max, slip_early, slip_late = (jnp.where(ok, e, jnp.nan) for e in extrema)
-    amplitudes = 0.5 * (x_max - x_min)
-    slip = jnp.minimum(slip_early, slip_late)
-    on_halc = sticks(slip, params.eps)  # False where NaN
-    halves = jnp.stack([jnp.sum(sticks(slip_early, params.eps)),
-                        jnp.sum(sticks(slip_late, params.eps))])
-    return Observables(
-        amplitudes=amplitudes, energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc,
-        n_halc=jnp.where(ok, jnp.sum(on_halc), -1),
-        n_halc_halves=jnp.where(ok, halves, -1), min_slip_speed=slip, x_max=x_max,
-        x_min=x_min, v_max=v_max,
-        y_initial=y0, y_final=y_final, num_steps=steps, status=status,
-    )
+    results = tuple(
+        {k: _no_partial_answers(jnp.asarray(v), ok)
+         for k, v in o.result(s, args, options).items()}
+        for o, s in zip(observers, states))
+    return results, y_final, steps, status
+
+
+def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
+        options: SimulationOptions, progress: bool = False) -> Observables:
+    """Pure, traceable core of `simulate` for one trajectory: the `Extrema` of eq.
+    (5) by `integrate`; no checks, no exceptions. `run_lanes` maps it over lanes.
+    With `progress` (static), each chunk ticks the active progress bar through a
+    host callback."""
+    (extrema,), y_final, steps, status = integrate(
+        terms(solver), solver, y0, params, options, (Extrema(),), progress)
+    return Observables(**extrema, y_initial=y0, y_final=y_final, num_steps=steps,
+                       status=status)
+
+
+def run_observers(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
+                  options: SimulationOptions, observers: Sequence[AbstractObserver],
+                  progress: bool = False) -> dict[str, Array]:
+    """Pure, traceable core of `observe`: one trajectory of eq. (5) with the given
+    observers only; `run_lanes` maps it over lanes.
+
+    **Returns:**
+
+    Every observer's results by name, with `y_initial`, `y_final`, `num_steps` and
+    `status` (see `Observables`).
+    """
+    results, y_final, steps, status = integrate(terms(solver), solver, y0, params,
+                                                options, observers, progress)
+    merged = {"y_initial": y0, "y_final": y_final, "num_steps": steps, "status": status}
+    for r in results:
+        merged |= r
+    return merged
+
+
+def check_observers(observers: Sequence[AbstractObserver]) -> tuple:
+    """`observers` as a tuple, checked.
+
+    **Raises:**
+
+    `TypeError` for an entry that is not an `AbstractObserver`; `ValueError` when
+    two observers give a result of the same name (observe each thing once).
+    """
+    observers = tuple(observers)
+    for o in observers:
+        if not isinstance(o, AbstractObserver):
+            raise TypeError(f"observers must be AbstractObserver instances, got {o!r}")
+    names = [type(o).__name__ for o in observers]
+    if len(set(names)) != len(names):
+        raise ValueError(f"observers must be of distinct kinds, got {names}")
+    return observers
 
 
 def n_ticks(options: SimulationOptions) -> int:
@@ -261,3 +368,42 @@ def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
     if throw and int(obs.status) != 0:
         raise RuntimeError(STATUS[int(obs.status)])
     return obs
+
+
+_observe_jit = eqx.filter_jit(run_observers)
+
+
+def observe(params: ChainParams, y0: AbstractInitialCondition | State,
+            observers: Sequence[AbstractObserver],
+            solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
+            options: SimulationOptions = SimulationOptions(), *, throw: bool = True,
+            progress: bool = False) -> dict[str, Array]:
+    """Integrate eq. (5) of the paper for one trajectory and return what the given
+    observers saw, and nothing else (`integrate`).
+
+    **Arguments:**
+
+    - `params`, `y0`, `solver`, `options`, `throw`, `progress`: as for `simulate`.
+    - `observers`: `Extrema`, `PeakTimes`, `TimeSeries`, `PoincareSection`,
+        `LargestLyapunov`, ... (one of each kind at most).
+
+    **Returns:**
+
+    dict of every observer's results by name (shapes in each observer's
+    docstring), with `y_initial`, `y_final` (2, n_osc), `num_steps` and `status`.
+
+    **Raises:**
+
+    `ValueError` for a state of the wrong shape or observers of the same kind,
+    `TypeError` for an object that is not an observer; `RuntimeError` with advice
+    when the run fails and `throw=True`.
+    """
+    observers = check_observers(observers)
+    if not isinstance(y0, AbstractInitialCondition):
+        y0 = GivenState(y0)
+    y = y0(params)
+    with progress_bar(n_ticks(options), "observe", progress):
+        out = _observe_jit(params, y, solver, options, observers, progress)
+    if throw and int(out["status"]) != 0:
+        raise RuntimeError(STATUS[int(out["status"])])
+    return out

@@ -1,0 +1,156 @@
+"""`jaxchain figure NAME`: one of the paper's scenes (Figs. 4-10), at full size or
+reduced, as a PNG and an xarray Dataset."""
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from .._dynamics.scenes import (PAPER_SOLUTIONS, orbit_diagram_scene, phase_portrait_scene,
+                                time_delay_scene, time_series_scene)
+from .._ensemble import ensemble
+from .._initial import localized_family
+from .._options import SimulationOptions
+from .._params import ChainParams
+from .._plots.dynamics import (plot_orbit_diagram, plot_phase_portraits,
+                               plot_states_and_orbits, plot_time_delays, plot_time_series)
+from .._plots.localized import plot_localized_states
+from .._results import save_dataset
+from .._simulate import STATUS
+from .common import (DEFAULT_SOLVER, DEFAULTS, SOLVERS, RunsFailed, add_output_options,
+                     json_ready, param_default, positive_float, save_figure,
+                     show_progress, writable_folder)
+
+#: Each figure: its belt speed, initial conditions and what it shows.
+FIGURES = {
+    "4": (1.5, "eq8", "localized states: circles of radius proportional to amplitude"),
+    "5": (1.5, "eq8", "time series and phase plot of 2 excited oscillators, t in [0, 300]"),
+    "6": (1.5, "eq8", "time delays against time, solutions 1 2 5 8 9 12 13 19 20"),
+    "7": (1.5, "eq8", "3-D phase plots (x11, x12, x13), t in [1e4, 1.5e4], same solutions"),
+    "8": (1.5, "eq8", "orbit diagram of the 20 solutions, classified"),
+    "9": (1.65, "eq8", "localized states and orbit diagram"),
+    "10": (1.75, "eq10", "localized states and orbit diagram, eq. (10) initial conditions"),
+}
+#: --quick: a ring of 8 over [0, 600], observed over [400, 600] (Fig. 5: [0, 100]),
+#: in chunks of 50 (the Lyapunov exponent's batch means need several).
+QUICK = {"n_osc": 8, "t_end": 600.0, "transient": 400.0, "t_series": 100.0,
+         "chunk_length": 50.0}
+FULL = {"n_osc": 20, "t_end": 15000.0, "transient": 10000.0, "t_series": 300.0,
+        "chunk_length": 250.0}
+#: Figures whose --json lists the classified solutions.
+CLASSIFIED = ("6", "8", "9", "10")
+
+HELP = "one of the paper's scenes, Figs. 4-10, as PNG and Dataset"
+DESCRIPTION = """\
+Run one of the paper's scenes and draw its figure. NAME is the figure number:
+
+""" + "\n".join(f"  {k:>2}  v_d = {v:g}, {ics}: {what}"
+                for k, (v, ics, what) in FIGURES.items()) + """
+
+At full size (the paper's: N = 20, t_end = 15000, the window [10000, 15000]) a
+scene takes minutes (Fig. 8: about 10 minutes on 2 CPU cores). --quick runs a
+ring of 8 over [0, 600], observed over [400, 600], in well under a minute.
+
+Figs. 6, 8, 9 and 10 classify each state as periodic or irregular from two
+independent signals, the spread of its time delays (the paper's criterion) and
+its largest Lyapunov exponent against its stated error; where they disagree the
+state is "undecided". Each scene observes only what it shows.
+
+Writes <out>/figure<NAME>.nc (xarray Dataset with all parameters as attributes)
+and <out>/figure<NAME>.png."""
+
+
+def add_parser(sub):
+    p = sub.add_parser("figure", help=HELP, description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("name", choices=list(FIGURES), metavar="NAME",
+                   help="figure number: " + ", ".join(FIGURES))
+    p.add_argument("--quick", action="store_true",
+                   help="a reduced scene: N = 8, t in [0, 600], window [400, 600]")
+    g = p.add_argument_group("model and integration (other parameters eq. (7))")
+    g.add_argument("--eps", type=positive_float, default=param_default("eps"),
+                   help=f"tanh smoothing velocity (default {param_default('eps'):g})")
+    g.add_argument("--solver", choices=sorted(SOLVERS), default=DEFAULT_SOLVER,
+                   help=f"diffrax solver (default {DEFAULT_SOLVER})")
+    g.add_argument("--rtol", type=positive_float, default=DEFAULTS.rtol,
+                   help=f"relative tolerance (default {DEFAULTS.rtol:g})")
+    g.add_argument("--atol", type=positive_float, default=DEFAULTS.atol,
+                   help=f"absolute tolerance (default {DEFAULTS.atol:g})")
+    add_output_options(p)
+    p.set_defaults(run=run)
+    return p
+
+
+def _scene(name: str, size: dict, params: ChainParams, solver, options, progress):
+    """The Dataset and the figure of scene `name`."""
+    ics = FIGURES[name][1]
+    solutions = [k for k in PAPER_SOLUTIONS if k <= params.n_osc]
+    if name == "4":
+        ds = ensemble(params, [params.v_d.item()], localized_family(params.n_osc, ics),
+                      solver, options, progress=progress)
+        return ds, plot_localized_states(ds)
+    if name == "5":
+        ds = time_series_scene(params, 2, ics, size["t_series"], solver=solver,
+                               progress=progress)
+        return ds, plot_time_series(ds)
+    if name == "6":
+        ds = time_delay_scene(params, solutions, ics, solver, options, progress=progress)
+        return ds, plot_time_delays(ds)
+    if name == "7":
+        ds = phase_portrait_scene(params, solutions, None, ics, solver=solver,
+                                  options=options, progress=progress)
+        return ds, plot_phase_portraits(ds)
+    ds = orbit_diagram_scene(params, None, ics, solver, options, progress=progress)
+    return ds, (plot_orbit_diagram(ds) if name == "8" else plot_states_and_orbits(ds))
+
+
+def run(args) -> None:
+    size = QUICK if args.quick else FULL
+    v_d, ics, _ = FIGURES[args.name]
+    params = ChainParams(n_osc=size["n_osc"], v_d=v_d, eps=args.eps)
+    options = SimulationOptions(t_end=size["t_end"], transient=size["transient"],
+                                rtol=args.rtol, atol=args.atol,
+                                chunk_length=size["chunk_length"])
+    writable_folder(args.out)
+    solver = SOLVERS[args.solver]()
+
+    start = time.perf_counter()
+    ds, fig = _scene(args.name, size, params, solver, options, show_progress(args))
+    wall = time.perf_counter() - start
+    ds.attrs |= {"figure": args.name, "quick": int(args.quick), "wall_time_s": wall}
+    nc = save_dataset(ds, args.out / f"figure{args.name}.nc")
+    png = args.out / f"figure{args.name}.png"
+    save_figure(fig, png)
+
+    status = [STATUS[int(s)].split(":")[0] for s in np.ravel(ds["status"].values)]
+    report = {"figure": args.name, "v_d": v_d, "ics": ics, "n_osc": params.n_osc,
+              "eps": args.eps, "solver": args.solver, "quick": args.quick,
+              "wall_time_s": wall, "dataset": str(nc), "png": str(png)}
+    if args.name in CLASSIFIED:
+        report["solutions"] = [
+            {"n_excited": int(r["solution"]), "n_halc": int(r["n_halc"]),
+             "class": str(r["class"].values), "class_delays": str(r["class_delays"].values),
+             "class_lyapunov": str(r["class_lyapunov"].values),
+             "lyapunov": float(r["lyapunov"]), "lyapunov_error": float(r["lyapunov_error"]),
+             "delay_spread": float(r["delay_spread"]), "status": s}
+            for r, s in zip((ds.isel(solution=i) for i in range(ds.sizes["solution"])),
+                            status)]
+    if args.json:
+        print(json.dumps(json_ready(report), allow_nan=False))
+    else:
+        print(f"Fig. {args.name}{' (quick)' if args.quick else ''}: v_d = {v_d:g}, "
+              f"N = {params.n_osc}, eps = {args.eps:g}, {args.solver}, ics = {ics}")
+        if args.name in CLASSIFIED:
+            print(f"{'excited':>7} {'n_HALC':>6} {'class':>10} {'delays':>9} "
+                  f"{'Lyapunov':>9} {'lambda':>10} {'error':>9} {'spread':>9}")
+            for s in report["solutions"]:
+                print(f"{s['n_excited']:7d} {s['n_halc']:6d} {s['class']:>10} "
+                      f"{s['class_delays']:>9} {s['class_lyapunov']:>9} "
+                      f"{s['lyapunov']:10.2e} {s['lyapunov_error']:9.1e} "
+                      f"{s['delay_spread']:9.2e}")
+        print(f"wall time {wall:.1f} s (compilation included); wrote {nc} and {png}")
+    failed = [s for s in status if s != "ok"]
+    if failed:
+        raise RunsFailed(f"{len(failed)} of {len(status)} trajectories failed "
+                         f"({', '.join(sorted(set(failed)))})")

@@ -1,0 +1,98 @@
+"""Periodic or irregular: each state classified from two independent signals, the
+spread of its time delays and its largest Lyapunov exponent."""
+
+import math
+
+import equinox as eqx
+import numpy as np
+
+from .delays import delay_spread, reference_oscillator, time_delays
+
+#: The classes of a state.
+CLASSES = ("periodic", "irregular", "undecided", "steady sliding", "failed")
+
+
+class ClassTolerances(eqx.Module):
+    """When a state counts as periodic.
+
+    **Arguments:**
+
+    - `delay`: largest delay spread of a periodic state (`delay_spread`),
+        dimensionless time. The peak times are interpolated to about 1e-5 and
+        the solver's tolerances move them by less than 1e-3 (rtol 1e-5), while an
+        irregular state's delays wander by a sizeable part of its period (~6).
+    - `max_period`: longest repetition of the delays, in reference peaks, that
+        still counts as periodic.
+
+    **Raises:**
+
+    `ValueError` for delay <= 0 or max_period < 1.
+    """
+
+    delay: float = 1e-2
+    max_period: int = 8
+
+    def __check_init__(self):
+        if not (math.isfinite(self.delay) and self.delay > 0):
+            raise ValueError(f"ClassTolerances.delay must be a finite number > 0, "
+                             f"got {self.delay!r}")
+        if self.max_period < 1:
+            raise ValueError(f"ClassTolerances.max_period must be >= 1, got "
+                             f"{self.max_period!r}")
+
+
+def lyapunov_class(exponent: float, error: float) -> str:
+    """"irregular" when the largest Lyapunov exponent is positive beyond its stated
+    error (a chaotic state), "periodic" when it is not (a regular one: 0 within
+    the error on a limit cycle or a torus, negative on an equilibrium), and
+    "undecided" when the error is unknown (fewer than two chunks in the window)."""
+    if not math.isfinite(error):
+        return "undecided"
+    return "irregular" if exponent > error else "periodic"
+
+
+def classify(peak_times, on_halc, n_halc: int, status: int, lyapunov: float,
+             lyapunov_error: float, t_from: float,
+             tolerances: ClassTolerances = ClassTolerances()) -> dict:
+    """Classify one state as periodic or irregular from two independent signals.
+
+    - **The time delays** (the paper's criterion, Section 3.3): `delay_spread` of
+        the HALC oscillators' delays to the reference (`reference_oscillator`)
+        and of the reference's own periods, over the peaks after `t_from`.
+    - **The largest Lyapunov exponent** against its stated error
+        (`lyapunov_class`).
+
+    When they agree, that is the class; when they disagree, "undecided" (both
+    verdicts are returned). A chain at rest (n_halc = 0) is "steady sliding"; a
+    failed run, "failed".
+
+    **Arguments:**
+
+    - `peak_times`: shape (n_osc, peaks), all oscillators (`PeakTimes`).
+    - `on_halc`: shape (n_osc,); `n_halc`, `status`: of the run (`Extrema`).
+    - `lyapunov`, `lyapunov_error`: from `LargestLyapunov`.
+    - `t_from`: start of the window for the delays (dimensionless time).
+
+    **Returns:**
+
+    dict with `class`, `class_delays`, `class_lyapunov`, `delay_spread`,
+    `delay_period` (the m of `delay_spread`) and `ref` (0-based).
+    """
+    out = {"class_delays": "failed", "class_lyapunov": "failed",
+           "delay_spread": math.nan, "delay_period": 0, "ref": -1}
+    if status != 0:
+        return out | {"class": "failed"}
+    on_halc = np.asarray(on_halc, dtype=bool)
+    ref = reference_oscillator(on_halc)
+    tau_ref, phi = time_delays(np.asarray(peak_times), ref)
+    others = on_halc.copy()
+    others[ref] = False
+    spread, period = delay_spread(tau_ref, phi[others], t_from, tolerances.max_period)
+    by_delays = "periodic" if spread <= tolerances.delay else "irregular"
+    by_lyapunov = lyapunov_class(lyapunov, lyapunov_error)
+    if n_halc == 0:
+        verdict = "steady sliding"
+    else:
+        verdict = by_delays if by_delays == by_lyapunov else "undecided"
+    return {"class": verdict, "class_delays": by_delays, "class_lyapunov": by_lyapunov,
+            "delay_spread": spread, "delay_period": period, "ref": ref}

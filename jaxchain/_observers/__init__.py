@@ -1,0 +1,1 @@
+"""Observers: what a run keeps of its trajectory, reduced chunk by chunk."""

@@ -1,0 +1,153 @@
+"""Observers and the largest Lyapunov exponent, each against an independent
+reference: a published exponent, analytic exponents of linear systems, the period
+of an orbit found by shooting, scipy, and the memory of a shorter run."""
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import jaxchain as jc
+from helpers import reference_rhs
+from jaxchain._lanes import _run_block, lane_params
+
+
+def lorenz(t, y, args):
+    sigma, rho, beta = 10.0, 28.0, 8.0 / 3.0
+    return jnp.stack([sigma * (y[1] - y[0]), y[0] * (rho - y[2]) - y[1],
+                      y[0] * y[1] - beta * y[2]])
+
+
+@pytest.mark.parametrize("shift", [0.0, 1e-3, -2e-3])
+def test_lorenz_largest_exponent_is_0_9056_within_its_stated_error(shift):
+    """Lorenz-63 at sigma = 10, rho = 28, beta = 8/3: 0.9056 (Sprott, Chaos and Time
+    Series Analysis, 2003). The start is perturbed: the trajectory is chaotic, so
+    each start (and each CPU) gives another finite-time estimate."""
+    options = jc.SimulationOptions(t_end=20000.0, transient=50.0, chunk_length=10.0,
+                                   rtol=1e-8, atol=1e-8, sample_dt=10.0, max_steps=10**5)
+    (res,), _, _, status = jax.jit(lambda y0: jc.integrate(
+        diffrax.ODETerm(lorenz), diffrax.Tsit5(), y0, None, options,
+        (jc.LargestLyapunov(),)))(jnp.array([1.0 + shift, 1.0, 1.0]))
+    assert int(status) == 0
+    error = float(res["lyapunov_error"])
+    assert 0 < error < 0.03
+    assert abs(float(res["lyapunov"]) - 0.9056) < error
+    history = np.asarray(res["lyapunov_history"])
+    assert abs(history[-1] - float(res["lyapunov"])) < 1e-12  # the running estimate ends there
+
+
+def test_damped_linear_chain_has_every_exponent_at_minus_xi():
+    """A ring with friction off: x'' + 2 xi x' + x + eta_c (2x - x_+ - x_-) = 0. Every
+    mode is underdamped, with eigenvalues -xi +- i w_k: the largest exponent is -xi."""
+    xi, eta = 0.05, 0.3
+
+    def ring(t, y, args):
+        x, v = y
+        return jnp.stack([v, -2 * xi * v - x - eta * (2 * x - jnp.roll(x, 1) - jnp.roll(x, -1))])
+
+    options = jc.SimulationOptions(t_end=2000.0, transient=100.0, chunk_length=50.0,
+                                   rtol=1e-8, atol=1e-10, sample_dt=1.0)
+    y0 = jnp.array([[1.0, 0.0, -0.5, 0.2, 0.0], [0.0, 0.3, 0.0, 0.0, -0.1]])
+    (res,), _, _, _ = jax.jit(lambda y: jc.integrate(
+        diffrax.ODETerm(ring), diffrax.Tsit5(), y, None, options,
+        (jc.LargestLyapunov(),)))(y0)
+    assert abs(float(res["lyapunov"]) + xi) < float(res["lyapunov_error"]) < 2e-3
+
+
+@pytest.mark.parametrize("solver", ["ros34pw2", "tsit5"])
+def test_steady_sliding_exponent_is_half_the_effective_damping(solver):
+    """Linearised about steady sliding every mode has the damping 2 xi - mu'(v_d)
+    (DESIGN.md): the largest exponent is -(2 xi - mu'(v_d)) / 2 above the Hopf point."""
+    params = jc.ChainParams(n_osc=3, v_d=1.5)
+    slope = (params.mu_st - params.mu_d) / params.v0 * np.exp(-params.v_d / params.v0)
+    expected = -(2 * params.xi - slope) / 2
+    options = jc.SimulationOptions(t_end=1200.0, transient=200.0, chunk_length=50.0)
+    out = jc.observe(params, jc.steady_sliding(params), [jc.LargestLyapunov()],
+                     jc.SOLVERS[solver](), options)
+    assert abs(float(out["lyapunov"]) - expected) < float(out["lyapunov_error"]) < 2e-3
+
+
+@pytest.fixture(scope="module")
+def stick_slip_orbit():
+    params = jc.ChainParams(n_osc=1, v_d=1.5)
+    return params, jc.periodic_orbit(params, jnp.array([[2.78], [1.5]]), 6.9)
+
+
+def test_stable_stick_slip_cycle_has_exponent_zero_within_its_error(stick_slip_orbit):
+    params, orbit = stick_slip_orbit
+    assert bool(orbit.converged) and bool(orbit.stable)
+    options = jc.SimulationOptions(t_end=3000.0, transient=500.0)
+    out = jc.observe(params, orbit.y0, [jc.LargestLyapunov(n_history=10)], options=options)
+    error = float(out["lyapunov_error"])
+    assert abs(float(out["lyapunov"])) < error < 1e-3
+    # the running estimate settles: its last points agree within the error
+    assert np.ptp(np.asarray(out["lyapunov_history"])[-3:]) < error
+
+
+def test_peak_times_of_a_periodic_orbit_are_spaced_by_its_period(stick_slip_orbit):
+    """And the Poincare section at those peaks is one point, the orbit's peak."""
+    params, orbit = stick_slip_orbit
+    period = float(orbit.period)
+    options = jc.SimulationOptions(t_end=400.0, transient=100.0, rtol=1e-8, atol=1e-10)
+    out = jc.observe(params, orbit.y0, [jc.PeakTimes(), jc.PoincareSection()],
+                     options=options)
+    n = int(out["n_peaks"][0])
+    times = np.asarray(out["peak_times"])[0, :n]
+    assert n == int(out["n_section"]) and abs(n - 300 / period) <= 1
+    assert np.max(np.abs(np.diff(times) - period)) < 1e-5
+    assert abs((times[-1] - times[0]) / (n - 1) - period) < 1e-6
+    section = np.asarray(out["section_states"])[:n, :, 0]
+    assert np.max(np.abs(section[:, 1])) < 1e-6  # x' = 0 on the section
+    assert np.ptp(section[:, 0]) < 1e-6  # one point
+    # shooting's phase condition puts y0 at x' = 0, here a peak (x'' < 0)
+    assert float(jc.vector_field(0.0, orbit.y0, params)[1, 0]) < 0
+    assert abs(section[0, 0] - float(orbit.y0[0, 0])) < 1e-6
+
+
+def test_time_series_match_scipy():
+    params = jc.ChainParams(n_osc=3, v_d=1.5, eps=1e-2)
+    y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 2))(params)
+    options = jc.SimulationOptions(t_end=60.0, transient=10.0, rtol=1e-9, atol=1e-11)
+    out = jc.observe(params, y0, [jc.TimeSeries(oscillators=(0, 2), dt=0.5)],
+                     options=options)
+    t = np.asarray(out["series_t"])
+    assert t[0] == 10.0 and t[-1] == 60.0 and t.size == 101
+    ref = solve_ivp(reference_rhs(params), (0.0, 60.0), np.ravel(y0), method="DOP853",
+                    t_eval=t, rtol=1e-11, atol=1e-12).y.reshape(2, 3, -1)
+    series = np.asarray(out["series"])  # (time, component, series_osc)
+    assert np.max(np.abs(series - np.moveaxis(ref[:, [0, 2]], -1, 0))) < 1e-5
+
+
+def test_memory_and_output_do_not_grow_with_t_end():
+    """Amplitudes only: a run to t_end = 15000 (the paper's window [10000, 15000])
+    keeps the same output and needs the same memory as a run to 1500 (window
+    [1000, 1500]): XLA's buffer assignment of the compiled program, arguments,
+    outputs and temporaries. Both windows are cut in chunks of 250 time units,
+    whose samples are the largest buffer."""
+    p = jc.ChainParams(n_osc=3)
+    y0 = np.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1))(p))[None]
+    sizes, outputs = [], []
+    for t_end in (1500.0, 15000.0):
+        options = jc.SimulationOptions(t_end=t_end, transient=t_end * 2 / 3)
+        args = (lane_params(p, 1), y0, jc.SOLVERS[jc.DEFAULT_SOLVER](), options,
+                (jc.Extrema(),))
+        memory = _run_block.lower(*args).compile().compiled.memory_analysis()
+        sizes.append(memory.argument_size_in_bytes + memory.output_size_in_bytes
+                     + memory.temp_size_in_bytes)
+        out = _run_block(*args)
+        outputs.append(sum(np.asarray(v).nbytes for v in out.values()))
+        assert int(out["status"][0]) == 0
+    assert outputs[0] == outputs[1]
+    assert abs(sizes[1] / sizes[0] - 1) < 0.1
+
+
+def test_observers_are_checked():
+    with pytest.raises(ValueError, match="distinct kinds"):
+        jc.observe(jc.ChainParams(n_osc=2), jnp.zeros((2, 2)), [jc.Extrema(), jc.Extrema()])
+    with pytest.raises(TypeError, match="AbstractObserver"):
+        jc.observe(jc.ChainParams(n_osc=2), jnp.zeros((2, 2)), ["amplitudes"])
+    with pytest.raises(ValueError, match="t_start"):
+        jc.observe(jc.ChainParams(n_osc=2), jnp.zeros((2, 2)), [jc.PeakTimes(t_start=5.0)],
+                   options=jc.SimulationOptions(t_end=100.0, transient=50.0))
