@@ -18,6 +18,9 @@ SMALL = {
     "02_bifurcation_sweep.ipynb":
         ("N_OSC = 4\nVD_START, VD_STOP, N_VD = 1.0, 2.0, 3\nT_END = 400.0\n"
          "TRANSIENT = 200.0\nBATCH_SIZE = 5", "fronts at v_d in"),
+    "03_dynamics_of_localized_states.ipynb":
+        ("N_OSC = 6\nT_END = 600.0\nTRANSIENT = 400.0\nCHUNK = 50.0\nT_SERIES = 60.0",
+         "the two signals agree on"),
 }
 #: A cell that draws: it calls one of jaxchain's plot functions or plt.show().
 PLOTTING = re.compile(r"\bplt\.show\(|\bjc\.plot_\w+\(")
