@@ -130,6 +130,7 @@ from ._simulate import observe as observe  # noqa: E402
 from ._observers.base import AbstractObserver as AbstractObserver  # noqa: E402
 from ._observers.base import Chunk as Chunk  # noqa: E402
 from ._observers.extrema import Extrema as Extrema  # noqa: E402
+from ._observers.energy import Energy as Energy  # noqa: E402
 from ._observers.crossings import PeakTimes as PeakTimes  # noqa: E402
 from ._observers.crossings import PoincareSection as PoincareSection  # noqa: E402
 from ._observers.series import TimeSeries as TimeSeries  # noqa: E402

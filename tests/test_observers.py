@@ -2,6 +2,8 @@
 reference: a published exponent, analytic exponents of linear systems, the period
 of an orbit found by shooting, scipy, and the memory of a shorter run."""
 
+import re
+
 import diffrax
 import jax
 import jax.numpy as jnp
@@ -10,7 +12,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
-from helpers import reference_rhs
+from helpers import SHORT, reference_rhs
 from jaxchain._lanes import _run_block, lane_params
 
 
@@ -151,3 +153,41 @@ def test_observers_are_checked():
     with pytest.raises(ValueError, match="t_start"):
         jc.observe(jc.ChainParams(n_osc=2), jnp.zeros((2, 2)), [jc.PeakTimes(t_start=5.0)],
                    options=jc.SimulationOptions(t_end=100.0, transient=50.0))
+
+
+def test_energy_at_steady_sliding_and_against_scipy():
+    """At steady sliding x_n = mu(v_d), x_n' = 0: the energy is N mu(v_d)^2 / 2. On a
+    stick-slip trajectory, the mean and maximum match scipy's dense solution."""
+    params = jc.ChainParams(n_osc=3, v_d=1.5)
+    options = jc.SimulationOptions(t_end=100.0, transient=50.0)
+    out = jc.observe(params, jc.steady_sliding(params), [jc.Energy()], options=options)
+    mu = float(jc.friction_coefficient(params, params.v_d))
+    assert abs(float(out["energy_mean"]) - 1.5 * mu**2) < 1e-10
+    assert abs(float(out["energy_max"]) - 1.5 * mu**2) < 1e-10
+    params = jc.ChainParams(n_osc=3, v_d=1.5, eps=1e-2)
+    y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 2))(params)
+    options = jc.SimulationOptions(t_end=60.0, transient=10.0, rtol=1e-9, atol=1e-11)
+    out = jc.observe(params, y0, [jc.Energy()], options=options)
+    t = np.linspace(10.0, 60.0, 50001)
+    y = solve_ivp(reference_rhs(params), (0.0, 60.0), np.ravel(y0), method="DOP853",
+                  t_eval=t, rtol=1e-11, atol=1e-12).y.reshape(2, 3, -1)
+    x, v = y
+    energy = 0.5 * np.sum(v**2 + x**2 + 0.01 * (np.roll(x, -1, axis=0) - x) ** 2, axis=0)
+    assert abs(float(out["energy_mean"]) / (np.trapezoid(energy, t) / 50.0) - 1) < 1e-5
+    # the maximum is over the samples (every 0.05: every 50th point here)
+    assert abs(float(out["energy_max"]) / energy[::50].max() - 1) < 1e-6
+
+
+def test_observers_keep_the_compiled_run_free_of_callbacks_and_scatters():
+    """With every observer, the tangent vector included, the optimised program holds
+    no host callback, custom call or scatter (see test_lanes): the observers reduce
+    each chunk with gathers, sorts and selects, outside the step loop."""
+    p = jc.ChainParams(n_osc=3)
+    y0 = np.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1))(p))[None]
+    observers = (jc.Extrema(), jc.Energy(), jc.PeakTimes(), jc.TimeSeries(dt=1.0),
+                 jc.PoincareSection(), jc.LargestLyapunov())
+    compiled = _run_block.lower(lane_params(p, 1), y0, jc.SOLVERS[jc.DEFAULT_SOLVER](),
+                                SHORT, observers).compile()
+    ops = set(re.findall(r" ([a-z][a-z0-9-]*)\(", compiled.compiled.as_text()))
+    assert "while" in ops and "tanh" in ops and "sort" in ops
+    assert not ops & {"custom-call", "scatter", "send", "recv", "infeed", "outfeed"}

@@ -1,5 +1,4 @@
 import diffrax
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -7,7 +6,6 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 from helpers import SHORT, flat, reference_rhs, scipy_slip_arc, scipy_stick_slip_cycle
-from jaxchain._simulate import run
 from jaxchain._stick import min_slip_speed
 
 
@@ -142,19 +140,6 @@ def test_ring_symmetry_rotating_the_initial_condition_rotates_amplitudes():
     b = jc.simulate(p, jc.OutOfPhaseExcitation.eq8(np.roll(mask, 2)), options=tight)
     assert np.max(a) > 1.0 and np.min(a) < 0.5  # a localized state
     assert np.allclose(b.amplitudes, np.roll(a, 2), rtol=1e-7, atol=1e-9)
-
-
-def test_memory_does_not_grow_with_t_end():
-    """The compiled run's scratch memory is the same for t_end = 1000 and 20000;
-    storing the trajectory would make it 20 times larger."""
-    p = jc.ChainParams(n_osc=3)
-    y = jc.steady_sliding(p)
-    sizes = []
-    for t_end in (1000.0, 20000.0):
-        o = jc.SimulationOptions(t_end=t_end, transient=t_end / 2)
-        f = jax.jit(lambda p, y, o=o: run(p, y, diffrax.Tsit5(), o))
-        sizes.append(f.lower(p, y).compile().memory_analysis().temp_size_in_bytes)
-    assert sizes[1] <= 1.01 * sizes[0]
 
 
 def test_failure_raises_with_advice_or_returns_status():
