@@ -49,8 +49,9 @@ Run one of the paper's scenes and draw its figure. NAME is the figure number:
                 for k, (v, ics, what) in FIGURES.items()) + """
 
 At full size (the paper's: N = 20, t_end = 15000, the window [10000, 15000]) a
-scene takes minutes (Fig. 8: about 10 minutes on 2 CPU cores). --quick runs a
-ring of 8 over [0, 600], observed over [400, 600], in well under a minute.
+scene takes up to a few minutes on 2 CPU cores (Fig. 8: about 2 minutes, Fig. 9:
+2.5, Fig. 5: 10 s). --quick runs a ring of 8 over [0, 600], observed over
+[400, 600], in seconds.
 
 Figs. 6, 8, 9 and 10 classify each state as periodic or irregular from two
 independent signals, the spread of its time delays (the paper's criterion) and
