@@ -39,7 +39,8 @@ class AbstractObserver(eqx.Module):
     (boolean) results: no partial answers.
 
     Subclasses set `needs_tangent = True` to have a tangent vector propagated beside
-    the trajectory (`Chunk.log_growth`).
+    the trajectory (`Chunk.log_growth`); they then define `initial_tangent(y0)`,
+    the unit vector it starts from (see `LargestLyapunov`).
     """
 
     needs_tangent: ClassVar[bool] = False
