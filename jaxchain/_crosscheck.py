@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import xarray as xr
 
+from ._checks import as_solver, belt_speeds, check_options, check_params
 from ._initial import FAMILIES, excited_block
 from ._nonsmooth.options import NonsmoothOptions
 from ._nonsmooth.solve import NONSMOOTH_STATUS, run_nonsmooth
@@ -174,8 +175,15 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
 
     `ValueError` for an unknown family, a k outside [1, N] or a bad belt speed.
     """
+    params, solver = check_params(params), as_solver(solver)
+    options = check_options(options)
+    v_d = belt_speeds(v_d)
+    ics = list(ics)
+    if not ics:
+        raise ValueError("ics must list at least one (family, n_excited) pair, got none")
     if reference_options is None:
         reference_options = NonsmoothOptions(t_end=options.t_end, transient=options.transient)
+    check_options(reference_options, NonsmoothOptions, "reference_options")
     if (reference_options.t_end, reference_options.transient) != (options.t_end,
                                                                    options.transient):
         raise ValueError("reference_options must observe the same window as options")

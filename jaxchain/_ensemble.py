@@ -7,6 +7,7 @@ import numpy as np
 import xarray as xr
 from jaxtyping import ArrayLike, Float
 
+from ._checks import as_solver, belt_speeds, check_options, check_params
 from ._initial import AbstractInitialCondition, batch_length, initial_states
 from ._lanes import lane_params, run_lanes, take_lanes
 from ._options import SimulationOptions
@@ -52,13 +53,19 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
 
     **Raises:**
 
-    `ValueError` for belt speeds that are not finite and > 0, initial conditions
-    of the wrong shape, or an unknown engine.
+    `ValueError` for an empty list of belt speeds or of initial conditions, belt
+    speeds that are not finite and > 0, initial conditions of the wrong shape, an
+    unknown solver name or engine; `TypeError` for arguments of the wrong type.
     """
-    v_d = np.atleast_1d(np.asarray(v_d, dtype=float))
-    if v_d.ndim != 1 or not np.all(np.isfinite(v_d) & (v_d > 0)):
-        raise ValueError(f"v_d must be a 1-d array of finite belt speeds > 0, got {v_d}")
+    params, solver = check_params(params), as_solver(solver)
+    options = check_options(options)
+    v_d = belt_speeds(v_d)
+    if not isinstance(ics, AbstractInitialCondition):
+        raise TypeError(f"ics must be initial conditions (jaxchain.localized_family, "
+                        f"GivenState, ...), got {type(ics).__name__}")
     n_ic = batch_length(ics)
+    if n_ic == 0:
+        raise ValueError("ics must hold at least one initial condition, got 0")
     ics_first = take_lanes(ics, 0)
     ics_first(with_parameter(params, "v_d", v_d[0]))  # shape check, may raise
     lanes_vd, lanes_ic = np.repeat(v_d, n_ic), np.tile(np.arange(n_ic), v_d.size)

@@ -99,6 +99,22 @@ class OutOfPhaseExcitation(AbstractInitialCondition):
         return jnp.stack([x, v])
 
 
+def _state_array(value):
+    """A user's state as a JAX array (tracers as they are).
+
+    **Raises:** `TypeError` naming y0 when it is not real numbers."""
+    if isinstance(value, jax.core.Tracer):
+        return value
+    try:
+        a = np.asarray(value) if not isinstance(value, jax.Array) else value
+    except ValueError:  # ragged nested lists
+        raise TypeError(f"y0 must be an array of real numbers, got {value!r}") from None
+    if a.dtype == bool or not (jnp.issubdtype(a.dtype, jnp.integer)
+                               or jnp.issubdtype(a.dtype, jnp.floating)):
+        raise TypeError(f"y0 must be an array of real numbers, got dtype {a.dtype}")
+    return jnp.asarray(a, dtype=float)
+
+
 class GivenState(AbstractInitialCondition):
     """A user-given initial state.
 
@@ -108,10 +124,11 @@ class GivenState(AbstractInitialCondition):
 
     **Raises:**
 
-    `ValueError` when called with parameters whose `n_osc` does not match the shape.
+    `TypeError` when `y0` is not real numbers; `ValueError` when called with
+    parameters whose `n_osc` does not match the shape.
     """
 
-    y0: Float[Array, "..."] = eqx.field(converter=jnp.asarray)
+    y0: Float[Array, "..."] = eqx.field(converter=_state_array)
 
     def __call__(self, params: ChainParams) -> State:
         n = params.n_osc

@@ -4,6 +4,7 @@ import math
 
 import equinox as eqx
 import jax
+import numpy as np
 
 
 class SimulationOptions(eqx.Module):
@@ -51,10 +52,16 @@ class SimulationOptions(eqx.Module):
             value = getattr(self, name)
             if isinstance(value, jax.Array) and value.shape == ():
                 value = float(value)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            if not (isinstance(value, (int, float, np.integer, np.floating))
+                    and not isinstance(value, bool) and math.isfinite(value) and value > 0):
                 raise ValueError(f"SimulationOptions.{name} must be a finite number > 0, "
                                  f"got {value!r}")
-        if not (math.isfinite(self.transient) and 0 <= self.transient < self.t_end):
+        if isinstance(self.max_steps, bool) or not isinstance(self.max_steps, (int, np.integer)):
+            raise ValueError(f"SimulationOptions.max_steps must be an integer >= 1, got "
+                             f"{self.max_steps!r}")
+        if not (isinstance(self.transient, (int, float, np.integer, np.floating))
+                and not isinstance(self.transient, bool) and math.isfinite(self.transient)
+                and 0 <= self.transient < self.t_end):
             raise ValueError(f"SimulationOptions.transient must lie in [0, t_end = "
                              f"{self.t_end}), got {self.transient!r}")
 

@@ -14,6 +14,12 @@ def _as_array(value):
     traces, so that a new value does not recompile), or the tracer itself."""
     if isinstance(value, jax.core.Tracer) or isinstance(value, jax.Array):
         return value
+    try:
+        kind = np.asarray(value).dtype.kind
+    except ValueError:  # ragged nested lists
+        kind = "O"
+    if kind not in "iuf":  # booleans, strings, None, ...: refused by the check
+        return np.asarray(value, dtype=object)
     return np.asarray(value, dtype=np.float64)
 
 
@@ -95,6 +101,9 @@ class ChainParams(eqx.Module):
         }
         for name, (ok, requirement) in rules.items():
             value = getattr(self, name)
+            if isinstance(value, np.ndarray) and value.dtype == object:
+                raise TypeError(f"ChainParams.{name} must be a real number (or an array "
+                                f"of them), got {value.tolist()!r}")
             a = _concrete(value)
             if a is None:
                 continue

@@ -11,6 +11,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
+from ._checks import as_solver, check_options, check_params
 from ._custom_types import State
 from ._initial import AbstractInitialCondition, GivenState
 from ._model import split_vector_field, vector_field
@@ -345,8 +346,9 @@ def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
     - `params`: the chain parameters (`ChainParams`).
     - `y0`: an initial condition (`OutOfPhaseExcitation`, `GivenState`, ...) or a
         state array of shape (2, n_osc) or (2 n_osc,).
-    - `solver`: a diffrax solver, `Ros34PW2()` by default (`DEFAULT_SOLVER`; a
-        solver of `SPLIT_SOLVERS` gets the friction force as its stiff term).
+    - `solver`: a diffrax solver or the name of one (`SOLVERS`), `Ros34PW2()` by
+        default (`DEFAULT_SOLVER`; a solver of `SPLIT_SOLVERS` gets the friction
+        force as its stiff term).
     - `options`: `SimulationOptions` (horizon, tolerances, sampling).
     - `throw`: raise on failure (default) or return the status.
     - `progress`: show a tqdm bar, one tick per chunk.
@@ -357,9 +359,12 @@ def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
 
     **Raises:**
 
-    `ValueError` for a state of the wrong shape; `RuntimeError` with advice when
+    `ValueError` for a state of the wrong shape or an unknown solver name;
+    `TypeError` for arguments of the wrong type; `RuntimeError` with advice when
     the run fails and `throw=True`.
     """
+    params, solver = check_params(params), as_solver(solver)
+    options = check_options(options)
     if not isinstance(y0, AbstractInitialCondition):
         y0 = GivenState(y0)
     y = y0(params)
@@ -399,6 +404,8 @@ def observe(params: ChainParams, y0: AbstractInitialCondition | State,
     when the run fails and `throw=True`.
     """
     observers = check_observers(observers)
+    params, solver = check_params(params), as_solver(solver)
+    options = check_options(options)
     if not isinstance(y0, AbstractInitialCondition):
         y0 = GivenState(y0)
     y = y0(params)

@@ -9,6 +9,7 @@ import diffrax
 import numpy as np
 import xarray as xr
 
+from .._checks import as_solver, check_options, check_params
 from .._initial import FAMILIES, initial_states, localized_family
 from .._lanes import lane_params, run_lanes, take_lanes
 from .._observers.base import AbstractObserver
@@ -31,8 +32,11 @@ _SHARED = {"series_t": "time", "lyapunov_time": "lyapunov_time"}
 
 
 def _check_solutions(solutions, n_osc: int) -> np.ndarray:
-    solutions = np.asarray(sorted(set(int(k) for k in solutions)) if solutions is not None
-                           else np.arange(1, n_osc + 1))
+    try:
+        solutions = np.asarray(sorted(set(int(k) for k in solutions))
+                               if solutions is not None else np.arange(1, n_osc + 1))
+    except (TypeError, ValueError):
+        raise TypeError(f"solutions must be a list of integers, got {solutions!r}") from None
     if solutions.size == 0 or solutions.min() < 1 or solutions.max() > n_osc:
         raise ValueError(f"solutions must be numbers of excited oscillators in "
                          f"[1, {n_osc}], got {solutions.tolist()}")
@@ -75,6 +79,8 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
     `TypeError` or `ValueError` for bad observers (`check_observers`).
     """
     observers = check_observers(observers)
+    params, solver = check_params(params), as_solver(solver)
+    options = check_options(options)
     solutions = _check_solutions(solutions, params.n_osc)
     family = take_lanes(localized_family(params.n_osc, ics), solutions - 1)
     lanes = lane_params(params, solutions.size)

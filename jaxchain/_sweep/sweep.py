@@ -13,6 +13,7 @@ import xarray as xr
 from jaxtyping import ArrayLike, Float
 from tqdm.auto import tqdm
 
+from .._checks import as_solver, check_options, check_params
 from .._initial import AbstractInitialCondition
 from .._lanes import block_size, run_lanes
 from .._options import SimulationOptions
@@ -100,6 +101,8 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     `resume` or `overwrite`, or a store made with other settings (naming the
     settings that differ).
     """
+    params, solver = check_params(params), as_solver(solver)
+    options = check_options(options)
     grid = SweepGrid.build(params, where, values, ics)
     if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) \
             or batch_size < 1:

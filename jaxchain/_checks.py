@@ -1,0 +1,78 @@
+"""Checks of the arguments of the public entry points: a bad argument raises at
+once, naming itself and what it accepts, before anything is traced or run."""
+
+import diffrax
+import numpy as np
+
+from ._options import SimulationOptions
+from ._params import ChainParams
+from ._solvers import SOLVERS
+
+
+def as_solver(solver, name: str = "solver") -> diffrax.AbstractSolver:
+    """A diffrax solver, given as an instance or by name (`SOLVERS`).
+
+    **Raises:**
+
+    `ValueError` for an unknown name; `TypeError` for anything else that is not a
+    `diffrax.AbstractSolver`.
+    """
+    if isinstance(solver, str):
+        if solver not in SOLVERS:
+            raise ValueError(f"{name} must be one of {', '.join(sorted(SOLVERS))} or a "
+                             f"diffrax solver, got {solver!r}")
+        return SOLVERS[solver]()
+    if not isinstance(solver, diffrax.AbstractSolver):
+        raise TypeError(f"{name} must be a diffrax solver or one of "
+                        f"{', '.join(sorted(SOLVERS))}, got {type(solver).__name__}")
+    return solver
+
+
+def check_params(params) -> ChainParams:
+    """**Raises:** `TypeError` unless `params` is a `ChainParams`."""
+    if not isinstance(params, ChainParams):
+        raise TypeError(f"params must be a jaxchain.ChainParams, got {type(params).__name__}")
+    return params
+
+
+def check_options(options, cls=SimulationOptions, name: str = "options"):
+    """**Raises:** `TypeError` unless `options` is an instance of `cls`."""
+    if not isinstance(options, cls):
+        raise TypeError(f"{name} must be a jaxchain.{cls.__name__}, got "
+                        f"{type(options).__name__}")
+    return options
+
+
+def real_array(value, name: str) -> np.ndarray:
+    """`value` as a float64 NumPy array.
+
+    **Raises:**
+
+    `TypeError` naming `name` when it is not real numbers (strings, booleans,
+    complex numbers, objects).
+    """
+    try:
+        a = np.asarray(value)
+    except (TypeError, ValueError):  # ragged nested lists
+        raise TypeError(f"{name} must be an array of real numbers, got {value!r}") from None
+    if a.dtype == bool or not (np.issubdtype(a.dtype, np.integer)
+                               or np.issubdtype(a.dtype, np.floating)):
+        raise TypeError(f"{name} must be an array of real numbers, got dtype {a.dtype}")
+    return a.astype(np.float64)
+
+
+def belt_speeds(v_d, name: str = "v_d") -> np.ndarray:
+    """Belt speeds as a non-empty 1-d float64 array.
+
+    **Raises:**
+
+    `TypeError` for non-numbers; `ValueError` for an empty list, more than one
+    dimension, or speeds that are not finite and > 0.
+    """
+    v = np.atleast_1d(real_array(v_d, name))
+    if v.ndim != 1 or v.size == 0:
+        raise ValueError(f"{name} must be a 1-d list of at least one belt speed, "
+                         f"got shape {v.shape}")
+    if not np.all(np.isfinite(v) & (v > 0)):
+        raise ValueError(f"{name} must hold finite belt speeds > 0, got {v.tolist()}")
+    return v
