@@ -1,5 +1,8 @@
+import dataclasses
+
 import jax.numpy as jnp
 import numpy as np
+import pytest
 import xarray as xr
 
 import jaxchain as jc
@@ -27,16 +30,37 @@ def test_ensemble_equals_runs_done_one_at_a_time():
                                    atol=1e-12), name
 
 
-def test_a_failing_trajectory_is_flagged_and_the_others_kept():
+@pytest.mark.parametrize("engine", ["queue", "vmap"])
+def test_good_lanes_are_kept_beside_failing_ones(engine):
+    """One ensemble mixes good lanes (steady sliding, a decaying perturbation of it)
+    with failing ones: a NaN initial state, and a stick-slipping lane whose step
+    budget per chunk is too small. The failures are flagged, skipped and give no
+    partial answers; every good lane equals its own separate run: bit for bit in
+    the queue (the same compiled program), to rounding under vmap (a batch of 4
+    lanes and one of 1 are different vectorised programs)."""
     p = jc.ChainParams(n_osc=2)
-    good = jc.OutOfPhaseExcitation.eq8([True, False])(p)
-    y0 = jnp.stack([good, good.at[0, 0].set(jnp.nan)])
-    ds = jc.ensemble(p, [1.5], jc.GivenState(y0), options=SHORT, progress=False)
-    assert ds["status"].values.tolist() == [[0, 3]]  # non-finite initial state
-    assert np.all(np.isnan(ds["amplitudes"][0, 1])) and int(ds["n_halc"][0, 1]) == -1
-    assert int(ds["num_steps"][0, 1]) == 0  # skipped, holding up no other lane
-    single = jc.simulate(p, good, options=SHORT)
-    assert np.allclose(ds["amplitudes"][0, 0], single.amplitudes, rtol=1e-9)
+    sliding = jc.steady_sliding(p)
+    lanes = jnp.stack([sliding.at[1, 0].add(0.1), sliding.at[0, 0].set(jnp.nan),
+                       jc.OutOfPhaseExcitation.eq8([True, True])(p), sliding])
+    options = dataclasses.replace(SHORT, max_steps=2500)
+    ds = jc.ensemble(p, [1.5], jc.GivenState(lanes), options=options, engine=engine,
+                     progress=False).isel(v_d=0)
+    assert ds["status"].values.tolist() == [0, 3, 1, 0]  # ok, non-finite, max_steps, ok
+    for bad in (1, 2):
+        assert np.all(np.isnan(ds["amplitudes"][bad])) and int(ds["n_halc"][bad]) == -1
+        assert not ds["on_halc"][bad].any() and np.isnan(float(ds["energy"][bad]))
+    assert int(ds["num_steps"][1]) == 0  # skipped, holding up no other lane
+    for good in (0, 3):
+        alone = jc.ensemble(p, [1.5], jc.GivenState(lanes[good:good + 1]), options=options,
+                            engine=engine, progress=False).isel(v_d=0, ic=0)
+        assert int(ds["n_halc"][good]) == int(alone["n_halc"])
+        for name in ("amplitudes", "energy", "y_final", "num_steps"):
+            a, b = ds[name][good].values, alone[name].values
+            if engine == "queue":
+                assert np.array_equal(a, b), name
+            else:
+                assert np.allclose(a, b, rtol=1e-6, atol=1e-8), name
+    assert float(ds["amplitudes"][0].max()) > 0  # the perturbation was observed
 
 
 def test_dataset_round_trip_keeps_parameters(tmp_path):
