@@ -363,16 +363,23 @@ def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
     `TypeError` for arguments of the wrong type; `RuntimeError` with advice when
     the run fails and `throw=True`.
     """
+    return _single(_run_jit, "simulate", params, y0, solver, options, (), throw, progress)
+
+
+def _single(fn, name, params, y0, solver, options, extra, throw, progress):
+    """One checked run of `fn(params, y, solver, options, *extra, progress)` under a
+    progress bar, raising on failure when `throw`."""
     params, solver = check_params(params), as_solver(solver)
     options = check_options(options)
     if not isinstance(y0, AbstractInitialCondition):
         y0 = GivenState(y0)
     y = y0(params)
-    with progress_bar(n_ticks(options), "simulate", progress):
-        obs = _run_jit(params, y, solver, options, progress)
-    if throw and int(obs.status) != 0:
-        raise RuntimeError(STATUS[int(obs.status)])
-    return obs
+    with progress_bar(n_ticks(options), name, progress):
+        out = fn(params, y, solver, options, *extra, progress)
+    status = int(out["status"] if isinstance(out, dict) else out.status)
+    if throw and status != 0:
+        raise RuntimeError(STATUS[status])
+    return out
 
 
 _observe_jit = eqx.filter_jit(run_observers)
@@ -403,14 +410,5 @@ def observe(params: ChainParams, y0: AbstractInitialCondition | State,
     `TypeError` for an object that is not an observer; `RuntimeError` with advice
     when the run fails and `throw=True`.
     """
-    observers = check_observers(observers)
-    params, solver = check_params(params), as_solver(solver)
-    options = check_options(options)
-    if not isinstance(y0, AbstractInitialCondition):
-        y0 = GivenState(y0)
-    y = y0(params)
-    with progress_bar(n_ticks(options), "observe", progress):
-        out = _observe_jit(params, y, solver, options, observers, progress)
-    if throw and int(out["status"]) != 0:
-        raise RuntimeError(STATUS[int(out["status"])])
-    return out
+    return _single(_observe_jit, "observe", params, y0, solver, options,
+                   (check_observers(observers),), throw, progress)
