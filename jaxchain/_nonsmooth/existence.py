@@ -37,6 +37,10 @@ def _slip_arc_peak(v_d, args):
 _peak = eqx.filter_jit(_slip_arc_peak)
 
 
+#: Bisection steps: the bracket [lower, upper] shrinks by 2^-BISECTION_STEPS.
+BISECTION_STEPS = 80
+
+
 def stick_slip_existence_limit(params: ChainParams = ChainParams(n_osc=1),
                                lower: float | None = None, upper: float = 3.0, *,
                                tol: float = 1e-10, rtol: float = 1e-12) -> float:
@@ -89,8 +93,15 @@ def stick_slip_existence_limit(params: ChainParams = ChainParams(n_osc=1),
         raise ValueError(f"the bracket [lower, upper] = [{lower}, {upper}] must contain "
                          f"the existence limit: the cycle must exist at lower and not at "
                          f"upper (peak x' - v_d = {lo:.3g}, {hi:.3g})")
+    # Bisection stops when the bracket is narrower than tol and |peak| < tol. Where
+    # the peak is resolved only to more than tol (v0 = 1e-3: the friction changes
+    # within 1e-3 of stick, where the arc grazes), the second never holds; the
+    # bracket still halves every step, so after BISECTION_STEPS it is far below tol.
     sol = optx.root_find(_slip_arc_peak, optx.Bisection(rtol=0.0, atol=tol),
                          jnp.asarray(0.5 * (lower + upper)), args,
                          options={"lower": jnp.asarray(lower, dtype=float),
-                                  "upper": jnp.asarray(upper, dtype=float)})
+                                  "upper": jnp.asarray(upper, dtype=float)},
+                         max_steps=BISECTION_STEPS, throw=False)
+    if sol.result not in (optx.RESULTS.successful, optx.RESULTS.nonlinear_max_steps_reached):
+        raise RuntimeError(f"bisection for the existence limit failed: {sol.result}")
     return float(sol.value)

@@ -21,6 +21,7 @@ NONSMOOTH_STATUS = STATUS + (
     "event not resolved: max_events reached in one chunk (chattering), or an event "
     "located where no guard is within switch_tol; raise max_events or switch_tol",
 )
+UNRESOLVED = len(STATUS)
 
 
 class NonsmoothObservables(eqx.Module):
@@ -134,7 +135,7 @@ def _segment(params, options, observe, half, t_stop, c: _Carry) -> _Carry:
                       jnp.where(event & (kind >= 0), jnp.inf, jnp.abs(y[1] - params.v_d)))
     slip_speed = jnp.where(observe, jnp.minimum(c.slip_speed, speed), c.slip_speed)
     # An event that no guard accounts for would repeat forever: stop the run.
-    code = jnp.where((code == 0) & event & ~resolved, 4, code)
+    code = jnp.where((code == 0) & event & ~resolved, UNRESOLVED, code)
     modes = jnp.where(event, modes, c.modes)
     y = jnp.where(event, y_new, y)
     turned = event & turned & observe
@@ -180,7 +181,7 @@ def _chunk(params, options, progress, half, c: _Carry, t_stop) -> _Carry:
 
     c = jax.lax.while_loop(cond, lambda d: _segment(params, options, observe, half,
                                                     t_stop, d), c)
-    status = jnp.where((c.status == 0) & (c.t < t_stop), 4, c.status)
+    status = jnp.where((c.status == 0) & (c.t < t_stop), UNRESOLVED, c.status)
     c = _observe_point(eqx.tree_at(lambda d: d.status, c, status), half)
     if progress:
         tick(c.t)
