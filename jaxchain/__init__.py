@@ -152,3 +152,7 @@ from ._plots.dynamics import plot_time_delays as plot_time_delays  # noqa: E402
 from ._plots.dynamics import plot_phase_portraits as plot_phase_portraits  # noqa: E402
 from ._plots.dynamics import plot_orbit_diagram as plot_orbit_diagram  # noqa: E402
 from ._plots.dynamics import plot_states_and_orbits as plot_states_and_orbits  # noqa: E402
+from ._solvers import auto_solver as auto_solver  # noqa: E402
+from ._hints import failure_hint as failure_hint  # noqa: E402
+from ._stress.cases import stress_cases as stress_cases  # noqa: E402
+from ._stress.run import stress as stress  # noqa: E402

@@ -6,11 +6,14 @@ import numpy as np
 
 from ._options import SimulationOptions
 from ._params import ChainParams
-from ._solvers import SOLVERS
+from ._solvers import AUTO, SOLVERS, auto_solver
 
 
-def as_solver(solver, name: str = "solver") -> diffrax.AbstractSolver:
-    """A diffrax solver, given as an instance or by name (`SOLVERS`).
+def as_solver(solver, name: str = "solver", params: ChainParams | None = None
+              ) -> diffrax.AbstractSolver:
+    """A diffrax solver, given as an instance, by name (`SOLVERS`), or as "auto":
+    chosen from `params` by `auto_solver` (the stiffness-aware ROS34PW2 unless
+    eps is large), or ROS34PW2 when no params are given.
 
     **Raises:**
 
@@ -18,12 +21,14 @@ def as_solver(solver, name: str = "solver") -> diffrax.AbstractSolver:
     `diffrax.AbstractSolver`.
     """
     if isinstance(solver, str):
+        if solver == AUTO:
+            return auto_solver(params) if params is not None else SOLVERS["ros34pw2"]()
         if solver not in SOLVERS:
-            raise ValueError(f"{name} must be one of {', '.join(sorted(SOLVERS))} or a "
-                             f"diffrax solver, got {solver!r}")
+            raise ValueError(f"{name} must be one of {', '.join(sorted(SOLVERS))}, "
+                             f"'{AUTO}' or a diffrax solver, got {solver!r}")
         return SOLVERS[solver]()
     if not isinstance(solver, diffrax.AbstractSolver):
-        raise TypeError(f"{name} must be a diffrax solver or one of "
+        raise TypeError(f"{name} must be a diffrax solver, '{AUTO}' or one of "
                         f"{', '.join(sorted(SOLVERS))}, got {type(solver).__name__}")
     return solver
 

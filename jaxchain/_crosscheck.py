@@ -175,7 +175,8 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
 
     `ValueError` for an unknown family, a k outside [1, N] or a bad belt speed.
     """
-    params, solver = check_params(params), as_solver(solver)
+    params = check_params(params)
+    solver = as_solver(solver, params=params)
     options = check_options(options)
     v_d = belt_speeds(v_d)
     ics = list(ics)

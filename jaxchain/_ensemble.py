@@ -57,7 +57,8 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     speeds that are not finite and > 0, initial conditions of the wrong shape, an
     unknown solver name or engine; `TypeError` for arguments of the wrong type.
     """
-    params, solver = check_params(params), as_solver(solver)
+    params = check_params(params)
+    solver = as_solver(solver, params=params)
     options = check_options(options)
     v_d = belt_speeds(v_d)
     if not isinstance(ics, AbstractInitialCondition):

@@ -62,7 +62,8 @@ def run_attributes(params: ChainParams, solver: diffrax.AbstractSolver,
     strings (netCDF and zarr keep them)."""
     attrs = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
              if f.name != varying}
-    attrs |= {f.name: getattr(options, f.name) for f in dataclasses.fields(options)}
+    attrs |= {f.name: getattr(options, f.name) for f in dataclasses.fields(options)
+              if getattr(options, f.name) is not None}  # netCDF has no None
     attrs |= {"solver": type(solver).__name__, "ics": ics,
               "jaxchain_version": _package_version(), "paper": PAPER,
               "units": "dimensionless, eqs. (4)-(6) of the paper"}

@@ -13,6 +13,7 @@ from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from ._checks import as_solver, check_options, check_params
 from ._custom_types import State
+from ._hints import failure_hint
 from ._initial import AbstractInitialCondition, GivenState
 from ._model import split_vector_field, vector_field
 from ._observers.base import AbstractObserver, Chunk
@@ -355,9 +356,9 @@ def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
     - `params`: the chain parameters (`ChainParams`).
     - `y0`: an initial condition (`OutOfPhaseExcitation`, `GivenState`, ...) or a
         state array of shape (2, n_osc) or (2 n_osc,).
-    - `solver`: a diffrax solver or the name of one (`SOLVERS`), `Ros34PW2()` by
-        default (`DEFAULT_SOLVER`; a solver of `SPLIT_SOLVERS` gets the friction
-        force as its stiff term).
+    - `solver`: a diffrax solver, the name of one (`SOLVERS`), or "auto" (chosen
+        from eps by `auto_solver`); `Ros34PW2()` by default (`DEFAULT_SOLVER`). A
+        solver of `SPLIT_SOLVERS` gets the friction force as its stiff term.
     - `options`: `SimulationOptions` (horizon, tolerances, sampling).
     - `throw`: raise on failure (default) or return the status.
     - `progress`: show a tqdm bar, one tick per chunk.
@@ -378,7 +379,8 @@ def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
 def _single(fn, name, params, y0, solver, options, extra, throw, progress):
     """One checked run of `fn(params, y, solver, options, *extra, progress)` under a
     progress bar, raising on failure when `throw`."""
-    params, solver = check_params(params), as_solver(solver)
+    params = check_params(params)
+    solver = as_solver(solver, params=params)
     options = check_options(options)
     if not isinstance(y0, AbstractInitialCondition):
         y0 = GivenState(y0)
@@ -387,7 +389,8 @@ def _single(fn, name, params, y0, solver, options, extra, throw, progress):
         out = fn(params, y, solver, options, *extra, progress)
     status = int(out["status"] if isinstance(out, dict) else out.status)
     if throw and status != 0:
-        raise RuntimeError(STATUS[status])
+        raise RuntimeError(f"{STATUS[status].split(':')[0]}: "
+                           f"{failure_hint(status, params, solver, options)}")
     return out
 
 

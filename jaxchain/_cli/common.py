@@ -108,11 +108,12 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
                    help="final time, in units of 1/omega_n (default 15000, as the paper)")
     g.add_argument("--transient", type=float, default=10000.0, metavar="T",
                    help="observables are taken after this time (default 10000)")
-    g.add_argument("--solver", choices=sorted(SOLVERS), default=DEFAULT_SOLVER,
+    g.add_argument("--solver", choices=sorted(SOLVERS) + ["auto"], default=DEFAULT_SOLVER,
                    help=f"diffrax solver (default {DEFAULT_SOLVER}, the fastest at the "
                         "default eps and rtol: a Rosenbrock-W method whose W is the "
                         "diagonal friction Jacobian); kencarp* are IMEX, with the "
-                        "friction force implicit")
+                        "friction force implicit; auto takes tsit5 where mu_st/eps <= "
+                        "100 and ros34pw2 elsewhere")
     g.add_argument("--rtol", type=positive_float, default=DEFAULTS.rtol,
                    help=f"relative tolerance (default {DEFAULTS.rtol:g})")
     g.add_argument("--atol", type=positive_float, default=DEFAULTS.atol,

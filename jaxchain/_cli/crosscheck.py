@@ -11,7 +11,7 @@ from .._options import SimulationOptions
 from .._params import ChainParams, with_parameter
 from .._plots.crosscheck import plot_crosscheck
 from .._results import save_dataset
-from .common import (SOLVERS, RunsFailed, UsageError, add_output_options, add_ring_options,
+from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_run_options, comma_list, json_ready, positive_float, save_figure,
                      show_progress, writable_folder)
 
@@ -78,7 +78,7 @@ def run(args) -> None:
     writable_folder(args.out)
 
     start = time.perf_counter()
-    ds = crosscheck(params, args.vd, ics, SOLVERS[args.solver](), options, ref_options,
+    ds = crosscheck(params, args.vd, ics, args.solver, options, ref_options,
                     checkpoint=args.out / "crosscheck_cases", progress=show_progress(args))
     wall = time.perf_counter() - start
     ds.attrs["wall_time_s"] = wall

@@ -72,7 +72,7 @@ def add_parser(sub):
     g = p.add_argument_group("model and integration (other parameters eq. (7))")
     g.add_argument("--eps", type=positive_float, default=param_default("eps"),
                    help=f"tanh smoothing velocity (default {param_default('eps'):g})")
-    g.add_argument("--solver", choices=sorted(SOLVERS), default=DEFAULT_SOLVER,
+    g.add_argument("--solver", choices=sorted(SOLVERS) + ["auto"], default=DEFAULT_SOLVER,
                    help=f"diffrax solver (default {DEFAULT_SOLVER})")
     g.add_argument("--rtol", type=positive_float, default=DEFAULTS.rtol,
                    help=f"relative tolerance (default {DEFAULTS.rtol:g})")
@@ -114,7 +114,7 @@ def run(args) -> None:
                                 rtol=args.rtol, atol=args.atol,
                                 chunk_length=size["chunk_length"])
     writable_folder(args.out)
-    solver = SOLVERS[args.solver]()
+    solver = args.solver
 
     start = time.perf_counter()
     ds, fig = _scene(args.name, size, params, solver, options, show_progress(args))

@@ -14,7 +14,7 @@ from .._params import ChainParams
 from .._plots.localized import plot_localized_states
 from .._results import save_dataset
 from .._simulate import STATUS
-from .common import (SOLVERS, RunsFailed, add_model_options, add_output_options,
+from .common import (RunsFailed, add_model_options, add_output_options,
                      add_run_options, json_ready, save_figure, show_progress,
                      writable_folder)
 
@@ -50,7 +50,7 @@ def run(args) -> None:
     options = SimulationOptions(t_end=args.t_end, transient=args.transient,
                                 rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     writable_folder(args.out)
-    solver = SOLVERS[args.solver]()
+    solver = args.solver
     ics = localized_family(args.n_osc, args.ics)
     n_excited = np.arange(1, args.n_osc + 1)
 

@@ -8,10 +8,10 @@ import jax
 import matplotlib
 import platformdirs
 
-from . import boundaries, crosscheck, figure, localized, sweep, work_precision
+from . import boundaries, crosscheck, figure, localized, stress, sweep, work_precision
 from .common import Parser, RunsFailed, UsageError, one_line, usage_message
 
-COMMANDS = (localized, sweep, figure, crosscheck, work_precision, boundaries)
+COMMANDS = (localized, sweep, figure, crosscheck, work_precision, boundaries, stress)
 
 
 def build_parser() -> Parser:

@@ -15,7 +15,7 @@ from .._plots.sweep import plot_bifurcation_diagram
 from .._simulate import STATUS
 from .._sweep.fronts import front_fractions, front_ranges
 from .._sweep.sweep import sweep
-from .common import (SOLVERS, RunsFailed, add_output_options, add_ring_options,
+from .common import (RunsFailed, add_output_options, add_ring_options,
                      add_run_options, json_ready, positive_int, save_figure, show_progress,
                      writable_folder)
 
@@ -114,7 +114,7 @@ def run(args) -> None:
     store = args.out / "sweep.zarr"
 
     start = time.perf_counter()
-    ds = sweep(params, args.vd, ics, SOLVERS[args.solver](), options,
+    ds = sweep(params, args.vd, ics, args.solver, options,
                batch_size=args.batch_size, store=store, resume=args.resume,
                overwrite=args.overwrite, progress=show_progress(args)).load()
     wall = time.perf_counter() - start

@@ -79,7 +79,8 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
     `TypeError` or `ValueError` for bad observers (`check_observers`).
     """
     observers = check_observers(observers)
-    params, solver = check_params(params), as_solver(solver)
+    params = check_params(params)
+    solver = as_solver(solver, params=params)
     options = check_options(options)
     solutions = _check_solutions(solutions, params.n_osc)
     family = take_lanes(localized_family(params.n_osc, ics), solutions - 1)

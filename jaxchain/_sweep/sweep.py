@@ -101,7 +101,8 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     `resume` or `overwrite`, or a store made with other settings (naming the
     settings that differ).
     """
-    params, solver = check_params(params), as_solver(solver)
+    params = check_params(params)
+    solver = as_solver(solver, params=params)
     options = check_options(options)
     grid = SweepGrid.build(params, where, values, ics)
     if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) \

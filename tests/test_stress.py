@@ -1,0 +1,130 @@
+"""The stress matrix: every case ends verified or failed with a specific status, the
+physics checks agree with analytic results, and failures carry specific hints."""
+
+import dataclasses
+import json
+import sys
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxchain as jc
+from jaxchain._nonsmooth.existence import _peak
+from jaxchain._stress.cases import QUICK_MATRIX, QUICK_OPTIONS, make_case
+from jaxchain._stress.checks import balance_run, linear_rate
+from jaxchain._stress.run import run_case
+from jaxchain._cli.main import main
+
+#: What a failed case may say: the run's own statuses (without their advice) and
+#: the declared limit of the IMEX path. A failed check is a defect, not an outcome.
+SPECIFIC = {s.split(":")[0] for s in jc.STATUS[1:]} | {"not run: too costly"}
+
+
+def test_quick_matrix_ends_verified_or_with_a_specific_status(tmp_path, capsys):
+    """`jaxchain stress --quick` on the default path: every case is verified or fails
+    with a specific status and a hint; nothing is a defect. A second run with the
+    same --out reads every row back."""
+    argv = ["stress", "--quick", "--solvers", "ros34pw2", "--out", str(tmp_path), "--json",
+            "--no-progress"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    cases = out["cases"]
+    assert len(cases) == sum(len(v) for v in QUICK_MATRIX.values())
+    assert set(cases[0]) == {"what", "value", "solver", "outcome", "status", "check", "hint"}
+    for case in cases:
+        assert case["outcome"] in ("verified", "failed"), case
+        if case["outcome"] == "verified":
+            assert case["status"] == "ok" and "energy balance" in case["check"], case
+        else:
+            assert case["status"] in SPECIFIC and case["hint"], case
+    assert out["defects"] == 0
+    # The checks that apply did apply: the steady slide at v_d = 10, the Hopf point.
+    by = {(c["what"], c["value"]): c for c in cases}
+    assert "slides to steady sliding" in by["v_d", 10.0]["check"]
+    assert "Hopf point" in by["v_d", 1.1513]["check"]
+    assert "stays at steady sliding" in by["ics", "steady sliding"]["check"]
+    assert (tmp_path / "stress.md").read_text().count("| eps |") == len(QUICK_MATRIX["eps"])
+    # Resumed: the same rows, read back (so with the same wall times).
+    assert main(argv) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert again["cases"] == cases and again["wall_time_s"] < out["wall_time_s"] / 5
+
+
+def test_an_explicit_solver_at_tiny_eps_fails_with_a_specific_hint():
+    """Tsit5 with a step budget far below mu_st/eps fails with max_steps, and the hint
+    names the stiffness and the solver that copes."""
+    options = dataclasses.replace(QUICK_OPTIONS, max_steps=2000)
+    row = run_case(make_case("eps", 1e-6, options), "tsit5")
+    assert row["outcome"] == "failed" and row["status"] == "max_steps reached"
+    assert "eps = 1e-06 makes the stick phase stiff" in row["hint"]
+    assert "solver='ros34pw2'" in row["hint"]
+
+
+def test_a_collapsing_step_size_is_its_own_status():
+    """A step-size floor above what a stick transition needs stops the run with the
+    status "step size collapsed", not with a spent step budget."""
+    options = dataclasses.replace(QUICK_OPTIONS, dtmin=0.05)
+    row = run_case(make_case("eps", 1e-3, options), "ros34pw2")
+    assert row["outcome"] == "failed" and row["status"] == "step size collapsed below options.dtmin"
+    assert "dtmin = 0.05" in row["hint"]
+    obs = jc.simulate(jc.ChainParams(n_osc=2), jc.OutOfPhaseExcitation.eq8([True, False]),
+                      options=options, throw=False)
+    assert int(obs.status) == 4 and np.all(np.isnan(obs.amplitudes))
+
+
+def test_energy_balance_and_decay_rate_of_the_damped_linear_oscillator():
+    """With mu_st = mu_d and a fast belt the friction force is the constant mu_d, so
+    x - mu_d is a damped linear oscillator: its energy, the work of damping and its
+    decay rate -xi are known in closed form."""
+    xi, x0 = 0.05, 1.5
+    params = jc.ChainParams(n_osc=1, xi=xi, mu_st=0.5, mu_d=0.5, v_d=10.0)
+    y0 = jnp.array([[0.5 + x0], [0.0]])
+    options = jc.SimulationOptions(t_end=60.0, transient=20.0, chunk_length=10.0,
+                                   rtol=1e-9, atol=1e-11)
+    out = balance_run(params, y0, jc.SOLVERS["tsit5"](), options)
+    wd = np.sqrt(1 - xi**2)
+    t = options.t_end
+    u = x0 * np.exp(-xi * t) * (np.cos(wd * t) + xi / wd * np.sin(wd * t))
+    du = -x0 * np.exp(-xi * t) * (1 / wd) * np.sin(wd * t)
+    energy_end = 0.5 * ((0.5 + u) ** 2 + du**2)
+    assert out["energy_end"] == pytest.approx(energy_end, rel=1e-7)
+    assert out["residual"] < 1e-7
+    assert out["decay_rate"] == pytest.approx(-xi, abs=2e-3)
+    assert linear_rate(params) == pytest.approx(-xi, abs=1e-12)
+
+
+def test_existence_limit_with_steep_friction():
+    """At v0 = 1e-3 the slip arc's peak is resolved to less than the bisection's
+    tolerance: the limit is still bracketed to it, where the peak changes sign."""
+    params = jc.ChainParams(n_osc=1, v0=1e-3)
+    limit = jc.stick_slip_existence_limit(params)
+    assert 0.5 < limit < 0.6
+    peak = [float(_peak(jnp.asarray(limit + d), (params, 1e-12))) for d in (-1e-4, 1e-4)]
+    assert peak[0] > 0 > peak[1]
+
+
+def test_auto_solver_is_explicit_only_where_the_stick_phase_is_not_stiff():
+    y0 = jc.OutOfPhaseExcitation.eq8([True, False])
+    options = jc.SimulationOptions(t_end=60.0, transient=30.0)
+    for eps, name in ((0.1, "tsit5"), (1e-3, "ros34pw2")):
+        params = jc.ChainParams(n_osc=2, eps=eps)
+        assert type(jc.auto_solver(params)) is type(jc.SOLVERS[name]())
+        auto = jc.simulate(params, y0, "auto", options)
+        named = jc.simulate(params, y0, name, options)
+        assert np.array_equal(auto.amplitudes, named.amplitudes)
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--what", "bogus"], "--what"),
+    (["--solvers", "euler"], "--solvers"),
+    (["--solvers", ""], "--solvers"),
+    (["--what", ""], "--what"),
+    (["--out", __file__], "--out"),
+])
+def test_stress_command_rejects_bad_input_in_one_line(argv, says, capsys):
+    with pytest.raises(SystemExit) as exc:
+        sys.exit(main(["stress", *argv]))
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err
