@@ -14,6 +14,10 @@ def counts(rows: list[dict]) -> dict[str, int]:
             "failed_with_status": sum(status.values()) - defects, "defects": defects}
 
 
+def _value(value) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
 def _cell(row: dict) -> str:
     if row["outcome"] == "verified":
         return f"verified ({row['num_steps']} steps)"
@@ -39,15 +43,13 @@ def markdown(rows: list[dict]) -> str:
              "| --- | --- | " + " | ".join("---" for _ in solvers) + " |"]
     for what, value in cases:
         cells = [_cell(by[what, value, s]) if (what, value, s) in by else "" for s in solvers]
-        lines.append(f"| {what} | {value:g} | " if isinstance(value, float)
-                     else f"| {what} | {value} | ")
-        lines[-1] += " | ".join(cells) + " |"
+        lines.append(f"| {what} | {_value(value)} | " + " | ".join(cells) + " |")
     failures = [r for r in rows if r["outcome"] == "failed"]
     if failures:
         lines += ["", "**Failures, with their hints:**", ""]
-        lines += [f"- {r['what']} = {r['value']}, {r['solver']}: {r['status']}. "
+        lines += [f"- {r['what']} = {_value(r['value'])}, {r['solver']}: {r['status']}. "
                   f"{r['check'] or r['hint']}" for r in failures]
     lines += ["", "**Checks of the verified runs:**", ""]
-    lines += [f"- {r['what']} = {r['value']}, {r['solver']}: {r['check']}"
+    lines += [f"- {r['what']} = {_value(r['value'])}, {r['solver']}: {r['check']}"
               for r in rows if r["outcome"] == "verified"]
     return "\n".join(lines) + "\n"
