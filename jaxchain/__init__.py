@@ -156,3 +156,10 @@ from ._solvers import auto_solver as auto_solver  # noqa: E402
 from ._hints import failure_hint as failure_hint  # noqa: E402
 from ._stress.cases import stress_cases as stress_cases  # noqa: E402
 from ._stress.run import stress as stress  # noqa: E402
+from ._basin.sampling import Box as Box  # noqa: E402
+from ._basin.sampling import sample_states as sample_states  # noqa: E402
+from ._basin.classes import halc_clusters as halc_clusters  # noqa: E402
+from ._basin.classes import wilson_interval as wilson_interval  # noqa: E402
+from ._basin.basin import basin_stability as basin_stability  # noqa: E402
+from ._plots.basin import plot_basin_stability as plot_basin_stability  # noqa: E402
+from ._plots.basin import plot_halc_histogram as plot_halc_histogram  # noqa: E402

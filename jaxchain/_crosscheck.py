@@ -19,7 +19,7 @@ from ._nonsmooth.solve import NONSMOOTH_STATUS, run_nonsmooth
 from ._options import SimulationOptions
 from ._params import ChainParams, with_parameter
 from ._lanes import on_devices, run_lanes
-from ._results import PAPER
+from ._results import PAPER, field_values
 from ._simulate import STATUS
 from ._solvers import DEFAULT_SOLVER, SOLVERS
 from ._store import read_dataset, settings_key, write_dataset
@@ -248,10 +248,8 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
         coords={"v_d": (case, vds), "family": (case, [c[1] for c in cases]),
                 "n_excited": (case, [c[2] for c in cases]), "osc": np.arange(1, n + 1)},
     )
-    attrs = {f"smoothed_{f.name}": getattr(options, f.name)
-             for f in dataclasses.fields(options)}
-    attrs |= {f"reference_{f.name}": getattr(reference_options, f.name)
-              for f in dataclasses.fields(reference_options)}
+    attrs = field_values(options, "smoothed_") | field_values(reference_options,
+                                                             "reference_")
     attrs |= {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
               if f.name != "v_d"}
     attrs |= {"solver": type(solver).__name__, "wall_time_s_smoothed": smooth_wall,

@@ -33,12 +33,6 @@ def stick_stiffness(params: ChainParams) -> float:
     return float(np.max(np.asarray(params.mu_st) / np.asarray(params.eps)))
 
 
-def explicit_steps(params: ChainParams, options: SimulationOptions) -> float:
-    """A lower bound on the steps an explicit method takes over the run when it sticks
-    for a fraction of the time near 1/2: t_end * stiffness / (2 * 3)."""
-    return options.t_end * stick_stiffness(params) / (2 * EXPLICIT_STABILITY)
-
-
 def failure_hint(status: int, params: ChainParams, solver: diffrax.AbstractSolver,
                  options: SimulationOptions) -> str:
     """A hint for a trajectory of `status` (`STATUS`), naming the setting to change.
@@ -60,10 +54,10 @@ def failure_hint(status: int, params: ChainParams, solver: diffrax.AbstractSolve
         return ""
     if status == 1:
         if _explicit(solver):
-            need = explicit_steps(params, options)
-            return (f"{stiff}: an explicit solver ({name}) needs about {need:.2g} steps "
-                    f"over t_end = {options.t_end:g}; use solver='{DEFAULT_SOLVER}' "
-                    f"(or 'auto'), or eps >= {10 * eps:g}")
+            step = EXPLICIT_STABILITY / stick_stiffness(params)
+            return (f"{stiff}: an explicit solver ({name}) may need steps as small as "
+                    f"3 eps/mu_st = {step:.1g} while it sticks; use "
+                    f"solver='{DEFAULT_SOLVER}' (or 'auto'), or eps >= {10 * eps:g}")
         return (f"{name} ran out of its {options.max_steps} steps in one chunk of "
                 f"length {options.chunk_length:g} ({stiff}); raise max_steps, shorten "
                 f"chunk_length or use eps >= {10 * eps:g}")
@@ -74,6 +68,7 @@ def failure_hint(status: int, params: ChainParams, solver: diffrax.AbstractSolve
     if status == 3:
         return ("the state became non-finite: check that the initial state is finite, "
                 "and that the parameters are within the ranges of ChainParams")
-    return (f"{stiff}, and the step size fell below dtmin = {options.dtmin:g} at a stick "
-            f"transition; use solver='{DEFAULT_SOLVER}', eps >= {10 * eps:g} or looser "
-            f"rtol (now {float(np.max(np.asarray(options.rtol))):g})")
+    other = "" if name == DEFAULT_SOLVER else f"solver='{DEFAULT_SOLVER}', "
+    return (f"{stiff}, and the steps fell below dtmin = {options.dtmin:g} on average "
+            f"until max_steps ran out; use {other}eps >= {10 * eps:g}, looser rtol (now "
+            f"{float(np.max(np.asarray(options.rtol))):g}) or a smaller dtmin")

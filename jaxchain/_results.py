@@ -54,6 +54,13 @@ def observables_variables(obs: Observables, lead: tuple[str, ...]) -> dict:
     return out
 
 
+def field_values(obj, prefix: str = "") -> dict:
+    """The fields of a dataclass (options) by name, with `prefix`, leaving out those
+    that are None (netCDF attributes have no None)."""
+    return {prefix + f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)
+            if getattr(obj, f.name) is not None}
+
+
 def run_attributes(params: ChainParams, solver: diffrax.AbstractSolver,
                    options: SimulationOptions, ics: str, varying: str) -> dict:
     """The attributes of a Dataset of runs: every field of `params` but `varying`
@@ -62,8 +69,7 @@ def run_attributes(params: ChainParams, solver: diffrax.AbstractSolver,
     strings (netCDF and zarr keep them)."""
     attrs = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
              if f.name != varying}
-    attrs |= {f.name: getattr(options, f.name) for f in dataclasses.fields(options)
-              if getattr(options, f.name) is not None}  # netCDF has no None
+    attrs |= field_values(options)
     attrs |= {"solver": type(solver).__name__, "ics": ics,
               "jaxchain_version": _package_version(), "paper": PAPER,
               "units": "dimensionless, eqs. (4)-(6) of the paper"}

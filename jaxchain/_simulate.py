@@ -31,8 +31,8 @@ STATUS = (
     "solver failed (for example a failed implicit solve): tighten the tolerances, "
     "use another solver or a larger eps",
     "non-finite state: the initial state or the trajectory is not finite; check them",
-    "step size collapsed below options.dtmin: a stick transition too sharp for the "
-    "tolerances; use a larger eps, looser tolerances or another solver",
+    "step size collapsed: max_steps spent on steps shorter than options.dtmin on "
+    "average; use a larger eps, looser tolerances or another solver",
 )
 
 
@@ -79,14 +79,12 @@ class Observables(eqx.Module):
     status: Int[Array, "*batch"]
 
 
-def _status_code(result, reached_end) -> Int[Array, ""]:
-    """The `STATUS` code of one chunk's diffrax result. A step-size controller flags
-    dt < dtmin also after the last step of a chunk, whose length is clipped to the
-    chunk's end: a chunk that `reached_end` is then a success."""
-    collapsed = result == diffrax.RESULTS.dt_min_reached
-    return jnp.where((result == diffrax.RESULTS.successful) | (collapsed & reached_end), 0,
-                     jnp.where(result == diffrax.RESULTS.max_steps_reached, 1,
-                               jnp.where(collapsed, 4, 2)))
+def _status_code(result, collapsed) -> Int[Array, ""]:
+    """The `STATUS` code of one chunk's diffrax result; a chunk out of steps whose
+    steps had `collapsed` (shorter than `options.dtmin` on average) is code 4."""
+    return jnp.where(result == diffrax.RESULTS.successful, 0,
+                     jnp.where(result == diffrax.RESULTS.max_steps_reached,
+                               jnp.where(collapsed, 4, 1), 2))
 
 
 #: Solvers that take eq. (5) split in two: IMEX solvers treat the friction force
@@ -149,9 +147,8 @@ def _advance(terms_, solver, args, options, observers, progress, tangent, carry,
             terms_, solver, t0, t1, None, y, args,
             saveat=diffrax.SaveAt(subs=subs, solver_state=True, controller_state=True,
                                   made_jump=True),
-            stepsize_controller=diffrax.PIDController(
-                rtol=options.rtol, atol=options.atol, dtmin=options.dtmin,
-                dtmax=options.dtmax, force_dtmin=False),
+            stepsize_controller=diffrax.PIDController(rtol=options.rtol,
+                                                      atol=options.atol),
             max_steps=options.max_steps, throw=False,
             solver_state=solver_state, controller_state=controller_state,
             made_jump=made_jump,
@@ -167,8 +164,10 @@ def _advance(terms_, solver, args, options, observers, progress, tangent, carry,
     chunk = Chunk(t0=t0, t1=t1, ts=ts, ys=samples, log_growth=log_growth)
     states = tuple(o.update(s, chunk, args, options) for o, s in zip(observers, states))
     state_end = y_end[0] if tangent else y_end
+    # Where a failed solve stopped: its t1 save holds the time it reached.
+    mean_step = (sol.ts[0][-1] - t0) / jnp.maximum(sol.stats["num_steps"], 1)
     code = jnp.where(jnp.all(jnp.isfinite(state_end)),
-                     _status_code(sol.result, sol.ts[0][-1] == t1), 3)
+                     _status_code(sol.result, mean_step < options.dtmin), 3)
     status = jnp.where(status == 0, code, status)
     if progress:
         tick(jnp.ravel(y_end)[0])

@@ -62,14 +62,18 @@ def test_an_explicit_solver_at_tiny_eps_fails_with_a_specific_hint():
 
 
 def test_a_collapsing_step_size_is_its_own_status():
-    """A step-size floor above what a stick transition needs stops the run with the
-    status "step size collapsed", not with a spent step budget."""
-    options = dataclasses.replace(QUICK_OPTIONS, dtmin=0.05)
+    """A run that spends its step budget on steps shorter than dtmin on average fails
+    with the status "step size collapsed", not "max_steps reached"; with the same
+    budget and a floor below its steps, it is "max_steps reached"."""
+    options = dataclasses.replace(QUICK_OPTIONS, max_steps=300, dtmin=0.05)
     row = run_case(make_case("eps", 1e-3, options), "ros34pw2")
-    assert row["outcome"] == "failed" and row["status"] == "step size collapsed below options.dtmin"
+    assert row["outcome"] == "failed" and row["status"] == "step size collapsed"
     assert "dtmin = 0.05" in row["hint"]
+    options = dataclasses.replace(options, dtmin=1e-6)
+    assert run_case(make_case("eps", 1e-3, options), "ros34pw2")["status"] == \
+        "max_steps reached"
     obs = jc.simulate(jc.ChainParams(n_osc=2), jc.OutOfPhaseExcitation.eq8([True, False]),
-                      options=options, throw=False)
+                      options=dataclasses.replace(options, dtmin=0.05), throw=False)
     assert int(obs.status) == 4 and np.all(np.isnan(obs.amplitudes))
 
 

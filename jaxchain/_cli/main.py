@@ -8,10 +8,12 @@ import jax
 import matplotlib
 import platformdirs
 
-from . import boundaries, crosscheck, figure, localized, stress, sweep, work_precision
+from . import (basin, boundaries, crosscheck, figure, localized, stress, sweep,
+               work_precision)
 from .common import Parser, RunsFailed, UsageError, one_line, usage_message
 
-COMMANDS = (localized, sweep, figure, crosscheck, work_precision, boundaries, stress)
+COMMANDS = (localized, sweep, figure, crosscheck, work_precision, boundaries, stress,
+            basin)
 
 
 def build_parser() -> Parser:

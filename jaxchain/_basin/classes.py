@@ -1,0 +1,70 @@
+"""The classes of a chain's final states, and their probabilities with Wilson
+confidence intervals."""
+
+import numpy as np
+from jaxtyping import Bool, Float, Int
+
+#: The 97.5 % quantile of the standard normal: a 95 % two-sided interval.
+Z95 = 1.959963984540054
+
+
+def halc_clusters(on_halc: Bool[np.ndarray, "*batch n_osc"]) -> Int[np.ndarray, "*batch"]:
+    """The number of separate groups of adjacent HALC oscillators on the ring: 0 at
+    steady sliding, 1 for one localized group (or the whole ring), more for several.
+
+    **Arguments:**
+
+    - `on_halc`: whether each oscillator is on the HALC, shape (..., n_osc).
+
+    **Returns:**
+
+    Shape (...): the groups, counted by their first oscillator (on the HALC, its
+    left neighbour, across the ring's closure, not).
+    """
+    on = np.asarray(on_halc, dtype=bool)
+    starts = (on & ~np.roll(on, 1, axis=-1)).sum(-1)
+    return np.where(on.all(-1), 1, starts)
+
+
+def class_names(n_osc: int) -> list[str]:
+    """The classes by n_HALC: "steady sliding" and "stick-slip" for one oscillator;
+    "steady sliding" (n_HALC = 0) and "n_HALC = k", k = 1..N, for a ring; then
+    "failed" (a run that did not finish)."""
+    if n_osc == 1:
+        return ["steady sliding", "stick-slip", "failed"]
+    return ["steady sliding"] + [f"n_HALC = {k}" for k in range(1, n_osc + 1)] + ["failed"]
+
+
+def class_index(n_halc: Int[np.ndarray, "*batch"], status: Int[np.ndarray, "*batch"],
+                n_osc: int) -> Int[np.ndarray, "*batch"]:
+    """The index into `class_names(n_osc)` of each run: n_HALC, or the last
+    ("failed") where the status is not 0."""
+    n_halc = np.asarray(n_halc)
+    return np.where(np.asarray(status) == 0, n_halc, n_osc + 1)
+
+
+def wilson_interval(k: Int[np.ndarray, "*shape"], n: int | Int[np.ndarray, "*shape"],
+                    z: float = Z95) -> tuple[Float[np.ndarray, "*shape"],
+                                             Float[np.ndarray, "*shape"]]:
+    """The Wilson score interval of a binomial proportion k/n (Wilson, J. Am. Stat.
+    Assoc. 22, 209-212 (1927)): the p with |k/n - p| <= z sqrt(p (1 - p) / n).
+    Unlike the normal approximation it stays in [0, 1] and does not collapse to a
+    point at k = 0 or k = n.
+
+    **Arguments:**
+
+    - `k`: successes; `n`: trials (> 0); `z`: the normal quantile (95 %: `Z95`).
+
+    **Returns:**
+
+    (low, high), of the broadcast shape of k and n.
+    """
+    k, n = np.asarray(k, dtype=float), np.asarray(n, dtype=float)
+    p = k / n
+    denom = 1 + z**2 / n
+    centre = (p + z**2 / (2 * n)) / denom
+    half = z * np.sqrt(p * (1 - p) / n + z**2 / (4 * n**2)) / denom
+    # At k = 0 and k = n the bounds are exactly 0 and 1 (centre = half there).
+    low = np.where(k == 0, 0.0, np.clip(centre - half, 0.0, 1.0))
+    high = np.where(k == n, 1.0, np.clip(centre + half, 0.0, 1.0))
+    return low, high

@@ -1,0 +1,135 @@
+"""`jaxchain basin`: basin stability of the chain's states over belt speeds."""
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .._basin.basin import BASIN_OPTIONS, basin_stability
+from .._basin.sampling import Box
+from .._options import SimulationOptions
+from .._params import ChainParams
+from .._plots.basin import plot_basin_stability, plot_halc_histogram
+from .common import (RunsFailed, UsageError, json_ready, positive_float, positive_int,
+                     save_figure, show_progress, writable_folder)
+from .sweep import belt_speeds
+
+HELP = "basin stability: how likely each state is from random initial states"
+DESCRIPTION = """\
+Draw --samples initial states uniformly from the box x_n(0) in --x-range, x_n'(0) in
+--v-range (independently for each oscillator, with the JAX PRNG key of --seed), run
+each at every belt speed of --vd to --t-end, and classify the state after
+--transient by n_HALC (for one oscillator: steady sliding or stick-slip) and by the
+number of separate groups of HALC oscillators. Prints, per belt speed, the fraction
+of samples in each class with its 95 % Wilson interval (Menck et al., Nature
+Physics 9, 89 (2013)). A subset of up to 50 samples runs again to 2 t_end: the
+share whose class changed says whether t_end was long enough, and its stick-slip
+states are classified periodic or irregular by their time delays.
+
+The runs are stored batch by batch in <out>/basin.zarr (--resume continues a killed
+run with the same settings). Writes <out>/basin.nc (the result, with the sampled
+initial states and the key), <out>/basin.png (the probabilities against v_d as
+stacked areas) and <out>/basin_halc.png (the distribution of n_HALC at the belt
+speed nearest 1.5). --quick: one oscillator, v_d = 0.8:2.2:8, 200 samples, t_end
+500."""
+
+
+def pair(text: str) -> tuple[float, float]:
+    """An argparse type: LO,HI with LO < HI, both finite."""
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected LO,HI, got {text!r}") from None
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise argparse.ArgumentTypeError(f"expected finite LO < HI, got {text!r}")
+    return lo, hi
+
+
+def add_parser(sub):
+    p = sub.add_parser("basin", help=HELP, description=DESCRIPTION,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    box = Box()
+    p.add_argument("--vd", type=belt_speeds, default=None, metavar="LIST|START:STOP:NUM",
+                   help="belt speeds (default 1.5; --quick 0.8:2.2:8)")
+    p.add_argument("--n-osc", type=positive_int, default=None, metavar="N",
+                   help="oscillators on the ring (default 20; --quick 1)")
+    p.add_argument("--samples", type=positive_int, default=None, metavar="S",
+                   help="initial states per belt speed (default 1000; --quick 200)")
+    p.add_argument("--x-range", type=pair, default=box.x, metavar="LO,HI",
+                   help=f"box of x_n(0) (default {box.x[0]:g},{box.x[1]:g})")
+    p.add_argument("--v-range", type=pair, default=box.v, metavar="LO,HI",
+                   help=f"box of x_n'(0) (default {box.v[0]:g},{box.v[1]:g})")
+    p.add_argument("--t-end", type=positive_float, default=None, metavar="T",
+                   help=f"final time (default {BASIN_OPTIONS.t_end:g}; --quick 500)")
+    p.add_argument("--transient", type=float, default=None, metavar="T",
+                   help=f"classify after this time (default {BASIN_OPTIONS.transient:g}; "
+                        "--quick 400)")
+    p.add_argument("--seed", type=int, default=0, metavar="K",
+                   help="seed of the JAX PRNG key (default 0)")
+    p.add_argument("--eps", type=positive_float, default=1e-3,
+                   help="tanh smoothing velocity (default 0.001)")
+    p.add_argument("--out", type=Path, default=Path("jaxchain-out"),
+                   metavar="DIR", help="output folder (default ./jaxchain-out/)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the runs stored in <out>/basin.zarr")
+    p.add_argument("--quick", action="store_true", help="the small single-oscillator run")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    p.set_defaults(run=run)
+    return p
+
+
+def run(args) -> None:
+    quick = args.quick
+    v_d = args.vd or (list(np.linspace(0.8, 2.2, 8).round(12)) if quick else [1.5])
+    n_osc = args.n_osc or (1 if quick else 20)
+    samples = args.samples or (200 if quick else 1000)
+    t_end = args.t_end or (500.0 if quick else BASIN_OPTIONS.t_end)
+    transient = args.transient if args.transient is not None else (
+        400.0 if quick else t_end - (BASIN_OPTIONS.t_end - BASIN_OPTIONS.transient))
+    if not 0 <= transient < t_end:
+        raise UsageError(f"--transient must lie in [0, t_end = {t_end:g}), got {transient:g}")
+    box = Box(x=tuple(args.x_range), v=tuple(args.v_range))
+    options = SimulationOptions(t_end=t_end, transient=transient)
+    params = ChainParams(n_osc=n_osc, eps=args.eps)
+    writable_folder(args.out)
+    start = time.perf_counter()
+    store = args.out / "basin.zarr"
+    if store.exists() and not args.resume:
+        raise UsageError(f"--out {args.out}: basin.zarr exists; use --resume to continue "
+                         "it, or another --out")
+    ds = basin_stability(params, v_d, samples, box, args.seed, options=options,
+                         store=store, resume=args.resume, progress=show_progress(args))
+    wall = time.perf_counter() - start
+    ds.to_netcdf(args.out / "basin.nc")
+    save_figure(plot_basin_stability(ds), args.out / "basin.png")
+    save_figure(plot_halc_histogram(ds, 1.5), args.out / "basin_halc.png")
+    classes = ds["class"].values.tolist()
+    shown = [c for c in range(len(classes)) if ds["counts"].values[:, c].any()]
+    if args.json:
+        print(json.dumps(json_ready({
+            "v_d": ds["v_d"].values.tolist(), "classes": classes,
+            "counts": ds["counts"].values.tolist(),
+            "fractions": ds["fraction"].values.tolist(),
+            "ci_low": ds["ci_low"].values.tolist(), "ci_high": ds["ci_high"].values.tolist(),
+            "n_samples": samples, "wall_time_s": wall,
+            "changed_fraction": ds["changed_fraction"].values.tolist(),
+            "periodic_fraction": ds["periodic_fraction"].values.tolist(),
+            "n_osc": n_osc, "box": {"x": list(box.x), "v": list(box.v)},
+            "seed": args.seed, "t_end": t_end, "transient": transient}), allow_nan=False))
+    else:
+        print(f"N = {n_osc}, {samples} samples, x in {list(box.x)}, x' in {list(box.v)}, "
+              f"seed {args.seed}, t_end = {t_end:g}, classified after {transient:g}")
+        for i, v in enumerate(ds["v_d"].values):
+            parts = [f"{classes[c]} {ds['fraction'].values[i, c]:.3f} "
+                     f"[{ds['ci_low'].values[i, c]:.3f}, {ds['ci_high'].values[i, c]:.3f}]"
+                     for c in shown if ds["counts"].values[i, c]]
+            print(f"v_d = {v:g}: " + "; ".join(parts)
+                  + f" (class changed at 2 t_end: {ds['changed_fraction'].values[i]:.0%})")
+        print(f"{wall:.1f} s; wrote {args.out / 'basin.nc'}, basin.png, basin_halc.png")
+    failed = int((ds["status"].values != 0).sum())
+    if failed:
+        raise RunsFailed(f"{failed} of {ds['status'].size} runs failed; they are counted "
+                         "in the class 'failed'")

@@ -1,0 +1,110 @@
+"""Basin stability: the single oscillator's known edges, the coverage of the Wilson
+intervals, reproducibility from the key, and a killed run resumed."""
+
+import json
+import sys
+
+import jax
+import numpy as np
+import pytest
+import xarray as xr
+
+import jaxchain as jc
+from jaxchain._cli.main import main
+from jaxchain._sweep.store import SweepStore
+
+SHORT = jc.SimulationOptions(t_end=300.0, transient=200.0)
+ONE = jc.ChainParams(n_osc=1)
+
+
+def test_single_oscillator_stick_slip_is_certain_below_hopf_and_absent_above_fold():
+    """Below the Hopf point steady sliding is unstable, so every sample ends in
+    stick-slip; above the fold (the stick-slip existence limit) none does; between
+    them both basins have weight. The edges come from `hopf_point` and
+    `stick_slip_existence_limit`, not from the samples."""
+    hopf = float(jc.hopf_point(ONE).v_d[0])
+    fold = jc.stick_slip_existence_limit(ONE)
+    v_d = [hopf - 0.25, 0.5 * (hopf + fold), fold + 0.15]
+    ds = jc.basin_stability(ONE, v_d, 48, key=1, options=SHORT, n_check=0, progress=False)
+    assert ds["class"].values.tolist() == ["steady sliding", "stick-slip", "failed"]
+    stick_slip = ds["counts"].sel({"class": "stick-slip"}).values
+    assert stick_slip.tolist()[0] == 48 and stick_slip.tolist()[2] == 0
+    assert 0 < stick_slip[1] < 48
+    assert np.all(ds["counts"].sel({"class": "failed"}).values == 0)
+    low, high = ds["ci_low"].values, ds["ci_high"].values
+    assert np.all(low <= ds["fraction"].values) and np.all(ds["fraction"].values <= high)
+
+
+def test_wilson_intervals_cover_a_known_probability_at_the_nominal_rate():
+    """A synthetic classifier with a known probability: a sample is in the class
+    when x_1(0) lies in the lowest 30 % of the box. Over 2000 keys of 50 samples
+    each, the 95 % Wilson interval covers 0.3 in 93-97 % of them (the standard
+    error of the coverage is 0.5 %)."""
+    box, p, n = jc.Box(), 0.3, 50
+    keys = jax.random.split(jax.random.PRNGKey(7), 2000)
+    x = jax.vmap(lambda k: jc.sample_states(k, box, n, 1)[:, 0, 0])(keys)
+    hits = np.asarray((x < box.x[0] + p * (box.x[1] - box.x[0])).sum(1))
+    low, high = jc.wilson_interval(hits, n)
+    coverage = np.mean((low <= p) & (p <= high))
+    assert 0.93 <= coverage <= 0.97
+    assert abs(hits.mean() / n - p) < 0.005  # the sampler is uniform
+
+
+def test_clusters_count_groups_across_the_ring_closure():
+    on = np.array([[1, 1, 0, 0, 1, 0], [1, 0, 0, 0, 0, 1], [0] * 6, [1] * 6], dtype=bool)
+    assert jc.halc_clusters(on).tolist() == [2, 1, 0, 1]
+
+
+def test_same_key_same_result_and_a_killed_run_resumes_to_the_same(tmp_path, monkeypatch):
+    params = jc.ChainParams(n_osc=3)
+    kwargs = dict(options=SHORT, n_check=2, batch_size=4, progress=False)
+    a = jc.basin_stability(params, [1.5], 10, key=3, **kwargs)
+    b = jc.basin_stability(params, [1.5], 10, key=jax.random.PRNGKey(3), **kwargs)
+    xr.testing.assert_equal(a, b)
+    other = jc.basin_stability(params, [1.5], 10, key=4, **kwargs)
+    assert not np.array_equal(other["y0"].values, a["y0"].values)
+
+    store = tmp_path / "basin.zarr"
+    write = SweepStore.write
+
+    def killed_after_batch_0(self, index, start, batch):
+        write(self, index, start, batch)
+        if index == 0:
+            raise KeyboardInterrupt("killed after batch 0")
+
+    monkeypatch.setattr(SweepStore, "write", killed_after_batch_0)
+    with pytest.raises(KeyboardInterrupt):
+        jc.basin_stability(params, [1.5], 10, key=3, store=store, **kwargs)
+    monkeypatch.setattr(SweepStore, "write", write)
+    assert SweepStore(store).done().tolist() == [True, False, False]
+    resumed = jc.basin_stability(params, [1.5], 10, key=3, store=store, resume=True, **kwargs)
+    xr.testing.assert_equal(resumed.drop_attrs(), a.drop_attrs())
+    assert resumed.attrs["key"] == a.attrs["key"] == np.asarray(jax.random.PRNGKey(3)).tolist()
+
+
+def test_basin_command_json_and_figures(tmp_path, capsys):
+    argv = ["basin", "--n-osc", "1", "--vd", "1.0,2.1", "--samples", "12", "--t-end", "300",
+            "--transient", "200", "--out", str(tmp_path), "--json", "--no-progress"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["classes"] == ["steady sliding", "stick-slip", "failed"]
+    assert np.array(out["fractions"]).shape == (2, 3) and out["n_samples"] == 12
+    assert out["fractions"][0][1] == 1.0 and out["fractions"][1][1] == 0.0
+    assert all((tmp_path / f).stat().st_size > 0 for f in ("basin.nc", "basin.png",
+                                                            "basin_halc.png"))
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--samples", "0"], "--samples"),
+    (["--x-range", "2,1"], "--x-range"),
+    (["--v-range", "a,b"], "--v-range"),
+    (["--vd", "-1"], "--vd"),
+    (["--transient", "5000"], "--transient"),
+    (["--out", __file__], "--out"),
+])
+def test_basin_command_rejects_bad_input_in_one_line(argv, says, capsys):
+    with pytest.raises(SystemExit) as exc:
+        sys.exit(main(["basin", *argv]))
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err
