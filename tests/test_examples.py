@@ -22,7 +22,7 @@ SMALL = {
         ("N_OSC = 6\nT_END = 600.0\nTRANSIENT = 400.0\nCHUNK = 50.0\nT_SERIES = 60.0",
          "the two signals agree on"),
     "04_basin_stability.ipynb":
-        ("N_OSC = 3\nSAMPLES = 12\nVD_ONE = (1.0, 2.1, 3)\nSAMPLES_ONE = 12\n"
+        ("N_OSC = 3\nSAMPLES = 8\nVD_ONE = (1.0, 2.1, 2)\nSAMPLES_ONE = 8\n"
          "T_END, TRANSIENT = 300.0, 200.0", "basin stability of stick-slip"),
 }
 #: A cell that draws: it calls one of jaxchain's plot functions or plt.show().

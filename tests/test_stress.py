@@ -65,16 +65,16 @@ def test_a_collapsing_step_size_is_its_own_status():
     """A run that spends its step budget on steps shorter than dtmin on average fails
     with the status "step size collapsed", not "max_steps reached"; with the same
     budget and a floor below its steps, it is "max_steps reached"."""
-    options = dataclasses.replace(QUICK_OPTIONS, max_steps=300, dtmin=0.05)
-    row = run_case(make_case("eps", 1e-3, options), "ros34pw2")
-    assert row["outcome"] == "failed" and row["status"] == "step size collapsed"
-    assert "dtmin = 0.05" in row["hint"]
-    options = dataclasses.replace(options, dtmin=1e-6)
-    assert run_case(make_case("eps", 1e-3, options), "ros34pw2")["status"] == \
-        "max_steps reached"
-    obs = jc.simulate(jc.ChainParams(n_osc=2), jc.OutOfPhaseExcitation.eq8([True, False]),
-                      options=dataclasses.replace(options, dtmin=0.05), throw=False)
+    params, y0 = jc.ChainParams(n_osc=2), jc.OutOfPhaseExcitation.eq8([True, False])
+    budget = jc.SimulationOptions(t_end=150.0, transient=100.0, max_steps=300, dtmin=0.05)
+    obs = jc.simulate(params, y0, options=budget, throw=False)
     assert int(obs.status) == 4 and np.all(np.isnan(obs.amplitudes))
+    assert jc.STATUS[4].startswith("step size collapsed")
+    assert "dtmin = 0.05" in jc.failure_hint(4, params, jc.SOLVERS["ros34pw2"](), budget)
+    with pytest.raises(RuntimeError, match="step size collapsed: eps = 0.001"):
+        jc.simulate(params, y0, options=budget)
+    floor = dataclasses.replace(budget, dtmin=1e-6)
+    assert int(jc.simulate(params, y0, options=floor, throw=False).status) == 1
 
 
 def test_energy_balance_and_decay_rate_of_the_damped_linear_oscillator():
