@@ -46,9 +46,9 @@ AUTO = "auto"
 #: Stick stiffness mu_st/eps up to which `auto_solver` takes an explicit method.
 #: There an explicit step is bounded by accuracy, not by the stick phase's
 #: stability (h <~ 3 eps/mu_st): on the stress matrix's default case Tsit5 takes
-#: 967 and 3390 steps at eps = 1e-1 and 1e-2 (mu_st/eps = 10 and 100) against
+#: 967 and 3411 steps at eps = 1e-1 and 1e-2 (mu_st/eps = 10 and 100) against
 #: ROS34PW2's 8517 and 10311, each step costing about half; at eps = 1e-3 Tsit5
-#: takes 20561 against 11244 (docs/stress.md).
+#: takes 20279 against 11226 (docs/stress.md).
 AUTO_STIFFNESS = 100.0
 
 

@@ -157,7 +157,7 @@ def _command_argv(command):
 
 
 @pytest.mark.parametrize("command", ["localized", "sweep", "figure", "crosscheck",
-                                     "work-precision", "boundaries"])
+                                     "work-precision", "boundaries", "stress", "basin"])
 @settings(max_examples=60, deadline=None)
 @given(data=st.data())
 def test_fuzzed_command_lines_parse_or_exit_2_with_one_line(command, data):

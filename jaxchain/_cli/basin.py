@@ -58,7 +58,8 @@ def add_parser(sub):
     p.add_argument("--samples", type=positive_int, default=None, metavar="S",
                    help="initial states per belt speed (default 1000; --quick 200)")
     p.add_argument("--x-range", type=pair, default=box.x, metavar="LO,HI",
-                   help=f"box of x_n(0) (default {box.x[0]:g},{box.x[1]:g})")
+                   help=f"box of x_n(0) (default {box.x[0]:g},{box.x[1]:g}; write "
+                        "--x-range=-3,3 when LO is negative)")
     p.add_argument("--v-range", type=pair, default=box.v, metavar="LO,HI",
                    help=f"box of x_n'(0) (default {box.v[0]:g},{box.v[1]:g})")
     p.add_argument("--t-end", type=positive_float, default=None, metavar="T",
