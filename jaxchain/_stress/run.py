@@ -27,8 +27,8 @@ COLUMNS = ("what", "value", "solver", "outcome", "status", "check", "hint", "num
 
 
 #: Where the IMEX path is not run: KenCarp's implicit stages solve dense (2N)x(2N)
-#: Newton systems, so its cost per step grows as N^3 from 1.8 ms at N = 20 (eps =
-#: 1e-5: 88582 steps in 160 s, against ROS34PW2's 69123 in 0.4 s), and one case at
+#: Newton systems, so its cost per step grows as N^3 from 1.7 ms at N = 20 (eps =
+#: 1e-5: 88582 steps in 149 s, against ROS34PW2's 69123 in 0.4 s), and one case at
 #: N = 200 did not finish in 7 minutes (docs/stress.md).
 IMEX_LIMITS = {"n_osc": 20, "eps": 1e-5}
 
