@@ -1,7 +1,10 @@
 """Small shared systems and references for the tests."""
 
+import sys
+
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
@@ -69,3 +72,13 @@ def scipy_stick_slip_cycle(params: jc.ChainParams) -> tuple[float, float]:
     amplitude = 0.5 * (max(x_turn.max(), x_exit) - min(x_turn.min(), x_return))
     period = arc.t[-1] + (x_exit - x_return) / params.v_d
     return amplitude, period
+
+
+def assert_usage_error(argv: list[str], says: str, capsys) -> None:
+    """`jaxchain ARGV` exits with status 2 and one line on stderr naming `says`."""
+    from jaxchain._cli.main import main
+    with pytest.raises(SystemExit) as exc:
+        sys.exit(main(argv))
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and says in err

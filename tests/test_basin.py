@@ -2,7 +2,6 @@
 intervals, reproducibility from the key, and a killed run resumed."""
 
 import json
-import sys
 
 import jax
 import numpy as np
@@ -10,6 +9,7 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
+from helpers import assert_usage_error
 from jaxchain._cli.main import main
 from jaxchain._sweep.store import SweepStore
 
@@ -103,8 +103,4 @@ def test_basin_command_json_and_figures(tmp_path, capsys):
     (["--out", __file__], "--out"),
 ])
 def test_basin_command_rejects_bad_input_in_one_line(argv, says, capsys):
-    with pytest.raises(SystemExit) as exc:
-        sys.exit(main(["basin", *argv]))
-    assert exc.value.code == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and says in err
+    assert_usage_error(["basin", *argv], says, capsys)

@@ -16,6 +16,7 @@ import jaxchain as jc
 import jaxchain._cli.boundaries as cli_boundaries
 import jaxchain._cli.work_precision as cli_work_precision
 import jaxchain._work_precision as wp
+from helpers import assert_usage_error
 from jaxchain._cli.main import main
 
 SMALL = ["--n-osc", "3", "--t-end", "400", "--transient", "200"]
@@ -212,11 +213,7 @@ def test_installed_command_table_and_usage_error(tmp_path):
     (["--n-osc", "0"], "--n-osc"),
 ])
 def test_boundaries_bad_option_exits_2_with_one_line(argv, says, capsys):
-    with pytest.raises(SystemExit) as exc:
-        sys.exit(main(["boundaries", *argv]))
-    assert exc.value.code == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and says in err
+    assert_usage_error(["boundaries", *argv], says, capsys)
 
 
 @pytest.mark.slow

@@ -3,7 +3,6 @@ physics checks agree with analytic results, and failures carry specific hints.""
 
 import dataclasses
 import json
-import sys
 
 import jax.numpy as jnp
 import numpy as np
@@ -14,6 +13,7 @@ from jaxchain._nonsmooth.existence import _peak
 from jaxchain._stress.cases import QUICK_MATRIX, QUICK_OPTIONS, make_case
 from jaxchain._stress.checks import balance_run, linear_rate
 from jaxchain._stress.run import run_case
+from helpers import assert_usage_error
 from jaxchain._cli.main import main
 
 #: What a failed case may say: the run's own statuses (without their advice) and
@@ -127,8 +127,4 @@ def test_auto_solver_is_explicit_only_where_the_stick_phase_is_not_stiff():
     (["--out", __file__], "--out"),
 ])
 def test_stress_command_rejects_bad_input_in_one_line(argv, says, capsys):
-    with pytest.raises(SystemExit) as exc:
-        sys.exit(main(["stress", *argv]))
-    assert exc.value.code == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and says in err
+    assert_usage_error(["stress", *argv], says, capsys)

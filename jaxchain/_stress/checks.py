@@ -81,15 +81,20 @@ def resolution(params, options) -> jnp.ndarray:
     return 100.0 * (jnp.max(jnp.asarray(options.rtol)) * scale + jnp.max(jnp.asarray(options.atol)))
 
 
+def _friction_derivatives(params) -> tuple[jnp.ndarray, jnp.ndarray]:
+    """|d mu / d v_rel| and |d^2 mu / d v_rel^2| at v_rel = v_d, eq. (1), by JAX."""
+    mu = lambda v: friction_coefficient(params, v)  # noqa: E731
+    v_d = jnp.asarray(params.v_d, float)
+    return jnp.abs(jax.grad(mu)(v_d)), jnp.abs(jax.grad(jax.grad(mu))(v_d))
+
+
 def linear_regime(params) -> jnp.ndarray:
     """The largest deviation a from steady sliding that is still linear: the friction
     law (eq. (1)) departs from its tangent at v_d by at most |mu''| a^2 / 2, kept
     below 1 % of the linear damping (2 xi + |mu'|) a; and a <= v_d / 10, far from
     stick."""
-    mu = lambda v: friction_coefficient(params, v)  # noqa: E731
-    v_d = jnp.asarray(params.v_d, float)
-    slope, curvature = jnp.abs(jax.grad(mu)(v_d)), jnp.abs(jax.grad(jax.grad(mu))(v_d))
-    return jnp.minimum(0.1 * v_d, 0.02 * (2 * params.xi + slope) / curvature)
+    slope, curvature = _friction_derivatives(params)
+    return jnp.minimum(0.1 * params.v_d, 0.02 * (2 * params.xi + slope) / curvature)
 
 
 class SlidingDeviation(AbstractObserver):
@@ -185,8 +190,7 @@ def sliding_expected(params) -> str:
 
 def friction_slope(params) -> float:
     """|d mu / d v_rel| at steady sliding, eq. (1): (mu_st - mu_d)/v0 exp(-v_d/v0)."""
-    return float(jnp.abs(jax.grad(lambda v: friction_coefficient(params, v))(
-        jnp.asarray(params.v_d, float))))
+    return float(_friction_derivatives(params)[0])
 
 
 def physics_checks(params, y0, solver, options, observed, exactly_sliding: bool
