@@ -1,10 +1,28 @@
 import os
+import shutil
+import tempfile
 
-import jax
+# One persistent compilation cache for the whole test session, in a temporary folder:
+# the pytest-xdist workers and the subprocesses that the command-line and notebook
+# tests start all inherit this variable, so a program compiled by one of them is
+# loaded by the others. Set before JAX is imported, which reads it then. The
+# controller process makes the folder and removes it at the end (`_CACHE_OWNER`).
+_CACHE_OWNER = "JAX_COMPILATION_CACHE_DIR" not in os.environ
+if _CACHE_OWNER:
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="jaxchain-tests-xla-")
+    os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
 
-# The command line's persistent compilation cache stays off in the tests (one test
-# turns it on in a folder of its own), so that they never write to the user's cache.
+import jax  # noqa: E402
+
+# The command line's own persistent compilation cache stays off in the tests (one
+# test turns it on in a folder of its own), so that they never write to the user's
+# cache; the session's cache above serves them.
 os.environ.setdefault("JAXCHAIN_CACHE_DIR", "")
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
+
+
+def pytest_unconfigure(config):
+    if _CACHE_OWNER and not hasattr(config, "workerinput"):
+        shutil.rmtree(os.environ["JAX_COMPILATION_CACHE_DIR"], ignore_errors=True)

@@ -33,6 +33,38 @@ def reference_rhs(params: jc.ChainParams):
     return rhs
 
 
+def drift_bound(options: jc.SimulationOptions, num_steps, scale) -> float:
+    """How far two differently compiled integrations of the same run (vmap and queue,
+    two batch sizes, two solvers, two CPUs) may lie apart, in the state or in
+    anything read off it at fixed times (extrema at the sample times, y_final).
+
+    The step-size controller holds each accepted step's local error below
+    rtol |y| + atol. Rounding that differs between two programs moves the
+    accepted steps, so each result may move by up to the local errors it
+    accumulated: on a non-expanding flow (the damped chains and stable cycles of
+    these tests) at most their sum, num_steps (rtol scale + atol), where `scale`
+    bounds |y| over the run. Two runs differ by at most twice that. A bound of
+    the worst case: it grows with the horizon, through num_steps.
+
+    **Arguments:**
+
+    - `options`: the runs' `SimulationOptions` (rtol, atol).
+    - `num_steps`: steps of the longer run (array-like, the largest is taken).
+    - `scale`: a bound on |y| over the run.
+    """
+    return 2.0 * float(np.max(num_steps)) * (float(options.rtol) * float(np.max(scale))
+                                             + float(options.atol))
+
+
+def assert_within_drift(a, b, options: jc.SimulationOptions, num_steps, what: str = ""):
+    """`a` and `b`, read off two differently compiled runs, agree within
+    `drift_bound` (with |y| bounded by their largest entry, at least 1)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    bound = drift_bound(options, num_steps, max(1.0, np.abs(a).max(), np.abs(b).max()))
+    assert np.all(np.isfinite(a)) and np.all(np.isfinite(b)), what
+    assert np.max(np.abs(a - b)) <= bound, (what, np.max(np.abs(a - b)), bound)
+
+
 def flat(y) -> jnp.ndarray:
     return jnp.reshape(jnp.asarray(y), (-1,))
 

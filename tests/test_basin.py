@@ -7,11 +7,16 @@ import jax
 import numpy as np
 import pytest
 import xarray as xr
+from scipy.stats import binomtest
 
 import jaxchain as jc
 from helpers import assert_usage_error
 from jaxchain._cli.main import main
 from jaxchain._sweep.store import SweepStore
+
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
 
 SHORT = jc.SimulationOptions(t_end=300.0, transient=200.0)
 ONE = jc.ChainParams(n_osc=1)
@@ -31,8 +36,26 @@ def test_single_oscillator_stick_slip_is_certain_below_hopf_and_absent_above_fol
     assert stick_slip.tolist()[0] == 48 and stick_slip.tolist()[2] == 0
     assert 0 < stick_slip[1] < 48
     assert np.all(ds["counts"].sel({"class": "failed"}).values == 0)
-    low, high = ds["ci_low"].values, ds["ci_high"].values
-    assert np.all(low <= ds["fraction"].values) and np.all(ds["fraction"].values <= high)
+    # the 95 % Wilson intervals, against scipy's
+    counts = ds["counts"].values
+    for low, high, k in zip(ds["ci_low"].values.ravel(), ds["ci_high"].values.ravel(),
+                            counts.ravel()):
+        ci = binomtest(int(k), 48).proportion_ci(confidence_level=0.95, method="wilson")
+        assert low == pytest.approx(ci.low, abs=1e-12)
+        assert high == pytest.approx(ci.high, abs=1e-12)
+    assert np.array_equal(ds["fraction"].values, counts / 48)
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 48, 1000])
+def test_wilson_interval_equals_scipys(n):
+    """Every k of n, the ends k = 0 and k = n included, against scipy's Wilson
+    interval (no continuity correction)."""
+    k = np.arange(n + 1)
+    low, high = jc.wilson_interval(k, n)
+    for kk in k:
+        ci = binomtest(int(kk), n).proportion_ci(confidence_level=0.95, method="wilson")
+        assert low[kk] == pytest.approx(ci.low, abs=1e-12)
+        assert high[kk] == pytest.approx(ci.high, abs=1e-12)
 
 
 def test_wilson_intervals_cover_a_known_probability_at_the_nominal_rate():

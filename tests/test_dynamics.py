@@ -13,6 +13,10 @@ import jaxchain as jc
 from jaxchain._cli.figure import FIGURES
 from jaxchain._cli.main import main
 
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
+
 
 def synthetic_peaks(n_peaks, period, delays, jitter=0.0, seed=0):
     """Peak times of oscillators that peak at k T + delay_i(k)."""

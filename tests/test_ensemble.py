@@ -6,12 +6,18 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from helpers import SHORT
+from helpers import SHORT, assert_within_drift
+
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
 
 
 def test_ensemble_equals_runs_done_one_at_a_time():
-    """3 initial conditions x 2 belt speeds, vmapped in one compiled function, give
-    the same observables as 6 separate `simulate` calls."""
+    """3 initial conditions x 2 belt speeds in one ensemble give the observables of
+    6 separate `simulate` calls, in the order given. The ensemble's lanes and
+    `simulate` are different compiled programs: the discrete observables agree
+    exactly, the numbers within the integration tolerance (`drift_bound`)."""
     p = jc.ChainParams(n_osc=4)
     masks = np.stack([jc.excited_block(4, k) for k in (1, 2, 4)])
     ics = jc.OutOfPhaseExcitation(excited=jnp.asarray(masks), velocity=jnp.zeros(3))
@@ -24,10 +30,11 @@ def test_ensemble_equals_runs_done_one_at_a_time():
             single = jc.simulate(jc.ChainParams(n_osc=4, v_d=vd),
                                  jc.OutOfPhaseExcitation.eq8(mask), options=SHORT)
             lane = ds.isel(v_d=i, ic=j)
-            for name in ("amplitudes", "energy", "n_halc", "min_slip_speed", "v_max",
-                         "y_initial", "y_final", "num_steps", "status"):
-                assert np.allclose(lane[name], getattr(single, name), rtol=1e-9,
-                                   atol=1e-12), name
+            for name in ("y_initial", "n_halc", "on_halc", "status"):
+                assert np.array_equal(lane[name], getattr(single, name)), name
+            steps = [int(lane["num_steps"]), int(single.num_steps)]
+            for name in ("amplitudes", "min_slip_speed", "v_max", "y_final"):
+                assert_within_drift(lane[name], getattr(single, name), SHORT, steps, name)
 
 
 @pytest.mark.parametrize("engine", ["queue", "vmap"])
@@ -37,7 +44,8 @@ def test_good_lanes_are_kept_beside_failing_ones(engine):
     budget per chunk is too small. The failures are flagged, skipped and give no
     partial answers; every good lane equals its own separate run: bit for bit in
     the queue (the same compiled program), to rounding under vmap (a batch of 4
-    lanes and one of 1 are different vectorised programs)."""
+    lanes and one of 1 are different vectorised programs, which agree within the
+    integration tolerance, `drift_bound`)."""
     p = jc.ChainParams(n_osc=2)
     sliding = jc.steady_sliding(p)
     lanes = jnp.stack([sliding.at[1, 0].add(0.1), sliding.at[0, 0].set(jnp.nan),
@@ -54,12 +62,13 @@ def test_good_lanes_are_kept_beside_failing_ones(engine):
         alone = jc.ensemble(p, [1.5], jc.GivenState(lanes[good:good + 1]), options=options,
                             engine=engine, progress=False).isel(v_d=0, ic=0)
         assert int(ds["n_halc"][good]) == int(alone["n_halc"])
+        steps = [int(ds["num_steps"][good]), int(alone["num_steps"])]
         for name in ("amplitudes", "energy", "y_final", "num_steps"):
             a, b = ds[name][good].values, alone[name].values
             if engine == "queue":
                 assert np.array_equal(a, b), name
-            else:
-                assert np.allclose(a, b, rtol=1e-6, atol=1e-8), name
+            elif name in ("amplitudes", "y_final"):  # (energy follows from amplitudes)
+                assert_within_drift(a, b, options, steps, name)
     assert float(ds["amplitudes"][0].max()) > 0  # the perturbation was observed
 
 

@@ -1,9 +1,14 @@
 import jax.numpy as jnp
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import jaxchain as jc
+
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
 
 
 def test_friction_coefficient_limits():

@@ -9,6 +9,10 @@ import pytest
 
 import jaxchain as jc
 
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
+
 
 def test_modal_eigenvalues_are_the_spectrum_of_the_jacobian():
     for v_d in (1.0, 1.5):

@@ -6,6 +6,10 @@ import pytest
 import jaxchain as jc
 from helpers import flat, reference_rhs
 
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
+
 
 @pytest.mark.parametrize("n_osc, v_d, eps", [(1, 1.5, 1e-2), (5, 0.8, 1e-3), (20, 2.0, 1e-2)])
 def test_steady_sliding_is_a_fixed_point(n_osc, v_d, eps):

@@ -8,6 +8,10 @@ import pytest
 import jaxchain as jc
 from helpers import scipy_slip_arc, scipy_stick_slip_cycle
 
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
+
 ONE = jc.ChainParams(n_osc=1)
 
 

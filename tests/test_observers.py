@@ -15,6 +15,10 @@ import jaxchain as jc
 from helpers import SHORT, reference_rhs
 from jaxchain._lanes import _run_block, lane_params
 
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
+
 
 def lorenz(t, y, args):
     sigma, rho, beta = 10.0, 28.0, 8.0 / 3.0

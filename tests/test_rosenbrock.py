@@ -5,11 +5,16 @@ import dataclasses
 import diffrax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import jaxchain as jc
 from helpers import SHORT, scipy_stick_slip_cycle
 from jaxchain._rosenbrock import Ros34PW2
 from jaxchain._simulate import terms
+
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
 
 
 def _fixed_step_error(split, y0, t1, exact, n_steps):

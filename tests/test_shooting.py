@@ -11,6 +11,10 @@ import jaxchain as jc
 from helpers import SHORT, reference_rhs, scipy_stick_slip_cycle
 from jaxchain._bifurcation.shooting import describe_orbit, pack
 
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
+
 
 def scipy_flow(params, y, period):
     sol = solve_ivp(reference_rhs(params), (0.0, period), np.ravel(y), method="DOP853",

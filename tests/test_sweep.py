@@ -17,6 +17,10 @@ from helpers import SHORT
 from jaxchain._cli.main import main
 from jaxchain._sweep.store import SweepStore
 
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
+
 #: The grid of the kill-and-resume tests: 2 belt speeds x eq. (8) with k = 1..3 on
 #: a ring of 3, in 3 batches of 2. The horizon makes a batch last about a second,
 #: so that the sweep can be killed between two batches.

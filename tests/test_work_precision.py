@@ -4,11 +4,16 @@ import dataclasses
 import json
 
 import numpy as np
+import pytest
 
 import jaxchain as jc
 import jaxchain._work_precision as wp
 from jaxchain._cli.main import main
 from helpers import flat, scipy_stick_slip_cycle
+
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
 
 
 def test_numpy_field_for_scipy_matches_the_model():
