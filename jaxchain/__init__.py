@@ -123,6 +123,8 @@ from ._sweep.fronts import front_ranges as front_ranges  # noqa: E402
 from ._sweep.fronts import propagating_fronts as propagating_fronts  # noqa: E402
 from ._params import parameter_name as parameter_name  # noqa: E402
 from ._plots.sweep import plot_bifurcation_diagram as plot_bifurcation_diagram  # noqa: E402
+from ._plots.bifurcation import plot_bistable_region as plot_bistable_region  # noqa: E402
+from ._plots.bifurcation import plot_limit_cycle_branch as plot_limit_cycle_branch  # noqa: E402
 from ._plots.crosscheck import plot_crosscheck as plot_crosscheck  # noqa: E402
 from ._plots.work_precision import plot_work_precision as plot_work_precision  # noqa: E402
 from ._simulate import integrate as integrate  # noqa: E402

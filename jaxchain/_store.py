@@ -5,6 +5,7 @@ import csv
 import dataclasses
 import functools
 import hashlib
+import inspect
 import json
 import os
 from collections.abc import Callable
@@ -28,9 +29,10 @@ def canonical(obj):
         class and every field, static fields too.
     - NumPy and JAX arrays and scalars: their values (`tolist()`), so that a float
         and a 0-d float64 array of the same value give the same data.
-    - Functions and classes: their qualified name; `functools.partial`: its
-        function and arguments; any other object with a `__dict__` (for example
-        a sentinel): its class and attributes.
+    - Classes and functions defined at the top level of a module: their
+        qualified name; `functools.partial`: its function and arguments; any other
+        object with a `__dict__` (for example a sentinel): its class and
+        attributes.
     - Dicts (keys as strings), lists and tuples, recursively; str, int, float,
         bool and None as they are.
 
@@ -44,8 +46,10 @@ def canonical(obj):
 
     **Raises:**
 
-    `TypeError` for a traced value or an object of any other type: such a value
-    cannot be keyed by its content.
+    `TypeError` for a traced value, a lambda, a closure or a function defined
+    inside another (two of them share a name, not their content: two closures
+    over different values would share one stored result), or an object of any
+    other type: such a value cannot be keyed by its content.
     """
     if obj is None or isinstance(obj, (bool, int, float, str)):
         return obj
@@ -65,10 +69,27 @@ def canonical(obj):
                 "fields": {f.name: canonical(getattr(obj, f.name))
                            for f in dataclasses.fields(obj)}}
     if callable(obj):
+        _check_named(obj)
         return {"callable": _name(obj)}
     if hasattr(obj, "__dict__"):  # a plain object, for example a sentinel
         return {"class": _name(type(obj)), "attributes": canonical(vars(obj))}
     raise TypeError(f"cannot key a stored result by an object of type {type(obj).__name__}")
+
+
+def _check_named(fn) -> None:
+    """Raise `TypeError` unless the callable `fn` is what its qualified name says:
+    a class, or a function defined at a module's top level, with no closure and
+    not bound to an object."""
+    if isinstance(fn, type):
+        return
+    qualname = getattr(fn, "__qualname__", None)
+    if (qualname is None or "<lambda>" in qualname or "<locals>" in qualname
+            or getattr(fn, "__closure__", None) or inspect.ismethod(fn)):
+        raise TypeError(f"cannot key a stored result by the function {qualname or fn!r}: a "
+                        "lambda, a closure, a bound method or a local function is known by "
+                        "its name, not by what it computes; pass a parameter name, or a "
+                        "function defined at a module's top level (with functools.partial "
+                        "for its arguments)")
 
 
 def _name(obj) -> str:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
+from jaxchain._bifurcation.two_parameter import hopf_vd, hopf_vd_and_derivative
 from jaxchain._boundaries import RATIO_VALUES, XI_VALUES
 
 
@@ -141,3 +142,20 @@ def test_continuation_on_an_analytic_fold_records_failures():
     assert bool(failing.converged[0])  # what was found is kept
     with pytest.raises(ValueError, match="not a solution"):
         jc.continuation(eqx.tree_at(lambda pr: pr.u0, problem, jnp.array([3.0])))
+
+
+
+def test_a_failed_hopf_solve_is_nan_never_a_number():
+    """`hopf_vd` (the traced Hopf point of the two-parameter curves) against the
+    analytic v0 ln((mu_st - mu_d) / (2 xi v0)) and its derivative -v0/xi in xi; and
+    NaN, with a NaN derivative, where Newton's method cannot succeed: with
+    mu_st = mu_d the growth rate is -xi at every belt speed (there is no root), and
+    from a guess of v_d = -50 the exponential law's slope vanishes in float64."""
+    one = jc.ChainParams(n_osc=1)
+    hopf, d_xi = hopf_vd_and_derivative(one, "xi", 0.05)
+    assert abs(float(hopf) - 0.5 * np.log(10)) < 1e-10
+    assert abs(float(d_xi) + 0.5 / 0.05) < 1e-8
+    value, derivative = hopf_vd_and_derivative(jc.ChainParams(n_osc=1, mu_st=0.5),
+                                               "xi", 0.05)
+    assert np.isnan(float(value)) and np.isnan(float(derivative))
+    assert np.isnan(float(hopf_vd(one, guess=-50.0)))

@@ -62,7 +62,8 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
 
     **Raises:**
 
-    `ValueError` if target <= 0; `RuntimeError` if a fold along the way is lost.
+    `ValueError` if target <= 0; `RuntimeError` if a fold along the way is lost or
+    the Hopf point is not found.
     """
     if not target > 0:
         raise ValueError(f"target must be > 0, got {target!r}")
@@ -79,6 +80,8 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
         state.update(solution=solution,
                      problem=problem.with_params(with_parameter(problem.params, "xi", xi)))
         hopf, d_hopf = hopf_vd_and_derivative(problem.params, "xi", xi)
+        if not bool(jnp.isfinite(hopf)):
+            raise RuntimeError(f"Newton's method did not find the Hopf point at xi = {xi:.6g}")
         return float(solution[n] - hopf), float(derivative[n] - d_hopf), float(hopf)
 
     optimiser = optax.lbfgs(learning_rate=learning_rate, linesearch=None)

@@ -8,6 +8,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from .._params import ChainParams, parameter_value, with_parameter
@@ -20,15 +21,25 @@ from .hopf import _hopf_modes
 def hopf_vd(params: ChainParams, guess: float = 1.0) -> Float[Array, ""]:
     """The Hopf belt speed of steady sliding (the largest over the Fourier modes),
     traceable and differentiable in `params` by implicit differentiation through
-    optimistix's Newton method (`hopf_point`)."""
-    return _hopf_modes(params, jnp.asarray(guess, dtype=float), 1e-12, 1e-12)[0].max()
+    optimistix's Newton method (`hopf_point`).
+
+    **Returns:**
+
+    A scalar; NaN (and a NaN derivative) where Newton's method failed for a mode
+    or gave v_d <= 0, so that a failed solve never passes for a belt speed.
+    `hopf_point` raises instead.
+    """
+    v, *_, result = _hopf_modes(params, jnp.asarray(guess, dtype=float), 1e-12, 1e-12)
+    ok = jnp.all(result == optx.RESULTS.successful) & jnp.all(v > 0)
+    return jnp.where(ok, v.max(), jnp.nan)
 
 
 def hopf_vd_and_derivative(params: ChainParams, where: Callable | str, value):
     """`hopf_vd` at `where(params) = value` and its derivative in `value` (forward
-    mode through the implicit function)."""
-    return jax.jvp(lambda x: hopf_vd(with_parameter(params, where, x)),
-                   (jnp.asarray(value, dtype=float),), (jnp.asarray(1.0),))
+    mode through the implicit function); both NaN where Newton's method failed."""
+    hopf, derivative = jax.jvp(lambda x: hopf_vd(with_parameter(params, where, x)),
+                               (jnp.asarray(value, dtype=float),), (jnp.asarray(1.0),))
+    return hopf, jnp.where(jnp.isnan(hopf), jnp.nan, derivative)
 
 
 @eqx.filter_jit
@@ -110,7 +121,8 @@ class BoundaryCurves(eqx.Module):
     **Fields:**
 
     - `values`: the second parameter, shape (n_values,).
-    - `hopf_vd`: Hopf belt speed of steady sliding, shape (n_values,).
+    - `hopf_vd`: Hopf belt speed of steady sliding, shape (n_values,); NaN where
+        Newton's method did not find it (`hopf_vd`).
     - `fold_vd`: fold belt speed of the limit cycle, shape (n_values,); NaN where
         the fold was not found.
     - `d_hopf`, `d_fold`: their derivatives in the second parameter (implicit

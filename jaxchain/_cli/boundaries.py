@@ -7,7 +7,7 @@ import time
 
 from .._boundaries import RATIO_VALUES, XI_VALUES, boundaries, fig3a_simulations
 from .._params import ChainParams
-from .._plots.bifurcation import plot_bifurcation_diagram, plot_bistable_region
+from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
 from .common import (RunsFailed, UsageError, add_output_options, comma_list, json_ready,
                      param_default, positive_float, positive_int, save_figure,
                      show_progress, writable_folder)
@@ -80,9 +80,9 @@ def run(args) -> None:
                        progress=progress)
     s = found.summary
     sims = None if args.no_simulation else fig3a_simulations(params, progress=progress)
-    fig = plot_bifurcation_diagram(found.branch, s["hopf_vd"], s["fold_vd"],
-                                   float(found.fold.record.energy), sims,
-                                   title=f"single oscillator (Fig. 3(a)), eps = {args.eps:g}")
+    fig = plot_limit_cycle_branch(found.branch, s["hopf_vd"], s["fold_vd"],
+                                  float(found.fold.record.energy), sims,
+                                  title=f"single oscillator (Fig. 3(a)), eps = {args.eps:g}")
     single_png = args.out / "bifurcation_single.png"
     save_figure(fig, single_png)
     region_png = args.out / "bistable_region.png"

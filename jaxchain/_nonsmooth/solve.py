@@ -260,8 +260,10 @@ def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State
     Dynamics 16, 41-54, without its stick band: stick is exact.
 
     Every event (a switch, or a turning point of an oscillator while observing) is
-    located by an optimistix Newton root find on diffrax's dense output of the
-    smooth segment (`diffrax.Event`), with time measured from the segment start so
+    located by bisection (`optimistix.Bisection`, to `options.root_tol`) on
+    diffrax's dense output of the smooth segment (`diffrax.Event`): the guards
+    change sign at an event, so a bracket exists and bisection cannot leave it.
+    Time is measured from the segment start so
     that event times keep full precision. Smooth segments use Dopri8 at
     `options.rtol`. Several oscillators that switch at the same instant (within
     `options.switch_tol` on their guards) switch together: the force needed to

@@ -16,8 +16,8 @@ def _segments(x, y, flags):
             start = i
 
 
-def plot_bifurcation_diagram(branch, hopf_vd: float, fold_vd: float, fold_energy: float,
-                             simulations=None, v_range=(0.5, 2.3), title: str = ""):
+def plot_limit_cycle_branch(branch, hopf_vd: float, fold_vd: float, fold_energy: float,
+                            simulations=None, v_range=(0.5, 2.3), title: str = ""):
     """Fig. 3(a) of the paper: energy E = A^2/2 (eq. (9)) of the single oscillator
     against v_d. Steady sliding (E = 0) and the limit-cycle branch of the
     continuation, stable solid and unstable dashed; the Hopf and fold points
