@@ -141,7 +141,8 @@ from ._dynamics.delays import time_delays as time_delays  # noqa: E402
 from ._dynamics.delays import delay_spread as delay_spread  # noqa: E402
 from ._dynamics.delays import reference_oscillator as reference_oscillator  # noqa: E402
 from ._dynamics.classify import CLASSES as CLASSES  # noqa: E402
-from ._dynamics.classify import ClassTolerances as ClassTolerances  # noqa: E402
+from ._states import ClassTolerances as ClassTolerances  # noqa: E402
+from ._states import state_class as state_class  # noqa: E402
 from ._dynamics.classify import classify as classify  # noqa: E402
 from ._dynamics.scenes import PAPER_SOLUTIONS as PAPER_SOLUTIONS  # noqa: E402
 from ._dynamics.scenes import observe_solutions as observe_solutions  # noqa: E402

@@ -22,6 +22,7 @@ from ._lanes import on_devices, run_lanes
 from ._results import PAPER, field_values
 from ._simulate import STATUS
 from ._solvers import DEFAULT_SOLVER, SOLVERS
+from ._states import IRREGULAR, PERIODIC, ClassTolerances, state_class
 from ._store import read_dataset, settings_key, write_dataset
 
 #: The grid of the issue: belt speeds across the bistable range and a set of
@@ -29,28 +30,6 @@ from ._store import read_dataset, settings_key, write_dataset
 CROSSCHECK_VD = (1.2, 1.5, 1.65, 1.75)
 CROSSCHECK_ICS = (("eq8", 1), ("eq8", 2), ("eq8", 5), ("eq8", 20), ("eq10", 2),
                   ("eq10", 20))
-
-
-@dataclasses.dataclass(frozen=True)
-class ClassTolerances:
-    """A state is periodic when the extrema of its two half windows agree to this
-    relative tolerance: the reference's extrema are exact (1e-6 leaves a margin
-    over its ~1e-9 accuracy), the smoothed model's are sampled every `sample_dt`
-    (a relative error of up to 3e-4, hence 1e-3)."""
-
-    reference: float = 1e-6
-    smoothed: float = 1e-3
-
-
-def state_class(n_halc: int, n_osc: int, periodic: bool) -> str:
-    """'steady sliding', or 'localized'/'stick-slip' (all N on the HALC) followed by
-    '(periodic)' or '(irregular)'."""
-    if n_halc < 0:
-        return "failed"
-    if n_halc == 0:
-        return "steady sliding"
-    kind = "stick-slip" if n_halc == n_osc else "localized"
-    return f"{kind} ({'periodic' if periodic else 'irregular'})"
 
 
 _reference_run = eqx.filter_jit(run_nonsmooth)
@@ -149,7 +128,9 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
     - `solver`, `options`: the smoothed runs (`simulate`'s).
     - `reference_options`: the reference runs; by default the horizon of
         `options` with `NonsmoothOptions`'s tolerances.
-    - `tolerances`: how periodic is told from irregular (`ClassTolerances`).
+    - `tolerances`: how periodic is told from irregular (`ClassTolerances`: its
+        `halves` and `halves_reference`, the change of the extrema between the
+        two halves of the observed window).
     - `checkpoint`: a folder where each reference run is stored as it finishes and
         read back on a later call (resuming an interrupted cross-check). Each run
         is stored under the key of everything that determines it (every parameter
@@ -214,10 +195,10 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
     n = params.n_osc
     half_s = _half_difference(smooth)
     half_r = _half_difference(ref)
-    class_s = [state_class(int(h), n, d <= tolerances.smoothed)
+    class_s = [state_class(int(h), n, PERIODIC if d <= tolerances.halves else IRREGULAR)
                for h, d in zip(smooth["n_halc"], half_s)]
-    class_r = [state_class(int(h), n, d <= tolerances.reference)
-               for h, d in zip(ref["n_halc"], half_r)]
+    class_r = [state_class(int(h), n, PERIODIC if d <= tolerances.halves_reference
+                           else IRREGULAR) for h, d in zip(ref["n_halc"], half_r)]
     energy_s = 0.5 * np.sum(smooth["amplitudes"] ** 2, -1)
     energy_r = 0.5 * np.sum(ref["amplitudes"] ** 2, -1)
     case, osc = ("case",), ("case", "osc")
@@ -253,8 +234,8 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
     attrs |= {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
               if f.name != "v_d"}
     attrs |= {"solver": type(solver).__name__, "wall_time_s_smoothed": smooth_wall,
-              "periodic_tol_smoothed": tolerances.smoothed,
-              "periodic_tol_reference": tolerances.reference,
+              "periodic_tol_smoothed": tolerances.halves,
+              "periodic_tol_reference": tolerances.halves_reference,
               "status_smoothed_meanings": " | ".join(STATUS),
               "status_reference_meanings": " | ".join(NONSMOOTH_STATUS),
               "paper": PAPER, "units": "dimensionless, eqs. (4)-(6) of the paper"}

@@ -11,6 +11,10 @@ import jaxchain as jc
 from jaxchain._bifurcation.two_parameter import hopf_vd, hopf_vd_and_derivative
 from jaxchain._boundaries import RATIO_VALUES, XI_VALUES
 
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
+
 
 class _Point(eqx.Module):
     stable: jnp.ndarray

@@ -14,6 +14,10 @@ import jaxchain._crosscheck as xc
 import jaxchain._store as store
 from jaxchain._cli.main import main
 
+#: Numbers compared with references or across compiled programs: CI runs these
+#: tests again under another rounding (the `numerics` marker, .ci/run).
+pytestmark = pytest.mark.numerics
+
 SMALL = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=150.0)
 #: Long enough for the localized state of a 4-ring to settle to a periodic orbit.
 SETTLED = jc.SimulationOptions(t_end=1200.0, transient=600.0, chunk_length=150.0)
@@ -112,10 +116,32 @@ def test_smoothed_error_shrinks_with_eps():
 
 
 def test_state_class_names():
-    assert xc.state_class(0, 20, True) == "steady sliding"
-    assert xc.state_class(3, 20, True) == "localized (periodic)"
-    assert xc.state_class(20, 20, False) == "stick-slip (irregular)"
-    assert xc.state_class(-1, 20, True) == "failed"
+    assert jc.state_class(0, 20, "periodic") == "steady sliding"
+    assert jc.state_class(3, 20, "periodic") == "localized (periodic)"
+    assert jc.state_class(20, 20, "irregular") == "stick-slip (irregular)"
+    assert jc.state_class(1, 1) == "stick-slip"
+    assert jc.state_class(-1, 20, "periodic") == "failed"
+
+
+def test_the_public_class_tolerances_drive_the_crosscheck():
+    """`jc.ClassTolerances` is the cross-check's: with its defaults the single
+    oscillator's stick-slip cycle is periodic in both models; with half-window
+    tolerances below rounding the smoothed model's is irregular (its extrema,
+    sampled every sample_dt, move by ~1e-4 between the two halves), so the
+    fields are read."""
+    kwargs = {k: TINY[k] for k in ("v_d", "ics", "options")}
+    ds = xc.crosscheck(TINY["params"], tolerances=jc.ClassTolerances(), **kwargs)
+    assert ds["state_class_smoothed"].values.tolist() == ["stick-slip (periodic)"]
+    assert ds["state_class_reference"].values.tolist() == ["stick-slip (periodic)"]
+    strict = jc.ClassTolerances(halves=1e-300, halves_reference=1e-300)
+    ds = xc.crosscheck(TINY["params"], tolerances=strict, **kwargs)
+    assert ds["state_class_smoothed"].values.tolist() == ["stick-slip (irregular)"]
+    assert ds.attrs["periodic_tol_smoothed"] == ds.attrs["periodic_tol_reference"] == 1e-300
+    for field in ("delay", "halves", "halves_reference"):
+        with pytest.raises(ValueError, match=f"ClassTolerances.{field}"):
+            jc.ClassTolerances(**{field: 0.0})
+    with pytest.raises(ValueError, match="ClassTolerances.max_period"):
+        jc.ClassTolerances(max_period=0)
 
 
 def test_crosscheck_command_json_and_files(tmp_path, capsys):

@@ -14,6 +14,7 @@ from jaxtyping import ArrayLike, Float
 
 from .._checks import as_solver, belt_speeds, check_options, check_params
 from .._dynamics.classify import classify
+from .._states import PERIODIC
 from .._initial import GivenState
 from .._lanes import run_lanes
 from .._observers.crossings import PeakTimes
@@ -193,7 +194,7 @@ def _convergence(params, v, states, index, solver, options, progress) -> dict:
             if not math.isfinite(verdict["delay_spread"]):  # too few peaks to judge
                 continue
             moving[i] += 1
-            periodic[i] += verdict["class_delays"] == "periodic"
+            periodic[i] += verdict["class_delays"] == PERIODIC
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.where(moving > 0, periodic / np.maximum(moving, 1), math.nan)
         low, high = wilson_interval(periodic, np.maximum(moving, 1))

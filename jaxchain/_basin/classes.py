@@ -4,6 +4,8 @@ confidence intervals."""
 import numpy as np
 from jaxtyping import Bool, Float, Int
 
+from .._states import FAILED, STEADY_SLIDING, STICK_SLIP
+
 #: The 97.5 % quantile of the standard normal: a 95 % two-sided interval.
 Z95 = 1.959963984540054
 
@@ -27,12 +29,13 @@ def halc_clusters(on_halc: Bool[np.ndarray, "*batch n_osc"]) -> Int[np.ndarray, 
 
 
 def class_names(n_osc: int) -> list[str]:
-    """The classes by n_HALC: "steady sliding" and "stick-slip" for one oscillator;
-    "steady sliding" (n_HALC = 0) and "n_HALC = k", k = 1..N, for a ring; then
-    "failed" (a run that did not finish)."""
+    """The classes by n_HALC, in the vocabulary of `state_class`: "steady sliding"
+    and "stick-slip" for one oscillator; "steady sliding" (n_HALC = 0) and
+    "n_HALC = k", k = 1..N (localized states, and the stick-slip of the whole
+    chain at k = N), for a chain; then "failed" (a run that did not finish)."""
     if n_osc == 1:
-        return ["steady sliding", "stick-slip", "failed"]
-    return ["steady sliding"] + [f"n_HALC = {k}" for k in range(1, n_osc + 1)] + ["failed"]
+        return [STEADY_SLIDING, STICK_SLIP, FAILED]
+    return [STEADY_SLIDING] + [f"n_HALC = {k}" for k in range(1, n_osc + 1)] + [FAILED]
 
 
 def class_index(n_halc: Int[np.ndarray, "*batch"], status: Int[np.ndarray, "*batch"],

@@ -3,42 +3,15 @@ spread of its time delays and its largest Lyapunov exponent."""
 
 import math
 
-import equinox as eqx
 import numpy as np
 
+from .._states import (FAILED, IRREGULAR, PERIODIC, STEADY_SLIDING, UNDECIDED,
+                       ClassTolerances)
 from .delays import delay_spread, reference_oscillator, time_delays
 
-#: The classes of a state.
-CLASSES = ("periodic", "irregular", "undecided", "steady sliding", "failed")
-
-
-class ClassTolerances(eqx.Module):
-    """When a state counts as periodic.
-
-    **Arguments:**
-
-    - `delay`: largest delay spread of a periodic state (`delay_spread`),
-        dimensionless time. The peak times are interpolated to about 1e-5 and
-        the solver's tolerances move them by less than 1e-3 (rtol 1e-5), while an
-        irregular state's delays wander by a sizeable part of its period (~6).
-    - `max_period`: longest repetition of the delays, in reference peaks, that
-        still counts as periodic.
-
-    **Raises:**
-
-    `ValueError` for delay <= 0 or max_period < 1.
-    """
-
-    delay: float = 1e-2
-    max_period: int = 8
-
-    def __check_init__(self):
-        if not (math.isfinite(self.delay) and self.delay > 0):
-            raise ValueError(f"ClassTolerances.delay must be a finite number > 0, "
-                             f"got {self.delay!r}")
-        if self.max_period < 1:
-            raise ValueError(f"ClassTolerances.max_period must be >= 1, got "
-                             f"{self.max_period!r}")
+#: The classes of a state in the scenes: its regularity, or steady sliding, or failed
+#: (the vocabulary of `jaxchain._states`).
+CLASSES = (PERIODIC, IRREGULAR, UNDECIDED, STEADY_SLIDING, FAILED)
 
 
 def lyapunov_class(exponent: float, error: float) -> str:
@@ -47,8 +20,8 @@ def lyapunov_class(exponent: float, error: float) -> str:
     the error on a limit cycle or a torus, negative on an equilibrium), and
     "undecided" when the error is unknown (fewer than two chunks in the window)."""
     if not math.isfinite(error):
-        return "undecided"
-    return "irregular" if exponent > error else "periodic"
+        return UNDECIDED
+    return IRREGULAR if exponent > error else PERIODIC
 
 
 def classify(peak_times, on_halc, n_halc: int, status: int, lyapunov: float,
@@ -78,21 +51,21 @@ def classify(peak_times, on_halc, n_halc: int, status: int, lyapunov: float,
     dict with `class`, `class_delays`, `class_lyapunov`, `delay_spread`,
     `delay_period` (the m of `delay_spread`) and `ref` (0-based).
     """
-    out = {"class_delays": "failed", "class_lyapunov": "failed",
+    out = {"class_delays": FAILED, "class_lyapunov": FAILED,
            "delay_spread": math.nan, "delay_period": 0, "ref": -1}
     if status != 0:
-        return out | {"class": "failed"}
+        return out | {"class": FAILED}
     on_halc = np.asarray(on_halc, dtype=bool)
     ref = reference_oscillator(on_halc)
     tau_ref, phi = time_delays(np.asarray(peak_times), ref)
     others = on_halc.copy()
     others[ref] = False
     spread, period = delay_spread(tau_ref, phi[others], t_from, tolerances.max_period)
-    by_delays = "periodic" if spread <= tolerances.delay else "irregular"
+    by_delays = PERIODIC if spread <= tolerances.delay else IRREGULAR
     by_lyapunov = lyapunov_class(lyapunov, lyapunov_error)
     if n_halc == 0:
-        verdict = "steady sliding"
+        verdict = STEADY_SLIDING
     else:
-        verdict = by_delays if by_delays == by_lyapunov else "undecided"
+        verdict = by_delays if by_delays == by_lyapunov else UNDECIDED
     return {"class": verdict, "class_delays": by_delays, "class_lyapunov": by_lyapunov,
             "delay_spread": spread, "delay_period": period, "ref": ref}

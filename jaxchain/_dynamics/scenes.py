@@ -22,7 +22,8 @@ from .._params import ChainParams
 from .._results import run_attributes
 from .._simulate import STATUS, check_observers
 from .._solvers import DEFAULT_SOLVER, SOLVERS
-from .classify import ClassTolerances, classify
+from .._states import ClassTolerances
+from .classify import classify
 
 #: The solutions (numbers of excited oscillators) of Figs. 6 and 7 of the paper.
 PAPER_SOLUTIONS = (1, 2, 5, 8, 9, 12, 13, 19, 20)
