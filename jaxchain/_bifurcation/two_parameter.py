@@ -36,9 +36,15 @@ def hopf_vd(params: ChainParams, guess: float = 1.0) -> Float[Array, ""]:
 
 def hopf_vd_and_derivative(params: ChainParams, where: Callable | str, value):
     """`hopf_vd` at `where(params) = value` and its derivative in `value` (forward
-    mode through the implicit function); both NaN where Newton's method failed."""
+    mode through the implicit function); both NaN where Newton's method failed.
+    Compiled once for every value of `value` (`where` is static)."""
+    return _hopf_vd_and_derivative(params, where, jnp.asarray(value, dtype=float))
+
+
+@eqx.filter_jit
+def _hopf_vd_and_derivative(params, where, value):
     hopf, derivative = jax.jvp(lambda x: hopf_vd(with_parameter(params, where, x)),
-                               (jnp.asarray(value, dtype=float),), (jnp.asarray(1.0),))
+                               (value,), (jnp.ones_like(value),))
     return hopf, jnp.where(jnp.isnan(hopf), jnp.nan, derivative)
 
 
