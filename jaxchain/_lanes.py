@@ -152,8 +152,11 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
 
     `Observables` (or the dict of `run_observers`) whose fields carry a leading (lanes,)
     axis, in the order given.
-    The engines and the device count change nothing in the result: each lane is
-    the same compiled integration.
+    The device count changes nothing in the queue's result: each lane is the same
+    compiled integration, whichever device takes it, for the same `block`. The
+    vmap engine, another block or batch size, and `simulate` are other compiled
+    programs, whose rounding moves the adaptive steps: they agree to the
+    integration tolerance, not to the last bit.
 
     **Raises:**
 
