@@ -14,7 +14,6 @@ from jaxtyping import ArrayLike, Float
 
 from .._checks import as_solver, belt_speeds, check_options, check_params
 from .._dynamics.classify import classify
-from .._states import PERIODIC
 from .._initial import GivenState
 from .._lanes import run_lanes
 from .._observers.crossings import PeakTimes
@@ -22,6 +21,7 @@ from .._observers.extrema import Extrema
 from .._options import SimulationOptions
 from .._params import ChainParams, with_parameter
 from .._solvers import DEFAULT_SOLVER
+from .._states import PERIODIC
 from .._sweep.sweep import sweep
 from .classes import class_index, class_names, halc_clusters, wilson_interval
 from .sampling import Box, sample_states
