@@ -44,8 +44,8 @@ _SAFETY, _FACTORMIN, _FACTORMAX = 0.9, 0.2, 10.0
 def params_vector(params) -> np.ndarray:
     """`ChainParams` as the float vector the loops take:
     (xi, mu_d, mu_st, v0, eta_c, v_d, eps)."""
-    return np.array([float(params.xi), float(params.mu_d), float(params.mu_st),
-                     float(params.v0), float(params.eta_c), float(params.v_d),
+    return np.array([float(params.xi), float(params.friction.mu_d), float(params.friction.mu_st),
+                     float(params.friction.v0), float(params.eta_c), float(params.v_d),
                      float(params.eps)])
 
 

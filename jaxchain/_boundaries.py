@@ -14,11 +14,14 @@ from ._bifurcation.hopf import HopfPoint, hopf_eps_correction, hopf_point, hopf_
 from ._bifurcation.limit_cycles import hopf_cycle, limit_cycle_problem
 from ._bifurcation.lyapunov import first_lyapunov_coefficient
 from ._bifurcation.shooting import ShootingOptions, flow, periodic_orbit
-from ._bifurcation.two_parameter import BoundaryCurves, boundary_curves
-from ._initial import GivenState
+from ._bifurcation.two_parameter import BoundaryCurves, boundary_curves, hopf_vd
+from ._physics.initial import GivenState
 from ._nonsmooth.existence import stick_slip_existence_limit
 from ._options import SimulationOptions
-from ._params import ChainParams, with_parameter
+from ._physics.chain import is_homogeneous_ring
+from ._physics.friction import ExponentialDecay
+from ._physics.params import ChainParams, single_oscillator, with_parameter
+from ._physics.record import chain_record
 from ._simulate import simulate
 
 
@@ -31,7 +34,7 @@ class Boundaries:
     fold: FoldPoint
     hopf: HopfPoint
     curves_xi: BoundaryCurves
-    curves_ratio: BoundaryCurves
+    curves_ratio: BoundaryCurves | None
     design: DampingDesign
     ring_branches: dict
 
@@ -50,7 +53,7 @@ def design_check(params: ChainParams, design: DampingDesign, target: float,
     out = {}
     for side, factor in (("below", 1 - margin), ("above", 1 + margin)):
         p = with_parameter(params, "xi", design.xi * factor)
-        v = float(hopf_vd_analytic(p)) + target
+        v = _hopf_speed(p) + target
         p = with_parameter(p, "v_d", v)
         obs = simulate(p, GivenState(jnp.array([[3.5], [0.0]])),
                        options=SimulationOptions(t_end=4000.0, transient=3500.0))
@@ -58,6 +61,15 @@ def design_check(params: ChainParams, design: DampingDesign, target: float,
                      "amplitude": float(obs.amplitudes[0]), "n_halc": int(obs.n_halc)}
     out["holds"] = out["below"]["n_halc"] == 1 and out["above"]["amplitude"] < 1e-3
     return out
+
+
+def _hopf_speed(params: ChainParams) -> float:
+    """The Hopf belt speed: the closed form of eq. (1) where it applies, else
+    Newton's method on the Jacobian's eigenvalues (`hopf_vd`)."""
+    try:
+        return float(hopf_vd_analytic(params))
+    except ValueError:
+        return float(hopf_vd(params))
 
 
 def _ring_state(params: ChainParams, single, kind: str, options, progress):
@@ -119,18 +131,21 @@ RATIO_VALUES = (1.6, 1.8, 2.0, 2.2, 2.4)
 def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
                xi_values=XI_VALUES, ratio_values=RATIO_VALUES, ring: bool = True,
                progress: bool = False) -> Boundaries:
-    """The Hopf and fold belt speeds of the single oscillator and of the ring.
+    """The Hopf and fold belt speeds of the single oscillator and of the chain.
 
-    1. Single oscillator (`params` with n_osc = 1): the Hopf point (Newton on the
-       growth rate), its first Lyapunov coefficient, the limit-cycle branch from
-       the Hopf point by shooting and pseudo-arclength continuation, the fold by
-       its extended system, and the non-smooth existence limit to compare.
-    2. The fold and Hopf belt speeds against xi and against mu_st/mu_d, with their
-       derivatives by implicit differentiation.
+    1. Single oscillator (the chain's first, `single_oscillator`, with its friction
+       law): the Hopf point (Newton on the growth rate), its first Lyapunov
+       coefficient, the limit-cycle branch from the Hopf point by shooting and
+       pseudo-arclength continuation, the fold by its extended system, and the
+       non-smooth existence limit to compare.
+    2. The fold and Hopf belt speeds against xi, and for eq. (1) against
+       mu_st/mu_d, with their derivatives by implicit differentiation.
     3. The design: the smallest xi whose bistable window is narrower than
        `target`, by optax, checked by simulation on both sides.
-    4. The ring (`params.n_osc`): the Hopf point of every Fourier mode, and the
-       folds of the fully stick-slipping in-phase and anti-phase states.
+    4. The chain (`params`): the Hopf point of every Fourier mode on the
+       homogeneous ring (of the leading eigenvalue on any other chain), and on the
+       homogeneous ring of even N the folds of the fully stick-slipping in-phase
+       and anti-phase states. `summary["chain"]` records the chain.
 
     **Arguments:**
 
@@ -152,8 +167,8 @@ def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
     if not target > 0:
         raise ValueError(f"target must be > 0, got {target!r}")
     options = ShootingOptions()
-    single = ChainParams(n_osc=1, xi=params.xi, mu_d=params.mu_d, mu_st=params.mu_st,
-                         v0=params.v0, v_d=params.v_d, eps=params.eps)
+    single = single_oscillator(params)
+    exponential = isinstance(single.friction, ExponentialDecay)
     hopf = hopf_point(single)
     l1 = float(first_lyapunov_coefficient(with_parameter(single, "v_d", hopf.v_d[0])))
     start = hopf_cycle(single, options=options)
@@ -165,20 +180,23 @@ def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
     solution = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
     fold_problem = problem.with_params(fold.record.params)
     curves_xi = boundary_curves(fold_problem, solution, "xi", xi_values, progress=progress)
-    mu_values = single.mu_d * np.asarray(ratio_values)
-    curves_ratio = boundary_curves(fold_problem, solution, "mu_st", mu_values,
-                                   progress=progress)
+    curves_ratio = None
+    if exponential:
+        mu_d = float(single.friction.mu_d)
+        mu_values = mu_d * np.asarray(ratio_values)
+        curves_ratio = boundary_curves(fold_problem, solution, "mu_st", mu_values,
+                                       progress=progress)
+        at_r = int(np.argmin(np.abs(mu_values - float(single.friction.mu_st))))
     design = smallest_damping(fold_problem, solution, target)
     at = int(np.argmin(np.abs(np.asarray(curves_xi.values) - float(single.xi))))
-    at_r = int(np.argmin(np.abs(mu_values - float(single.mu_st))))
     p_ok = np.asarray(branch.converged)
     summary = {
         "hopf_vd": float(hopf.v_d[0]),
         "fold_vd": float(fold.p),
         "eps": float(params.eps),
         "subcritical": l1 > 0 and float(branch.p[p_ok][1]) > float(hopf.v_d[0]),
-        "hopf_vd_analytic": float(hopf_vd_analytic(single)),
-        "hopf_eps_correction": float(hopf_eps_correction(single)),
+        "hopf_vd_analytic": float(hopf_vd_analytic(single)) if exponential else None,
+        "hopf_eps_correction": float(hopf_eps_correction(single)) if exponential else None,
         "hopf_newton_steps": int(hopf.newton_steps[0]),
         "hopf_omega": float(hopf.omega[0]),
         "hopf_growth_slope": float(hopf.slope[0]),
@@ -192,29 +210,31 @@ def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
         "branch_stop": branch.stop,
         "d_hopf_vd_d_xi": float(curves_xi.d_hopf[at]),
         "d_fold_vd_d_xi": float(curves_xi.d_fold[at]),
-        "d_hopf_vd_d_ratio": float(single.mu_d * curves_ratio.d_hopf[at_r]),
-        "d_fold_vd_d_ratio": float(single.mu_d * curves_ratio.d_fold[at_r]),
         "xi_curve": {"xi": np.asarray(curves_xi.values).tolist(),
                      **_curve_summary(single, "xi", curves_xi)},
-        "ratio_curve": {"mu_st/mu_d": (np.asarray(curves_ratio.values) / float(single.mu_d)
-                                       ).tolist(),
-                        **_curve_summary(single, "mu_st", curves_ratio)},
         "design": {"target_window": target, "xi": design.xi, "window": design.window,
                    "hopf_vd": design.hopf_vd, "fold_vd": design.fold_vd,
                    "d_window_d_xi": design.d_window, "optax_iterations": len(design.history),
                    "converged": design.converged,
                    "simulation_check": design_check(single, design, target)},
     }
+    if exponential:
+        summary |= {
+            "d_hopf_vd_d_ratio": float(mu_d * curves_ratio.d_hopf[at_r]),
+            "d_fold_vd_d_ratio": float(mu_d * curves_ratio.d_fold[at_r]),
+            "ratio_curve": {"mu_st/mu_d": (np.asarray(curves_ratio.values) / mu_d).tolist(),
+                            **_curve_summary(single, "mu_st", curves_ratio)}}
+    summary["chain"] = chain_record(params)
     ring_branches = {}
     if ring:
         ring_hopf = hopf_point(params)
         summary["ring"] = {
-            "n_osc": params.n_osc, "eta_c": float(params.eta_c),
+            "n_osc": params.n_osc, "boundary": params.boundary,
             "hopf_vd": float(np.max(ring_hopf.v_d)),
             "hopf_vd_spread_over_modes": float(np.ptp(np.asarray(ring_hopf.v_d))),
             "hopf_omega_range": [float(np.min(ring_hopf.omega)), float(np.max(ring_hopf.omega))],
         }
-        if params.n_osc % 2 == 0:
+        if params.n_osc % 2 == 0 and is_homogeneous_ring(params):
             cycle = periodic_orbit(with_parameter(single, "v_d", 1.5),
                                    jnp.array([[2.2], [0.0]]), 6.3, options)
             for kind in ("in-phase", "anti-phase"):
@@ -233,8 +253,7 @@ def fig3a_simulations(params: ChainParams, v_d=np.round(np.arange(0.6, 2.21, 0.1
     (n_vd, 2)."""
     from ._ensemble import ensemble
 
-    single = ChainParams(n_osc=1, xi=params.xi, mu_d=params.mu_d, mu_st=params.mu_st,
-                         v0=params.v0, eps=params.eps)
+    single = single_oscillator(params)
     ds = ensemble(single, jnp.asarray(v_d), GivenState(jnp.array([[[0.6], [0.0]],
                                                                   [[3.5], [0.0]]])),
                   options=SimulationOptions(t_end=3000.0, transient=2500.0),

@@ -5,7 +5,7 @@ import diffrax
 import numpy as np
 
 from ._options import SimulationOptions
-from ._params import ChainParams
+from ._physics.params import ChainParams
 from ._solvers import AUTO, SOLVERS, auto_solver
 
 

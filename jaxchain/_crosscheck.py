@@ -13,12 +13,12 @@ import numpy as np
 import xarray as xr
 
 from ._checks import as_solver, belt_speeds, check_options, check_params
-from ._initial import FAMILIES, excited_block
+from ._physics.initial import FAMILIES, excited_block
 from ._nonsmooth.options import NonsmoothOptions
 from ._nonsmooth.solve import NONSMOOTH_STATUS, run_nonsmooth
 from ._options import SimulationOptions
-from ._params import ChainParams, with_parameter
-from ._lanes import on_devices, run_lanes
+from ._physics.params import ChainParams, with_parameter
+from ._lanes import lane_params, on_devices, run_lanes
 from ._results import PAPER, field_values
 from ._simulate import STATUS
 from ._solvers import DEFAULT_SOLVER, SOLVERS
@@ -41,7 +41,7 @@ def _smoothed(params, v_d, y0, solver, options):
     mid = 0.5 * (options.transient + options.t_end)
     first = dataclasses.replace(options, t_end=mid)
     second = dataclasses.replace(options, t_end=options.t_end - mid, transient=0.0)
-    params = with_parameter(params, "v_d", v_d)
+    params = lane_params(params, len(v_d), v_d=v_d)
     a = run_lanes(params, y0, solver, first)
     b = run_lanes(params, a.y_final, solver, second)
     return a, b
@@ -175,12 +175,12 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
         if fam not in FAMILIES:
             raise ValueError(f"ics family must be one of {sorted(FAMILIES)}, got {fam!r}")
         p = with_parameter(params, "v_d", vd)
-        y0.append(np.asarray(FAMILIES[fam](excited_block(params.n_osc, k))(p)))
+        y0.append(np.asarray(FAMILIES[fam](excited_block(params.n_osc, k, params.boundary))(p)))
     vds = np.array([c[0] for c in cases])
     y0 = np.stack(y0)
 
     start = time.perf_counter()
-    smooth = _gather(*_smoothed(params, jnp.asarray(vds), jnp.asarray(y0), solver, options))
+    smooth = _gather(*_smoothed(params, vds, jnp.asarray(y0), solver, options))
     smooth_wall = time.perf_counter() - start
 
     def reference(i, device):

@@ -8,10 +8,10 @@ import xarray as xr
 from jaxtyping import ArrayLike, Float
 
 from ._checks import as_solver, belt_speeds, check_options, check_params
-from ._initial import AbstractInitialCondition, batch_length, initial_states
+from ._physics.initial import AbstractInitialCondition, batch_length, initial_states
 from ._lanes import lane_params, run_lanes, take_lanes
 from ._options import SimulationOptions
-from ._params import ChainParams, with_parameter
+from ._physics.params import ChainParams, with_parameter
 from ._results import to_dataset
 from ._solvers import DEFAULT_SOLVER, SOLVERS
 
@@ -70,7 +70,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     ics_first = take_lanes(ics, 0)
     ics_first(with_parameter(params, "v_d", v_d[0]))  # shape check, may raise
     lanes_vd, lanes_ic = np.repeat(v_d, n_ic), np.tile(np.arange(n_ic), v_d.size)
-    lanes = lane_params(with_parameter(params, "v_d", lanes_vd), lanes_vd.size)
+    lanes = lane_params(params, lanes_vd.size, v_d=lanes_vd)
     y0 = initial_states(lanes, take_lanes(ics, lanes_ic))
     obs = run_lanes(lanes, y0, solver, options, engine=engine, progress=progress)
     obs = jax.tree_util.tree_map(lambda x: x.reshape(v_d.size, n_ic, *x.shape[1:]), obs)

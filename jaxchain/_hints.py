@@ -5,8 +5,8 @@ import diffrax
 import numpy as np
 
 from ._options import SimulationOptions
-from ._params import ChainParams
-from ._solvers import DEFAULT_SOLVER, SOLVERS
+from ._physics.params import ChainParams
+from ._solvers import DEFAULT_SOLVER, SOLVERS, stick_stiffness
 
 #: Stability bound of an explicit Runge-Kutta step on a decaying mode, h |lambda| <~
 #: 3 (Tsit5, Dopri5: 3.3 and 3.3 on the negative real axis; Hairer & Wanner,
@@ -25,12 +25,6 @@ def _name(solver) -> str:
 def _explicit(solver) -> bool:
     return not isinstance(solver, (diffrax.AbstractImplicitSolver,
                                    SOLVERS[DEFAULT_SOLVER]))
-
-
-def stick_stiffness(params: ChainParams) -> float:
-    """The stiffness of the stick phase, |dF/dv_rel| at v_rel = 0: mu_st / eps (the
-    smoothed force of eq. (2), -mu tanh(v_rel/eps)), in units of omega_n."""
-    return float(np.max(np.asarray(params.mu_st) / np.asarray(params.eps)))
 
 
 def failure_hint(status: int, params: ChainParams, solver: diffrax.AbstractSolver,

@@ -10,7 +10,6 @@ Fig. 4 scene), and a vmapped loop is too large for XLA to compile into one kerne
 On a GPU, with one device running thousands of lanes, vmap is the engine."""
 
 import contextlib
-import dataclasses
 import queue
 import threading
 from collections.abc import Callable, Sequence
@@ -25,8 +24,8 @@ from jaxtyping import ArrayLike, Float
 from tqdm.auto import tqdm
 
 from ._options import SimulationOptions
-from ._friction import smoothed_friction_force
-from ._params import ChainParams
+from ._physics.model import steady_sliding
+from ._physics.params import ChainParams, parameter_lens, with_parameter
 from ._observers.base import AbstractObserver
 from ._simulate import Observables, check_observers, run, run_observers
 
@@ -65,22 +64,62 @@ def _run_vmapped(params, y0, solver, options, mesh, observers=None):
                          check_vma=False)(params, y0)
 
 
-def lane_params(params: ChainParams, n_lanes: int) -> ChainParams:
-    """`params` with every field broadcast to shape (n_lanes,): the parameters of
-    each lane, as `run_lanes` takes them.
+def lane_params(params: ChainParams, n_lanes: int, **per_lane) -> ChainParams:
+    """The parameters of each lane, as `run_lanes` takes them: every array field of
+    the one chain `params` gains a leading lane axis (shape (n_lanes, ...), its own
+    shape after it, so that a per-oscillator array stays per oscillator), and the
+    parameters named in `per_lane` take one value per lane.
+
+    This is the one route from a chain to lanes; a batch of different chains (for
+    example mistuning draws) is made by `stack_chains`. A field of `params` is
+    never read as one value per lane because its length happens to be n_lanes.
+
+    **Arguments:**
+
+    - `params`: one chain (v_d and eps scalars).
+    - `n_lanes`: the number of lanes.
+    - `per_lane`: parameter name (as `with_parameter` takes it) -> values of shape
+        (n_lanes,), for example `v_d=np.repeat(v_d, n_ic)`.
 
     **Raises:**
 
-    `ValueError` when a field's shape does not broadcast to (n_lanes,).
+    `ValueError` when `params` is already a batch, for an unknown name, or for
+    values that are not of shape (n_lanes,) or invalid for the parameter.
     """
-    try:
-        return jax.tree_util.tree_map(
-            lambda x: np.broadcast_to(np.asarray(x, dtype=float), (n_lanes,)), params)
-    except ValueError:
-        shapes = {f.name: np.shape(getattr(params, f.name))
-                  for f in dataclasses.fields(params) if f.name != "n_osc"}
-        raise ValueError(f"every parameter must be a scalar or have shape ({n_lanes},) "
-                         f"(one value per lane), got {shapes}") from None
+    if np.ndim(params.v_d) != 0:
+        raise ValueError("lane_params takes one chain (v_d a scalar); give per-lane values "
+                         "by name, for example lane_params(params, n, v_d=values)")
+    for name, values in per_lane.items():
+        values = np.asarray(values, dtype=float)
+        if values.shape != (n_lanes,):
+            raise ValueError(f"{name}: one value per lane, shape ({n_lanes},), got "
+                             f"{values.shape}")
+        for value in np.unique(values):  # validated, naming the field
+            with_parameter(params, name, value)
+    lanes = jax.tree_util.tree_map(
+        lambda x: np.broadcast_to(np.asarray(x, dtype=float), (n_lanes,) + np.shape(x)), params)
+    for name, values in per_lane.items():
+        lanes = eqx.tree_at(parameter_lens(name, params), lanes,
+                            np.asarray(values, dtype=float))
+    return lanes
+
+
+def as_lanes(params: ChainParams, n_lanes: int) -> ChainParams:
+    """`params` as lanes: a batch (from `lane_params` or `stack_chains`, v_d of shape
+    (n_lanes,)) as it is, one chain broadcast by `lane_params`.
+
+    **Raises:**
+
+    `ValueError` when a batch's fields do not lead with n_lanes.
+    """
+    if np.ndim(params.v_d) == 0:
+        return lane_params(params, n_lanes)
+    leading = {np.shape(x)[:1] for x in jax.tree_util.tree_leaves(params)}
+    if leading != {(n_lanes,)}:
+        raise ValueError(f"lane parameters must lead with the lane axis ({n_lanes},) in "
+                         f"every field (lane_params, stack_chains), got leading shapes "
+                         f"{sorted(leading)}")
+    return params
 
 
 def take_lanes(tree, index):
@@ -111,9 +150,12 @@ def expected_cost(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"]
     distance of its initial state from steady sliding at its belt speed. Lanes that
     start far from it (more oscillators excited) stick and slip more, and take more
     steps. `params` holds each lane's parameters (`lane_params`)."""
-    x0 = np.asarray(smoothed_friction_force(params, -np.asarray(params.v_d)))[:, None]
+    x0 = np.asarray(_steady_sliding_lanes(params))[:, 0]
     y0 = np.asarray(y0)
     return np.sqrt(np.sum((y0[:, 0] - x0) ** 2 + y0[:, 1] ** 2, -1))
+
+
+_steady_sliding_lanes = eqx.filter_jit(eqx.filter_vmap(steady_sliding))
 
 
 def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
@@ -128,9 +170,10 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
 
     **Arguments:**
 
-    - `params`: chain parameters, each field a scalar (shared by every lane) or of
-        shape (lanes,) (one value per lane: for example
-        `with_parameter(params, "v_d", v_d)` for one belt speed per lane).
+    - `params`: one chain (shared by every lane), or the lanes' chains with a
+        leading (lanes,) axis on every field, from `lane_params` (for example
+        `lane_params(params, n, v_d=v_d)` for one belt speed per lane) or
+        `stack_chains` (one chain per lane).
     - `y0`: initial state of each lane, shape (lanes, 2, n_osc).
     - `solver`, `options`: as for `simulate`.
     - `engine`: "queue" or "vmap" (`ENGINES`); by default "queue" on a CPU and
@@ -160,8 +203,8 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
 
     **Raises:**
 
-    `ValueError` for an unknown engine, an empty list of lanes, or parameters
-    whose shape is not () or (lanes,); see also `check_observers`.
+    `ValueError` for an unknown engine, an empty list of lanes, or lane parameters
+    that do not lead with (lanes,) (`as_lanes`); see also `check_observers`.
     """
     if observers is not None:
         observers = check_observers(observers)
@@ -169,7 +212,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
     n_lanes = y0.shape[0]
     if n_lanes == 0:
         raise ValueError("run_lanes needs at least one lane, got 0")
-    params = lane_params(params, n_lanes)
+    params = as_lanes(params, n_lanes)
     devices = list(devices or jax.local_devices())[:n_lanes]
     if engine is None:
         engine = "queue" if devices[0].platform == "cpu" else "vmap"

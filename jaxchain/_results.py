@@ -9,11 +9,12 @@ import numpy as np
 import xarray as xr
 from jaxtyping import ArrayLike
 
-from ._initial import AbstractInitialCondition, OutOfPhaseExcitation
+from ._physics.initial import AbstractInitialCondition, OutOfPhaseExcitation
 from ._options import SimulationOptions
-from ._params import ChainParams
+from ._physics.params import ChainParams
+from ._physics.record import chain_record
 from ._simulate import STATUS, Observables
-from ._stick import STICK_BAND
+from ._physics.stick import STICK_BAND
 
 PAPER = ("Multiple spatially localized dynamical states in friction-excited "
          "oscillator chains")
@@ -63,17 +64,19 @@ def field_values(obj, prefix: str = "") -> dict:
 
 def run_attributes(params: ChainParams, solver: diffrax.AbstractSolver,
                    options: SimulationOptions, ics: str, varying: str) -> dict:
-    """The attributes of a Dataset of runs: every field of `params` but `varying`
-    (the parameter along a dim of the Dataset), of `options`, the solver, the
-    initial conditions, the jaxchain version and the paper, as plain numbers and
-    strings (netCDF and zarr keep them)."""
-    attrs = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
-             if f.name != varying}
-    attrs |= field_values(options)
+    """The attributes of a Dataset of runs: the whole chain (`chain_record`: the
+    boundary, the friction law and its parameters, per-oscillator arrays as lists,
+    the mistuning record) but `varying` (the parameter along a dim of the
+    Dataset), the fields of `options`, the solver, the initial conditions, the
+    jaxchain version and the paper, as plain numbers, lists and strings (netCDF and
+    zarr keep them)."""
+    attrs = {k: v for k, v in chain_record(params).items() if k != varying}
+    attrs |= {k: (v if isinstance(v, (str, int)) else float(v))
+              for k, v in field_values(options).items()}
     attrs |= {"solver": type(solver).__name__, "ics": ics,
               "jaxchain_version": _package_version(), "paper": PAPER,
               "units": "dimensionless, eqs. (4)-(6) of the paper"}
-    return {k: (float(v) if not isinstance(v, (str, int)) else v) for k, v in attrs.items()}
+    return attrs
 
 
 def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,

@@ -14,12 +14,12 @@ from jaxtyping import Array, Bool, Float, Int, PyTree
 from ._checks import as_solver, check_options, check_params
 from ._custom_types import State
 from ._hints import failure_hint
-from ._initial import AbstractInitialCondition, GivenState
-from ._model import split_vector_field, vector_field
+from ._physics.initial import AbstractInitialCondition, GivenState
+from ._physics.model import split_vector_field, vector_field
 from ._observers.base import AbstractObserver, Chunk
 from ._observers.extrema import Extrema
 from ._options import SimulationOptions
-from ._params import ChainParams
+from ._physics.params import ChainParams
 from ._progress import progress_bar, tick
 from ._rosenbrock import Ros34PW2
 from ._solvers import DEFAULT_SOLVER, SOLVERS

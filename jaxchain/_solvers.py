@@ -4,6 +4,7 @@ import diffrax
 import numpy as np
 import optimistix as optx
 
+from ._physics.friction import static_friction
 from ._rosenbrock import Ros34PW2
 
 
@@ -52,9 +53,17 @@ AUTO = "auto"
 AUTO_STIFFNESS = 100.0
 
 
+def stick_stiffness(params) -> float:
+    """The stiffness of the stick phase, |dF/dv_rel| at v_rel = 0: (P_n/P) mu(0) /
+    eps (the smoothed force of eq. (2), -(P_n/P) mu tanh(v_rel/eps); mu_st / eps
+    for eq. (1)), its largest over the oscillators and lanes, in units of
+    omega_n."""
+    return float(np.max(np.asarray(static_friction(params)) / np.asarray(params.eps)))
+
+
 def auto_solver(params) -> diffrax.AbstractSolver:
     """The solver for `params`: Tsit5 where the stick phase is not stiff
-    (mu_st/eps <= `AUTO_STIFFNESS`, for every value when params hold arrays), else
-    the stiffness-aware `DEFAULT_SOLVER`, ROS34PW2."""
-    stiffness = np.max(np.asarray(params.mu_st) / np.asarray(params.eps))
+    (`stick_stiffness`, (P_n/P) mu(0)/eps, <= `AUTO_STIFFNESS` for every
+    oscillator and lane), else the stiffness-aware `DEFAULT_SOLVER`, ROS34PW2."""
+    stiffness = stick_stiffness(params)
     return SOLVERS["tsit5" if stiffness <= AUTO_STIFFNESS else DEFAULT_SOLVER]()

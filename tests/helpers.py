@@ -24,7 +24,7 @@ def reference_rhs(params: jc.ChainParams):
         for i in range(n):
             left, right = x[(i - 1) % n], x[(i + 1) % n]
             v_rel = v[i] - params.v_d
-            mu = params.mu_d + (params.mu_st - params.mu_d) * np.exp(-abs(v_rel) / params.v0)
+            mu = params.friction.mu_d + (params.friction.mu_st - params.friction.mu_d) * np.exp(-abs(v_rel) / params.friction.v0)
             force = -mu * np.tanh(v_rel / params.eps)
             a[i] = (-2 * params.xi * v[i] - x[i]
                     - params.eta_c * (2 * x[i] - left - right) + force)
@@ -77,7 +77,7 @@ def scipy_slip_arc(params: jc.ChainParams, t_max: float = 50.0):
     p = params
 
     def slip(t, y):
-        mu = p.mu_d + (p.mu_st - p.mu_d) * np.exp(-(p.v_d - y[1]) / p.v0)
+        mu = p.friction.mu_d + (p.friction.mu_st - p.friction.mu_d) * np.exp(-(p.v_d - y[1]) / p.friction.v0)
         return [y[1], -2 * p.xi * y[1] - y[0] + mu]
 
     def back_to_belt(t, y):
@@ -87,7 +87,7 @@ def scipy_slip_arc(params: jc.ChainParams, t_max: float = 50.0):
     def turning(t, y):
         return y[1]
 
-    return solve_ivp(slip, (0.0, t_max), [p.mu_st - 2 * p.xi * p.v_d, p.v_d],
+    return solve_ivp(slip, (0.0, t_max), [p.friction.mu_st - 2 * p.xi * p.v_d, p.v_d],
                      method="DOP853", rtol=1e-12, atol=1e-12,
                      events=[back_to_belt, turning])
 

@@ -70,7 +70,8 @@ CASES = {
     "a string parameter": (lambda: jc.ChainParams(xi="a"), TypeError, "ChainParams.xi"),
     "a boolean parameter": (lambda: jc.ChainParams(v_d=True), TypeError, "ChainParams.v_d"),
     "a NaN parameter": (lambda: jc.ChainParams(eps=np.nan), ValueError, "ChainParams.eps"),
-    "mu_st below mu_d": (lambda: jc.ChainParams(mu_st=0.2), ValueError, "ChainParams.mu_st"),
+    "mu_st below mu_d": (lambda: jc.ChainParams(mu_st=0.2), ValueError,
+                         "ExponentialDecay.mu_st"),
     "a time series with dt <= 0": (lambda: jc.observe(P, Y0, [jc.TimeSeries(dt=0.0)],
                                                       options=OPTS),
                                    ValueError, "TimeSeries.dt"),
@@ -105,15 +106,19 @@ VALUES = st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(-
 def test_fuzzed_parameters_are_accepted_exactly_when_valid(field, value):
     """One field at a time, the others at eq. (7) (mu_d = 0.5, mu_st = 1): a value is
     accepted exactly when it is a finite real number (or a list of them) obeying
-    the field's rule; otherwise ValueError or TypeError names the field (a mu_d
-    above mu_st is reported as "ChainParams.mu_st must be >= mu_d")."""
+    the field's rule, and a scalar (a list of up to 3 values has the wrong length
+    for the 20 oscillators of eq. (7)); otherwise ValueError or TypeError names the
+    field (a mu_d above mu_st is reported as "ExponentialDecay.mu_st must be >=
+    mu_d")."""
     numbers = (not isinstance(value, (str, bool)) and value is not None)
     a = np.asarray(value, dtype=float) if numbers else None
-    valid = numbers and np.all(np.isfinite(a)) and np.all(RULES[field](a))
+    valid = (numbers and np.all(np.isfinite(a)) and np.all(RULES[field](a))
+             and np.ndim(a) == 0)
     if valid:
         jc.ChainParams(**{field: value})
     else:
-        says = "mu_d" if field == "mu_d" else f"ChainParams.{field}"
+        owner = "ExponentialDecay" if field in ("mu_st", "mu_d", "v0") else "ChainParams"
+        says = "mu_d" if field == "mu_d" else f"{owner}.{field}"
         with pytest.raises((ValueError, TypeError), match=says):
             jc.ChainParams(**{field: value})
 

@@ -78,7 +78,7 @@ def default_curves(branch):
     """The fold and Hopf curves of `jaxchain boundaries` on its default grids."""
     problem, _, fold = branch
     start = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
-    mu_d = float(problem.params.mu_d)
+    mu_d = float(problem.params.friction.mu_d)
     return {"xi": jc.boundary_curves(problem, start, "xi", XI_VALUES),
             "mu_st": jc.boundary_curves(problem, start, "mu_st", mu_d * np.asarray(RATIO_VALUES))}
 
@@ -98,7 +98,7 @@ def test_every_default_fold_converges_near_the_existence_limit(branch, default_c
     assert np.all(np.abs(fold_vd - limit) < 0.01) and np.all(fold_vd < limit)
     # Hopf point: v0 ln((mu_st - mu_d) / (2 xi v0)), and its derivative
     xi = values if where == "xi" else float(single.xi)
-    mu_st = values if where == "mu_st" else float(single.mu_st)
+    mu_st = values if where == "mu_st" else float(single.friction.mu_st)
     np.testing.assert_allclose(curves.hopf_vd, 0.5 * np.log((mu_st - 0.5) / xi), atol=1e-10)
     d_hopf = -0.5 / xi if where == "xi" else 0.5 / (mu_st - 0.5)
     np.testing.assert_allclose(curves.d_hopf, d_hopf, rtol=1e-8)

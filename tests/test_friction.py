@@ -13,11 +13,11 @@ pytestmark = pytest.mark.numerics
 
 def test_friction_coefficient_limits():
     p = jc.ChainParams()
-    assert float(jc.friction_coefficient(p, 0.0)) == p.mu_st
-    assert np.isclose(float(jc.friction_coefficient(p, 50.0)), p.mu_d, rtol=1e-12)
+    assert float(jc.friction_coefficient(p, 0.0)) == p.friction.mu_st
+    assert np.isclose(float(jc.friction_coefficient(p, 50.0)), p.friction.mu_d, rtol=1e-12)
     # eq. (1) at |v_rel| = v0: mu_d + (mu_st - mu_d)/e, on both sides
-    expected = p.mu_d + (p.mu_st - p.mu_d) / np.e
-    assert np.allclose(jc.friction_coefficient(p, jnp.array([-p.v0, p.v0])), expected)
+    expected = p.friction.mu_d + (p.friction.mu_st - p.friction.mu_d) / np.e
+    assert np.allclose(jc.friction_coefficient(p, jnp.array([-p.friction.v0, p.friction.v0])), expected)
 
 
 def test_smoothed_force_tends_to_coulomb_law_away_from_zero():
@@ -29,7 +29,7 @@ def test_smoothed_force_tends_to_coulomb_law_away_from_zero():
     # slope at zero is mu_st / eps: the stiffness of the smoothed stick phase
     h = 1e-9
     slope = (jc.smoothed_friction_force(p, h) - jc.smoothed_friction_force(p, -h)) / (2 * h)
-    assert np.isclose(float(slope), -p.mu_st / p.eps, rtol=1e-5)
+    assert np.isclose(float(slope), -p.friction.mu_st / p.eps, rtol=1e-5)
 
 
 @settings(max_examples=50, deadline=None)
@@ -37,6 +37,6 @@ def test_smoothed_force_tends_to_coulomb_law_away_from_zero():
 def test_smoothed_force_is_odd_and_bounded_by_mu_st(v, eps):
     p = jc.ChainParams(eps=eps)
     f = float(jc.smoothed_friction_force(p, v))
-    assert abs(f) <= p.mu_st
+    assert abs(f) <= p.friction.mu_st
     assert f == -float(jc.smoothed_friction_force(p, -v))
     assert f * v <= 0  # friction always opposes the relative motion

@@ -60,7 +60,7 @@ def test_growth_rate_slope_and_hopf_sensitivity_against_finite_differences():
     fd = (float(jc.hopf_vd(eqx.tree_at(lambda p: p.xi, params, 0.05 + 1e-6)))
           - float(jc.hopf_vd(eqx.tree_at(lambda p: p.xi, params, 0.05 - 1e-6)))) / 2e-6
     assert abs(float(d_xi) - fd) < 1e-6 * abs(fd)
-    assert abs(float(d_xi) - (-params.v0 / params.xi)) < 1e-9
+    assert abs(float(d_xi) - (-params.friction.v0 / params.xi)) < 1e-9
 
 
 @pytest.mark.parametrize("xi", [0.05, 0.02])
@@ -68,7 +68,7 @@ def test_first_lyapunov_coefficient_is_the_analytic_one(xi):
     single = jc.ChainParams(n_osc=1, xi=xi)
     single = eqx.tree_at(lambda p: p.v_d, single, jc.hopf_point(single).v_d[0])
     l1 = float(jc.first_lyapunov_coefficient(single))
-    assert abs(l1 - xi / (4 * single.v0**2)) < 1e-10  # subcritical
+    assert abs(l1 - xi / (4 * single.friction.v0**2)) < 1e-10  # subcritical
     ring = jc.ChainParams(n_osc=4, xi=xi)
     ring = eqx.tree_at(lambda p: p.v_d, ring, jc.hopf_point(ring).v_d[0])
     assert abs(float(jc.first_lyapunov_coefficient(ring)) - l1 / 4) < 1e-10

@@ -43,7 +43,7 @@ def test_run_lanes_with_padding_equals_runs_done_one_at_a_time():
     v_d = np.array([1.3, 1.5, 1.7])
     y0 = np.stack([jc.OutOfPhaseExcitation.eq8([True, k > 0])(jc.ChainParams(n_osc=2, v_d=v))
                    for k, v in enumerate(v_d)])
-    obs = run_lanes(jc.with_parameter(p, "v_d", v_d), y0, SOLVERS[DEFAULT_SOLVER](), SHORT)
+    obs = run_lanes(lane_params(p, 3, v_d=v_d), y0, SOLVERS[DEFAULT_SOLVER](), SHORT)
     assert obs.amplitudes.shape == (3, 2)
     for i, v in enumerate(v_d):
         single = jc.simulate(jc.ChainParams(n_osc=2, v_d=v), y0[i], options=SHORT)
@@ -65,7 +65,7 @@ def test_one_device_two_devices_and_both_engines_give_the_same_results():
     y0 = np.stack([jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1 + k % 3))(
         jc.ChainParams(n_osc=3, v_d=v)) for k, v in enumerate(v_d)])
     solver = SOLVERS[DEFAULT_SOLVER]()
-    p = jc.with_parameter(p, "v_d", v_d)
+    p = lane_params(p, v_d.size, v_d=v_d)
     one = run_lanes(p, y0, solver, SHORT, engine="queue", devices=jax.devices()[:1])
     two = run_lanes(p, y0, solver, SHORT, engine="queue", devices=jax.devices()[:2])
     vmapped = run_lanes(p, y0, solver, SHORT, engine="vmap", devices=jax.devices()[:2])
@@ -100,7 +100,7 @@ def test_expected_cost_grows_with_the_excited_block_and_is_zero_at_steady_slidin
                   + [np.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(6, k))(
                       jc.ChainParams(n_osc=6, v_d=v))) for k, v in zip((1, 3), v_d[1:3])]
                   + [np.asarray(jc.steady_sliding(jc.ChainParams(n_osc=6, v_d=v_d[3])))])
-    cost = expected_cost(lane_params(jc.with_parameter(p, "v_d", v_d), 4), y0)
+    cost = expected_cost(lane_params(p, 4, v_d=v_d), y0)
     assert cost[0] == 0 and cost[3] == 0 and 0 < cost[1] < cost[2]
 
 

@@ -16,7 +16,7 @@ def test_steady_sliding_is_a_fixed_point(n_osc, v_d, eps):
     p = jc.ChainParams(n_osc=n_osc, v_d=v_d, eps=eps)
     y = jc.steady_sliding(p)
     # x_n = F(-v_d) = mu(v_d) tanh(v_d/eps), independently of the code under test
-    mu = p.mu_d + (p.mu_st - p.mu_d) * np.exp(-v_d / p.v0)
+    mu = p.friction.mu_d + (p.friction.mu_st - p.friction.mu_d) * np.exp(-v_d / p.friction.v0)
     assert np.allclose(y[0], mu * np.tanh(v_d / eps), rtol=1e-14)
     assert np.all(y[1] == 0)
     assert np.max(np.abs(jc.vector_field(0.0, y, p))) < 1e-14
@@ -42,8 +42,8 @@ def test_steady_sliding_eigenvalues_match_analytic_damping(n_osc, eps):
     (mu_st - mu_d)/v0 exp(-v_d/v0) (the Hopf condition of DESIGN.md)."""
     p = jc.ChainParams(n_osc=n_osc, v_d=1.4, eps=eps)
     s = p.v_d
-    mu = p.mu_d + (p.mu_st - p.mu_d) * np.exp(-s / p.v0)
-    slope = ((p.mu_st - p.mu_d) / p.v0 * np.exp(-s / p.v0) * np.tanh(s / eps)
+    mu = p.friction.mu_d + (p.friction.mu_st - p.friction.mu_d) * np.exp(-s / p.friction.v0)
+    slope = ((p.friction.mu_st - p.friction.mu_d) / p.friction.v0 * np.exp(-s / p.friction.v0) * np.tanh(s / eps)
              - mu / np.cosh(s / eps) ** 2 / eps)
     damping = 2 * p.xi - slope
     k = np.arange(n_osc)
@@ -54,7 +54,7 @@ def test_steady_sliding_eigenvalues_match_analytic_damping(n_osc, eps):
     key = lambda z: np.round(z.imag, 9) + 1e3 * np.round(z.real, 9)  # noqa: E731
     assert np.allclose(sorted(numeric, key=key), sorted(analytic, key=key), atol=1e-10)
     if eps == 1e-2:  # the smoothing correction is exp(-2 v_d/eps): nil here
-        mu_prime = (p.mu_st - p.mu_d) / p.v0 * np.exp(-s / p.v0)
+        mu_prime = (p.friction.mu_st - p.friction.mu_d) / p.friction.v0 * np.exp(-s / p.friction.v0)
         assert np.allclose(numeric.real, -(2 * p.xi - mu_prime) / 2, atol=1e-12)
 
 

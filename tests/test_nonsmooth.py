@@ -16,7 +16,7 @@ ONE = jc.ChainParams(n_osc=1)
 
 
 def _stick_exit_state(p):
-    return jnp.array([[p.mu_st - 2 * p.xi * p.v_d], [p.v_d]])
+    return jnp.array([[p.friction.mu_st - 2 * p.xi * p.v_d], [p.v_d]])
 
 
 def test_stick_exit_time_and_oscillator_match_the_stick_force_formula():
@@ -28,7 +28,7 @@ def test_stick_exit_time_and_oscillator_match_the_stick_force_formula():
     x = np.array([0.1, 0.4, -0.2])
     f = 2 * p.xi * p.v_d + x + p.eta_c * (2 * x - np.roll(x, 1) - np.roll(x, -1))
     first = int(np.argmax(f))
-    t_exit = float((p.mu_st - f[first]) / p.v_d)
+    t_exit = float((p.friction.mu_st - f[first]) / p.v_d)
     y0 = np.stack([x, np.full(3, p.v_d)])
     obs = jc.simulate_nonsmooth(p, y0, jc.NonsmoothOptions(t_end=t_exit + 0.1, transient=0.0))
     logged = np.asarray(obs.log_osc) >= 0

@@ -7,9 +7,9 @@ import jaxchain as jc
 
 def test_defaults_are_eq7_with_paper_chain():
     p = jc.ChainParams()
-    assert (p.n_osc, p.xi, p.mu_d, p.mu_st, p.v0, p.eta_c, p.v_d) == (
+    assert (p.n_osc, p.xi, p.friction.mu_d, p.friction.mu_st, p.friction.v0, p.eta_c, p.v_d) == (
         20, 0.05, 0.5, 1.0, 0.5, 0.01, 1.5)
-    assert p.mu_st / p.mu_d == 2
+    assert p.friction.mu_st / p.friction.mu_d == 2
 
 
 @pytest.mark.parametrize("field, value", [
@@ -19,7 +19,8 @@ def test_defaults_are_eq7_with_paper_chain():
     ("v0", -math.inf), ("v_d", 0.0), ("v_d", -1.5),
 ])
 def test_invalid_parameter_raises_value_error_naming_field(field, value):
-    with pytest.raises(ValueError, match=f"ChainParams.{field}"):
+    owner = "ExponentialDecay" if field in ("mu_st", "mu_d", "v0") else "ChainParams"
+    with pytest.raises(ValueError, match=f"{owner}.{field}"):
         jc.ChainParams(**{field: value})
 
 

@@ -7,7 +7,7 @@ from scipy.integrate import solve_ivp
 import jaxchain as jc
 from helpers import (SHORT, assert_within_drift, drift_bound, flat, reference_rhs,
                      scipy_slip_arc, scipy_stick_slip_cycle)
-from jaxchain._stick import min_slip_speed
+from jaxchain._physics.stick import min_slip_speed
 
 #: Numbers compared with references or across compiled programs: CI runs these
 #: tests again under another rounding (the `numerics` marker, .ci/run).
@@ -20,7 +20,7 @@ def _near_steady_sliding(p):
 
 def _growth_rate(p):
     """Re(lambda) of steady sliding for eps -> 0: -(2 xi - mu'(v_d)) / 2."""
-    mu_prime = (p.mu_st - p.mu_d) / p.v0 * np.exp(-p.v_d / p.v0)
+    mu_prime = (p.friction.mu_st - p.friction.mu_d) / p.friction.v0 * np.exp(-p.v_d / p.friction.v0)
     return -(2 * p.xi - mu_prime) / 2
 
 
@@ -97,7 +97,7 @@ def test_single_oscillator_cycle_converges_to_nonsmooth_stick_slip_cycle():
     p1 = jc.ChainParams(n_osc=1)
     reference = scipy_stick_slip_cycle(p1)[0]
     entry_force = scipy_slip_arc(p1).y[0, -1] + 2 * p1.xi * p1.v_d
-    quasi_static = np.arctanh(entry_force / p1.mu_st)  # in units of eps
+    quasi_static = np.arctanh(entry_force / p1.friction.mu_st)  # in units of eps
     default = float(jc.ChainParams().eps)
     errors, slip_errors = {}, {}
     for eps in (1e-2, 3e-3, default):

@@ -34,7 +34,7 @@ def test_two_closures_over_different_values_never_share_a_key():
     a = settings_key("test", where=functools.partial(_scaled, factor=1.0))
     b = settings_key("test", where=functools.partial(_scaled, factor=2.0))
     assert a != b and settings_key("test", where=_scaled) not in (a, b)
-    assert canonical(jc.ChainParams) == {"callable": "jaxchain._params.ChainParams"}
+    assert canonical(jc.ChainParams) == {"callable": "jaxchain._physics.params.ChainParams"}
 
 
 def test_a_sweep_through_a_lambda_lens_is_stored_under_the_parameter_it_selects(

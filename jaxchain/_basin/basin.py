@@ -14,12 +14,12 @@ from jaxtyping import ArrayLike, Float
 
 from .._checks import as_solver, belt_speeds, check_options, check_params
 from .._dynamics.classify import classify
-from .._initial import GivenState
-from .._lanes import run_lanes
+from .._physics.initial import GivenState
+from .._lanes import lane_params, run_lanes
 from .._observers.crossings import PeakTimes
 from .._observers.extrema import Extrema
 from .._options import SimulationOptions
-from .._params import ChainParams, with_parameter
+from .._physics.params import ChainParams
 from .._solvers import DEFAULT_SOLVER
 from .._states import PERIODIC
 from .._sweep.sweep import sweep
@@ -61,7 +61,7 @@ def _check_run(params, v, states, solver, options, progress) -> dict:
     """The convergence subset at 2 t_end, with peak times for the periodic/irregular
     class: n_halc, on_halc, status and peak_times of shape (n_vd, n_check, ...)."""
     n_vd, n = v.size, states.shape[0]
-    lanes = with_parameter(params, "v_d", np.repeat(v, n))
+    lanes = lane_params(params, n_vd * n, v_d=np.repeat(v, n))
     y0 = np.tile(np.asarray(states), (n_vd, 1, 1))
     out = run_lanes(lanes, y0, solver, options, progress=progress,
                     observers=(Extrema(), PeakTimes()))
@@ -139,7 +139,7 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
                store=store, resume=resume, progress=progress).load()
     status = ds["status"].values
     index = class_index(ds["n_halc"].values, status, n_osc)
-    clusters = np.where(status == 0, halc_clusters(ds["on_halc"].values), -1)
+    clusters = np.where(status == 0, halc_clusters(ds["on_halc"].values, params.boundary), -1)
     names = class_names(n_osc)
     counts = np.stack([(index == c).sum(-1) for c in range(len(names))], axis=-1)
     low, high = wilson_interval(counts, n_samples)
@@ -190,7 +190,7 @@ def _convergence(params, v, states, index, solver, options, progress) -> dict:
                 continue
             verdict = classify(run["peak_times"][i, j], run["on_halc"][i, j],
                                int(run["n_halc"][i, j]), 0, math.nan, math.nan,
-                               longer.transient)
+                               longer.transient, boundary=params.boundary)
             if not math.isfinite(verdict["delay_spread"]):  # too few peaks to judge
                 continue
             moving[i] += 1

@@ -10,21 +10,29 @@ from .._states import FAILED, STEADY_SLIDING, STICK_SLIP
 Z95 = 1.959963984540054
 
 
-def halc_clusters(on_halc: Bool[np.ndarray, "*batch n_osc"]) -> Int[np.ndarray, "*batch"]:
-    """The number of separate groups of adjacent HALC oscillators on the ring: 0 at
-    steady sliding, 1 for one localized group (or the whole ring), more for several.
+def halc_clusters(on_halc: Bool[np.ndarray, "*batch n_osc"], boundary: str = "ring"
+                  ) -> Int[np.ndarray, "*batch"]:
+    """The number of separate groups of adjacent HALC oscillators: 0 at steady
+    sliding, 1 for one localized group (or the whole chain), more for several.
 
     **Arguments:**
 
     - `on_halc`: whether each oscillator is on the HALC, shape (..., n_osc).
+    - `boundary`: the chain's boundary (`BOUNDARIES`): on the ring a group may run
+        across the closure (oscillators N and 1 are neighbours); on an open chain
+        it may not.
 
     **Returns:**
 
     Shape (...): the groups, counted by their first oscillator (on the HALC, its
-    left neighbour, across the ring's closure, not).
+    left neighbour not; the left neighbour of oscillator 1 is oscillator N on the
+    ring and nothing on an open chain).
     """
     on = np.asarray(on_halc, dtype=bool)
-    starts = (on & ~np.roll(on, 1, axis=-1)).sum(-1)
+    left = np.roll(on, 1, axis=-1)
+    if boundary != "ring":
+        left[..., 0] = False
+    starts = (on & ~left).sum(-1)
     return np.where(on.all(-1), 1, starts)
 
 

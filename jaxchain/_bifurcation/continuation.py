@@ -12,7 +12,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 from tqdm.auto import tqdm
 
-from .._params import ChainParams, parameter_value, with_parameter
+from .._physics.params import ChainParams, parameter_value, with_parameter
 
 
 class ContinuationProblem(eqx.Module):

@@ -7,7 +7,7 @@ import numpy as np
 import optax
 from jaxtyping import Array, Float
 
-from .._params import with_parameter
+from .._physics.params import with_parameter
 from .continuation import ContinuationProblem
 from .two_parameter import fold_curve, hopf_vd_and_derivative
 

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
-from .._params import ChainParams
+from .._physics.params import ChainParams
 from .continuation import Branch, ContinuationProblem, _describe
 
 

@@ -1,4 +1,6 @@
-"""Stability of steady sliding, mode by mode, and its Hopf boundary."""
+"""Stability of steady sliding and its Hopf boundary: mode by mode on the paper's
+homogeneous ring (the Fourier route), from the eigenvalues of the Jacobian for any
+chain."""
 
 import equinox as eqx
 import jax
@@ -7,9 +9,16 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Complex, Float
 
-from .._friction import friction_coefficient
-from .._model import jacobian
-from .._params import ChainParams, with_parameter
+from .._physics.chain import is_homogeneous_ring
+from .._physics.friction import ExponentialDecay, friction_coefficient
+from .._physics.model import jacobian
+from .._physics.params import ChainParams, with_parameter
+
+
+def _require_ring(params: ChainParams, what: str) -> None:
+    if not is_homogeneous_ring(params):
+        raise ValueError(f"{what} needs the homogeneous ring (boundary 'ring', scalar "
+                         "per-oscillator fields); use steady_sliding_eigenvalues for any chain")
 
 
 def fourier_blocks(params: ChainParams) -> Complex[Array, "n_osc 2 2"]:
@@ -32,7 +41,12 @@ def fourier_blocks(params: ChainParams) -> Complex[Array, "n_osc 2 2"]:
 
     Blocks of shape (n_osc, 2, 2), complex, for k = 0..N-1 (k = 0 in phase,
     k = N/2 anti-phase).
+
+    **Raises:**
+
+    `ValueError` unless the chain is the homogeneous ring.
     """
+    _require_ring(params, "fourier_blocks")
     n = params.n_osc
     jac = jnp.reshape(jacobian(params), (2, n, 2, n))
     k, m = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
@@ -57,15 +71,44 @@ def mode_eigenvalues(params: ChainParams) -> Complex[Array, "n_osc 2"]:
     return jnp.stack([half_trace + root, half_trace - root], axis=-1)
 
 
-def growth_rates(params: ChainParams) -> Float[Array, " n_osc"]:
-    """Growth rate max Re(lambda) of each Fourier mode of the ring about steady
-    sliding; steady sliding is stable when all are negative.
+def steady_sliding_eigenvalues(params: ChainParams) -> Complex[Array, " 2n_osc"]:
+    """The eigenvalues of the Jacobian of eq. (5) at steady sliding, for any chain:
+    by the Fourier route (`mode_eigenvalues`) on the homogeneous ring, by
+    `jnp.linalg.eigvals` of the Jacobian (`jacobian`, by `jax.jacfwd`) otherwise.
 
     **Returns:**
 
-    Shape (n_osc,), dimensionless (per unit of time, eq. (4)).
+    Shape (2 n_osc,), complex, sorted by decreasing real part (then imaginary
+    part), dimensionless (per unit of time, eq. (4)).
     """
-    return mode_eigenvalues(params)[:, 0].real
+    if is_homogeneous_ring(params):
+        values = jnp.reshape(mode_eigenvalues(params), (-1,))
+    else:
+        values = jnp.linalg.eigvals(jacobian(params))
+    order = jnp.lexsort((-values.imag, -values.real))
+    return values[order]
+
+
+def leading_growth_rate(params: ChainParams) -> Float[Array, ""]:
+    """max Re(lambda) over the eigenvalues of the Jacobian at steady sliding
+    (`steady_sliding_eigenvalues`): steady sliding is stable where it is negative.
+    Dimensionless (per unit of time, eq. (4))."""
+    return jnp.max(steady_sliding_eigenvalues(params).real)
+
+
+def growth_rates(params: ChainParams) -> Float[Array, " modes"]:
+    """Growth rates about steady sliding; steady sliding is stable when all are
+    negative.
+
+    **Returns:**
+
+    On the homogeneous ring, max Re(lambda) of each Fourier mode, shape (n_osc,);
+    on any other chain, Re(lambda) of every eigenvalue of the Jacobian, shape
+    (2 n_osc,), decreasing. Dimensionless (per unit of time, eq. (4)).
+    """
+    if is_homogeneous_ring(params):
+        return mode_eigenvalues(params)[:, 0].real
+    return steady_sliding_eigenvalues(params).real
 
 
 def hopf_vd_analytic(params: ChainParams) -> Float[Array, ""]:
@@ -77,15 +120,26 @@ def hopf_vd_analytic(params: ChainParams) -> Float[Array, ""]:
     the same for every Fourier mode (the coupling is conservative, the damping
     uniform). 0.5 ln(10) = 1.1513 for eq. (7) of the paper (shared/DESIGN.md).
 
+    For another friction law or a chain whose damping differs between
+    oscillators, use `hopf_point` (root finding on the Jacobian's eigenvalues).
+
     **Raises:**
 
-    `ValueError` if xi = 0 or mu_st = mu_d (no Hopf point).
+    `ValueError` if xi = 0 or mu_st = mu_d (no Hopf point), or if the law is not
+    eq. (1) or the load and damping are not uniform.
     """
-    xi, delta = np.asarray(params.xi), np.asarray(params.mu_st) - np.asarray(params.mu_d)
+    law = params.friction
+    if not isinstance(law, ExponentialDecay):
+        raise ValueError(f"hopf_vd_analytic is the closed form of eq. (1) "
+                         f"(ExponentialDecay), got {type(law).__name__}; use hopf_point")
+    if any(np.ndim(a) for a in (params.xi, params.load, law.mu_st, law.mu_d, law.v0)):
+        raise ValueError("hopf_vd_analytic needs uniform xi, load and friction law; "
+                         "use hopf_point")
+    xi, delta = np.asarray(params.xi), np.asarray(law.mu_st) - np.asarray(law.mu_d)
     if np.any(xi <= 0) or np.any(delta <= 0):
         raise ValueError(f"hopf_vd_analytic needs xi > 0 and mu_st > mu_d, got xi = "
                          f"{params.xi!r}, mu_st - mu_d = {delta!r}")
-    return params.v0 * jnp.log((params.mu_st - params.mu_d) / (2 * params.xi * params.v0))
+    return law.v0 * jnp.log(params.load * (law.mu_st - law.mu_d) / (2 * params.xi * law.v0))
 
 
 def hopf_eps_correction(params: ChainParams) -> Float[Array, ""]:
@@ -102,8 +156,9 @@ def hopf_eps_correction(params: ChainParams) -> Float[Array, ""]:
     The shift, shape (), dimensionless (always negative).
     """
     v = hopf_vd_analytic(params)
-    mu = friction_coefficient(params, v)
-    return -params.v0 * (2 + 2 * mu / (params.xi * params.eps)) * jnp.exp(-2 * v / params.eps)
+    mu = params.load * friction_coefficient(params, v)
+    return -params.friction.v0 * (2 + 2 * mu / (params.xi * params.eps)) * jnp.exp(
+        -2 * v / params.eps)
 
 
 class HopfPoint(eqx.Module):
@@ -111,8 +166,9 @@ class HopfPoint(eqx.Module):
 
     **Fields:**
 
-    - `v_d`: the Hopf belt speed of every Fourier mode, shape (n_osc,). Steady
-        sliding is stable above the largest.
+    - `v_d`: the Hopf belt speed of every Fourier mode, shape (n_osc,) on the
+        homogeneous ring; shape (1,) (the leading eigenvalue) on any other chain.
+        Steady sliding is stable above the largest.
     - `omega`: angular frequency of each mode at its Hopf point, shape (n_osc,).
     - `slope`: d Re(lambda) / d v_d of each mode at its Hopf point, by JAX, shape
         (n_osc,); negative (the speed stabilises steady sliding).
@@ -147,12 +203,96 @@ def _hopf_modes(params: ChainParams, guess, rtol, atol):
     return jax.vmap(one)(jnp.arange(params.n_osc))
 
 
+def critical_mode(params: ChainParams, mode: int = 0):
+    """The critical mode at a Hopf point (`params.v_d` at it): its frequency omega,
+    the right eigenvector q of the Jacobian (A q = i omega q, |q| = 1) and the left
+    one p (A^T p = -i omega p, <p, q> = conj(p) . q = 1), as the normal form of the
+    Hopf bifurcation takes them (Kuznetsov, *Elements of Applied Bifurcation
+    Theory*, Sect. 3.5).
+
+    On the homogeneous ring, Fourier mode `mode` (0 in phase or N/2 anti-phase, a
+    real mode shape), from its 2x2 block (`fourier_blocks`); on any other chain the
+    eigenvalue of the Jacobian with the largest real part and positive imaginary
+    part (`mode` must be 0).
+
+    **Returns:**
+
+    (omega, q, p): shape (), (2 n_osc,) and (2 n_osc,) complex.
+
+    **Raises:**
+
+    `ValueError` for a bad mode.
+    """
+    n = params.n_osc
+    if not is_homogeneous_ring(params):
+        if mode != 0:
+            raise ValueError(f"mode must be 0 (the leading eigenvalue) on a chain other "
+                             f"than the homogeneous ring, got {mode!r}")
+        a = jacobian(params)
+        values, right = jnp.linalg.eig(a)
+        i = jnp.argmax(jnp.where(values.imag > 0, values.real, -jnp.inf))
+        left_values, left = jnp.linalg.eig(a.T)
+        j = jnp.argmin(jnp.abs(left_values - values[i].conj()))
+        q, p = right[:, i], left[:, j]
+        omega = values[i].imag
+    else:
+        if mode not in (0, n / 2):
+            raise ValueError(f"mode must be 0 or N/2 = {n / 2} (a real mode shape), "
+                             f"got {mode!r}")
+        block = fourier_blocks(params)[mode]
+        values, right = jnp.linalg.eig(block)
+        i = jnp.argmax(values.imag)
+        omega = values[i].imag
+        left_values, left = jnp.linalg.eig(block.T)
+        j = jnp.argmin(left_values.imag)
+        shape = jnp.asarray(np.cos(np.pi * 2 * mode * np.arange(n) / n) / np.sqrt(n))
+        q = jnp.kron(right[:, i], shape)
+        p = jnp.kron(left[:, j], shape)
+    q = q / jnp.linalg.norm(q)
+    p = p / jnp.vdot(p, q).conj()
+    return omega, q, p
+
+
+def _leading_growth(v_d, params):
+    return leading_growth_rate(with_parameter(params, "v_d", v_d))
+
+
+@eqx.filter_jit
+def _hopf_leading(params: ChainParams, guess, rtol, atol):
+    """The Hopf point of any chain: Newton's method (optimistix) on the leading
+    growth rate, with shapes (1,) as `_hopf_modes` gives them per mode."""
+    sol = optx.root_find(_leading_growth, optx.Newton(rtol=rtol, atol=atol), guess, params,
+                         max_steps=100, throw=False)
+    at = with_parameter(params, "v_d", sol.value)
+    values = steady_sliding_eigenvalues(at)
+    slope = jax.grad(_leading_growth)(sol.value, params)
+    fields = (sol.value, jnp.abs(values[0].imag), slope, values[0].real,
+              sol.stats["num_steps"])
+    return (*(jnp.atleast_1d(a) for a in fields), sol.result)
+
+
+def hopf_modes(params: ChainParams, guess, rtol: float = 1e-12, atol: float = 1e-12):
+    """(v_d, omega, slope, residual, steps, result) of the Hopf point: per Fourier
+    mode on the homogeneous ring (`_hopf_modes`), of the leading eigenvalue
+    otherwise (`_hopf_leading`), each of shape (modes,) (result: () or (modes,),
+    optimistix's RESULTS). Traceable."""
+    guess = jnp.asarray(guess, dtype=float)
+    if is_homogeneous_ring(params):
+        return _hopf_modes(params, guess, rtol, atol)
+    return _hopf_leading(params, guess, rtol, atol)
+
+
 def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
                atol: float = 1e-12) -> HopfPoint:
-    """The Hopf boundary of steady sliding, mode by mode: the root in v_d of each
-    Fourier mode's growth rate max Re(lambda)(v_d) = 0 (`growth_rates`), found by
-    optimistix's Newton method with the derivative from JAX (the Jacobian of eq.
-    (5) by `jax.jacfwd`, its modal eigenvalues differentiated by `jax.jacfwd`).
+    """The Hopf boundary of steady sliding. On the homogeneous ring, mode by mode:
+    the root in v_d of each Fourier mode's growth rate max Re(lambda)(v_d) = 0
+    (`growth_rates`). On any other chain (mistuned, open, other loads): the root of
+    the leading growth rate, max Re(lambda) over the eigenvalues of the Jacobian
+    (`leading_growth_rate`). Both by optimistix's Newton method with the derivative
+    from JAX (the Jacobian of eq. (5) by `jax.jacfwd`, its eigenvalues
+    differentiated by JAX). For eq. (1) with uniform damping and load the closed
+    form is `hopf_vd_analytic`; for any law with uniform damping and load the root
+    is that of 2 xi + (P_n/P) mu'(v_d) = 0 for every mode.
 
     Differentiable in the other parameters by implicit differentiation (optimistix's
     `ImplicitAdjoint`): d v_d,H / d xi = -(d g/d xi) / (d g/d v_d).
@@ -160,19 +300,20 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
     **Arguments:**
 
     - `params`: the chain parameters; `params.v_d` is ignored.
-    - `guess`: starting belt speed of Newton's method.
+    - `guess`: starting belt speed of Newton's method (a law with several Hopf
+        points, such as a Stribeck curve, gives the one Newton's method reaches).
     - `rtol`, `atol`: Newton tolerances on v_d.
 
     **Returns:**
 
-    A `HopfPoint`, fields of shape (n_osc,).
+    A `HopfPoint`, fields of shape (n_osc,) on the homogeneous ring (one per Fourier
+    mode), (1,) otherwise (the leading eigenvalue).
 
     **Raises:**
 
     `RuntimeError` if Newton's method fails for a mode (try another `guess`).
     """
-    v, omega, slope, residual, steps, result = _hopf_modes(
-        params, jnp.asarray(guess, dtype=float), rtol, atol)
+    v, omega, slope, residual, steps, result = hopf_modes(params, guess, rtol, atol)
     if not bool(jnp.all(result == optx.RESULTS.successful)) or not bool(jnp.all(v > 0)):
         raise RuntimeError(f"Newton's method did not find the Hopf point from v_d = {guess}; "
                            "try another guess")

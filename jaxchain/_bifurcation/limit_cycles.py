@@ -5,10 +5,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._model import steady_sliding
-from .._params import ChainParams, with_parameter
+from .._physics.model import steady_sliding
+from .._physics.params import ChainParams, with_parameter
 from .continuation import ContinuationProblem
-from .hopf import fourier_blocks, hopf_point
+from .hopf import critical_mode, hopf_point
 from .lyapunov import first_lyapunov_coefficient
 from .shooting import (PeriodicOrbit, ShootingOptions, describe_orbit, pack,
                        periodic_orbit, shooting_residual)
@@ -52,9 +52,10 @@ def limit_cycle_problem(orbit: PeriodicOrbit, options: ShootingOptions = Shootin
 
 def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
                options: ShootingOptions = ShootingOptions()) -> PeriodicOrbit:
-    """The small limit cycle born at the Hopf point of steady sliding in Fourier mode
-    `mode` (0: in phase), a distance `offset` in v_d from the Hopf point on the side
-    where the first Lyapunov coefficient puts it (above v_d,H when subcritical).
+    """The small limit cycle born at the Hopf point of steady sliding in the critical
+    mode `mode` (`critical_mode`; 0: in phase on the ring), a distance `offset` in
+    v_d from the Hopf point on the side where the first Lyapunov coefficient puts
+    it (above v_d,H when subcritical).
 
     The guess is the normal form of the Hopf bifurcation (Kuznetsov, *Elements of
     Applied Bifurcation Theory*, Sect. 3.5): y = y_ss + 2 Re(z q) with |z|^2 =
@@ -65,7 +66,8 @@ def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
 
     - `params`: the chain parameters; `params.v_d` is ignored.
     - `offset`: |v_d - v_d,H| of the cycle, > 0.
-    - `mode`: Fourier mode with a real mode shape, 0 or N/2.
+    - `mode`: Fourier mode with a real mode shape, 0 or N/2, on the homogeneous
+        ring; 0 (the leading eigenvalue) on any other chain.
     - `options`: `ShootingOptions`.
 
     **Returns:**
@@ -84,11 +86,7 @@ def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
     v_d = hopf.v_d[mode] + jnp.sign(l1) * offset
     near = with_parameter(params, "v_d", v_d)
     n = params.n_osc
-    values, vectors = jnp.linalg.eig(fourier_blocks(at_hopf)[mode])
-    q2 = vectors[:, jnp.argmax(values.imag)]
-    shape = np.cos(2 * np.pi * mode * np.arange(n) / n) / np.sqrt(n)
-    q = jnp.kron(q2, jnp.asarray(shape))
-    q = q / jnp.linalg.norm(q)
+    _, q, _ = critical_mode(at_hopf, mode)
     growth = hopf.slope[mode] * (v_d - hopf.v_d[mode])
     radius = jnp.sqrt(-growth / (l1 * hopf.omega[mode]))
     q = q * jnp.exp(1j * (np.pi / 2 - jnp.angle(q[n])))  # x_1' = 0 at the start

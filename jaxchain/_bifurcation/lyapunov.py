@@ -5,12 +5,11 @@ import itertools
 import jax
 import jax.numpy as jnp
 import lineax as lx
-import numpy as np
 from jaxtyping import Array, Float
 
-from .._model import jacobian, steady_sliding, vector_field
-from .._params import ChainParams
-from .hopf import fourier_blocks
+from .._physics.model import jacobian, steady_sliding, vector_field
+from .._physics.params import ChainParams
+from .hopf import critical_mode
 
 
 def _derivative(params: ChainParams, y, vectors) -> Array:
@@ -60,7 +59,8 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0) -> Float[Arra
     **Arguments:**
 
     - `params`: the chain parameters, at the Hopf point.
-    - `mode`: Fourier mode k with a real mode shape, 0 or N/2.
+    - `mode`: Fourier mode k with a real mode shape, 0 or N/2, on the homogeneous
+        ring; 0 (the leading eigenvalue, `critical_mode`) on any other chain.
 
     **Returns:**
 
@@ -68,22 +68,10 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0) -> Float[Arra
 
     **Raises:**
 
-    `ValueError` if `mode` is not 0 or N/2.
+    `ValueError` for a bad mode.
     """
     n = params.n_osc
-    if mode not in (0, n / 2):
-        raise ValueError(f"mode must be 0 or N/2 = {n / 2} (a real mode shape), got {mode!r}")
-    block = fourier_blocks(params)[mode]
-    eigvals, right = jnp.linalg.eig(block)
-    i = jnp.argmax(eigvals.imag)
-    omega = eigvals[i].imag
-    left_vals, left = jnp.linalg.eig(block.T)
-    j = jnp.argmin(left_vals.imag)
-    shape = jnp.asarray(np.cos(np.pi * 2 * mode * np.arange(n) / n) / np.sqrt(n))
-    q = jnp.kron(right[:, i], shape)
-    p = jnp.kron(left[:, j], shape)
-    q = q / jnp.linalg.norm(q)
-    p = p / jnp.vdot(p, q).conj()  # <p, q> = conj(p) . q = 1
+    omega, q, p = critical_mode(params, mode)
 
     y = jnp.reshape(steady_sliding(params), (-1,))
     a = jacobian(params).astype(complex)

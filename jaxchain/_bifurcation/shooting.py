@@ -9,9 +9,9 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Complex, Float
 
 from .._custom_types import State
-from .._model import vector_field
-from .._params import ChainParams
-from .._stick import min_slip_speed, sticks
+from .._physics.model import vector_field
+from .._physics.params import ChainParams
+from .._physics.stick import min_slip_speed, sticks
 
 
 class ShootingOptions(eqx.Module):

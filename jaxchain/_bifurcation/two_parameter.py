@@ -11,15 +11,16 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
-from .._params import ChainParams, parameter_value, with_parameter
+from .._physics.params import ChainParams, parameter_value, with_parameter
 from .continuation import (Branch, ContinuationOptions, ContinuationProblem, PseudoArclength,
                            continuation)
 from .fold import FoldSystem, solve_fold
-from .hopf import _hopf_modes
+from .hopf import hopf_modes
 
 
 def hopf_vd(params: ChainParams, guess: float = 1.0) -> Float[Array, ""]:
-    """The Hopf belt speed of steady sliding (the largest over the Fourier modes),
+    """The Hopf belt speed of steady sliding (the largest over the Fourier modes of
+    the homogeneous ring, that of the leading eigenvalue on any other chain),
     traceable and differentiable in `params` by implicit differentiation through
     optimistix's Newton method (`hopf_point`).
 
@@ -29,7 +30,7 @@ def hopf_vd(params: ChainParams, guess: float = 1.0) -> Float[Array, ""]:
     or gave v_d <= 0, so that a failed solve never passes for a belt speed.
     `hopf_point` raises instead.
     """
-    v, *_, result = _hopf_modes(params, jnp.asarray(guess, dtype=float), 1e-12, 1e-12)
+    v, *_, result = hopf_modes(params, guess)
     ok = jnp.all(result == optx.RESULTS.successful) & jnp.all(v > 0)
     return jnp.where(ok, v.max(), jnp.nan)
 

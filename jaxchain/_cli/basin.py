@@ -10,7 +10,7 @@ import numpy as np
 from .._basin.basin import BASIN_OPTIONS, basin_stability
 from .._basin.sampling import Box
 from .._options import SimulationOptions
-from .._params import ChainParams
+from .._physics.params import ChainParams
 from .._plots.basin import plot_basin_stability, plot_halc_histogram
 from .common import (RunsFailed, UsageError, json_ready, positive_float, positive_int,
                      save_figure, show_progress, writable_folder)

@@ -6,7 +6,7 @@ import json
 import time
 
 from .._boundaries import RATIO_VALUES, XI_VALUES, boundaries, fig3a_simulations
-from .._params import ChainParams
+from .._physics.params import ChainParams
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
 from .common import (RunsFailed, UsageError, add_output_options, comma_list, json_ready,
                      param_default, positive_float, positive_int, save_figure,

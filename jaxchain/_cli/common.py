@@ -12,7 +12,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from .._options import SimulationOptions
-from .._params import ChainParams
+from .._physics.params import ChainParams
 from .._solvers import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
 
 

@@ -8,7 +8,7 @@ import time
 from .._crosscheck import CROSSCHECK_ICS, CROSSCHECK_VD, crosscheck
 from .._nonsmooth.options import NonsmoothOptions
 from .._options import SimulationOptions
-from .._params import ChainParams, with_parameter
+from .._physics.params import ChainParams, with_parameter
 from .._plots.crosscheck import plot_crosscheck
 from .._results import save_dataset
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,

@@ -10,9 +10,9 @@ import numpy as np
 from .._dynamics.scenes import (PAPER_SOLUTIONS, orbit_diagram_scene, phase_portrait_scene,
                                 time_delay_scene, time_series_scene)
 from .._ensemble import ensemble
-from .._initial import localized_family
+from .._physics.initial import localized_family
 from .._options import SimulationOptions
-from .._params import ChainParams
+from .._physics.params import ChainParams
 from .._plots.dynamics import (plot_orbit_diagram, plot_phase_portraits,
                                plot_states_and_orbits, plot_time_delays, plot_time_series)
 from .._plots.localized import plot_localized_states
@@ -88,8 +88,8 @@ def _scene(name: str, size: dict, params: ChainParams, solver, options, progress
     ics = FIGURES[name][1]
     solutions = [k for k in PAPER_SOLUTIONS if k <= params.n_osc]
     if name == "4":
-        ds = ensemble(params, [params.v_d.item()], localized_family(params.n_osc, ics),
-                      solver, options, progress=progress)
+        family = localized_family(params.n_osc, ics, params.boundary)
+        ds = ensemble(params, [params.v_d.item()], family, solver, options, progress=progress)
         return ds, plot_localized_states(ds)
     if name == "5":
         ds = time_series_scene(params, 2, ics, size["t_series"], solver=solver,

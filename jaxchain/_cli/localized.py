@@ -8,9 +8,9 @@ import time
 import numpy as np
 
 from .._ensemble import ensemble
-from .._initial import FAMILIES, localized_family
+from .._physics.initial import FAMILIES, localized_family
 from .._options import SimulationOptions
-from .._params import ChainParams
+from .._physics.params import ChainParams
 from .._plots.localized import plot_localized_states
 from .._results import save_dataset
 from .._simulate import STATUS

@@ -8,9 +8,9 @@ import time
 
 import numpy as np
 
-from .._initial import FAMILIES, localized_family
+from .._physics.initial import FAMILIES, localized_family
 from .._options import SimulationOptions
-from .._params import ChainParams
+from .._physics.params import ChainParams
 from .._plots.sweep import plot_bifurcation_diagram
 from .._simulate import STATUS
 from .._sweep.fronts import front_fractions, front_ranges

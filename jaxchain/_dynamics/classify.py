@@ -26,7 +26,7 @@ def lyapunov_class(exponent: float, error: float) -> str:
 
 def classify(peak_times, on_halc, n_halc: int, status: int, lyapunov: float,
              lyapunov_error: float, t_from: float,
-             tolerances: ClassTolerances = ClassTolerances()) -> dict:
+             tolerances: ClassTolerances = ClassTolerances(), boundary: str = "ring") -> dict:
     """Classify one state as periodic or irregular from two independent signals.
 
     - **The time delays** (the paper's criterion, Section 3.3): `delay_spread` of
@@ -45,6 +45,8 @@ def classify(peak_times, on_halc, n_halc: int, status: int, lyapunov: float,
     - `on_halc`: shape (n_osc,); `n_halc`, `status`: of the run (`Extrema`).
     - `lyapunov`, `lyapunov_error`: from `LargestLyapunov`.
     - `t_from`: start of the window for the delays (dimensionless time).
+    - `tolerances`: `ClassTolerances`; `boundary`: the chain's (for the reference
+        oscillator, `reference_oscillator`).
 
     **Returns:**
 
@@ -56,7 +58,7 @@ def classify(peak_times, on_halc, n_halc: int, status: int, lyapunov: float,
     if status != 0:
         return out | {"class": FAILED}
     on_halc = np.asarray(on_halc, dtype=bool)
-    ref = reference_oscillator(on_halc)
+    ref = reference_oscillator(on_halc, boundary)
     tau_ref, phi = time_delays(np.asarray(peak_times), ref)
     others = on_halc.copy()
     others[ref] = False

@@ -5,16 +5,19 @@ import numpy as np
 from jaxtyping import Bool, Float
 
 
-def reference_oscillator(on_halc: Bool[np.ndarray, " n_osc"]) -> int:
+def reference_oscillator(on_halc: Bool[np.ndarray, " n_osc"], boundary: str = "ring") -> int:
     """The paper's reference oscillator: the 11th of 20 (0-based N//2), which is
     excited and on the HALC in every solution of Fig. 4. When it is not on the
-    HALC, the HALC oscillator nearest to it on the ring; N//2 when none is."""
+    HALC, the HALC oscillator nearest to it along the chain (around the ring, or
+    along an open chain, `boundary`); N//2 when none is."""
     n = on_halc.size
     centre = n // 2
     halc = np.flatnonzero(on_halc)
     if halc.size == 0 or on_halc[centre]:
         return centre
-    distance = np.minimum(np.abs(halc - centre), n - np.abs(halc - centre))
+    distance = np.abs(halc - centre)
+    if boundary == "ring":
+        distance = np.minimum(distance, n - distance)
     return int(halc[np.argmin(distance)])
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import xarray as xr
 
 from .._checks import as_solver, check_options, check_params
-from .._initial import FAMILIES, initial_states, localized_family
+from .._physics.initial import FAMILIES, initial_states, localized_family
 from .._lanes import lane_params, run_lanes, take_lanes
 from .._observers.base import AbstractObserver
 from .._observers.crossings import PeakTimes
@@ -18,7 +18,7 @@ from .._observers.extrema import Extrema
 from .._observers.lyapunov import LargestLyapunov
 from .._observers.series import TimeSeries
 from .._options import SimulationOptions
-from .._params import ChainParams
+from .._physics.params import ChainParams
 from .._results import run_attributes
 from .._simulate import STATUS, check_observers
 from .._solvers import DEFAULT_SOLVER, SOLVERS
@@ -84,7 +84,7 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
     solver = as_solver(solver, params=params)
     options = check_options(options)
     solutions = _check_solutions(solutions, params.n_osc)
-    family = take_lanes(localized_family(params.n_osc, ics), solutions - 1)
+    family = take_lanes(localized_family(params.n_osc, ics, params.boundary), solutions - 1)
     lanes = lane_params(params, solutions.size)
     out = run_lanes(lanes, initial_states(lanes, family), solver, options,
                     engine=engine, progress=progress, observers=observers)
@@ -114,7 +114,7 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
         rows = [classify(ds["peak_times"].values[i], ds["on_halc"].values[i],
                          int(ds["n_halc"][i]), int(ds["status"][i]),
                          float(ds["lyapunov"][i]), float(ds["lyapunov_error"][i]),
-                         start, tolerances) for i in range(solutions.size)]
+                         start, tolerances, params.boundary) for i in range(solutions.size)]
         for key in rows[0]:
             ds[key] = ("solution", np.asarray([r[key] for r in rows]))
         ds["ref"] = ds["ref"] + 1

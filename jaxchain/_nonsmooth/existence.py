@@ -6,7 +6,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import optimistix as optx
 
-from .._params import ChainParams, with_parameter
+from .._physics.friction import static_friction
+from .._physics.params import ChainParams, with_parameter
 from .switching import mode_field
 
 
@@ -16,8 +17,9 @@ def _slip_arc_peak(v_d, args):
     (params, rtol)."""
     params, rtol = args
     p = with_parameter(params, "v_d", v_d)
-    exit_state = jnp.stack([jnp.atleast_1d(p.mu_st - 2 * p.xi * v_d), jnp.atleast_1d(v_d)])
-    modes = -jnp.ones(1)  # f = +mu_st at the exit: the oscillator falls behind the belt
+    exit_x = (static_friction(p) - 2 * p.xi * v_d) / p.stiffness
+    exit_state = jnp.stack([jnp.atleast_1d(exit_x), jnp.atleast_1d(v_d)])
+    modes = -jnp.ones(1)  # f = +mu(0) at the exit: the oscillator falls behind the belt
 
     def acceleration(t, y, args, **kwargs):
         return mode_field(t, y, args)[0][1, 0]
@@ -58,12 +60,13 @@ def stick_slip_existence_limit(params: ChainParams = ChainParams(n_osc=1),
 
     **Arguments:**
 
-    - `params`: parameters; `xi`, `mu_d`, `mu_st` and `v0` are used.
+    - `params`: one oscillator (n_osc = 1; `single_oscillator` takes one out of a
+        chain); its xi, stiffness, load and friction law are used.
     - `lower`, `upper`: a bracket of belt speeds, the cycle existing at `lower` and
         not at `upper`. By default `lower` is the Hopf point of steady sliding
-        (`hopf_vd_analytic`), where the cycle exists whenever there is a
-        velocity-weakening Hopf point; `upper` is raised by factors of 1.5 (up to
-        20 times) until the cycle no longer exists there.
+        (`hopf_vd_analytic` for eq. (1), `hopf_point` for another law), where
+        the cycle exists whenever there is a velocity-weakening Hopf point;
+        `upper` is raised by factors of 1.5 (up to 20 times) until the cycle no longer exists there.
     - `tol`: absolute tolerance on the limit.
     - `rtol`: integration tolerance of the slip arc.
 
@@ -73,12 +76,18 @@ def stick_slip_existence_limit(params: ChainParams = ChainParams(n_osc=1),
 
     **Raises:**
 
-    `ValueError` if the bracket does not contain the limit.
+    `ValueError` if the bracket does not contain the limit, or for n_osc != 1.
     """
+    if params.n_osc != 1:
+        raise ValueError(f"the existence limit is that of one oscillator (n_osc = 1), got "
+                         f"n_osc = {params.n_osc}; see single_oscillator")
     if lower is None:
-        from .._bifurcation.hopf import hopf_vd_analytic  # analysis layer, for a default
+        from .._bifurcation.hopf import hopf_point, hopf_vd_analytic  # for a default
 
-        lower = float(hopf_vd_analytic(params))
+        try:
+            lower = float(hopf_vd_analytic(params))
+        except ValueError:
+            lower = float(jnp.max(hopf_point(params).v_d))
         if not lower > 0:
             raise ValueError(f"no Hopf point of steady sliding to start from (v_d,H = "
                              f"{lower:.3g}): give lower, a belt speed with a stick-slip cycle")

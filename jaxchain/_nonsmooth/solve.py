@@ -8,11 +8,11 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .._custom_types import State
-from .._initial import AbstractInitialCondition, GivenState
-from .._params import ChainParams
+from .._physics.initial import AbstractInitialCondition, GivenState
+from .._physics.params import ChainParams
 from .._progress import progress_bar, tick
 from .._simulate import STATUS
-from .._stick import sticks
+from .._physics.stick import sticks
 from .options import NonsmoothOptions
 from .switching import guard, initial_modes, mode_field, switch, turning_directions
 

@@ -6,8 +6,9 @@ stick. Within a segment the modes are fixed, the vector field is smooth, and the
 guard is the smallest of
 
 - s_n (x_n' - v_d) for oscillators in slip (slip ends when it reaches zero),
-- mu_st - |f_n| for oscillators in stick (stick ends when the needed force
-  f_n of `stick_force` reaches mu_st),
+- (P_n/P) mu(0) - |f_n| for oscillators in stick (stick ends when the needed
+  force f_n of `stick_force` reaches the static friction `static_friction`,
+  mu_st for eq. (1)),
 - tol + sigma_n x_n' for oscillators in slip while observing, sigma_n the
   direction of motion (a turning point: an extremum of x_n, from which the
   amplitudes are taken without sampling error),
@@ -19,8 +20,9 @@ earliest event however many oscillators there are.
 
 import jax.numpy as jnp
 
-from .._friction import slip_friction_force
-from .._model import stick_force
+from .._physics.chain import coupling_force
+from .._physics.friction import slip_friction_force, static_friction
+from .._physics.model import stick_force
 
 #: Kinds of switch recorded in the event log.
 SWITCH_KINDS = ("stick to slip", "slip to stick", "slip reversal")
@@ -38,11 +40,11 @@ def mode_field(t, state, args):
     params, modes = args[0], args[1]
     x, v = y
     stick = modes == 0
-    coupling = 2 * x - jnp.roll(x, 1) - jnp.roll(x, -1)
     force = jnp.where(stick, stick_force(params, x),
                       slip_friction_force(params, v - params.v_d, modes))
     dx = jnp.where(stick, params.v_d, v)
-    a = jnp.where(stick, 0.0, -2 * params.xi * v - x - params.eta_c * coupling + force)
+    a = jnp.where(stick, 0.0, -2 * params.xi * v - params.stiffness * x
+                  - coupling_force(params, x) + force)
     power = jnp.stack([jnp.sum(force * dx), jnp.sum(2 * params.xi * dx**2)])
     return jnp.stack([dx, a]), power
 
@@ -79,7 +81,7 @@ def guard_values(params, y, modes, sigma, observe, tol):
     """
     x, v = y
     f = stick_force(params, x)
-    switch = _OFFSET + jnp.where(modes == 0, params.mu_st - jnp.abs(f),
+    switch = _OFFSET + jnp.where(modes == 0, static_friction(params) - jnp.abs(f),
                                  modes * (v - params.v_d))
     turning = jnp.where(observe & (sigma != 0), tol + sigma * v, jnp.inf)
     return switch, turning
@@ -126,7 +128,7 @@ def switch(params, y, modes, sigma, observe, tol):
     due = switch_guard <= tol
     leaves = stick & due & (jnp.sign(f) * _stick_force_rate(params, v) >= 0)
     ends = ~stick & due & (modes * a <= 0)
-    sticks = ends & (jnp.abs(f) < params.mu_st)
+    sticks = ends & (jnp.abs(f) < static_friction(params))
     reverses = ends & ~sticks
     new_modes = jnp.where(leaves | reverses, -jnp.sign(f), jnp.where(sticks, 0.0, modes))
     turned = (turning_guard <= tol) & (sigma * a <= 0) & ~ends
@@ -143,5 +145,5 @@ def initial_modes(params, y):
     x, v = y
     f = stick_force(params, x)
     v_rel = v - params.v_d
-    return jnp.where(v_rel == 0, jnp.where(jnp.abs(f) < params.mu_st, 0.0, -jnp.sign(f)),
+    return jnp.where(v_rel == 0, jnp.where(jnp.abs(f) < static_friction(params), 0.0, -jnp.sign(f)),
                      jnp.sign(v_rel))

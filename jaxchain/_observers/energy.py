@@ -4,7 +4,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._model import mechanical_energy
+from .._physics.model import mechanical_energy
 from .base import AbstractObserver, in_window, window_start
 
 

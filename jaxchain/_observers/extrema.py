@@ -4,7 +4,7 @@ which oscillators are on the high-amplitude limit cycle (HALC)."""
 import equinox as eqx
 import jax.numpy as jnp
 
-from .._stick import min_slip_speed, sticks
+from .._physics.stick import min_slip_speed, sticks
 from .base import AbstractObserver, in_window, window_start
 
 

@@ -20,7 +20,8 @@ def solution_delays(ds: xr.Dataset, i: int):
     1-based numbers, the 1-based reference)."""
     row = ds.isel(solution=i)
     on_halc = np.asarray(row["on_halc"], dtype=bool)
-    ref = int(row["ref"]) - 1 if "ref" in row else reference_oscillator(on_halc)
+    ref = (int(row["ref"]) - 1 if "ref" in row
+           else reference_oscillator(on_halc, ds.attrs.get("boundary", "ring")))
     ref = max(ref, 0)
     tau_ref, phi = time_delays(np.asarray(row["peak_times"]), ref)
     shown = on_halc.copy()

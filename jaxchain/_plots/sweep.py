@@ -8,7 +8,8 @@ from matplotlib.colors import BoundaryNorm
 from matplotlib.patches import Patch
 
 from .._bifurcation.hopf import hopf_vd_analytic
-from .._params import ChainParams
+from .._bifurcation.two_parameter import hopf_vd
+from .._physics.record import chain_from_record, chain_settings
 from .._sweep.fronts import front_fractions, front_ranges
 
 #: Colours of invading (+1) and receding (-1) fronts.
@@ -132,10 +133,17 @@ def _edges(values, lo, hi, cells) -> list[float]:
 
 
 def _hopf_vd(ds: xr.Dataset) -> float | None:
-    """The Hopf point of steady sliding for the parameters of `ds` (its
-    attributes), or None where there is none (xi = 0 or mu_st = mu_d)."""
-    fields = ("n_osc", "xi", "mu_d", "mu_st", "v0", "eta_c", "eps")
+    """The Hopf point of steady sliding for the chain of `ds` (its attributes,
+    `chain_record`): the closed form of eq. (1) where it holds, else Newton's
+    method on the Jacobian's eigenvalues (`hopf_vd`); None where there is none
+    (xi = 0, mu_st = mu_d, or Newton's method fails)."""
+    record = {k: v for k, v in ds.attrs.items() if k in chain_settings(ds.attrs)}
     try:
-        return float(hopf_vd_analytic(ChainParams(**{f: ds.attrs[f] for f in fields})))
-    except (KeyError, ValueError):
+        params = chain_from_record(record)
+    except (KeyError, ValueError, TypeError):
         return None
+    try:
+        return float(hopf_vd_analytic(params))
+    except ValueError:
+        value = float(hopf_vd(params))
+        return value if np.isfinite(value) else None

@@ -7,10 +7,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._custom_types import State
-from .._initial import OutOfPhaseExcitation, excited_block
-from .._model import steady_sliding
+from .._physics.initial import OutOfPhaseExcitation, excited_block
+from .._physics.model import steady_sliding
 from .._options import SimulationOptions
-from .._params import ChainParams, with_parameter
+from .._physics.params import ChainParams, with_parameter
 
 #: What varies, and its values. "mu_st/mu_d" varies mu_st at mu_d = 0.5; "ics" the
 #: initial state: exactly steady sliding, or steady sliding plus an out-of-phase
@@ -86,7 +86,7 @@ def make_case(what: str, value, options: SimulationOptions = OPTIONS) -> StressC
     n = params.n_osc
     base = steady_sliding(params)
     if what != "ics":
-        y0 = OutOfPhaseExcitation.eq8(excited_block(n, max(1, n // 4)))(params)
+        y0 = OutOfPhaseExcitation.eq8(excited_block(n, max(1, n // 4), params.boundary))(params)
     elif value == "steady sliding":
         y0 = base
     elif value == "x ± 1e3":

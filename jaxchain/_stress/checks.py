@@ -11,8 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._bifurcation.hopf import growth_rates
-from .._friction import friction_coefficient
-from .._model import mechanical_energy, split_vector_field, steady_sliding
+from .._physics.friction import friction_coefficient
+from .._physics.model import mechanical_energy, split_vector_field, steady_sliding
 from .._nonsmooth.existence import stick_slip_existence_limit
 from .._observers.base import AbstractObserver
 from .._simulate import SPLIT_SOLVERS, integrate

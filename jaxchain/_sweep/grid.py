@@ -6,10 +6,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .._initial import (AbstractInitialCondition, OutOfPhaseExcitation, batch_length,
+from .._physics.initial import (AbstractInitialCondition, OutOfPhaseExcitation, batch_length,
                         initial_states)
 from .._lanes import lane_params, take_lanes
-from .._params import ChainParams, parameter_name, with_parameter
+from .._physics.params import ChainParams, parameter_name, with_parameter
 
 
 @dataclasses.dataclass(frozen=True)
@@ -40,12 +40,13 @@ class SweepGrid:
 
     @classmethod
     def build(cls, params, where, values, ics) -> "SweepGrid":
-        name = parameter_name(where)
+        name = parameter_name(where, params)
         values = np.atleast_1d(np.asarray(values, dtype=float))
         if values.ndim != 1 or values.size == 0:
             raise ValueError(f"{name}: the sweep needs a 1-d list of at least one value, "
                              f"got shape {values.shape}")
-        with_parameter(params, name, values)  # validates every value, naming the field
+        for value in values:  # validates every value, naming the field
+            with_parameter(params, name, value)
         families = dict(ics) if isinstance(ics, Mapping) else {type(ics).__name__: ics}
         if not families:
             raise ValueError("ics: the sweep needs at least one family of initial "
@@ -53,7 +54,7 @@ class SweepGrid:
         grid = cls(params, name, values, families)
         for family in families.values():  # shapes checked before anything runs
             batch_length(family)
-            initial_states(lane_params(with_parameter(params, name, values[0]), 1),
+            initial_states(lane_params(params, 1, **{name: values[:1]}),
                             take_lanes(family, np.array([0])))
         return grid
 
@@ -86,12 +87,11 @@ class SweepGrid:
                 "n_excited": ("ic", np.array(excited))}
 
     def lanes(self, start: int, stop: int) -> tuple[ChainParams, np.ndarray]:
-        """The parameters (every field of shape (lanes,), see `lane_params`) and the
+        """The parameters (every field with a leading (lanes,) axis, `lane_params`) and the
         initial states, shape (lanes, 2, n_osc), of trajectories [start, stop)."""
         t = np.arange(start, stop)
         value, ic = t // self.n_ics, t % self.n_ics
-        params = lane_params(with_parameter(self.params, self.name, self.values[value]),
-                             t.size)
+        params = lane_params(self.params, t.size, **{self.name: self.values[value]})
         y0 = np.empty((t.size, 2, self.params.n_osc))
         first = 0
         for family, n in zip(self.families.values(), self.sizes):

@@ -14,10 +14,10 @@ from jaxtyping import ArrayLike, Float
 from tqdm.auto import tqdm
 
 from .._checks import as_solver, check_options, check_params
-from .._initial import AbstractInitialCondition
+from .._physics.initial import AbstractInitialCondition
 from .._lanes import block_size, run_lanes
 from .._options import SimulationOptions
-from .._params import ChainParams
+from .._physics.params import ChainParams
 from .._results import observables_variables, run_attributes
 from .._solvers import DEFAULT_SOLVER, SOLVERS
 from .._store import settings_json, settings_key

@@ -8,25 +8,29 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from ._custom_types import State
-from ._friction import smoothed_friction_force
-from ._params import ChainParams
+from .._custom_types import State
+from .chain import BOUNDARIES
+from .model import steady_sliding
+from .params import ChainParams
 
 
-def excited_block(n_osc: int, n_excited: int) -> Bool[np.ndarray, " n_osc"]:
-    """Mask of `n_excited` contiguous oscillators around the centre of the ring.
+def excited_block(n_osc: int, n_excited: int, boundary: str = "ring"
+                  ) -> Bool[np.ndarray, " n_osc"]:
+    """Mask of `n_excited` contiguous oscillators around the centre of the chain.
 
     The paper does not say which oscillators it excites, only that the 11th (of 20)
     is always excited (Section 3.3). We take the block that starts at the centre
     oscillator c = N//2 + 1 (1-based; c = 11 for N = 20) and grows alternately to
     the right and to the left: oscillators c - (k-1)//2, ..., c + k//2, wrapping
     around the ring. So k = 1 excites {11}, k = 2 {11, 12}, k = 3 {10, 11, 12}, and
-    k = 20 the whole ring.
+    k = 20 the whole ring. An open chain ("free", "fixed") has no wrap: a block
+    that would pass its last oscillator is shifted back to end there.
 
     **Arguments:**
 
-    - `n_osc`: ring size N (>= 1).
+    - `n_osc`: chain size N (>= 1).
     - `n_excited`: number of excited oscillators k, 0 <= k <= N.
+    - `boundary`: the chain's boundary (`BOUNDARIES`).
 
     **Returns:**
 
@@ -34,12 +38,17 @@ def excited_block(n_osc: int, n_excited: int) -> Bool[np.ndarray, " n_osc"]:
 
     **Raises:**
 
-    `ValueError` if `n_excited` is outside [0, n_osc].
+    `ValueError` if `n_excited` is outside [0, n_osc], or for an unknown boundary.
     """
     if not 0 <= n_excited <= n_osc:
         raise ValueError(f"n_excited must lie in [0, {n_osc}], got {n_excited}")
+    if boundary not in BOUNDARIES:
+        raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, got {boundary!r}")
     centre = n_osc // 2  # 0-based index of oscillator N//2 + 1
-    idx = (centre - (n_excited - 1) // 2 + np.arange(n_excited)) % n_osc
+    start = centre - (n_excited - 1) // 2
+    if boundary != "ring":
+        start = min(start, n_osc - n_excited)
+    idx = (start + np.arange(n_excited)) % n_osc
     mask = np.zeros(n_osc, dtype=bool)
     mask[idx] = True
     return mask
@@ -59,11 +68,13 @@ class OutOfPhaseExcitation(AbstractInitialCondition):
     """Initial displacements 2 (-1)^n on the excited oscillators, around a base
     displacement, with a common initial velocity: eqs. (8) and (10) of the paper.
 
-        x_n(0) = F(s v_d) + 2 (-1)^n [n excited],   x_n'(0) = velocity,
+        x_n(0) = -s x_ss,n + 2 (-1)^n [n excited],   x_n'(0) = velocity,
 
-    with n = 1..N (1-based, as in the paper) and F the smoothed friction force.
-    Eq. (8) is s = -1, velocity = 0 (so the unexcited oscillators start at steady
-    sliding); eq. (10) is s = +1, velocity = 0.56, as printed in the paper.
+    with n = 1..N (1-based, as in the paper) and x_ss the displacement of steady
+    sliding (`steady_sliding`; F(-v_d) on the paper's ring, F the smoothed friction
+    force, so that -s x_ss = F(s v_d) there). Eq. (8) is s = -1, velocity = 0 (so
+    the unexcited oscillators start at steady sliding); eq. (10) is s = +1,
+    velocity = 0.56, as printed in the paper.
 
     **Arguments:**
 
@@ -93,7 +104,7 @@ class OutOfPhaseExcitation(AbstractInitialCondition):
                 f"excited must have shape ({params.n_osc},), got {excited.shape}"
             )
         n = jnp.arange(1, params.n_osc + 1)
-        base = smoothed_friction_force(params, self.base_sign * jnp.asarray(params.v_d))
+        base = -self.base_sign * steady_sliding(params)[0]
         x = base + jnp.where(excited, 2.0 * (-1.0) ** n, 0.0)
         v = jnp.broadcast_to(jnp.asarray(self.velocity, dtype=x.dtype), x.shape)
         return jnp.stack([x, v])
@@ -174,7 +185,8 @@ def initial_states(params: ChainParams, ics: AbstractInitialCondition
     return eqx.filter_vmap(lambda p, ic: ic(p))(params, ics)
 
 
-def localized_family(n_osc: int, family: str = "eq8") -> OutOfPhaseExcitation:
+def localized_family(n_osc: int, family: str = "eq8", boundary: str = "ring"
+                     ) -> OutOfPhaseExcitation:
     """The paper's staircase of initial conditions: 1, 2, ..., N excited oscillators
     in the block of `excited_block`, by eq. (8) or eq. (10).
 
@@ -182,6 +194,7 @@ def localized_family(n_osc: int, family: str = "eq8") -> OutOfPhaseExcitation:
 
     - `n_osc`: ring size N.
     - `family`: "eq8" or "eq10".
+    - `boundary`: the chain's boundary (where the block may wrap).
 
     **Returns:**
 
@@ -194,7 +207,7 @@ def localized_family(n_osc: int, family: str = "eq8") -> OutOfPhaseExcitation:
     """
     if family not in FAMILIES:
         raise ValueError(f"ics must be one of {sorted(FAMILIES)}, got {family!r}")
-    masks = np.stack([excited_block(n_osc, k) for k in range(1, n_osc + 1)])
+    masks = np.stack([excited_block(n_osc, k, boundary) for k in range(1, n_osc + 1)])
     one = FAMILIES[family](masks[0])
     return OutOfPhaseExcitation(
         excited=jnp.asarray(masks),

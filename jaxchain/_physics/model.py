@@ -1,25 +1,28 @@
-"""The vector field of the ring, eq. (5) of the paper, its steady sliding and its
+"""The vector field of the chain, eq. (5) of the paper, its steady sliding and its
 Jacobian. Nothing here knows about solvers."""
 
 import jax
 import jax.numpy as jnp
+import lineax as lx
 from jaxtyping import Array, Float
 
-from ._custom_types import State
-from ._friction import smoothed_friction_force
-from ._params import ChainParams
+from .._custom_types import State
+from .chain import coupling_energy, coupling_force, is_homogeneous_ring, stiffness_matrix
+from .friction import smoothed_friction_force
+from .params import ChainParams
 
 
 def vector_field(t, y: State | Float[Array, " 2n"],
                  params: ChainParams):
-    """Right-hand side of eq. (5) of the paper on a ring (periodic boundary
-    conditions, oscillator N coupled to oscillator 1), with the smoothed friction
-    force of `smoothed_friction_force`:
+    """Right-hand side of eq. (5) of the paper, with the smoothed friction force of
+    `smoothed_friction_force` and the coupling of `coupling_force`:
 
-        x_n'' = -2 xi x_n' - x_n - eta_c (2 x_n - x_{n+1} - x_{n-1}) + F(x_n' - v_d).
+        x_n'' = -2 xi_n x_n' - k_n x_n - (coupling)_n + (P_n/P) F(x_n' - v_d),
 
-    For n_osc = 1 the coupling term vanishes (the oscillator is its own neighbour),
-    which gives the single mass-on-moving-belt oscillator of Fig. 3(a).
+    on the paper's ring (coupling)_n = eta_c (2 x_n - x_{n+1} - x_{n-1}), k_n = 1 and
+    P_n = P. For n_osc = 1 on the ring the coupling term vanishes (the oscillator
+    is its own neighbour), which gives the single mass-on-moving-belt oscillator of
+    Fig. 3(a).
 
     **Arguments:**
 
@@ -63,23 +66,30 @@ def split_vector_field(t, y: State | Float[Array, " 2n"], params: ChainParams):
     if shape not in ((2, n), (2 * n,)):
         raise ValueError(f"state must have shape (2, {n}) or ({2 * n},), got {shape}")
     x, v = jnp.reshape(y, (2, n))
-    coupling = 2 * x - jnp.roll(x, 1) - jnp.roll(x, -1)
-    elastic = jnp.stack([v, -2 * params.xi * v - x - params.eta_c * coupling])
+    elastic = jnp.stack([v, -2 * params.xi * v - params.stiffness * x
+                         - coupling_force(params, x)])
     force = smoothed_friction_force(params, v - params.v_d)
     friction = jnp.stack([jnp.zeros_like(force), force])
     return jnp.reshape(elastic, shape), jnp.reshape(friction, shape)
 
 
 def steady_sliding(params: ChainParams) -> State:
-    """Steady sliding, the fixed point of eq. (5): x_n = F(-v_d) = mu(v_d) (smoothed:
-    mu(v_d) tanh(v_d/eps)), x_n' = 0 for every n.
+    """Steady sliding, the fixed point of eq. (5): x_n' = 0 and K x = F(-v_d), K the
+    `stiffness_matrix` and F_n(-v_d) = (P_n/P) mu(v_d) tanh(v_d/eps) the friction
+    force at rest. On a homogeneous ring every x_n = F(-v_d)/k; otherwise the
+    linear system is solved (lineax, LU).
 
     **Returns:**
 
     State of shape (2, n_osc), dimensionless.
     """
-    x = smoothed_friction_force(params, -jnp.asarray(params.v_d))
-    x = jnp.broadcast_to(x, (params.n_osc,))
+    n = params.n_osc
+    force = jnp.broadcast_to(smoothed_friction_force(params, -jnp.asarray(params.v_d)), (n,))
+    if is_homogeneous_ring(params):
+        x = force / params.stiffness
+    else:
+        operator = lx.MatrixLinearOperator(stiffness_matrix(params))
+        x = lx.linear_solve(operator, force, lx.LU()).value
     return jnp.stack([x, jnp.zeros_like(x)])
 
 
@@ -87,11 +97,13 @@ def stick_force(params: ChainParams, x: Float[Array, " n_osc"]) -> Float[Array, 
     """Friction force that oscillator n needs to stick (x_n' = v_d, x_n'' = 0), from
     eq. (5) of the paper:
 
-        f_n = 2 xi v_d + x_n + eta_c (2 x_n - x_{n+1} - x_{n-1}).
+        f_n = 2 xi_n v_d + k_n x_n + (coupling)_n,
 
-    It depends on the displacements only (the coupling is elastic), so whether one
-    oscillator can stick never depends on what its neighbours do at the same instant.
-    Stick lasts while |f_n| < mu_st.
+    (coupling)_n = eta_c (2 x_n - x_{n+1} - x_{n-1}) on the paper's ring
+    (`coupling_force`). It depends on the displacements only (the coupling is
+    elastic), so whether one oscillator can stick never depends on what its
+    neighbours do at the same instant. Stick lasts while |f_n| < (P_n/P) mu(0)
+    (`static_friction`).
 
     **Arguments:**
 
@@ -102,17 +114,17 @@ def stick_force(params: ChainParams, x: Float[Array, " n_osc"]) -> Float[Array, 
 
     f, shape (n_osc,), dimensionless (in units of the normal load P).
     """
-    coupling = 2 * x - jnp.roll(x, 1) - jnp.roll(x, -1)
-    return 2 * params.xi * params.v_d + x + params.eta_c * coupling
+    return 2 * params.xi * params.v_d + params.stiffness * x + coupling_force(params, x)
 
 
 def mechanical_energy(params: ChainParams, y: State) -> Float[Array, ""]:
-    """Kinetic plus elastic energy of the ring,
+    """Kinetic plus elastic energy of the chain,
 
-        1/2 sum_n (x_n'^2 + x_n^2 + eta_c (x_{n+1} - x_n)^2),
+        1/2 sum_n (x_n'^2 + k_n x_n^2) + sum_links `coupling_energy`,
 
-    whose rate of change along eq. (5) is the power of friction minus the viscous
-    dissipation sum_n 2 xi x_n'^2 (the energy balance).
+    (on the paper's ring 1/2 sum_n (x_n'^2 + x_n^2 + eta_c (x_{n+1} - x_n)^2)), whose
+    rate of change along eq. (5) is the power of friction minus the viscous
+    dissipation sum_n 2 xi_n x_n'^2 (the energy balance).
 
     **Arguments:**
 
@@ -124,7 +136,10 @@ def mechanical_energy(params: ChainParams, y: State) -> Float[Array, ""]:
     The energy, shape (), dimensionless.
     """
     x, v = y
-    return 0.5 * jnp.sum(v**2 + x**2 + params.eta_c * (jnp.roll(x, -1) - x) ** 2)
+    if params.boundary == "ring":  # one link per oscillator: one sum, as eq. (5) reads
+        return 0.5 * jnp.sum(v**2 + params.stiffness * x**2
+                             + params.eta_c * (jnp.roll(x, -1) - x) ** 2)
+    return 0.5 * jnp.sum(v**2 + params.stiffness * x**2) + jnp.sum(coupling_energy(params, x))
 
 
 def jacobian(params: ChainParams, y: State | None = None) -> Float[Array, "2n 2n"]:

@@ -1,0 +1,348 @@
+"""Friction laws mu(v_rel) as objects (eq. (1) of the paper and others), and the
+friction force they give: smoothed by tanh(v_rel/eps) for the smoothed model, or
+with the slip direction for the non-smooth reference (eq. (2))."""
+
+import abc
+from typing import TYPE_CHECKING
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+if TYPE_CHECKING:
+    from .params import ChainParams
+
+
+def as_parameter(value):
+    """A parameter value as a float64 NumPy array (a leaf that `eqx.filter_jit`
+    traces, so that a new value does not recompile), or the JAX array or tracer
+    itself. Strings, booleans and None become object arrays, which `check_values`
+    refuses with a `TypeError`."""
+    if isinstance(value, jax.core.Tracer) or isinstance(value, jax.Array):
+        return value
+    try:
+        kind = np.asarray(value).dtype.kind
+    except ValueError:  # ragged nested lists
+        kind = "O"
+    if kind not in "iuf":
+        return np.asarray(value, dtype=object)
+    return np.asarray(value, dtype=np.float64)
+
+
+def concrete(value) -> np.ndarray | None:
+    """`value` as a NumPy array, or None when it is a tracer (checked later by
+    whoever traces it)."""
+    if isinstance(value, jax.core.Tracer):
+        return None
+    return np.asarray(value, dtype=float)
+
+
+def check_values(owner: str, values: dict, rules: dict) -> None:
+    """Validate concrete parameter values: each must be real, finite and satisfy
+    its rule.
+
+    **Arguments:**
+
+    - `owner`: the class name used in messages, for example "Stribeck".
+    - `values`: field name -> value.
+    - `rules`: field name -> (predicate on a NumPy array, requirement as text).
+
+    **Raises:**
+
+    `TypeError` for a value that is not real numbers; `ValueError` naming the
+    field for a non-finite value or one that breaks its rule.
+    """
+    for name, value in values.items():
+        if isinstance(value, np.ndarray) and value.dtype == object:
+            raise TypeError(f"{owner}.{name} must be a real number (or an array of "
+                            f"them), got {value.tolist()!r}")
+        a = concrete(value)
+        if a is None:
+            continue
+        shown = a.item() if a.ndim == 0 else a
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{owner}.{name} must be finite, got {shown!r}")
+        ok, requirement = rules.get(name, (lambda a: True, ""))
+        if not np.all(ok(a)):
+            raise ValueError(f"{owner}.{name} must be {requirement}, got {shown!r}")
+
+
+def _positive(a):
+    return a > 0
+
+
+def _non_negative(a):
+    return a >= 0
+
+
+class AbstractFrictionLaw(eqx.Module):
+    """A friction law: the friction coefficient mu as an even function of the
+    relative velocity v_rel = x' - v_d, and its static value mu(0), which bounds the
+    force in stick. The sign of the force (sign(v_rel), or its smoothing
+    tanh(v_rel/eps)) is not part of the law.
+
+    Every field is a scalar (the same law for every oscillator) or an array of
+    shape (n_osc,) (one value per oscillator); `ChainParams` checks the shapes.
+    Fields are float64 arrays, traced by `eqx.filter_jit`.
+    """
+
+    @abc.abstractmethod
+    def __call__(self, v_rel: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
+        """mu(v_rel), broadcast against the law's fields; dimensionless."""
+
+    @abc.abstractmethod
+    def static(self) -> Float[Array, "*shape"]:
+        """mu(0), the static friction coefficient: the bound |F| <= P_n mu(0) of the
+        set-valued stick condition."""
+
+    def check(self) -> None:
+        """Validate the fields (called by each law's `__check_init__`)."""
+        check_values(type(self).__name__,
+                     {name: getattr(self, name) for name in self.parameter_names()},
+                     self.rules())
+
+    @classmethod
+    def parameter_names(cls) -> tuple[str, ...]:
+        """The names of the law's parameters (its fields), in order."""
+        return tuple(f for f in cls.__dataclass_fields__)
+
+    @classmethod
+    @abc.abstractmethod
+    def rules(cls) -> dict:
+        """field name -> (predicate, requirement text), for `check_values`."""
+
+
+class ExponentialDecay(AbstractFrictionLaw):
+    """The exponentially decaying law of eq. (1) of the paper, the default:
+
+        mu(v_rel) = mu_d + (mu_st - mu_d) exp(-|v_rel| / v0).
+
+    **Arguments:**
+
+    - `mu_st`: static coefficient mu(0) (>= mu_d).
+    - `mu_d`: dynamic coefficient, the limit for large |v_rel| (> 0).
+    - `v0`: velocity scale of the decay (> 0).
+
+    The defaults are eq. (7) of the paper (mu_d = 0.5, mu_st / mu_d = 2, v0 = 0.5).
+
+    **Raises:**
+
+    `ValueError` naming the field for a non-finite value, mu_d <= 0, v0 <= 0 or
+    mu_st < mu_d.
+    """
+
+    mu_st: ArrayLike = eqx.field(converter=as_parameter, default=1.0)
+    mu_d: ArrayLike = eqx.field(converter=as_parameter, default=0.5)
+    v0: ArrayLike = eqx.field(converter=as_parameter, default=0.5)
+
+    def __check_init__(self):
+        self.check()
+        mu_st, mu_d = concrete(self.mu_st), concrete(self.mu_d)
+        if mu_st is not None and mu_d is not None and not np.all(mu_st >= mu_d):
+            raise ValueError(f"ExponentialDecay.mu_st must be >= mu_d = {mu_d.tolist()!r}, "
+                             f"got {mu_st.tolist()!r}")
+
+    @classmethod
+    def rules(cls):
+        return {"mu_d": (_positive, "> 0"), "v0": (_positive, "> 0")}
+
+    def __call__(self, v_rel):
+        return self.mu_d + (self.mu_st - self.mu_d) * jnp.exp(-jnp.abs(v_rel) / self.v0)
+
+    def static(self):
+        return jnp.asarray(self.mu_st)
+
+
+class Stribeck(AbstractFrictionLaw):
+    """A Stribeck curve with a viscous term (for example Berger (2002), Appl. Mech.
+    Rev. 55, 535-577):
+
+        mu(v_rel) = mu_c + (mu_s - mu_c) exp(-(|v_rel| / v_s)^delta) + viscous |v_rel|.
+
+    **Arguments:**
+
+    - `mu_s`: static coefficient mu(0) (>= mu_c).
+    - `mu_c`: Coulomb (kinetic) level (> 0).
+    - `v_s`: Stribeck velocity (> 0).
+    - `delta`: shape exponent (> 0; 1 is exponential, 2 Gaussian).
+    - `viscous`: viscous coefficient (>= 0).
+
+    **Raises:**
+
+    `ValueError` naming the field for a non-finite value, mu_c <= 0, v_s <= 0,
+    delta <= 0, viscous < 0 or mu_s < mu_c.
+    """
+
+    mu_s: ArrayLike = eqx.field(converter=as_parameter, default=1.0)
+    mu_c: ArrayLike = eqx.field(converter=as_parameter, default=0.5)
+    v_s: ArrayLike = eqx.field(converter=as_parameter, default=0.5)
+    delta: ArrayLike = eqx.field(converter=as_parameter, default=2.0)
+    viscous: ArrayLike = eqx.field(converter=as_parameter, default=0.0)
+
+    def __check_init__(self):
+        self.check()
+        mu_s, mu_c = concrete(self.mu_s), concrete(self.mu_c)
+        if mu_s is not None and mu_c is not None and not np.all(mu_s >= mu_c):
+            raise ValueError(f"Stribeck.mu_s must be >= mu_c = {mu_c.tolist()!r}, "
+                             f"got {mu_s.tolist()!r}")
+
+    @classmethod
+    def rules(cls):
+        return {"mu_c": (_positive, "> 0"), "v_s": (_positive, "> 0"),
+                "delta": (_positive, "> 0"), "viscous": (_non_negative, ">= 0")}
+
+    def __call__(self, v_rel):
+        r = jnp.abs(v_rel) / self.v_s
+        # (r^delta) has an infinite derivative at r = 0 for delta < 1: evaluate the
+        # power away from 0 only, so that JAX's derivatives stay finite there.
+        safe = jnp.where(r > 0, r, 1.0)
+        decay = jnp.where(r > 0, jnp.exp(-safe**self.delta), 1.0)
+        return self.mu_c + (self.mu_s - self.mu_c) * decay + self.viscous * jnp.abs(v_rel)
+
+    def static(self):
+        return jnp.asarray(self.mu_s)
+
+
+class Polynomial(AbstractFrictionLaw):
+    """A cubic law in |v_rel|, common in brake-squeal models (for example Hoffmann
+    et al. (2002), Mech. Syst. Signal Process. 16, 613-627):
+
+        mu(v_rel) = c0 + c1 |v_rel| + c2 v_rel^2 + c3 |v_rel|^3.
+
+    **Arguments:**
+
+    - `c0`: static coefficient mu(0) (> 0).
+    - `c1`, `c2`: linear and quadratic coefficients (any sign; c1 < 0 gives the
+        falling characteristic that destabilises steady sliding).
+    - `c3`: cubic coefficient (>= 0, so that mu does not fall without bound).
+
+    The defaults (1, -0.5, 0, 0.1) fall from 1 to a minimum of 0.53 at |v_rel| = 1.29.
+
+    **Raises:**
+
+    `ValueError` naming the field for a non-finite value, c0 <= 0, c3 < 0, or
+    coefficients for which mu(v_rel) <= 0 at some |v_rel| <= 100.
+    """
+
+    c0: ArrayLike = eqx.field(converter=as_parameter, default=1.0)
+    c1: ArrayLike = eqx.field(converter=as_parameter, default=-0.5)
+    c2: ArrayLike = eqx.field(converter=as_parameter, default=0.0)
+    c3: ArrayLike = eqx.field(converter=as_parameter, default=0.1)
+
+    def __check_init__(self):
+        self.check()
+        c = [concrete(getattr(self, name)) for name in ("c0", "c1", "c2", "c3")]
+        if all(a is not None for a in c):
+            s = np.linspace(0.0, 100.0, 100001)[:, None]
+            mu = c[0] + c[1] * s + c[2] * s**2 + c[3] * s**3
+            if not np.all(mu > 0):
+                raise ValueError("Polynomial coefficients must keep mu(v_rel) > 0 for "
+                                 f"|v_rel| <= 100, got c0..c3 = {[a.tolist() for a in c]!r}")
+
+    @classmethod
+    def rules(cls):
+        return {"c0": (_positive, "> 0"), "c3": (_non_negative, ">= 0")}
+
+    def __call__(self, v_rel):
+        s = jnp.abs(v_rel)
+        return self.c0 + s * (self.c1 + s * (self.c2 + s * self.c3))
+
+    def static(self):
+        return jnp.asarray(self.c0)
+
+
+class Coulomb(AbstractFrictionLaw):
+    """Constant friction, mu(v_rel) = mu (> 0). Steady sliding is then stable for
+    any xi > 0 (no falling characteristic).
+
+    **Raises:**
+
+    `ValueError` for a non-finite or non-positive mu.
+    """
+
+    mu: ArrayLike = eqx.field(converter=as_parameter, default=0.5)
+
+    def __check_init__(self):
+        self.check()
+
+    @classmethod
+    def rules(cls):
+        return {"mu": (_positive, "> 0")}
+
+    def __call__(self, v_rel):
+        return self.mu + 0.0 * jnp.abs(v_rel)
+
+    def static(self):
+        return jnp.asarray(self.mu)
+
+
+#: The friction laws by the names the command line takes (`--friction NAME:...`).
+FRICTION_LAWS = {"exponential": ExponentialDecay, "stribeck": Stribeck,
+                 "polynomial": Polynomial, "coulomb": Coulomb}
+
+
+def friction_coefficient(params: "ChainParams", v_rel: Float[ArrayLike, "*shape"]
+                         ) -> Float[Array, "*shape"]:
+    """The friction coefficient mu(v_rel) of the chain's law (`params.friction`),
+    eq. (1) of the paper by default: mu_d + (mu_st - mu_d) exp(-|v_rel| / v0).
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `v_rel`: relative velocity x' - v_d, shape () or (n_osc,), dimensionless.
+
+    **Returns:**
+
+    mu, of the broadcast shape of `v_rel` and the law's fields.
+    """
+    return params.friction(v_rel)
+
+
+def smoothed_friction_force(params: "ChainParams", v_rel: Float[ArrayLike, "*shape"]
+                            ) -> Float[Array, "*shape"]:
+    """Smoothed friction force F_n = -(P_n/P) mu(v_rel) tanh(v_rel / eps), in units
+    of the nominal normal load P.
+
+    This is eq. (2) of the paper with sign(v_rel) replaced by tanh(v_rel / eps), and
+    scaled by each oscillator's normal load `params.load` (1 by default). The stick
+    phase becomes a stiff slip at |v_rel| ~ eps, of stiffness about P_n mu(0)/eps.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (its friction law, `load` and `eps`).
+    - `v_rel`: relative velocity x' - v_d, shape () or (n_osc,), dimensionless.
+
+    **Returns:**
+
+    F, of the broadcast shape, dimensionless (F/P in eq. (6)).
+    """
+    return -(params.load * friction_coefficient(params, v_rel)) * jnp.tanh(v_rel / params.eps)
+
+
+def slip_friction_force(params: "ChainParams", v_rel: Float[ArrayLike, "*shape"],
+                        direction: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
+    """Friction force in slip, F = -(P_n/P) mu(|v_rel|) sign(v_rel), eq. (2) of the
+    paper, with sign(v_rel) given as the slip `direction` (+1 or -1) of the
+    non-smooth reference. Taking the sign from the slip mode, not from v_rel, keeps
+    the force smooth within a slip phase, up to and through the zero of v_rel where
+    the phase ends (the event is then located on a smooth function).
+
+    **Arguments:**
+
+    - `params`: the chain parameters (its friction law and `load`).
+    - `v_rel`: relative velocity x' - v_d, dimensionless.
+    - `direction`: slip direction, +1 or -1, broadcastable against `v_rel`.
+
+    **Returns:**
+
+    F, of the broadcast shape, dimensionless (F/P in eq. (6)).
+    """
+    return -(params.load * friction_coefficient(params, v_rel)) * direction
+
+
+def static_friction(params: "ChainParams") -> Float[Array, "*shape"]:
+    """The bound of the set-valued stick condition, |F_n| <= (P_n/P) mu(0), for each
+    oscillator (shape () for a homogeneous chain, else (n_osc,))."""
+    return params.load * params.friction.static()

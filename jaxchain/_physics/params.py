@@ -1,0 +1,370 @@
+"""Physical parameters of the chain (eqs. (4)-(7) of the paper, generalised to any
+chain: per-oscillator values, open ends and any friction law)."""
+
+import dataclasses
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import numpy as np
+from jaxtyping import ArrayLike
+
+from .chain import BOUNDARIES, Mistuning, n_links
+from .friction import AbstractFrictionLaw, ExponentialDecay, as_parameter, check_values
+
+#: The fields that hold one value per chain (never per oscillator).
+CHAIN_SCALARS = ("v_d", "eps")
+#: The fields that may hold one value per oscillator, shape (n_osc,).
+PER_OSCILLATOR = ("xi", "stiffness", "load")
+
+
+#: Marks a shorthand argument of `ChainParams` that was not given.
+_ABSENT = object()
+
+
+class ChainParams(eqx.Module):
+    """Dimensionless parameters of a chain of friction-excited oscillators, eq. (5)
+    of the paper *Multiple spatially localized dynamical states in friction-excited
+    oscillator chains*, generalised:
+
+        x_n'' = -2 xi_n x_n' - k_n x_n - (coupling)_n + (P_n/P) F(x_n' - v_d),
+
+    with the coupling of `coupling_force` (eta_c (2 x_n - x_{n+1} - x_{n-1}) on the
+    paper's ring) and F the friction law's force, smoothed by tanh(v_rel/eps).
+
+    All quantities are dimensionless as in eqs. (4)-(6): displacements in units of
+    x_0 = P/k, velocities in units of x_0*omega_n, time in units of 1/omega_n.
+
+    **Arguments:**
+
+    - `n_osc`: number of oscillators N (static, >= 1).
+    - `xi`: damping ratio (>= 0), shape () or (n_osc,).
+    - `eta_c`: coupling stiffness k_c/k (>= 0), shape () or (n_links,) with
+        n_links = N (ring), N - 1 (free) or N + 1 (fixed), see `BOUNDARIES`.
+    - `v_d`: belt speed (> 0; a belt moving the other way is the mirror image
+        x -> -x), shape ().
+    - `eps`: velocity scale of the tanh smoothing of sign(v_rel) (> 0), shape ().
+    - `stiffness`: ground stiffness k_n/k = 1 + delta_n (> 0), shape () or (n_osc,).
+    - `load`: normal load P_n/P, which scales oscillator n's friction force (> 0),
+        shape () or (n_osc,).
+    - `friction`: the friction law (an `AbstractFrictionLaw`), whose fields are
+        each of shape () or (n_osc,); eq. (1), `ExponentialDecay()`, by default.
+    - `boundary`: "ring" (eq. (5), the default), "free" or "fixed" (static).
+    - `mistuning`: the `Mistuning` record that drew `stiffness` (see `mistune`),
+        or None (static).
+    - `mu_st`, `mu_d`, `v0`: shorthand for `friction=ExponentialDecay(mu_st, mu_d,
+        v0)`, eq. (1) (not stored; read them as `params.friction.mu_st`).
+
+    The defaults are eq. (7) of the paper (xi = 0.05, mu_d = 0.5, mu_st/mu_d = 2,
+    v0 = 0.5) with eta_c = 0.01, N = 20 and v_d = 1.5, the scene of Fig. 4, on the
+    homogeneous ring.
+
+    The default `eps = 1e-3` is chosen from the work-precision study against the
+    event-driven non-smooth reference (README, "Choice of eps and solver"): it is
+    the largest eps whose amplitudes stay within 1 % of the reference on every
+    periodic state of the cross-check grid, n_HALC included (0.23 % on the chain
+    scene; at eps = 3e-3 the case v_d = 1.75, eq. (10), k = 20 falls to steady
+    sliding instead of the reference's 10 oscillators on the HALC). Smaller eps
+    cost more: the stick phase stiffens (stiffness about mu_st/eps), and the step
+    count grows as 1x, 2x, 6x and 30x for eps = 1e-2, 3e-3, 1e-3 and 3e-4 on the
+    Fig. 4 scene.
+
+    Array fields are stored as float64 arrays (JAX arrays or tracers are kept as
+    they are, for example under `jax.vmap`), so that `eqx.filter_jit` traces them: a
+    new value of v_d, eps or xi does not recompile. Only concrete values are
+    validated. Change a field with `with_parameter`, which validates. A batch of
+    chains (lanes) is never made by giving a field a longer axis: see `lane_params`
+    and `stack_chains`.
+
+    **Raises:**
+
+    `ValueError` naming the field for a non-finite value, n_osc < 1, xi < 0,
+    eta_c < 0, v_d <= 0, eps <= 0, stiffness <= 0, load <= 0, a field of the wrong
+    shape, an unknown boundary, a friction law that is not an
+    `AbstractFrictionLaw`, both `friction` and `mu_st`/`mu_d`/`v0`, or a
+    `stiffness` that its `mistuning` record does not give. The friction law
+    validates its own parameters.
+    """
+
+    n_osc: int = eqx.field(static=True)
+    xi: ArrayLike = eqx.field(converter=as_parameter)
+    eta_c: ArrayLike = eqx.field(converter=as_parameter)
+    v_d: ArrayLike = eqx.field(converter=as_parameter)
+    eps: ArrayLike = eqx.field(converter=as_parameter)
+    stiffness: ArrayLike = eqx.field(converter=as_parameter)
+    load: ArrayLike = eqx.field(converter=as_parameter)
+    friction: AbstractFrictionLaw
+    boundary: str = eqx.field(static=True)
+    mistuning: Mistuning | None = eqx.field(static=True)
+
+    def __init__(self, n_osc: int = 20, xi=0.05, eta_c=0.01, v_d=1.5, eps=1e-3,
+                 stiffness=1.0, load=1.0, friction: AbstractFrictionLaw | None = None,
+                 boundary: str = "ring", mistuning: Mistuning | None = None, *,
+                 mu_st=_ABSENT, mu_d=_ABSENT, v0=_ABSENT):
+        shorthand = {k: v for k, v in (("mu_st", mu_st), ("mu_d", mu_d), ("v0", v0))
+                     if v is not _ABSENT}
+        if friction is None:
+            friction = ExponentialDecay(**shorthand)
+        elif shorthand:
+            raise ValueError(f"ChainParams takes either friction or {', '.join(shorthand)} "
+                             "(the shorthand of ExponentialDecay), not both")
+        self.n_osc = n_osc
+        self.xi = xi
+        self.eta_c = eta_c
+        self.v_d = v_d
+        self.eps = eps
+        self.stiffness = stiffness
+        self.load = load
+        self.friction = friction
+        self.boundary = boundary
+        self.mistuning = mistuning
+
+    def __check_init__(self):
+        if isinstance(self.n_osc, bool) or not isinstance(self.n_osc, (int, np.integer)):
+            raise ValueError(f"ChainParams.n_osc must be an integer, got {self.n_osc!r}")
+        if self.n_osc < 1:
+            raise ValueError(f"ChainParams.n_osc must be >= 1, got {self.n_osc!r}")
+        if not isinstance(self.boundary, str) or self.boundary not in BOUNDARIES:
+            raise ValueError(f"ChainParams.boundary must be one of {', '.join(BOUNDARIES)}, "
+                             f"got {self.boundary!r}")
+        if not isinstance(self.friction, AbstractFrictionLaw):
+            raise ValueError(f"ChainParams.friction must be a friction law (jaxchain."
+                             f"ExponentialDecay, Stribeck, Polynomial, Coulomb or another "
+                             f"AbstractFrictionLaw), got {type(self.friction).__name__}")
+        if self.mistuning is not None and not isinstance(self.mistuning, Mistuning):
+            raise ValueError(f"ChainParams.mistuning must be a jaxchain.Mistuning or None, "
+                             f"got {type(self.mistuning).__name__}")
+        positive = (lambda a: a > 0, "> 0")
+        non_negative = (lambda a: a >= 0, ">= 0")
+        check_values("ChainParams", {name: getattr(self, name) for name in
+                                     ("xi", "eta_c", "v_d", "eps", "stiffness", "load")},
+                     {"xi": non_negative, "eta_c": non_negative, "v_d": positive,
+                      "eps": positive, "stiffness": positive, "load": positive})
+        self._check_shapes()
+        if self.mistuning is not None and not isinstance(self.stiffness, jax.core.Tracer):
+            given = np.asarray(self.stiffness, dtype=float)
+            if not np.array_equal(np.broadcast_to(given, (self.n_osc,)),
+                                  self.mistuning.stiffness(self.n_osc)):
+                raise ValueError("ChainParams.stiffness is not the one its mistuning record "
+                                 f"{self.mistuning} draws; set mistuning=None to give your own")
+
+    def _check_shapes(self):
+        n, links = self.n_osc, n_links(self.boundary, self.n_osc)
+        expected = {name: ((), (n,)) for name in PER_OSCILLATOR}
+        expected |= {name: ((),) for name in CHAIN_SCALARS} | {"eta_c": ((), (links,))}
+        for name, shapes in expected.items():
+            shape = np.shape(getattr(self, name))
+            if shape not in shapes:
+                raise ValueError(_shape_message(f"ChainParams.{name}", shape, shapes))
+        for name in self.friction.parameter_names():
+            shape = np.shape(getattr(self.friction, name))
+            if shape not in ((), (n,)):
+                raise ValueError(_shape_message(f"{type(self.friction).__name__}.{name}",
+                                                shape, ((), (n,))))
+
+
+def _shape_message(name, shape, shapes) -> str:
+    allowed = " or ".join(str(s) for s in shapes)
+    hint = ("" if len(shapes) > 1 or shape == () else
+            "; a batch of chains (one value per lane) is made by lane_params or "
+            "stack_chains, not by a longer axis")
+    return f"{name} must have shape {allowed}, got {shape}{hint}"
+
+
+def mistune(params: ChainParams, sigma: float, seed: int) -> ChainParams:
+    """`params` with random stiffness mistuning: k_n = 1 + delta_n, delta_n drawn
+    from a normal distribution of standard deviation `sigma` with the JAX key
+    `jax.random.key(seed)`, and the `Mistuning` record kept in `params.mistuning`
+    (it rebuilds the same chain). sigma = 0 leaves the stiffness as it is (the
+    homogeneous chain, bit for bit).
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `sigma`: standard deviation of delta_n (>= 0, dimensionless).
+    - `seed`: integer seed.
+
+    **Returns:**
+
+    A new `ChainParams`.
+
+    **Raises:**
+
+    `ValueError` for a negative sigma or a seed that is not an integer, or when the
+    draw gives a stiffness <= 0 (sigma too large).
+    """
+    record = Mistuning(sigma=sigma, seed=seed)
+    stiffness = params.stiffness if sigma == 0 else record.stiffness(params.n_osc)
+    fields = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)}
+    return ChainParams(**(fields | {"stiffness": stiffness, "mistuning": record}))
+
+
+def single_oscillator(params: ChainParams, index: int = 0) -> ChainParams:
+    """Oscillator `index` of the chain on its own: n_osc = 1 on the ring (no
+    coupling), with that oscillator's xi, stiffness, load and friction law, the
+    chain's v_d and eps. The single oscillator of Fig. 3(a) for the paper's ring.
+
+    **Raises:**
+
+    `ValueError` for an index outside [0, n_osc).
+    """
+    if not 0 <= index < params.n_osc:
+        raise ValueError(f"index must lie in [0, {params.n_osc}), got {index!r}")
+
+    def pick(value):
+        a = np.asarray(value, dtype=float)
+        return a if a.ndim == 0 else a[index]
+
+    law = params.friction
+    law = type(law)(**{name: pick(getattr(law, name)) for name in law.parameter_names()})
+    return ChainParams(n_osc=1, xi=pick(params.xi), eta_c=params.eta_c if np.ndim(
+        params.eta_c) == 0 else 0.0, v_d=params.v_d, eps=params.eps,
+        stiffness=pick(params.stiffness), load=pick(params.load), friction=law)
+
+
+def _chain_fields() -> list[str]:
+    return [f.name for f in dataclasses.fields(ChainParams)
+            if f.name not in ("n_osc", "friction", "boundary", "mistuning")]
+
+
+def parameter_names(params: ChainParams | None = None) -> list[str]:
+    """The names `with_parameter` and the sweeps take: the array fields of
+    `ChainParams` and those of its friction law (`mu_st`, `mu_d`, `v0` for eq. (1)).
+    """
+    law = ExponentialDecay if params is None else type(params.friction)
+    return _chain_fields() + list(law.parameter_names())
+
+
+class _Field(eqx.Module):
+    """The lens of one named field, of `ChainParams` or of its friction law: equal
+    names compare and hash equal, so that a jitted function taking the lens
+    compiles once per name."""
+
+    name: str = eqx.field(static=True)
+
+    def __call__(self, params):
+        if self.name in _chain_fields():
+            return getattr(params, self.name)
+        return getattr(params.friction, self.name)
+
+
+def parameter_lens(where: Callable | str, params: ChainParams | None = None) -> Callable:
+    """The lens of a parameter given by name (`"xi"`, or a field of the friction law
+    such as `"mu_st"`) or already as a lens.
+
+    **Raises:**
+
+    `ValueError` for an unknown name (for `params`' friction law, eq. (1) if None).
+    """
+    if not isinstance(where, str):
+        return where
+    names = parameter_names(params)
+    if where not in names:
+        raise ValueError(f"unknown parameter {where!r}: choose one of {', '.join(names)}")
+    return _Field(where)
+
+
+def parameter_name(where: Callable | str, params: ChainParams | None = None) -> str:
+    """The name of the one field that `where` picks: `where` itself when it is a
+    name, or else found by applying the lens to parameters whose fields hold
+    distinct values. A sweep keys and labels its results by this name, never by
+    the lens (two lambdas cannot be compared by content).
+
+    **Arguments:**
+
+    - `where`: a field name such as `"eta_c"` or `"mu_st"`, or a lens such as
+        `lambda p: p.eta_c` or `lambda p: p.friction.mu_st`.
+    - `params`: the chain whose friction law the lens reads (eq. (1) if None).
+
+    **Returns:**
+
+    The field name.
+
+    **Raises:**
+
+    `ValueError` for an unknown name, for n_osc (it sets the shapes: it cannot vary
+    within one compiled run), or for a lens that does not return one field.
+    """
+    if isinstance(where, str):
+        parameter_lens(where, params)  # raises for an unknown name
+        return where
+    base = ChainParams() if params is None else params
+    leaves, treedef = jax.tree_util.tree_flatten(base)
+    probe = jax.tree_util.tree_unflatten(
+        treedef, [np.asarray(0.125 * (i + 1)) for i in range(len(leaves))])
+    try:
+        picked = where(probe)
+    except Exception as err:
+        raise ValueError(f"where must pick one field of ChainParams, got a lens that "
+                         f"raised {type(err).__name__}: {err}") from None
+    if picked is probe.n_osc and isinstance(picked, int):
+        raise ValueError("n_osc cannot be swept: it sets the shapes of a compiled run; "
+                         "run one sweep per n_osc")
+    for name in parameter_names(base):
+        if picked is _Field(name)(probe):
+            return name
+    raise ValueError(f"where must pick one field of ChainParams "
+                     f"({', '.join(parameter_names(base))}), got a lens that returns "
+                     f"{picked!r}")
+
+
+def parameter_value(params: ChainParams, where: Callable | str):
+    """The value of the parameter `where` (a name or a lens) in `params`."""
+    return parameter_lens(where, params)(params)
+
+
+def with_parameter(params: ChainParams, where: Callable | str, value) -> ChainParams:
+    """`params` with one parameter set to `value`, validated like a new `ChainParams`.
+    This is the one way jaxchain changes a parameter (a bare `eqx.tree_at` would skip
+    the validation and could leave a Python float, which `eqx.filter_jit` treats as
+    static).
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `where`: the field, as a lens such as `lambda p: p.v_d` (as `eqx.tree_at`
+        takes it) or as its name, `"v_d"` (or a friction law's field, `"mu_st"`).
+    - `value`: the new value: a number, an array of the field's allowed shape, or a
+        tracer.
+
+    **Returns:**
+
+    A new `ChainParams`.
+
+    **Raises:**
+
+    `ValueError` naming the field for a bad value or shape, or for an unknown name.
+    """
+    changed = eqx.tree_at(parameter_lens(where, params), params, value)
+    law = changed.friction
+    law = type(law)(**{name: getattr(law, name) for name in law.parameter_names()})
+    fields = {f.name: getattr(changed, f.name) for f in dataclasses.fields(changed)}
+    return ChainParams(**(fields | {"friction": law}))
+
+
+def stack_chains(chains: list[ChainParams]) -> ChainParams:
+    """A batch of chains, the named route to an ensemble over chains (for example
+    100 mistuning draws): every array field gains a leading lane axis, shape
+    (lanes, ...); a field that is a scalar in some chains and per-oscillator in
+    others is broadcast to (lanes, n_osc). The chains must share n_osc, the
+    boundary and the class of the friction law; their mistuning records are
+    dropped (each lane's stiffness is kept). `run_lanes` takes the result.
+
+    **Raises:**
+
+    `ValueError` for an empty list or chains of different structure.
+    """
+    if not chains:
+        raise ValueError("stack_chains needs at least one chain")
+    plain = [ChainParams(**({f.name: getattr(c, f.name) for f in dataclasses.fields(c)}
+                            | {"mistuning": None})) for c in chains]
+    structures = {jax.tree_util.tree_structure(c) for c in plain}
+    if len(structures) != 1:
+        raise ValueError("stack_chains needs chains of one structure (n_osc, boundary, "
+                         "friction law)")
+
+    def stack(*xs):
+        shape = np.broadcast_shapes(*(np.shape(x) for x in xs))
+        return np.stack([np.broadcast_to(np.asarray(x, dtype=float), shape) for x in xs])
+
+    return jax.tree_util.tree_map(stack, *plain)
