@@ -18,6 +18,7 @@ from ._nonsmooth.options import NonsmoothOptions
 from ._nonsmooth.solve import NONSMOOTH_STATUS, run_nonsmooth
 from ._options import SimulationOptions
 from ._physics.params import ChainParams, with_parameter
+from ._physics.record import chain_record
 from ._lanes import lane_params, on_devices, run_lanes
 from ._results import PAPER, field_values
 from ._simulate import STATUS
@@ -231,15 +232,15 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
     )
     attrs = field_values(options, "smoothed_") | field_values(reference_options,
                                                              "reference_")
-    attrs |= {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
-              if f.name != "v_d"}
+    attrs = {k: (float(v) if not isinstance(v, (str, int)) else v) for k, v in attrs.items()}
+    attrs |= {k: v for k, v in chain_record(params).items() if k != "v_d"}
     attrs |= {"solver": type(solver).__name__, "wall_time_s_smoothed": smooth_wall,
               "periodic_tol_smoothed": tolerances.halves,
               "periodic_tol_reference": tolerances.halves_reference,
               "status_smoothed_meanings": " | ".join(STATUS),
               "status_reference_meanings": " | ".join(NONSMOOTH_STATUS),
               "paper": PAPER, "units": "dimensionless, eqs. (4)-(6) of the paper"}
-    ds.attrs = {k: (float(v) if not isinstance(v, (str, int)) else v)
+    ds.attrs = {k: (float(v) if isinstance(v, (float, np.floating)) else v)
                 for k, v in attrs.items()}
     return ds
 

@@ -10,8 +10,9 @@ import numpy as np
 from .._basin.basin import BASIN_OPTIONS, basin_stability
 from .._basin.sampling import Box
 from .._options import SimulationOptions
-from .._physics.params import ChainParams
 from .._plots.basin import plot_basin_stability, plot_halc_histogram
+from .._physics.record import chain_record
+from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, json_ready, positive_float, positive_int,
                      save_figure, show_progress, writable_folder)
 from .sweep import belt_speeds
@@ -48,7 +49,7 @@ def pair(text: str) -> tuple[float, float]:
 
 
 def add_parser(sub):
-    p = sub.add_parser("basin", help=HELP, description=DESCRIPTION,
+    p = sub.add_parser("basin", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     box = Box()
     p.add_argument("--vd", type=belt_speeds, default=None, metavar="LIST|START:STOP:NUM",
@@ -68,9 +69,11 @@ def add_parser(sub):
                    help=f"classify after this time (default {BASIN_OPTIONS.transient:g}; "
                         "--quick 400)")
     p.add_argument("--seed", type=int, default=0, metavar="K",
-                   help="seed of the JAX PRNG key (default 0)")
+                   help="seed of the JAX PRNG key of the samples and of the mistuning "
+                        "draw (default 0)")
     p.add_argument("--eps", type=positive_float, default=1e-3,
                    help="tanh smoothing velocity (default 0.001)")
+    add_chain_options(p.add_argument_group("chain"), seed=False)
     p.add_argument("--out", type=Path, default=Path("jaxchain-out"),
                    metavar="DIR", help="output folder (default ./jaxchain-out/)")
     p.add_argument("--resume", action="store_true",
@@ -94,7 +97,8 @@ def run(args) -> None:
         raise UsageError(f"--transient must lie in [0, t_end = {t_end:g}), got {transient:g}")
     box = Box(x=tuple(args.x_range), v=tuple(args.v_range))
     options = SimulationOptions(t_end=t_end, transient=transient)
-    params = ChainParams(n_osc=n_osc, eps=args.eps)
+    params = chain_params(args, n_osc, eps=args.eps)
+    n_osc = params.n_osc
     writable_folder(args.out)
     start = time.perf_counter()
     store = args.out / "basin.zarr"
@@ -112,6 +116,7 @@ def run(args) -> None:
     if args.json:
         print(json.dumps(json_ready({
             "v_d": ds["v_d"].values.tolist(), "classes": classes,
+            "chain": chain_record(params),
             "counts": ds["counts"].values.tolist(),
             "fractions": ds["fraction"].values.tolist(),
             "ci_low": ds["ci_low"].values.tolist(), "ci_high": ds["ci_high"].values.tolist(),

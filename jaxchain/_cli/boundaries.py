@@ -6,8 +6,8 @@ import json
 import time
 
 from .._boundaries import RATIO_VALUES, XI_VALUES, boundaries, fig3a_simulations
-from .._physics.params import ChainParams
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
+from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, comma_list, json_ready,
                      param_default, positive_float, positive_int, save_figure,
                      show_progress, writable_folder)
@@ -38,7 +38,7 @@ with the defaults."""
 
 
 def add_parser(sub):
-    p = sub.add_parser("boundaries", help=HELP, description=DESCRIPTION,
+    p = sub.add_parser("boundaries", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("model (eq. (5) of the paper; other parameters eq. (7))")
     g.add_argument("--n-osc", type=positive_int, default=20, metavar="N",
@@ -47,6 +47,7 @@ def add_parser(sub):
                    help=f"tanh smoothing velocity (default {param_default('eps'):g})")
     g.add_argument("--xi", type=positive_float, default=param_default("xi"),
                    help=f"damping ratio (default {param_default('xi'):g})")
+    add_chain_options(g)
     g = p.add_argument_group("analysis")
     g.add_argument("--target", type=positive_float, default=0.5,
                    help="design: the bistable window width to stay below (default 0.5)")
@@ -65,7 +66,7 @@ def add_parser(sub):
 
 
 def run(args) -> None:
-    params = ChainParams(n_osc=args.n_osc, eps=args.eps, xi=args.xi)
+    params = chain_params(args, args.n_osc, eps=args.eps, xi=args.xi)
     for name in ("xi_values", "ratio_values"):
         values = getattr(args, name)
         if not values or min(values) <= 0:
@@ -86,16 +87,18 @@ def run(args) -> None:
     single_png = args.out / "bifurcation_single.png"
     save_figure(fig, single_png)
     region_png = args.out / "bistable_region.png"
-    limits = [s[c]["existence_limit_nonsmooth"] for c in ("xi_curve", "ratio_curve")]
-    save_figure(plot_bistable_region(found.curves_xi, found.curves_ratio,
-                                     float(params.mu_d), found.design, limits), region_png)
+    curves = [c for c in ("xi_curve", "ratio_curve") if c in s]
+    limits = [s[c]["existence_limit_nonsmooth"] for c in curves]
+    mu_d = float(params.friction.mu_d) if found.curves_ratio is not None else None
+    save_figure(plot_bistable_region(found.curves_xi, found.curves_ratio, mu_d,
+                                     found.design, limits), region_png)
     s |= {"wall_time_s": time.perf_counter() - start,
           "figures": [str(single_png), str(region_png)]}
     if sims is not None:
         s["simulation_energy"] = {"v_d": sims[0].tolist(), "energy": sims[1].tolist()}
     text = json.dumps(json_ready(s), allow_nan=False)
     (args.out / "boundaries.json").write_text(text)
-    missing = sum(f is None for c in ("xi_curve", "ratio_curve") for f in s[c]["fold_vd"])
+    missing = sum(f is None for c in curves for f in s[c]["fold_vd"])
     if args.json:
         print(text)
     else:
@@ -108,8 +111,10 @@ def run(args) -> None:
 def _print_summary(s: dict, single_png, region_png) -> None:
     d = s["design"]
     print(f"single oscillator, eps = {s['eps']:g}:")
-    print(f"  Hopf   v_d = {s['hopf_vd']:.10f}  (analytic eps -> 0: "
-          f"{s['hopf_vd_analytic']:.10f}; eps correction {s['hopf_eps_correction']:.2e}); "
+    analytic = ("" if s["hopf_vd_analytic"] is None else
+                f"(analytic eps -> 0: {s['hopf_vd_analytic']:.10f}; eps correction "
+                f"{s['hopf_eps_correction']:.2e}); ")
+    print(f"  Hopf   v_d = {s['hopf_vd']:.10f}  {analytic}"
           f"Re(lambda) crosses with slope {s['hopf_growth_slope']:.4f}, omega "
           f"{s['hopf_omega']:.4f}")
     kind = "subcritical" if s["subcritical"] else "supercritical"
@@ -118,10 +123,13 @@ def _print_summary(s: dict, single_png, region_png) -> None:
           f"{s['fold_multipliers'][0]:.6f}, {s['fold_multipliers'][1]:.6f}); non-smooth "
           f"existence limit {s['existence_limit_nonsmooth']:.6f}, difference "
           f"{s['fold_minus_existence_limit']:+.4f}")
+    ratio = ("" if "ratio_curve" not in s else
+             f"; d/d(mu_st/mu_d): {s['d_hopf_vd_d_ratio']:.4f}, {s['d_fold_vd_d_ratio']:.4f}")
     print(f"  d v_d,H/d xi = {s['d_hopf_vd_d_xi']:.4f}, d v_d,fold/d xi = "
-          f"{s['d_fold_vd_d_xi']:.4f}; d/d(mu_st/mu_d): {s['d_hopf_vd_d_ratio']:.4f}, "
-          f"{s['d_fold_vd_d_ratio']:.4f}")
+          f"{s['d_fold_vd_d_xi']:.4f}{ratio}")
     for key, name in (("xi_curve", "xi"), ("ratio_curve", "mu_st/mu_d")):
+        if key not in s:
+            continue
         c = s[key]
         print(f"  {name:>10}  Hopf v_d   fold v_d   non-smooth limit   fold - limit")
         for v, h, f, e in zip(c[name], c["hopf_vd"], c["fold_vd"],
@@ -134,8 +142,8 @@ def _print_summary(s: dict, single_png, region_png) -> None:
           f"{'holds' if d['simulation_check']['holds'] else 'FAILS'}")
     if "ring" in s:
         r = s["ring"]
-        print(f"ring of {r['n_osc']}: Hopf v_d = {r['hopf_vd']:.10f} for every Fourier mode "
-              f"(spread {r['hopf_vd_spread_over_modes']:.1e})")
+        print(f"chain of {r['n_osc']} ({r['boundary']}): Hopf v_d = {r['hopf_vd']:.10f} "
+              f"(spread over the modes {r['hopf_vd_spread_over_modes']:.1e})")
         for kind in ("in-phase", "anti-phase"):
             if kind in r:
                 k = r[kind]

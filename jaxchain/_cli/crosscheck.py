@@ -8,9 +8,11 @@ import time
 from .._crosscheck import CROSSCHECK_ICS, CROSSCHECK_VD, crosscheck
 from .._nonsmooth.options import NonsmoothOptions
 from .._options import SimulationOptions
-from .._physics.params import ChainParams, with_parameter
+from .._physics.params import with_parameter
 from .._plots.crosscheck import plot_crosscheck
 from .._results import save_dataset
+from .._physics.record import chain_record
+from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_run_options, comma_list, json_ready, positive_float, save_figure,
                      show_progress, writable_folder)
@@ -37,7 +39,7 @@ minutes on 2 CPU cores with the defaults."""
 
 
 def add_parser(sub):
-    p = sub.add_parser("crosscheck", help=HELP, description=DESCRIPTION,
+    p = sub.add_parser("crosscheck", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("grid (eq. (5) of the paper; other parameters eq. (7))")
     g.add_argument("--vd", type=comma_list(float), default=list(CROSSCHECK_VD), metavar="V,V,...",
@@ -51,6 +53,7 @@ def add_parser(sub):
                    help="the same for eq. (10) (default "
                         f"{','.join(map(str, default10))}; '' for none)")
     add_ring_options(g)
+    add_chain_options(g)
     add_run_options(p)
     g = p.add_argument_group("reference")
     g.add_argument("--ref-rtol", type=positive_float, default=NonsmoothOptions().rtol,
@@ -68,7 +71,7 @@ def run(args) -> None:
     for _, k in ics:
         if not 1 <= k <= args.n_osc:
             raise UsageError(f"--eq8/--eq10: k must lie in [1, {args.n_osc}], got {k}")
-    params = ChainParams(n_osc=args.n_osc, eps=args.eps)
+    params = chain_params(args, args.n_osc, eps=args.eps)
     for vd in args.vd:
         with_parameter(params, "v_d", vd)  # validates every belt speed now
     options = SimulationOptions(t_end=args.t_end, transient=args.transient,
@@ -110,7 +113,8 @@ def run(args) -> None:
     }
     if args.json:
         print(json.dumps(json_ready({
-            "cases": rows, **summary, "eps": args.eps, "solver": args.solver,
+            "cases": rows, **summary, "chain": chain_record(params), "eps": args.eps,
+            "solver": args.solver,
             "rtol": args.rtol, "reference_rtol": args.ref_rtol, "wall_time_s": wall,
             "smoothed_wall_time_s": ds.attrs["wall_time_s_smoothed"],
             "dataset": str(nc), "figure": str(png),

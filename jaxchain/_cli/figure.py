@@ -18,6 +18,8 @@ from .._plots.dynamics import (plot_orbit_diagram, plot_phase_portraits,
 from .._plots.localized import plot_localized_states
 from .._results import save_dataset
 from .._simulate import STATUS
+from .._physics.record import chain_record
+from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (DEFAULT_SOLVER, DEFAULTS, SOLVERS, RunsFailed, add_output_options,
                      json_ready, param_default, positive_float, save_figure,
                      show_progress, writable_folder)
@@ -63,7 +65,7 @@ and <out>/figure<NAME>.png."""
 
 
 def add_parser(sub):
-    p = sub.add_parser("figure", help=HELP, description=DESCRIPTION,
+    p = sub.add_parser("figure", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("name", choices=list(FIGURES), metavar="NAME",
                    help="figure number: " + ", ".join(FIGURES))
@@ -74,6 +76,7 @@ def add_parser(sub):
                    help=f"tanh smoothing velocity (default {param_default('eps'):g})")
     g.add_argument("--solver", choices=sorted(SOLVERS) + ["auto"], default=DEFAULT_SOLVER,
                    help=f"diffrax solver (default {DEFAULT_SOLVER})")
+    add_chain_options(g)
     g.add_argument("--rtol", type=positive_float, default=DEFAULTS.rtol,
                    help=f"relative tolerance (default {DEFAULTS.rtol:g})")
     g.add_argument("--atol", type=positive_float, default=DEFAULTS.atol,
@@ -109,7 +112,7 @@ def _scene(name: str, size: dict, params: ChainParams, solver, options, progress
 def run(args) -> None:
     size = QUICK if args.quick else FULL
     v_d, ics, _ = FIGURES[args.name]
-    params = ChainParams(n_osc=size["n_osc"], v_d=v_d, eps=args.eps)
+    params = chain_params(args, size["n_osc"], v_d=v_d, eps=args.eps)
     options = SimulationOptions(t_end=size["t_end"], transient=size["transient"],
                                 rtol=args.rtol, atol=args.atol,
                                 chunk_length=size["chunk_length"])
@@ -126,6 +129,7 @@ def run(args) -> None:
 
     status = [STATUS[int(s)].split(":")[0] for s in np.ravel(ds["status"].values)]
     report = {"figure": args.name, "v_d": v_d, "ics": ics, "n_osc": params.n_osc,
+              "chain": chain_record(params),
               "eps": args.eps, "solver": args.solver, "quick": args.quick,
               "wall_time_s": wall, "dataset": str(nc), "png": str(png)}
     if args.name in CLASSIFIED:

@@ -10,10 +10,11 @@ import numpy as np
 from .._ensemble import ensemble
 from .._physics.initial import FAMILIES, localized_family
 from .._options import SimulationOptions
-from .._physics.params import ChainParams
 from .._plots.localized import plot_localized_states
 from .._results import save_dataset
 from .._simulate import STATUS
+from .._physics.record import chain_record
+from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, add_model_options, add_output_options,
                      add_run_options, json_ready, save_figure, show_progress,
                      writable_folder)
@@ -32,9 +33,10 @@ and <out>/localized_vd<V>.png (circles of radius proportional to amplitude)."""
 
 
 def add_parser(sub):
-    p = sub.add_parser("localized", help=HELP, description=DESCRIPTION,
+    p = sub.add_parser("localized", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     add_model_options(p, vd=1.5, n_osc=20)
+    add_chain_options(p.add_argument_group("chain"))
     p.add_argument("--ics", choices=sorted(FAMILIES), default="eq8",
                    help="initial-condition family: eq8 (at rest, the default) or eq10 "
                         "(x'(0) = 0.56); k = 1..N oscillators excited in a block "
@@ -46,13 +48,13 @@ def add_parser(sub):
 
 
 def run(args) -> None:
-    params = ChainParams(n_osc=args.n_osc, v_d=args.vd, eps=args.eps)
+    params = chain_params(args, args.n_osc, v_d=args.vd, eps=args.eps)
     options = SimulationOptions(t_end=args.t_end, transient=args.transient,
                                 rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     writable_folder(args.out)
     solver = args.solver
-    ics = localized_family(args.n_osc, args.ics)
-    n_excited = np.arange(1, args.n_osc + 1)
+    ics = localized_family(params.n_osc, args.ics, params.boundary)
+    n_excited = np.arange(1, params.n_osc + 1)
 
     start = time.perf_counter()
     ds = ensemble(params, [args.vd], ics, solver, options, progress=show_progress(args))
@@ -80,11 +82,12 @@ def run(args) -> None:
             "eps": args.eps,
             "solver": args.solver,
             "ics": args.ics,
+            "chain": chain_record(params),
             "dataset": str(nc),
             "figure": str(png),
         }), allow_nan=False))
     else:
-        print(f"v_d = {args.vd:g}, N = {args.n_osc}, eps = {args.eps:g}, "
+        print(f"v_d = {args.vd:g}, N = {params.n_osc}, {params.boundary}, eps = {args.eps:g}, "
               f"{args.solver}, ics = {args.ics}")
         print(f"{'n_excited':>9} {'n_HALC':>6} {'E':>9} {'E/n_HALC':>8}  status")
         for k, nh, e, s in zip(n_excited, row["n_halc"].values, row["energy"].values,

@@ -10,11 +10,12 @@ import numpy as np
 
 from .._physics.initial import FAMILIES, localized_family
 from .._options import SimulationOptions
-from .._physics.params import ChainParams
 from .._plots.sweep import plot_bifurcation_diagram
 from .._simulate import STATUS
 from .._sweep.fronts import front_fractions, front_ranges
 from .._sweep.sweep import sweep
+from .._physics.record import chain_record
+from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, add_output_options, add_ring_options,
                      add_run_options, json_ready, positive_int, save_figure, show_progress,
                      writable_folder)
@@ -77,7 +78,7 @@ def families(text: str) -> list[str]:
 
 
 def add_parser(sub):
-    p = sub.add_parser("sweep", help=HELP, description=DESCRIPTION,
+    p = sub.add_parser("sweep", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("grid (eq. (5) of the paper; other parameters eq. (7))")
     g.add_argument("--vd", type=belt_speeds, default=belt_speeds("1.0:2.0:21"),
@@ -88,6 +89,7 @@ def add_parser(sub):
                    help="initial-condition families, each with k = 1..N excited "
                         "oscillators around oscillator N//2+1 (default eq8)")
     add_ring_options(g)
+    add_chain_options(g)
     add_run_options(p)
     s = p.add_argument_group("storage")
     s.add_argument("--batch-size", type=positive_int, default=64, metavar="B",
@@ -104,13 +106,13 @@ def add_parser(sub):
 
 
 def run(args) -> None:
-    params = ChainParams(n_osc=args.n_osc, eps=args.eps)
+    params = chain_params(args, args.n_osc, eps=args.eps)
     options = SimulationOptions(t_end=args.t_end, transient=args.transient,
                                 rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     if args.resume and args.overwrite:
         raise ValueError("--resume and --overwrite exclude each other")
     writable_folder(args.out)
-    ics = {name: localized_family(args.n_osc, name) for name in args.ics}
+    ics = {name: localized_family(params.n_osc, name, params.boundary) for name in args.ics}
     store = args.out / "sweep.zarr"
 
     start = time.perf_counter()
@@ -139,6 +141,7 @@ def run(args) -> None:
     if args.json:
         print(json.dumps(json_ready({
             "v_d": v_d.tolist(),
+            "chain": chain_record(params),
             "family": ds["family"].values.tolist(),
             "n_excited": ds["n_excited"].values.tolist(),
             "n_halc": n_halc.tolist(),

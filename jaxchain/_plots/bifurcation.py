@@ -61,15 +61,16 @@ def plot_limit_cycle_branch(branch, hopf_vd: float, fold_vd: float, fold_energy:
     return fig
 
 
-def plot_bistable_region(curves_xi, curves_ratio, mu_d: float, design=None,
+def plot_bistable_region(curves_xi, curves_ratio, mu_d: float | None, design=None,
                          limits=None):
     """The bistable range of belt speeds (between the Hopf point and the fold)
-    against the damping ratio xi and against mu_st/mu_d. The fold is drawn along
-    its continued branch, with markers at the requested values.
+    against the damping ratio xi and, for eq. (1), against mu_st/mu_d. The fold is
+    drawn along its continued branch, with markers at the requested values.
 
     **Arguments:**
 
-    - `curves_xi`, `curves_ratio`: `BoundaryCurves` in xi and in mu_st.
+    - `curves_xi`, `curves_ratio`: `BoundaryCurves` in xi and in mu_st (None for
+        another friction law: one panel only).
     - `mu_d`: the dynamic friction coefficient (to turn mu_st into the ratio).
     - `design`: a `DampingDesign` to mark, or None.
     - `limits`: the non-smooth existence limits at the values of each curve, two
@@ -79,9 +80,12 @@ def plot_bistable_region(curves_xi, curves_ratio, mu_d: float, design=None,
 
     The matplotlib Figure.
     """
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5))
-    for ax, curves, scale, name in ((axes[0], curves_xi, 1.0, "damping ratio xi"),
-                                    (axes[1], curves_ratio, 1 / mu_d, "mu_st / mu_d")):
+    panels = [(curves_xi, 1.0, "damping ratio xi")]
+    if curves_ratio is not None:
+        panels.append((curves_ratio, 1 / mu_d, "mu_st / mu_d"))
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.5 * len(panels), 4.5), squeeze=False)
+    axes = axes[0]
+    for ax, (curves, scale, name) in zip(axes, panels):
         x = np.asarray(curves.values) * scale
         hopf, fold = np.asarray(curves.hopf_vd), np.asarray(curves.fold_vd)
         ax.fill_between(x, hopf, fold, color="C0", alpha=0.25,
@@ -96,7 +100,7 @@ def plot_bistable_region(curves_xi, curves_ratio, mu_d: float, design=None,
                     label="fold, continued" if i == 0 else None)
         ax.plot(x, fold, "s", color="C2", label="fold of limit cycles")
         if limits is not None:
-            ax.plot(x, limits[ax is axes[1]], "x", color="k",
+            ax.plot(x, limits[ax is not axes[0]], "x", color="k",
                     label="non-smooth existence limit")
         pad = 0.03 * (x.max() - x.min()) or 0.05 * max(abs(x.max()), 1e-3)  # one value
         ax.set(xlabel=name, ylabel="belt speed v_d", xlim=(x.min() - pad, x.max() + pad))
@@ -104,7 +108,8 @@ def plot_bistable_region(curves_xi, curves_ratio, mu_d: float, design=None,
         axes[0].plot([design.xi, design.xi], [design.hopf_vd, design.fold_vd], "k-", lw=2,
                      label=f"design: xi = {design.xi:.4f}, window {design.window:.3f}")
     axes[0].set_title("(a) against damping")
-    axes[1].set_title("(b) against the friction ratio")
+    if len(axes) > 1:
+        axes[1].set_title("(b) against the friction ratio")
     for ax in axes:
         ax.legend(fontsize=8)
     fig.tight_layout()
