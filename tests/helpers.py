@@ -69,16 +69,29 @@ def flat(y) -> jnp.ndarray:
     return jnp.reshape(jnp.asarray(y), (-1,))
 
 
-def scipy_slip_arc(params: jc.ChainParams, t_max: float = 50.0):
-    """The single oscillator's slip arc from the stick exit point, x = mu_st -
+def eq1_mu(p: jc.ChainParams):
+    """Eq. (1) of the paper as a function of the slip speed s = |v_rel| >= 0."""
+    law = p.friction
+    return lambda s: law.mu_d + (law.mu_st - law.mu_d) * np.exp(-s / law.v0)
+
+
+def stribeck_mu(mu_s, mu_c, v_s, delta, viscous):
+    """The Stribeck curve mu_c + (mu_s - mu_c) exp(-(s/v_s)^delta) + viscous s of
+    the slip speed s >= 0, written here independently of jaxchain."""
+    return lambda s: mu_c + (mu_s - mu_c) * np.exp(-(s / v_s) ** delta) + viscous * s
+
+
+def scipy_slip_arc(params: jc.ChainParams, t_max: float = 50.0, mu=None):
+    """The single oscillator's slip arc from the stick exit point, x = mu(0) -
     2 xi v_d, x' = v_d, with scipy (DOP853, rtol 1e-12): x'' = -2 xi x' - x +
     mu(v_d - x') while x' < v_d, ending when x' returns to v_d. Turning points
-    (x' = 0) are recorded as events."""
+    (x' = 0) are recorded as events. `mu` is the friction law as a function of the
+    slip speed (eq. (1) with `params`' coefficients if None)."""
     p = params
+    mu = eq1_mu(p) if mu is None else mu
 
     def slip(t, y):
-        mu = p.friction.mu_d + (p.friction.mu_st - p.friction.mu_d) * np.exp(-(p.v_d - y[1]) / p.friction.v0)
-        return [y[1], -2 * p.xi * y[1] - y[0] + mu]
+        return [y[1], -2 * p.xi * y[1] - y[0] + mu(p.v_d - y[1])]
 
     def back_to_belt(t, y):
         return y[1] - p.v_d
@@ -87,17 +100,17 @@ def scipy_slip_arc(params: jc.ChainParams, t_max: float = 50.0):
     def turning(t, y):
         return y[1]
 
-    return solve_ivp(slip, (0.0, t_max), [p.friction.mu_st - 2 * p.xi * p.v_d, p.v_d],
+    return solve_ivp(slip, (0.0, t_max), [mu(0.0) - 2 * p.xi * p.v_d, p.v_d],
                      method="DOP853", rtol=1e-12, atol=1e-12,
                      events=[back_to_belt, turning])
 
 
-def scipy_stick_slip_cycle(params: jc.ChainParams) -> tuple[float, float]:
+def scipy_stick_slip_cycle(params: jc.ChainParams, mu=None) -> tuple[float, float]:
     """(amplitude, period) of the single oscillator's non-smooth stick-slip cycle,
     independently of jaxchain: the scipy slip arc, then stick at x' = v_d from the
     return point back to the exit point. The extrema lie at the arc's turning
-    points."""
-    arc = scipy_slip_arc(params)
+    points. `mu` as for `scipy_slip_arc`."""
+    arc = scipy_slip_arc(params, mu=mu)
     assert arc.status == 1  # it returned to the belt speed: the cycle exists
     x_turn = arc.y_events[1][:, 0]
     x_exit, x_return = arc.y[0, 0], arc.y[0, -1]
