@@ -13,7 +13,7 @@ from ._bifurcation.fold import FoldPoint, fold_point
 from ._bifurcation.hopf import HopfPoint, hopf_eps_correction, hopf_point, hopf_vd_analytic
 from ._bifurcation.limit_cycles import hopf_cycle, limit_cycle_problem
 from ._bifurcation.lyapunov import first_lyapunov_coefficient
-from ._bifurcation.shooting import ShootingOptions, flow, periodic_orbit
+from ._bifurcation.shooting import ShootingOptions, flow, periodic_orbit, unpack
 from ._bifurcation.two_parameter import BoundaryCurves, boundary_curves, hopf_vd
 from ._physics.initial import GivenState
 from ._nonsmooth.existence import stick_slip_existence_limit
@@ -70,6 +70,22 @@ def _hopf_speed(params: ChainParams) -> float:
         return float(hopf_vd_analytic(params))
     except ValueError:
         return float(hopf_vd(params))
+
+
+def _stick_slip_cycle(single: ChainParams, branch: Branch, hopf_vd: float, fold_vd: float,
+                      options: ShootingOptions):
+    """The single oscillator's stable cycle inside its bistable window, at v_d = 1.5
+    (the paper's scene) when the window holds it, else at the window's middle:
+    shooting from the stable point of the continued branch nearest to that v_d."""
+    v_d = 1.5 if hopf_vd < 1.5 < fold_vd else 0.5 * (hopf_vd + fold_vd)
+    p = np.asarray(branch.p)[np.asarray(branch.converged)]
+    stable = np.flatnonzero(np.asarray(branch.stable))
+    if stable.size == 0:
+        raise RuntimeError("no stable cycle on the single oscillator's branch to start the "
+                           "chain's stick-slip states from")
+    nearest = stable[np.argmin(np.abs(p[stable] - v_d))]
+    y0, period = unpack(np.asarray(branch.u)[np.asarray(branch.converged)][nearest])
+    return periodic_orbit(with_parameter(single, "v_d", v_d), y0, float(period), options)
 
 
 def _ring_state(params: ChainParams, single, kind: str, options, progress):
@@ -235,8 +251,8 @@ def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
             "hopf_omega_range": [float(np.min(ring_hopf.omega)), float(np.max(ring_hopf.omega))],
         }
         if params.n_osc % 2 == 0 and is_homogeneous_ring(params):
-            cycle = periodic_orbit(with_parameter(single, "v_d", 1.5),
-                                   jnp.array([[2.2], [0.0]]), 6.3, options)
+            cycle = _stick_slip_cycle(single, branch, float(hopf.v_d[0]), float(fold.p),
+                                      options)
             for kind in ("in-phase", "anti-phase"):
                 summary["ring"][kind], ring_branches[kind] = _ring_state(
                     params, cycle, kind, options, progress)

@@ -80,7 +80,7 @@ def make_case(what: str, value, options: SimulationOptions = OPTIONS) -> StressC
     if what == "n_osc":
         params = ChainParams(n_osc=int(value))
     elif what == "mu_st/mu_d":
-        params = with_parameter(params, "mu_st", float(value) * float(params.mu_d))
+        params = with_parameter(params, "mu_st", float(value) * float(params.friction.mu_d))
     elif what != "ics":
         params = with_parameter(params, what, float(value))
     n = params.n_osc

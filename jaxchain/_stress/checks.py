@@ -11,8 +11,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._bifurcation.hopf import growth_rates
-from .._physics.friction import friction_coefficient
+from .._physics.friction import Coulomb, ExponentialDecay, friction_coefficient
 from .._physics.model import mechanical_energy, split_vector_field, steady_sliding
+from .._physics.params import single_oscillator
 from .._nonsmooth.existence import stick_slip_existence_limit
 from .._observers.base import AbstractObserver
 from .._simulate import SPLIT_SOLVERS, integrate
@@ -175,12 +176,15 @@ def sliding_expected(params) -> str:
     oscillator's stick-slip cycle can exist at (`stick_slip_existence_limit`) with
     weak coupling (eta_c <= 0.01), at which steady sliding is also linearly
     stable."""
-    if float(params.mu_st) == float(params.mu_d):
+    law = params.friction
+    if isinstance(law, ExponentialDecay) and float(law.mu_st) == float(law.mu_d):
         return "mu_st = mu_d"
-    if float(params.eta_c) > 0.01 or linear_rate(params) >= 0:
+    if isinstance(law, Coulomb):
+        return "Coulomb friction"
+    if float(np.max(params.eta_c)) > 0.01 or linear_rate(params) >= 0:
         return ""
     try:
-        limit = stick_slip_existence_limit(params)
+        limit = stick_slip_existence_limit(single_oscillator(params))
     except ValueError:  # no Hopf point to bracket the limit from: claim nothing
         return ""
     if float(params.v_d) > 1.02 * limit:
