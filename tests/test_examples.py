@@ -24,6 +24,9 @@ SMALL = {
     "04_basin_stability.ipynb":
         ("N_OSC = 3\nSAMPLES = 8\nVD_ONE = (1.0, 2.1, 2)\nSAMPLES_ONE = 8\n"
          "T_END, TRANSIENT = 300.0, 200.0", "basin stability of stick-slip"),
+    "05_any_chain.ipynb":
+        ("N_OSC = 4\nSIGMA, SEED = 0.01, 1\nV_D = 1.2\nT_END, TRANSIENT = 300.0, 200.0",
+         "the stored chain rebuilds the same parameters: True"),
 }
 #: A cell that draws: it calls one of jaxchain's plot functions or plt.show().
 PLOTTING = re.compile(r"\bplt\.show\(|\bjc\.plot_\w+\(")
