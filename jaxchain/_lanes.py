@@ -155,7 +155,8 @@ def expected_cost(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"]
     return np.sqrt(np.sum((y0[:, 0] - x0) ** 2 + y0[:, 1] ** 2, -1))
 
 
-_steady_sliding_lanes = eqx.filter_jit(eqx.filter_vmap(steady_sliding))
+#: Steady sliding of each lane, op by op (no compilation per lane count).
+_steady_sliding_lanes = eqx.filter_vmap(steady_sliding)
 
 
 def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],

@@ -74,7 +74,7 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
                     options: SimulationOptions = BASIN_OPTIONS, n_check: int | None = None,
                     batch_size: int = 64, store: str | Path | None = None,
                     resume: bool = False, progress: bool = True) -> xr.Dataset:
-    """The basin stability of each state of the ring at each belt speed: the
+    """The basin stability of each state of the chain at each belt speed: the
     fraction of `n_samples` initial states, drawn uniformly from `box` with `key`,
     that end in it, with 95 % Wilson intervals.
 

@@ -1,4 +1,4 @@
-"""The mechanical energy of the ring over a window: its time mean and its maximum."""
+"""The mechanical energy of the chain over a window: its time mean and its maximum."""
 
 import equinox as eqx
 import jax
@@ -9,7 +9,7 @@ from .base import AbstractObserver, in_window, window_start
 
 
 class Energy(AbstractObserver):
-    """Time mean and maximum of the ring's kinetic plus elastic energy
+    """Time mean and maximum of the chain's kinetic plus elastic energy
     (`mechanical_energy`) over [t_start, t_end]: the actual vibration energy that
     the paper's E of eq. (9) (see `Extrema`) stands in for. Memory: 3 numbers.
 
