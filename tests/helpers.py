@@ -24,7 +24,7 @@ def reference_rhs(params: jc.ChainParams):
         for i in range(n):
             left, right = x[(i - 1) % n], x[(i + 1) % n]
             v_rel = v[i] - params.v_d
-            mu = params.friction.mu_d + (params.friction.mu_st - params.friction.mu_d) * np.exp(-abs(v_rel) / params.friction.v0)
+            mu = eq1_mu(params)(abs(v_rel))
             force = -mu * np.tanh(v_rel / params.eps)
             a[i] = (-2 * params.xi * v[i] - x[i]
                     - params.eta_c * (2 * x[i] - left - right) + force)

@@ -17,7 +17,8 @@ def test_friction_coefficient_limits():
     assert np.isclose(float(jc.friction_coefficient(p, 50.0)), p.friction.mu_d, rtol=1e-12)
     # eq. (1) at |v_rel| = v0: mu_d + (mu_st - mu_d)/e, on both sides
     expected = p.friction.mu_d + (p.friction.mu_st - p.friction.mu_d) / np.e
-    assert np.allclose(jc.friction_coefficient(p, jnp.array([-p.friction.v0, p.friction.v0])), expected)
+    v0 = p.friction.v0
+    assert np.allclose(jc.friction_coefficient(p, jnp.array([-v0, v0])), expected)
 
 
 def test_smoothed_force_tends_to_coulomb_law_away_from_zero():

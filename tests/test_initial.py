@@ -25,7 +25,8 @@ def test_excited_block_grows_around_oscillator_11():
 def test_eq8_and_eq10_values():
     p = jc.ChainParams(n_osc=4, v_d=1.5)
     mask = np.array([False, True, True, False])
-    mu = p.friction.mu_d + (p.friction.mu_st - p.friction.mu_d) * np.exp(-1.5 / p.friction.v0)  # F(-v_d) = mu(v_d)
+    law = p.friction
+    mu = law.mu_d + (law.mu_st - law.mu_d) * np.exp(-1.5 / law.v0)  # F(-v_d) = mu(v_d)
     y8 = jc.OutOfPhaseExcitation.eq8(mask)(p)
     assert np.allclose(y8[0], mu + np.array([0, 2, -2, 0]), rtol=1e-12)  # 2 (-1)^n
     assert np.all(y8[1] == 0)

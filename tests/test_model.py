@@ -43,7 +43,8 @@ def test_steady_sliding_eigenvalues_match_analytic_damping(n_osc, eps):
     p = jc.ChainParams(n_osc=n_osc, v_d=1.4, eps=eps)
     s = p.v_d
     mu = p.friction.mu_d + (p.friction.mu_st - p.friction.mu_d) * np.exp(-s / p.friction.v0)
-    slope = ((p.friction.mu_st - p.friction.mu_d) / p.friction.v0 * np.exp(-s / p.friction.v0) * np.tanh(s / eps)
+    law = p.friction
+    slope = ((law.mu_st - law.mu_d) / law.v0 * np.exp(-s / law.v0) * np.tanh(s / eps)
              - mu / np.cosh(s / eps) ** 2 / eps)
     damping = 2 * p.xi - slope
     k = np.arange(n_osc)

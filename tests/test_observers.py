@@ -67,7 +67,8 @@ def test_steady_sliding_exponent_is_half_the_effective_damping(solver):
     """Linearised about steady sliding every mode has the damping 2 xi - mu'(v_d)
     (DESIGN.md): the largest exponent is -(2 xi - mu'(v_d)) / 2 above the Hopf point."""
     params = jc.ChainParams(n_osc=3, v_d=1.5)
-    slope = (params.friction.mu_st - params.friction.mu_d) / params.friction.v0 * np.exp(-params.v_d / params.friction.v0)
+    law = params.friction
+    slope = (law.mu_st - law.mu_d) / law.v0 * np.exp(-params.v_d / law.v0)
     expected = -(2 * params.xi - slope) / 2
     options = jc.SimulationOptions(t_end=1200.0, transient=200.0, chunk_length=50.0)
     out = jc.observe(params, jc.steady_sliding(params), [jc.LargestLyapunov()],
