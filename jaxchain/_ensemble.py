@@ -1,10 +1,11 @@
 """Ensembles: the single-trajectory run over a grid of belt speeds and initial
 conditions, vmapped and spread over the devices (`run_lanes`)."""
 
+from typing import TYPE_CHECKING
+
 import diffrax
 import jax
 import numpy as np
-import xarray as xr
 from jaxtyping import ArrayLike, Float
 
 from ._checks import as_solver, belt_speeds, check_options, check_params
@@ -12,15 +13,17 @@ from ._physics.initial import AbstractInitialCondition, batch_length, initial_st
 from ._lanes import lane_params, run_lanes, take_lanes
 from ._options import SimulationOptions
 from ._physics.params import ChainParams, with_parameter
-from ._results import to_dataset
 from ._solvers import DEFAULT_SOLVER, SOLVERS
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 
 def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
              ics: AbstractInitialCondition,
              solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
              options: SimulationOptions = SimulationOptions(), *,
-             engine: str | None = None, progress: bool = True) -> xr.Dataset:
+             engine: str | None = None, progress: bool = True) -> "xr.Dataset":
     """Run every (belt speed, initial condition) pair of a grid, spread over the
     devices (on a CPU, one per core) by `run_lanes`. Trajectories never raise: each
     has a `status` (0 = ok, see `STATUS`), so one failing lane never discards the
@@ -74,6 +77,8 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     y0 = initial_states(lanes, take_lanes(ics, lanes_ic))
     obs = run_lanes(lanes, y0, solver, options, engine=engine, progress=progress)
     obs = jax.tree_util.tree_map(lambda x: x.reshape(v_d.size, n_ic, *x.shape[1:]), obs)
+    from ._results import to_dataset  # xarray, imported once the run is done
+
     return to_dataset(obs, params, v_d, ics, solver, options)
 
 

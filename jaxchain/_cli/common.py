@@ -3,12 +3,13 @@ line, the errors that `main` turns into one line and an exit status, and the sol
 table."""
 
 import argparse
+import importlib
 import math
 import sys
 import tempfile
+import threading
 from pathlib import Path
 
-import matplotlib.pyplot as plt
 import numpy as np
 
 from .._options import SimulationOptions
@@ -168,8 +169,22 @@ def writable_folder(path: Path) -> None:
         raise UsageError(f"--out {path}: cannot write there ({err.strerror})") from None
 
 
+def prefetch(*modules: str) -> None:
+    """Import `modules` in a background thread, so that their import (xarray and
+    matplotlib take a second or two) overlaps the run: XLA releases the GIL while it
+    compiles and integrates. The module that needs one imports it as usual, after the
+    run, and waits for the thread if it is still importing it."""
+    def load():
+        for name in modules:
+            importlib.import_module(name)
+
+    threading.Thread(target=load, name="jaxchain-prefetch", daemon=True).start()
+
+
 def save_figure(fig, path: Path, dpi: int = 150) -> None:
     """Write a pyplot figure to `path` and close it (a command makes several)."""
+    import matplotlib.pyplot as plt  # imported by the figure's maker already
+
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
 

@@ -10,14 +10,12 @@ import numpy as np
 from .._ensemble import ensemble
 from .._physics.initial import FAMILIES, localized_family
 from .._options import SimulationOptions
-from .._plots.localized import plot_localized_states
-from .._results import save_dataset
 from .._simulate import STATUS
 from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, add_model_options, add_output_options,
-                     add_run_options, json_ready, save_figure, show_progress,
-                     writable_folder)
+                     add_run_options, json_ready, prefetch, save_figure,
+                     show_progress, writable_folder)
 
 HELP = "localized states at one belt speed, N initial conditions (Fig. 4)"
 DESCRIPTION = """\
@@ -48,6 +46,7 @@ def add_parser(sub):
 
 
 def run(args) -> None:
+    prefetch("xarray", "matplotlib.pyplot")
     params = chain_params(args, args.n_osc, v_d=args.vd, eps=args.eps)
     options = SimulationOptions(t_end=args.t_end, transient=args.transient,
                                 rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
@@ -59,6 +58,9 @@ def run(args) -> None:
     start = time.perf_counter()
     ds = ensemble(params, [args.vd], ics, solver, options, progress=show_progress(args))
     wall = time.perf_counter() - start
+
+    from .._plots.localized import plot_localized_states
+    from .._results import save_dataset
 
     ds.attrs["ics_family"] = args.ics
     ds.attrs["wall_time_s"] = wall

@@ -1,22 +1,25 @@
 """Entry point of the `jaxchain` command. Every subcommand's failure ends here, as one
 line on stderr and an exit status; no command handles its own."""
 
+import importlib
 import os
 import sys
 
 import jax
-import matplotlib
 import platformdirs
 
-from . import (basin, boundaries, crosscheck, figure, localized, stress, sweep,
-               work_precision)
 from .common import Parser, RunsFailed, UsageError, one_line, usage_message
 
-COMMANDS = (localized, sweep, figure, crosscheck, work_precision, boundaries, stress,
-            basin)
+#: The subcommands, each a module of this package with `add_parser(sub)`.
+COMMANDS = ("localized", "sweep", "figure", "crosscheck", "work-precision", "boundaries",
+            "stress", "basin")
 
 
-def build_parser() -> Parser:
+def build_parser(commands=COMMANDS) -> Parser:
+    """The parser of the command line with the subcommands `commands` (all of them
+    by default). A command's module is imported only here, so that a run loads only
+    its own command's dependencies (`main` builds the parser of the one command
+    named on its command line)."""
     parser = Parser(
         prog="jaxchain",
         description="Simulate rings of friction-excited oscillators (eq. (5) of "
@@ -29,8 +32,9 @@ def build_parser() -> Parser:
                "(platformdirs.user_cache_dir('jaxchain')/xla). "
                "JAXCHAIN_TRACEBACK=1 shows a failure's traceback.")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
-    for command in COMMANDS:
-        command.add_parser(sub)
+    for command in commands:
+        module = importlib.import_module("." + command.replace("-", "_"), __package__)
+        module.add_parser(sub)
     return parser
 
 
@@ -79,12 +83,19 @@ def main(argv=None) -> int:
     when interrupted. A failure is one line on stderr, never a traceback (set
     JAXCHAIN_TRACEBACK=1 to let the exception through).
     """
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    named = [a for a in argv if a in COMMANDS][:1]
+    parser = build_parser(named if named and argv[0] == named[0] else COMMANDS)
     args = parser.parse_args(argv)
     if args.command is None:
         parser.error("a COMMAND is required (see jaxchain --help)")
-    if not os.environ.get("MPLBACKEND"):
-        matplotlib.use("Agg")  # the commands write figures to files, with no window
+    set_backend = not os.environ.get("MPLBACKEND")
+    if set_backend:
+        # The commands write figures to files, with no window: Agg, set before
+        # matplotlib is imported (only the modules that draw import it), or switched.
+        os.environ["MPLBACKEND"] = "Agg"
+        if "matplotlib" in sys.modules:
+            sys.modules["matplotlib"].use("Agg")
     compilation_cache()
     try:
         args.run(args)
@@ -95,6 +106,9 @@ def main(argv=None) -> int:
         if os.environ.get("JAXCHAIN_TRACEBACK"):
             raise
         status, message = exit_status(err)
+    finally:
+        if set_backend:
+            del os.environ["MPLBACKEND"]
     print(f"jaxchain {args.command}: error: {message}", file=sys.stderr)
     return status
 
