@@ -9,7 +9,8 @@ resident memory after importing jaxchain and the peak resident memory, the XLA_F
 in effect.
 
 With --fig4, it runs the Fig. 4 ensemble instead (eq. (8) k = 1..20 at v_d = 1.5,
-`--engine`, `--solver`, `--rtol`, `--atol`), twice, and prints the first (compiling)
+`--engine`, `--solver`, `--rtol`, `--atol`, `--controller`; another belt speed
+with `--vd`), twice, and prints the first (compiling)
 and second wall times, the steps, n_HALC and E of each trajectory.
 """
 
@@ -58,6 +59,8 @@ def main() -> None:
     p.add_argument("--engine", default=None, help="queue or vmap (with --fig4)")
     p.add_argument("--rtol", type=float, default=None)
     p.add_argument("--atol", type=float, default=None)
+    p.add_argument("--controller", default=None, help="a name of CONTROLLERS (with --fig4)")
+    p.add_argument("--vd", type=float, default=1.5, help="belt speed (with --fig4)")
     args = p.parse_args()
 
     import jax
@@ -93,20 +96,22 @@ def main() -> None:
 
 
 def _fig4(args, jc) -> None:
-    tols = {k: v for k, v in (("rtol", args.rtol), ("atol", args.atol)) if v is not None}
+    tols = {k: v for k, v in (("rtol", args.rtol), ("atol", args.atol),
+                              ("controller", args.controller)) if v is not None}
     options = jc.SimulationOptions(t_end=args.t_end, transient=args.transient, **tols)
     solver = jc.SOLVERS[args.solver or jc.DEFAULT_SOLVER]()
     walls = []
     for _ in range(2):
         start = time.perf_counter()
-        ds = jc.ensemble(jc.ChainParams(n_osc=args.n_osc, v_d=1.5), [1.5],
+        ds = jc.ensemble(jc.ChainParams(n_osc=args.n_osc, v_d=args.vd), [args.vd],
                          jc.localized_family(args.n_osc), solver, options,
                          engine=args.engine, progress=False)
         walls.append(time.perf_counter() - start)
     row = ds.isel(v_d=0)
     print(json.dumps(dict(
         solver=type(solver).__name__, engine=args.engine, rtol=options.rtol,
-        atol=options.atol, first_s=walls[0], warm_s=walls[1],
+        atol=options.atol, controller=options.controller, v_d=args.vd, first_s=walls[0],
+        warm_s=walls[1],
         steps=int(row["num_steps"].sum()), n_halc=row["n_halc"].values.tolist(),
         energy=row["energy"].values.tolist(), status=row["status"].values.tolist(),
         xla_flags=os.environ.get("XLA_FLAGS"))))

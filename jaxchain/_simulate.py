@@ -12,6 +12,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from ._checks import as_solver, check_options, check_params
+from ._controller import step_size_controller
 from ._custom_types import State
 from ._hints import failure_hint
 from ._physics.initial import AbstractInitialCondition, GivenState
@@ -147,8 +148,7 @@ def _advance(terms_, solver, args, options, observers, progress, tangent, carry,
             terms_, solver, t0, t1, None, y, args,
             saveat=diffrax.SaveAt(subs=subs, solver_state=True, controller_state=True,
                                   made_jump=True),
-            stepsize_controller=diffrax.PIDController(rtol=options.rtol,
-                                                      atol=options.atol),
+            stepsize_controller=step_size_controller(options),
             max_steps=options.max_steps, throw=False,
             solver_state=solver_state, controller_state=controller_state,
             made_jump=made_jump,

@@ -17,6 +17,7 @@ from scipy.integrate import solve_ivp
 from ._physics.initial import OutOfPhaseExcitation, excited_block
 from ._nonsmooth.options import NonsmoothOptions
 from ._nonsmooth.solve import simulate_nonsmooth
+from ._controller import CONTROLLERS
 from ._options import SimulationOptions
 from ._physics.model import vector_field
 from ._physics.params import ChainParams
@@ -92,14 +93,21 @@ def _reference_options(scene: Scene, rtol: float) -> tuple[NonsmoothOptions, ...
             NonsmoothOptions(t_end=scene.window, transient=0.0, rtol=rtol, atol=rtol))
 
 
-def _diffrax_options(scene: Scene, rtol: float, max_steps: int
+def split_method(method: str) -> tuple[str, str]:
+    """The solver and the step-size controller of a method name "SOLVER" (the
+    default controller) or "SOLVER/CONTROLLER", for example "ros34pw2/diffrax"."""
+    solver, _, controller = method.partition("/")
+    return solver, controller or SimulationOptions().controller
+
+
+def _diffrax_options(scene: Scene, rtol: float, max_steps: int, controller: str
                      ) -> tuple[SimulationOptions, ...]:
     """The options of a smoothed observables run and of its trajectory run, atol =
     rtol / 100. The tolerances are traced, so each solver compiles once per scene."""
-    tol = {"rtol": jnp.asarray(rtol), "atol": jnp.asarray(rtol / 100)}
-    return (SimulationOptions(t_end=scene.t_end, transient=scene.transient,
-                              max_steps=max_steps, **tol),
-            SimulationOptions(t_end=scene.window, transient=0.0, max_steps=max_steps, **tol))
+    tol = {"rtol": jnp.asarray(rtol), "atol": jnp.asarray(rtol / 100),
+           "controller": controller, "max_steps": max_steps}
+    return (SimulationOptions(t_end=scene.t_end, transient=scene.transient, **tol),
+            SimulationOptions(t_end=scene.window, transient=0.0, **tol))
 
 
 def reference(scene: Scene, rtol: float = REFERENCE_RTOL, timed: bool = False
@@ -144,19 +152,20 @@ def _timed(fn):
     return out, time.perf_counter() - start
 
 
-def diffrax_point(scene: Scene, ref: Reference, solver_name: str, eps: float, rtol: float,
+def diffrax_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: float,
                   max_steps: int) -> dict:
     """One smoothed run of `scene` (observables, then the trajectory window) with a
-    diffrax solver. rtol, atol = rtol / 100 and eps are traced, so each solver
-    compiles once per scene; `compile_s` is the compilation time of this call (0
-    once compiled)."""
+    diffrax solver and a step-size controller (`method`, see `split_method`). rtol,
+    atol = rtol / 100 and eps are traced, so each method compiles once per scene;
+    `compile_s` is the compilation time of this call (0 once compiled)."""
     p = scene.params(jnp.asarray(eps))
     y0 = jnp.asarray(scene.y0())
-    observe, short = _diffrax_options(scene, rtol, max_steps)
+    solver_name, controller = split_method(method)
+    observe, short = _diffrax_options(scene, rtol, max_steps, controller)
     solver = SOLVERS[solver_name]()
     compile_s = 0.0
     for opt in (observe, short):
-        key = (solver_name, opt.t_end, opt.transient, scene.n_osc, max_steps)
+        key = (method, opt.t_end, opt.transient, scene.n_osc, max_steps)
         if key not in _compiled:
             start = time.perf_counter()
             _diffrax_run.lower(p, y0, solver, opt).compile()
@@ -239,7 +248,8 @@ def row_settings(scene: Scene, method: str, eps: float, rtol: float, *,
     **Arguments:**
 
     - `scene`: the scene.
-    - `method`: a name in `SOLVERS`, "scipy <method>" or "reference".
+    - `method`: a name in `SOLVERS` (optionally "/" and a name in `CONTROLLERS`),
+        "scipy <method>" or "reference".
     - `eps`, `rtol`: the point of the grid.
     - `max_steps`, `scipy_budget_s`: as for `work_precision`.
 
@@ -256,8 +266,9 @@ def row_settings(scene: Scene, method: str, eps: float, rtol: float, *,
         return out | {"solve_ivp": method.removeprefix("scipy "), "rtol": rtol,
                       "atol": rtol / 100, "budget_s": scipy_budget_s,
                       "sample_dt": SCIPY_SAMPLE_DT}
-    return out | {"solver": SOLVERS[method](),
-                  "options": _diffrax_options(scene, rtol, max_steps)}
+    solver_name, controller = split_method(method)
+    return out | {"solver": SOLVERS[solver_name](),
+                  "options": _diffrax_options(scene, rtol, max_steps, controller)}
 
 
 def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
@@ -291,7 +302,9 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
 
     - `path`: the CSV file (columns `COLUMNS`).
     - `scenes`: names in `SCENES`.
-    - `solvers`: names in `SOLVERS`.
+    - `solvers`: names in `SOLVERS`, each optionally followed by "/" and a
+        step-size controller of `CONTROLLERS` ("ros34pw2/diffrax"); without one,
+        the default controller.
     - `rtols`, `eps`: the grid; atol = rtol / 100.
     - `scipy`, `reference_points`: include the outside points.
     - `max_steps`: step budget per chunk of 250 time units.
@@ -312,8 +325,11 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
         if name not in SCENES:
             raise ValueError(f"scene must be one of {sorted(SCENES)}, got {name!r}")
     for name in solvers:
-        if name not in SOLVERS:
-            raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {name!r}")
+        solver_name, controller = split_method(name)
+        if solver_name not in SOLVERS or controller not in CONTROLLERS:
+            raise ValueError(f"solver must be one of {sorted(SOLVERS)}, optionally "
+                             f"followed by /CONTROLLER with CONTROLLER one of "
+                             f"{sorted(CONTROLLERS)}, got {name!r}")
     rtols, eps = sorted(rtols, reverse=True), sorted(eps, reverse=True)
     rows: list[dict] = []
     with CsvStore(path, COLUMNS) as store:

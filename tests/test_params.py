@@ -28,7 +28,7 @@ def test_invalid_parameter_raises_value_error_naming_field(field, value):
     ({"t_end": 0.0}, "t_end"), ({"transient": -1.0}, "transient"),
     ({"t_end": 100.0, "transient": 100.0}, "transient"), ({"rtol": 0.0}, "rtol"),
     ({"atol": math.nan}, "atol"), ({"sample_dt": -0.1}, "sample_dt"),
-    ({"max_steps": 0}, "max_steps"),
+    ({"max_steps": 0}, "max_steps"), ({"controller": "pid"}, "controller"),
 ])
 def test_invalid_option_raises_value_error_naming_field(kwargs, field):
     with pytest.raises(ValueError, match=f"SimulationOptions.{field}"):

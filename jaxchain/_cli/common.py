@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._controller import CONTROLLERS
 from .._options import SimulationOptions
 from .._physics.params import ChainParams
 from .._solvers import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
@@ -23,6 +24,7 @@ OPTION_NAMES = {
     "ChainParams.xi": "--xi",
     "SimulationOptions.t_end": "--t-end", "SimulationOptions.transient": "--transient",
     "SimulationOptions.rtol": "--rtol", "SimulationOptions.atol": "--atol",
+    "SimulationOptions.controller": "--controller",
     "SimulationOptions.max_steps": "--max-steps", "batch_size": "--batch-size",
     "NonsmoothOptions.rtol": "--ref-rtol", "NonsmoothOptions.atol": "--ref-rtol",
     "NonsmoothOptions.t_end": "--t-end", "NonsmoothOptions.transient": "--transient",
@@ -103,7 +105,7 @@ def add_ring_options(g, *, n_osc: int = 20) -> None:
 
 
 def add_run_options(p: argparse.ArgumentParser) -> None:
-    """--t-end, --transient, --solver, --rtol, --atol, --max-steps."""
+    """--t-end, --transient, --solver, --rtol, --atol, --controller, --max-steps."""
     g = p.add_argument_group("integration")
     g.add_argument("--t-end", type=positive_float, default=15000.0, metavar="T",
                    help="final time, in units of 1/omega_n (default 15000, as the paper)")
@@ -115,12 +117,22 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
                         "diagonal friction Jacobian); kencarp* are IMEX, with the "
                         "friction force implicit; auto takes tsit5 where mu_st/eps <= "
                         "100 and ros34pw2 elsewhere")
+    add_tolerance_options(g)
+    g.add_argument("--max-steps", type=positive_int, default=200_000,
+                   help="step budget per chunk of 250 time units (default 200000)")
+
+
+def add_tolerance_options(g) -> None:
+    """--rtol, --atol and --controller, in the argument group (or parser) `g`."""
     g.add_argument("--rtol", type=positive_float, default=DEFAULTS.rtol,
                    help=f"relative tolerance (default {DEFAULTS.rtol:g})")
     g.add_argument("--atol", type=positive_float, default=DEFAULTS.atol,
                    help=f"absolute tolerance (default {DEFAULTS.atol:g})")
-    g.add_argument("--max-steps", type=positive_int, default=200_000,
-                   help="step budget per chunk of 250 time units (default 200000)")
+    g.add_argument("--controller", choices=list(CONTROLLERS), default=DEFAULTS.controller,
+                   help=f"step-size controller (default {DEFAULTS.controller}: a PI "
+                        "controller that may shrink after an accepted step and, after "
+                        "two rejections, uses the order the error showed; diffrax: "
+                        "diffrax's integral controller, jaxchain 0.2's)")
 
 
 def add_output_options(p: argparse.ArgumentParser) -> None:

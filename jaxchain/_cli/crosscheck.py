@@ -75,7 +75,8 @@ def run(args) -> None:
     for vd in args.vd:
         with_parameter(params, "v_d", vd)  # validates every belt speed now
     options = SimulationOptions(t_end=args.t_end, transient=args.transient,
-                                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+                                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps,
+                                controller=args.controller)
     ref_options = NonsmoothOptions(t_end=args.t_end, transient=args.transient,
                                    rtol=args.ref_rtol, atol=args.ref_rtol)
     writable_folder(args.out)

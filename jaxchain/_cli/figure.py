@@ -20,8 +20,8 @@ from .._results import save_dataset
 from .._simulate import STATUS
 from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (DEFAULT_SOLVER, DEFAULTS, SOLVERS, RunsFailed, add_output_options,
-                     json_ready, param_default, positive_float, save_figure,
+from .common import (DEFAULT_SOLVER, SOLVERS, RunsFailed, add_output_options,
+                     add_tolerance_options, json_ready, param_default, positive_float, save_figure,
                      show_progress, writable_folder)
 
 #: Each figure: its belt speed, initial conditions and what it shows.
@@ -77,10 +77,7 @@ def add_parser(sub):
     g.add_argument("--solver", choices=sorted(SOLVERS) + ["auto"], default=DEFAULT_SOLVER,
                    help=f"diffrax solver (default {DEFAULT_SOLVER})")
     add_chain_options(g)
-    g.add_argument("--rtol", type=positive_float, default=DEFAULTS.rtol,
-                   help=f"relative tolerance (default {DEFAULTS.rtol:g})")
-    g.add_argument("--atol", type=positive_float, default=DEFAULTS.atol,
-                   help=f"absolute tolerance (default {DEFAULTS.atol:g})")
+    add_tolerance_options(g)
     add_output_options(p)
     p.set_defaults(run=run)
     return p
@@ -114,7 +111,7 @@ def run(args) -> None:
     v_d, ics, _ = FIGURES[args.name]
     params = chain_params(args, size["n_osc"], v_d=v_d, eps=args.eps)
     options = SimulationOptions(t_end=size["t_end"], transient=size["transient"],
-                                rtol=args.rtol, atol=args.atol,
+                                rtol=args.rtol, atol=args.atol, controller=args.controller,
                                 chunk_length=size["chunk_length"])
     writable_folder(args.out)
     solver = args.solver

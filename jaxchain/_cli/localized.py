@@ -49,7 +49,8 @@ def run(args) -> None:
     prefetch("xarray", "matplotlib.pyplot")
     params = chain_params(args, args.n_osc, v_d=args.vd, eps=args.eps)
     options = SimulationOptions(t_end=args.t_end, transient=args.transient,
-                                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+                                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps,
+                                controller=args.controller)
     writable_folder(args.out)
     solver = args.solver
     ics = localized_family(params.n_osc, args.ics, params.boundary)

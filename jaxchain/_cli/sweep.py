@@ -108,7 +108,8 @@ def add_parser(sub):
 def run(args) -> None:
     params = chain_params(args, args.n_osc, eps=args.eps)
     options = SimulationOptions(t_end=args.t_end, transient=args.transient,
-                                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+                                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps,
+                                controller=args.controller)
     if args.resume and args.overwrite:
         raise ValueError("--resume and --overwrite exclude each other")
     writable_folder(args.out)

@@ -6,10 +6,11 @@ import json
 import time
 from pathlib import Path
 
+from .._controller import CONTROLLERS
 from .._plots.work_precision import plot_work_precision
 from .._solvers import SOLVERS
 from .._work_precision import (SCENES, WP_EPS, WP_RTOLS, WP_SOLVERS, recommend,
-                               work_precision)
+                               split_method, work_precision)
 from .common import (RunsFailed, UsageError, comma_list, json_ready, positive_int,
                      save_figure, writable_folder)
 
@@ -40,8 +41,10 @@ def add_parser(sub):
     p.add_argument("--scenes", type=comma_list(str), default=list(SCENES), metavar="S,S",
                    help=f"scenes (default {','.join(SCENES)})")
     p.add_argument("--solvers", type=comma_list(str), default=list(WP_SOLVERS), metavar="S,...",
-                   help=f"diffrax solvers, of {','.join(SOLVERS)} (default "
-                        f"{','.join(WP_SOLVERS)})")
+                   help=f"diffrax solvers, of {','.join(SOLVERS)}, each optionally "
+                        f"with /CONTROLLER, of {','.join(CONTROLLERS)}, for example "
+                        f"ros34pw2/diffrax (default {','.join(WP_SOLVERS)}, with the "
+                        f"default controller, pi)")
     p.add_argument("--rtols", type=comma_list(float), default=list(WP_RTOLS), metavar="R,...",
                    help="relative tolerances (default 1e-3,...,1e-10)")
     p.add_argument("--eps", type=comma_list(float), default=list(WP_EPS), metavar="E,...",
@@ -64,9 +67,11 @@ def run(args) -> None:
             raise UsageError(f"--scenes: unknown scene {name!r} (choose from "
                              f"{', '.join(SCENES)})")
     for name in args.solvers:
-        if name not in SOLVERS:
+        solver, controller = split_method(name)
+        if solver not in SOLVERS or controller not in CONTROLLERS:
             raise UsageError(f"--solvers: unknown solver {name!r} (choose from "
-                             f"{', '.join(SOLVERS)})")
+                             f"{', '.join(SOLVERS)}, each optionally with /CONTROLLER, "
+                             f"one of {', '.join(CONTROLLERS)})")
     for option, values in (("--rtols", args.rtols), ("--eps", args.eps)):
         if not values or not all(0 < v < 1 for v in values):
             raise UsageError(f"{option}: values must lie in (0, 1), got {values}")
