@@ -194,10 +194,21 @@ def test_installed_command_table_and_usage_error(tmp_path):
     off elsewhere in the tests), which holds no host callback."""
     cache = tmp_path / "cache"
     env = dict(os.environ, JAXCHAIN_CACHE_DIR=str(cache))
-    run = subprocess.run([SCRIPT, "localized", *SMALL, "--out", str(tmp_path)],
-                         capture_output=True, text=True, env=env)
-    assert run.returncode == 0, run.stderr
-    assert any(p.name.startswith("jit__run_block") for p in cache.iterdir())
+    results = []
+    for folder, use in (("cold", str(cache)), ("warm", str(cache)), ("off", "")):
+        run = subprocess.run([SCRIPT, "localized", *SMALL, "--out", str(tmp_path / folder)],
+                             capture_output=True, text=True,
+                             env=dict(env, JAXCHAIN_CACHE_DIR=use))
+        assert run.returncode == 0, run.stderr
+        results.append(xr.load_dataset(next((tmp_path / folder).glob("*.nc"))))
+        if folder == "cold":  # the traced program is kept beside the compiled one
+            assert len(list((cache / "traced").glob("*.jaxexport"))) == 1
+            assert any(p.name.startswith("jit_call") for p in cache.iterdir())
+    # the kept program (cold: just traced, warm: read back) is the program that
+    # `_run_block` compiles without the cache: bitwise the same results
+    for name in ("energy", "amplitudes", "y_final", "n_halc", "num_steps"):
+        assert all(np.array_equal(r[name].values, results[2][name].values, equal_nan=True)
+                   for r in results[:2]), name
     lines = run.stdout.splitlines()
     assert lines[1].split()[:3] == ["n_excited", "n_HALC", "E"]
     assert len(lines) == 2 + 3 + 1

@@ -8,6 +8,7 @@ import sys
 import jax
 import platformdirs
 
+from .._programs import keep_programs
 from .common import Parser, RunsFailed, UsageError, one_line, usage_message
 
 #: The subcommands, each a module of this package with `add_parser(sub)`.
@@ -56,7 +57,8 @@ def compilation_cache() -> str | None:
     (platformdirs.user_cache_dir("jaxchain")/xla). JAXCHAIN_CACHE_DIR set to an
     empty string turns it off. Programs are cached when their compilation took
     0.5 s or more; jaxchain's compiled runs hold no host callbacks, which JAX
-    never caches.
+    never caches. The traced integration is kept beside them, in the folder
+    `traced` (`keep_programs`), so that a warm start neither traces nor compiles it.
 
     **Returns:**
 
@@ -69,6 +71,7 @@ def compilation_cache() -> str | None:
         return None
     jax.config.update("jax_compilation_cache_dir", folder)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+    keep_programs(os.path.join(folder, "traced"))
     return folder
 
 
