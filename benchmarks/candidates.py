@@ -5,10 +5,12 @@ diagram and on the scene itself.
                                     [--scene-rtol 3e-5] [--only NAME,...]
 
 A candidate is a solver and a step-size controller (a method "SOLVER/CONTROLLER" of
-the work-precision study). Besides the package's ROS34PW2 with its PI controller
-(`pi`, the default) and with diffrax's integral controller (`diffrax`, the default up
-to jaxchain 0.2), the candidates tried for issue 24 are defined here and registered
-in `SOLVERS` and `CONTROLLERS` for this process only:
+the work-precision study). Besides the package's ROS34PW2 (2 x 2 block W per
+oscillator, the default) and its diagonal-W form (`ros34pw2-diagonal`, jaxchain
+0.2's solver), with the package's PI controller (`pi`, the default) or diffrax's
+integral controller (`diffrax`, jaxchain 0.2's), the candidates tried for issue 24
+are defined here and registered in `SOLVERS` and `CONTROLLERS` for this process
+only:
 
 - controllers: diffrax's PID controller with PI coefficients (`diffrax-pi`, pcoeff
   0.3, icoeff 0.4), and the package's controller with pure integral control
@@ -18,17 +20,18 @@ in `SOLVERS` and `CONTROLLERS` for this process only:
   Section IV.8), which discounts the error of the stuck oscillators' stiff velocity;
 - the W matrix: -|d| in place of min(d, 0), so that velocity weakening is damped
   too (`ros34pw2-absw`); the secant slope of the friction force over the last step
-  where it is stiffer than the tangent (`ros34pw2-secant`); the 2 x 2 block of each
-  oscillator, (x, x') with its own spring (`ros34pw2-block`). A W-method keeps its
-  order for any W, so each is still of order 3.
+  where it is stiffer than the tangent (`ros34pw2-secant`), both on the diagonal W;
+  and the 2 x 2 block of each oscillator, (x, x') with its own spring, now the
+  package's `ros34pw2`. A W-method keeps its order for any W, so each is still of
+  order 3.
 
 Writes DIR/work_precision.csv and DIR/work_precision_chain.png (the chain scene of
 `jaxchain work-precision`, eps = 1e-3, against the non-smooth reference) and
 DIR/candidates.md and DIR/candidates.json: for every candidate the steps and wall
 time of the Fig. 4 scene (N = 20, v_d = 1.5, k = 1..20, t_end 15000, transient
-10000) at `--scene-rtol`, with the old default (ros34pw2/diffrax at rtol 1e-5)
-as baseline in the same run, and whether the staircase n_HALC = 1..18, 20, 20
-holds. About 10 minutes on 2 cores.
+10000) at `--scene-rtol`, with jaxchain 0.2's default (ros34pw2-diagonal/diffrax at
+rtol 1e-5) as baseline in the same run, and whether the staircase n_HALC = 1..18, 20, 20
+holds. About 15 minutes on 2 cores (each scene runs twice: the first call compiles).
 """
 
 import argparse
@@ -39,13 +42,14 @@ import time
 from pathlib import Path
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 import jaxchain as jc
 from jaxchain._controller import CONTROLLERS, PIController
 from jaxchain._plots.work_precision import plot_work_precision
-from jaxchain._rosenbrock import _A, _C, _GAMMA, _M, _M_ERROR, Ros34PW2, _evaluate
+from jaxchain._rosenbrock import _GAMMA, Ros34PW2
 from jaxchain._solvers import SOLVERS
 from jaxchain._work_precision import work_precision
 
@@ -54,7 +58,9 @@ EXPECTED = list(range(1, 19)) + [20, 20]
 
 
 class Filtered(Ros34PW2):
-    """ROS34PW2 with its error estimate filtered by (I - h gamma D)^-1."""
+    """ROS34PW2 (diagonal W) with its error estimate filtered by (I - h gamma D)^-1."""
+
+    block: bool = eqx.field(static=True, default=False)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         y1, err, dense, state, result = super().step(terms, t0, t1, y0, args,
@@ -64,102 +70,70 @@ class Filtered(Ros34PW2):
 
 
 class AbsW(Ros34PW2):
-    """ROS34PW2 with W from -|d|."""
+    """ROS34PW2 (diagonal W) with W from -|d|."""
+
+    block: bool = eqx.field(static=True, default=False)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        f0, d0 = solver_state
-        return super().step(terms, t0, t1, y0, args, (f0, -jnp.abs(d0)), made_jump)
+        f0, d0, spring = solver_state
+        return super().step(terms, t0, t1, y0, args, (f0, -jnp.abs(d0), spring), made_jump)
 
 
 class SecantW(Ros34PW2):
-    """ROS34PW2 with W from the stiffer of the tangent slope at y0 and the secant
-    slope of the stiff term over the last step."""
+    """ROS34PW2 (diagonal W) with W from the stiffer of the tangent slope at y0 and
+    the secant slope of the stiff term over the last step."""
+
+    block: bool = eqx.field(static=True, default=False)
 
     def init(self, terms, t0, t1, y0, args):
-        f, d = _evaluate(terms, t0, y0, args)
-        return f, d, jnp.zeros_like(d)
+        f, d, spring = super().init(terms, t0, t1, y0, args)
+        return f, d, spring, jnp.zeros_like(d)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        f0, d0, secant = solver_state
-        y1, err, dense, (f1, d1), result = super().step(
-            terms, t0, t1, y0, args, (f0, jnp.minimum(d0, secant)), made_jump)
+        f0, d0, spring, secant = solver_state
+        y1, err, dense, (f1, d1, _), result = super().step(
+            terms, t0, t1, y0, args, (f0, jnp.minimum(d0, secant), spring), made_jump)
         stiff = terms.terms[1]
         dy = y1 - y0
         moved = jnp.abs(dy) > 1e-14
         slope = (stiff.vf(t1, y1, args) - stiff.vf(t0, y0, args)) / jnp.where(moved, dy, 1.0)
-        return y1, err, dense, (f1, d1, jnp.minimum(jnp.where(moved, slope, 0.0), 0.0)), result
-
-
-class BlockW(Ros34PW2):
-    """ROS34PW2 with W built from the 2 x 2 block of each oscillator: dx'/dv = 1,
-    dv'/dx = c (the spring, from a JVP of the whole field with a tangent of ones
-    on x) and dv'/dv = min(d, 0) (friction). The state is (x, x') of shape (2, N)."""
-
-    def init(self, terms, t0, t1, y0, args):
-        return self._evaluate(terms, t0, y0, args)
-
-    @staticmethod
-    def _evaluate(terms, t, y, args):
-        f, d = _evaluate(terms, t, y, args)
-        field = lambda z: sum(term.vf(t, z, args) for term in terms.terms)  # noqa: E731
-        _, jx = jax.jvp(field, (y,), (jnp.zeros_like(y).at[0].set(1.0),))
-        return f, d, jx[1]
-
-    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        f0, d0, c0 = solver_state
-        h = t1 - t0
-        a = 1.0 / (h * _GAMMA)
-        b = a - jnp.minimum(d0[1], 0.0)
-        det = a * b - c0
-
-        def solve(r):
-            return jnp.stack([(b * r[0] + r[1]) / det, (c0 * r[0] + a * r[1]) / det])
-
-        u = []
-        for i in range(4):
-            f = f0 if i == 0 else sum(t.vf(t0, y0 + sum(_A[i, j] * u[j] for j in range(i)
-                                                         if _A[i, j]), args)
-                                      for t in terms.terms)
-            u.append(solve(f + sum(_C[i, j] / h * u[j] for j in range(i))))
-        y1 = y0 + sum(_M[i] * u[i] for i in range(4))
-        y_error = sum(_M_ERROR[i] * u[i] for i in range(4))
-        state = self._evaluate(terms, t1, y1, args)
-        dense = dict(y0=y0, y1=y1, k=jnp.stack([h * f0, h * state[0]]))
-        return y1, y_error, dense, state, diffrax.RESULTS.successful
+        return (y1, err, dense, (f1, d1, spring, jnp.minimum(jnp.where(moved, slope, 0.0), 0.0)),
+                result)
 
 
 CANDIDATE_SOLVERS = {"ros34pw2-filtered": Filtered, "ros34pw2-absw": AbsW,
-                     "ros34pw2-secant": SecantW, "ros34pw2-block": BlockW}
+                     "ros34pw2-secant": SecantW}
 CANDIDATE_CONTROLLERS = {
     "diffrax-pi": functools.partial(diffrax.PIDController, pcoeff=0.3, icoeff=0.4),
     "pi-i": functools.partial(PIController, pcoeff=0.0, icoeff=1.0),
     "pi-34": functools.partial(PIController, pcoeff=0.3, icoeff=0.4),
     "pi-43": functools.partial(PIController, pcoeff=0.4, icoeff=0.3),
 }
-#: Every candidate, the baseline (the old default) first.
-METHODS = ("ros34pw2/diffrax", "ros34pw2/diffrax-pi", "ros34pw2/pi-i", "ros34pw2/pi-34",
-           "ros34pw2/pi-43", "ros34pw2", "ros34pw2-filtered", "ros34pw2-absw",
-           "ros34pw2-secant", "ros34pw2-block", "ros34pw2-block/diffrax")
-BASELINE = ("ros34pw2/diffrax", 1e-5)
+#: Every candidate, the baseline (jaxchain 0.2's solver and controller) first.
+METHODS = ("ros34pw2-diagonal/diffrax", "ros34pw2-diagonal/diffrax-pi",
+           "ros34pw2-diagonal/pi-i", "ros34pw2-diagonal/pi-34", "ros34pw2-diagonal/pi-43",
+           "ros34pw2-diagonal", "ros34pw2-filtered", "ros34pw2-absw", "ros34pw2-secant",
+           "ros34pw2/diffrax", "ros34pw2/pi-34", "ros34pw2")
+BASELINE = ("ros34pw2-diagonal/diffrax", 1e-5)
 
 
 def scene_run(method: str, rtol: float) -> dict:
     """The Fig. 4 scene with `method` at `rtol` (atol = rtol / 100): steps, wall time
-    after compilation, n_HALC and E."""
+    of a second call (the first compiles), n_HALC and E."""
     solver_name, _, controller = method.partition("/")
     options = jc.SimulationOptions(rtol=jnp.asarray(rtol), atol=jnp.asarray(rtol / 100),
                                    controller=controller or "pi")
     solver = SOLVERS[solver_name]()
     family = jc.localized_family(20)
-    run = functools.partial(jc.ensemble, jc.ChainParams(), [1.5], family, solver, options,
+    run = functools.partial(jc.ensemble, jc.ChainParams(), [1.5], family, solver,
                             progress=False)
     start = time.perf_counter()
-    run(options=jc.SimulationOptions(t_end=20.0, transient=10.0, rtol=options.rtol,
-                                     atol=options.atol, controller=options.controller))
+    run(options=options)  # compiles
     compile_s = time.perf_counter() - start
     start = time.perf_counter()
-    ds = run()
+    ds = run(options=options)
     wall = time.perf_counter() - start
+    compile_s -= wall
     n_halc = ds["n_halc"].values[0].tolist()
     return {"method": method, "rtol": rtol, "steps": int(ds["num_steps"].values.sum()),
             "wall_s": wall, "compile_s": compile_s, "n_halc": n_halc,

@@ -1,5 +1,7 @@
 """The diffrax solvers jaxchain offers by name (command line, work-precision study)."""
 
+import functools
+
 import diffrax
 import numpy as np
 import optimistix as optx
@@ -30,6 +32,7 @@ SOLVERS = {
     "kencarp4": _imex(diffrax.KenCarp4),
     "kencarp5": _imex(diffrax.KenCarp5),
     "ros34pw2": Ros34PW2,
+    "ros34pw2-diagonal": functools.partial(Ros34PW2, block=False),
 }
 
 #: The solver of `simulate`, `ensemble`, `crosscheck` and the commands when none is
