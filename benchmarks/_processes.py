@@ -200,16 +200,14 @@ def compare_cli(settings: Settings, env: dict, start: float) -> tuple[list[Row],
     process wall time: imports, compilation, run, netCDF and PNG writing. In the full
     run also the paper's main job, `jaxchain localized` with its defaults (targets:
     <= 10 s warm, <= 20 s cold), and the main job
-    at jaxchain 0.2's defaults (--solver ros34pw2-diagonal --rtol 1e-5 --atol 1e-7
-    --controller diffrax) as the
+    at jaxchain 0.2's defaults (--rtol 1e-5 --atol 1e-7 --controller diffrax) as the
     baseline of its second run."""
     jobs = [(["localized", "--n-osc", "20", "--t-end", "3000", "--transient", "2000"],
              "Fig. 4 at t_end 3000", None)]
     if settings.cli_main_job:
         jobs.append((["localized"], "main job (defaults)", (10.0, 20.0)))
-        jobs.append((["localized", "--solver", "ros34pw2-diagonal", "--rtol", "1e-5",
-                      "--atol", "1e-7", "--controller", "diffrax"],
-                     "main job at jaxchain 0.2's defaults", None))
+        jobs.append((["localized", "--rtol", "1e-5", "--atol", "1e-7", "--controller",
+                      "diffrax"], "main job at jaxchain 0.2's defaults", None))
     rows, raw = [], {}
     for args, label, targets in jobs:
         r = _cli_twice(args, env, start, label)

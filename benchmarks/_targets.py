@@ -9,10 +9,8 @@ import time
 from _common import PAPER_T_END, Row, Settings, fmt_ratio, fmt_time, progress
 from _processes import _child, _without_xla_flags
 
-#: jaxchain 0.2's defaults: ROS34PW2 with its diagonal W and diffrax's integral
-#: controller at rtol 1e-5.
-OLD_DEFAULTS = ("--solver", "ros34pw2-diagonal", "--rtol", "1e-5", "--atol", "1e-7",
-                "--controller", "diffrax")
+#: jaxchain 0.2's defaults: ROS34PW2 with diffrax's integral controller at rtol 1e-5.
+OLD_DEFAULTS = ("--rtol", "1e-5", "--atol", "1e-7", "--controller", "diffrax")
 #: Belt speeds of the Fig. 3(b) sweep (21 in [1, 2]).
 N_SWEEP_VDS = 21
 
@@ -54,8 +52,8 @@ def compare_targets(settings: Settings, env: dict, start: float) -> tuple[list[R
     sweep = {k: scale * sum(r["warm_s"] for r in runs[k].values()) for k in runs}
     rows = [
         Row("8. steps of the Fig. 4 scene (20 traj.)",
-            f"{old['steps']:,} (diagonal W, rtol 1e-5, diffrax's controller)",
-            f"{new['steps']:,} (block W, rtol {new['rtol']:g}, {new['controller']})",
+            f"{old['steps']:,} (rtol 1e-5, diffrax's controller)",
+            f"{new['steps']:,} (rtol {new['rtol']:g}, {new['controller']})",
             fmt_ratio(old["steps"] / new["steps"]),
             f"{horizon}; target <= half the baseline ({steps_target:,.0f}): "
             f"{'met' if new['steps'] <= steps_target else 'MISSED'}; staircase n_HALC = "

@@ -5,12 +5,10 @@ diagram and on the scene itself.
                                     [--scene-rtol 3e-5] [--only NAME,...]
 
 A candidate is a solver and a step-size controller (a method "SOLVER/CONTROLLER" of
-the work-precision study). Besides the package's ROS34PW2 (2 x 2 block W per
-oscillator, the default) and its diagonal-W form (`ros34pw2-diagonal`, jaxchain
-0.2's solver), with the package's PI controller (`pi`, the default) or diffrax's
-integral controller (`diffrax`, jaxchain 0.2's), the candidates tried for issue 24
-are defined here and registered in `SOLVERS` and `CONTROLLERS` for this process
-only:
+the work-precision study). Besides the package's ROS34PW2 (diagonal W) with its PI
+controller (`pi`, the default) and with diffrax's integral controller (`diffrax`,
+jaxchain 0.2's), the candidates tried for issue 24 are defined here and registered
+in `SOLVERS` and `CONTROLLERS` for this process only:
 
 - controllers: diffrax's PID controller with PI coefficients (`diffrax-pi`, pcoeff
   0.3, icoeff 0.4), and the package's controller with pure integral control
@@ -20,17 +18,16 @@ only:
   Section IV.8), which discounts the error of the stuck oscillators' stiff velocity;
 - the W matrix: -|d| in place of min(d, 0), so that velocity weakening is damped
   too (`ros34pw2-absw`); the secant slope of the friction force over the last step
-  where it is stiffer than the tangent (`ros34pw2-secant`), both on the diagonal W;
-  and the 2 x 2 block of each oscillator, (x, x') with its own spring, now the
-  package's `ros34pw2`. A W-method keeps its order for any W, so each is still of
-  order 3.
+  where it is stiffer than the tangent (`ros34pw2-secant`); and the 2 x 2 block of
+  each oscillator, (x, x') with its own spring (`ros34pw2-block`, `Ros34PW2(block=
+  True)`). A W-method keeps its order for any W, so each is still of order 3.
 
 Writes DIR/work_precision.csv and DIR/work_precision_chain.png (the chain scene of
 `jaxchain work-precision`, eps = 1e-3, against the non-smooth reference) and
 DIR/candidates.md and DIR/candidates.json: for every candidate the steps and wall
 time of the Fig. 4 scene (N = 20, v_d = 1.5, k = 1..20, t_end 15000, transient
-10000) at `--scene-rtol`, with jaxchain 0.2's default (ros34pw2-diagonal/diffrax at
-rtol 1e-5) as baseline in the same run, and whether the staircase n_HALC = 1..18, 20, 20
+10000) at `--scene-rtol`, with jaxchain 0.2's default (ros34pw2/diffrax at rtol
+1e-5) as baseline in the same run, and whether the staircase n_HALC = 1..18, 20, 20
 holds. About 15 minutes on 2 cores (each scene runs twice: the first call compiles).
 """
 
@@ -102,7 +99,8 @@ class SecantW(Ros34PW2):
 
 
 CANDIDATE_SOLVERS = {"ros34pw2-filtered": Filtered, "ros34pw2-absw": AbsW,
-                     "ros34pw2-secant": SecantW}
+                     "ros34pw2-secant": SecantW,
+                     "ros34pw2-block": functools.partial(Ros34PW2, block=True)}
 CANDIDATE_CONTROLLERS = {
     "diffrax-pi": functools.partial(diffrax.PIDController, pcoeff=0.3, icoeff=0.4),
     "pi-i": functools.partial(PIController, pcoeff=0.0, icoeff=1.0),
@@ -110,11 +108,11 @@ CANDIDATE_CONTROLLERS = {
     "pi-43": functools.partial(PIController, pcoeff=0.4, icoeff=0.3),
 }
 #: Every candidate, the baseline (jaxchain 0.2's solver and controller) first.
-METHODS = ("ros34pw2-diagonal/diffrax", "ros34pw2-diagonal/diffrax-pi",
-           "ros34pw2-diagonal/pi-i", "ros34pw2-diagonal/pi-34", "ros34pw2-diagonal/pi-43",
-           "ros34pw2-diagonal", "ros34pw2-filtered", "ros34pw2-absw", "ros34pw2-secant",
-           "ros34pw2/diffrax", "ros34pw2/pi-34", "ros34pw2")
-BASELINE = ("ros34pw2-diagonal/diffrax", 1e-5)
+METHODS = ("ros34pw2/diffrax", "ros34pw2/diffrax-pi",
+           "ros34pw2/pi-i", "ros34pw2/pi-34", "ros34pw2/pi-43",
+           "ros34pw2", "ros34pw2-filtered", "ros34pw2-absw", "ros34pw2-secant",
+           "ros34pw2-block/diffrax", "ros34pw2-block")
+BASELINE = ("ros34pw2/diffrax", 1e-5)
 
 
 def scene_run(method: str, rtol: float) -> dict:

@@ -29,6 +29,10 @@ class PIController(diffrax.PIDController):
     (`benchmarks/candidates.py`). The state carries diffrax's PID state and the
     error and step size of the last rejected attempt (0 after an accepted step).
     The step-size factor is not differentiated (`lax.stop_gradient`), as in diffrax.
+
+    At the default rtol 3e-5 it takes 10 % fewer steps than diffrax's controller on
+    the Fig. 4 scene; at tight tolerances (rtol 1e-7 to 1e-10, a ring of 6) it
+    takes 4-12 % more, as it shrinks after accepted steps that diffrax would keep.
     """
 
     pcoeff: float = 0.2

@@ -1,7 +1,5 @@
 """The diffrax solvers jaxchain offers by name (command line, work-precision study)."""
 
-import functools
-
 import diffrax
 import numpy as np
 import optimistix as optx
@@ -32,17 +30,16 @@ SOLVERS = {
     "kencarp4": _imex(diffrax.KenCarp4),
     "kencarp5": _imex(diffrax.KenCarp5),
     "ros34pw2": Ros34PW2,
-    "ros34pw2-diagonal": functools.partial(Ros34PW2, block=False),
 }
 
 #: The solver of `simulate`, `ensemble`, `crosscheck` and the commands when none is
 #: given. At the default eps = 1e-3 an explicit method's step size is bounded by the
 #: stiff stick phases rather than by accuracy (Bosh3 takes 44M steps on the Fig. 4
 #: scene at rtol 1e-5, 50M at 1e-6). ROS34PW2, linearly implicit in the diagonal
-#: friction Jacobian, is not: 15M steps at rtol 1e-5 with diffrax's controller, 11M
-#: at the default rtol 3e-5 with `PIController`, with the error of the eps floor
-#: (0.24 % on the work-precision chain scene), at about twice the cost per step
-#: (README, "Choice of eps and solver").
+#: friction Jacobian, is not: 10.8M steps at the default rtol 3e-5 with
+#: `PIController` (15M at jaxchain 0.2's rtol 1e-5 with diffrax's controller), with
+#: the error of the eps floor (0.24 % on the work-precision chain scene), at about
+#: twice the cost per step (README, "Choice of eps and solver").
 DEFAULT_SOLVER = "ros34pw2"
 
 #: The name that picks a solver from the parameters (`auto_solver`).
