@@ -200,14 +200,14 @@ def compare_cli(settings: Settings, env: dict, start: float) -> tuple[list[Row],
     process wall time: imports, compilation, run, netCDF and PNG writing. In the full
     run also the paper's main job, `jaxchain localized` with its defaults (targets:
     <= 10 s warm, <= 20 s cold), and the main job
-    at jaxchain 0.2's defaults (--rtol 1e-5 --atol 1e-7 --controller diffrax) as the
+    at the previous defaults (--rtol 1e-5 --atol 1e-7 --controller diffrax) as the
     baseline of its second run."""
     jobs = [(["localized", "--n-osc", "20", "--t-end", "3000", "--transient", "2000"],
              "Fig. 4 at t_end 3000", None)]
     if settings.cli_main_job:
         jobs.append((["localized"], "main job (defaults)", (10.0, 20.0)))
         jobs.append((["localized", "--rtol", "1e-5", "--atol", "1e-7", "--controller",
-                      "diffrax"], "main job at jaxchain 0.2's defaults", None))
+                      "diffrax"], "main job at the previous defaults", None))
     rows, raw = [], {}
     for args, label, targets in jobs:
         r = _cli_twice(args, env, start, label)
@@ -225,8 +225,8 @@ def compare_cli(settings: Settings, env: dict, start: float) -> tuple[list[Row],
                         f"{fmt_ratio(r['cold_s'] / r['warm_s'])} (cold / warm)",
                         f"`{r['command']}`, whole process; {cache}{verdict}{err}"))
     if settings.cli_main_job:
-        now, before = raw["main job (defaults)"], raw["main job at jaxchain 0.2's defaults"]
-        rows.append(Row("CLI main job, second run (warm): jaxchain 0.2's defaults / now",
+        now, before = raw["main job (defaults)"], raw["main job at the previous defaults"]
+        rows.append(Row("CLI main job, second run (warm): the previous defaults / now",
                         fmt_time(before["warm_s"]), fmt_time(now["warm_s"]),
                         fmt_ratio(before["warm_s"] / now["warm_s"]),
                         "whole process, same cache folder state (warm); target <= 10 s: "

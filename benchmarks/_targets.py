@@ -1,5 +1,5 @@
 """Comparison 8 of benchmarks/run.py: the targets of issue 24 (fewer steps, less
-fixed cost), each against jaxchain 0.2's defaults or a bare import measured in the
+fixed cost), each against the previous defaults or a bare import measured in the
 same run."""
 
 import subprocess
@@ -9,7 +9,7 @@ import time
 from _common import PAPER_T_END, Row, Settings, fmt_ratio, fmt_time, progress
 from _processes import _child, _without_xla_flags
 
-#: jaxchain 0.2's defaults: ROS34PW2 with diffrax's integral controller at rtol 1e-5.
+#: the previous defaults: ROS34PW2 with diffrax's integral controller at rtol 1e-5.
 OLD_DEFAULTS = ("--rtol", "1e-5", "--atol", "1e-7", "--controller", "diffrax")
 #: Belt speeds of the Fig. 3(b) sweep (21 in [1, 2]).
 N_SWEEP_VDS = 21
@@ -28,7 +28,7 @@ def _import_time(code: str, env: dict, repeats: int = 3) -> float:
 def compare_targets(settings: Settings, env: dict, start: float) -> tuple[list[Row], dict]:
     """8. The Fig. 4 scene and the sweep subsample of comparison 6 (belt speeds
     `settings.sweep_vds`, 20 trajectories each, the horizon `settings.sweep_horizon`)
-    at jaxchain 0.2's defaults and at today's, each belt speed in its own process
+    at the previous defaults and at today's, each belt speed in its own process
     (compiled by a first call, then timed); steps at v_d = 1.5 are the Fig. 4 scene's.
     The sweep estimate is the sum over the subsample times 21 / (its size), scaled
     linearly to t_end 15000 in --quick. Then `import jaxchain` against `import jax,

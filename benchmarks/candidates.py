@@ -7,7 +7,7 @@ diagram and on the scene itself.
 A candidate is a solver and a step-size controller (a method "SOLVER/CONTROLLER" of
 the work-precision study). Besides the package's ROS34PW2 (diagonal W) with its PI
 controller (`pi`, the default) and with diffrax's integral controller (`diffrax`,
-jaxchain 0.2's), the candidates tried for issue 24 are defined here and registered
+the previous), the candidates tried for issue 24 are defined here and registered
 in `SOLVERS` and `CONTROLLERS` for this process only:
 
 - controllers: diffrax's PID controller with PI coefficients (`diffrax-pi`, pcoeff
@@ -26,7 +26,7 @@ Writes DIR/work_precision.csv and DIR/work_precision_chain.png (the chain scene 
 `jaxchain work-precision`, eps = 1e-3, against the non-smooth reference) and
 DIR/candidates.md and DIR/candidates.json: for every candidate the steps and wall
 time of the Fig. 4 scene (N = 20, v_d = 1.5, k = 1..20, t_end 15000, transient
-10000) at `--scene-rtol`, with jaxchain 0.2's default (ros34pw2/diffrax at rtol
+10000) at `--scene-rtol`, with the previous default (ros34pw2/diffrax at rtol
 1e-5) as baseline in the same run, and whether the staircase n_HALC = 1..18, 20, 20
 holds. About 15 minutes on 2 cores (each scene runs twice: the first call compiles).
 """
@@ -106,7 +106,7 @@ CANDIDATE_CONTROLLERS = {
     "pi-34": functools.partial(PIController, pcoeff=0.3, icoeff=0.4),
     "pi-43": functools.partial(PIController, pcoeff=0.4, icoeff=0.3),
 }
-#: Every candidate, the baseline (jaxchain 0.2's solver and controller) first.
+#: Every candidate, the baseline (the previous solver and controller) first.
 METHODS = ("ros34pw2/diffrax", "ros34pw2/diffrax-pi",
            "ros34pw2/pi-i", "ros34pw2/pi-34", "ros34pw2/pi-43",
            "ros34pw2", "ros34pw2-filtered", "ros34pw2-absw", "ros34pw2-secant",
@@ -203,7 +203,7 @@ def main(argv=None) -> int:
             by_method.setdefault(row["method"], {})[float(row["rtol"])] = row
     lines = [f"Candidates for fewer steps (issue 24). The Fig. 4 scene: N = 20, v_d = 1.5, "
              f"k = 1..20, t_end 15000, transient 10000, eps 1e-3, on {jax.device_count()} "
-             f"cores; the baseline is {BASELINE[0]} at rtol {BASELINE[1]:g} (jaxchain 0.2's "
+             f"cores; the baseline is {BASELINE[0]} at rtol {BASELINE[1]:g} (the previous "
              f"default) in the same run, every candidate at rtol {args.scene_rtol:g}; atol = "
              f"rtol / 100. The amplitude error is that of the work-precision chain scene "
              f"(k = 1, window [1000, 1500]) against the non-smooth reference at the same "

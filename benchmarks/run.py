@@ -17,12 +17,12 @@ default solver, eps and tolerances, unless stated):
 5. wall time against the number of trajectories, 1 to 10^4;
 6. the 21 x 20 belt-speed sweep, estimated from a subsample (or run, --sweep);
 7. XLA flag check: jaxchain's flag against none (exit status 1 if < 1.3x faster);
-8. the targets of issue 24 against jaxchain 0.2's defaults (ROS34PW2, diffrax's
+8. the targets of issue 24 against the previous defaults (ROS34PW2, diffrax's
    integral controller, rtol 1e-5) in the same run: steps and wall time of the
    Fig. 4 scene, the sweep estimate, and `import jaxchain` against `import jax,
    diffrax`;
 cli. cold and warm start of `jaxchain localized` with a fresh JAXCHAIN_CACHE_DIR,
-   and in the full run the main job's second run at jaxchain 0.2's defaults.
+   and in the full run the main job's second run at the previous defaults.
 
 Writes DIR/benchmarks.md (table and machine), DIR/benchmarks.json (raw numbers),
 DIR/scaling_n_osc.png and DIR/scaling_ensemble.png, and prints the table.
@@ -190,7 +190,7 @@ def main(argv=None) -> int:
                   start)
     if out:
         flag_ok = out[2]
-    attempt("8", "issue 24 targets against jaxchain 0.2's defaults",
+    attempt("8", "issue 24 targets against the previous defaults",
             _targets.compare_targets, settings, ORIGINAL_ENV, start)
     attempt("cli", "command line cold and warm start", _processes.compare_cli, settings,
             ORIGINAL_ENV, start)

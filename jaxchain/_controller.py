@@ -76,7 +76,7 @@ class PIController(diffrax.PIDController):
 
 #: Step-size controllers by name (`SimulationOptions.controller`): the package's
 #: `PIController`, and diffrax's `PIDController` as an integral controller (its
-#: defaults; jaxchain's controller up to version 0.2).
+#: defaults; jaxchain's controller before issue 24).
 CONTROLLERS = {"pi": PIController, "diffrax": diffrax.PIDController}
 
 

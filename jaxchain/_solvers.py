@@ -37,7 +37,7 @@ SOLVERS = {
 #: stiff stick phases rather than by accuracy (Bosh3 takes 44M steps on the Fig. 4
 #: scene at rtol 1e-5, 50M at 1e-6). ROS34PW2, linearly implicit in the diagonal
 #: friction Jacobian, is not: 10.8M steps at the default rtol 3e-5 with
-#: `PIController` (15M at jaxchain 0.2's rtol 1e-5 with diffrax's controller), with
+#: `PIController` (15M at the previous rtol 1e-5 with diffrax's controller), with
 #: the error of the eps floor (0.24 % on the work-precision chain scene), at about
 #: twice the cost per step (README, "Choice of eps and solver").
 DEFAULT_SOLVER = "ros34pw2"
