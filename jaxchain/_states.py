@@ -47,7 +47,8 @@ class ClassTolerances(eqx.Module):
     - `delay`: largest delay spread of a periodic state (`delay_spread`, the time
         delays of the scenes of Figs. 5-10), dimensionless time. The peak times are
         interpolated to about 1e-5 and the solver's tolerances move them by less
-        than 1e-3 (rtol 1e-5), while an irregular state's delays wander by a
+        than 1e-3 (measured at rtol 1e-5; the classification of the figure
+        tests is the same at the default 3e-5), while an irregular state's delays wander by a
         sizeable part of its period (~6).
     - `max_period`: longest repetition of the delays, in reference peaks, that
         still counts as periodic.
