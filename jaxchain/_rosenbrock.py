@@ -151,14 +151,13 @@ def _spring(terms, t, y, args):
 
 
 def _diagonal_solve(scale):
-    """Solve diag(scale) u = r. For a state of shape (..., 2, N) the positions and
-    the velocities are divided apart and stacked again: the same numbers, which XLA
-    compiles into a faster step loop (1.3 to 1.8 times fewer microseconds per step
-    on the Fig. 4 scene than dividing the whole state at once)."""
-    if scale.ndim >= 2 and scale.shape[-2] == 2:
-        return lambda r: jnp.stack([r[..., 0, :] / scale[..., 0, :],
-                                    r[..., 1, :] / scale[..., 1, :]], axis=-2)
-    return lambda r: r / scale
+    """Solve diag(scale) u = r, as r times the reciprocal of `scale`, taken once per
+    step: the four stages then multiply instead of divide, and XLA compiles a step
+    loop about 1.4 times cheaper per step on the Fig. 4 scene (the same numbers to
+    one rounding). (Dividing positions and velocities apart is cheaper still on
+    this CPU, but under vmap with XLA's fast math it took 10-20 times the steps.)"""
+    inverse = 1.0 / scale
+    return lambda r: r * inverse
 
 
 def _block_solve(scale, spring):
