@@ -74,8 +74,8 @@ class Ros34PW2(diffrax.AbstractAdaptiveSolver):
         dx/dt = x' and its own spring, dx''/dx = c (the sum over its row of the
         elastic Jacobian, min(c, 0), one JVP of `f_explicit` per solve), and each
         stage solves the blocks in closed form. On the Fig. 4 scene at eps = 1e-3
-        it takes 7 % fewer steps, each costing about half
-        (`docs/benchmarks/candidates/candidates.md`), but at eps <= 1e-4 its
+        it takes 7 % fewer steps (`docs/benchmarks/candidates/candidates.md`),
+        but at eps <= 1e-4 its
         amplitude error on the single oscillator is 10 to 100 times the diagonal
         W's (0.4 % against 3e-4 at eps = 1e-4): not the default.
 
