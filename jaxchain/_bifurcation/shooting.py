@@ -28,6 +28,14 @@ class ShootingOptions(eqx.Module):
         period.
     - `newton_steps`: Newton's iteration budget.
     - `n_samples`: samples of one period from which amplitudes are taken.
+    - `phase_oscillator`: the oscillator n of the phase condition x_n'(0) = 0
+        (0-based); choose one that vibrates, so that the section is crossed
+        transversally.
+    - `root_finder`: `"newton"` (optimistix's Newton, fast near the orbit) or
+        `"levenberg-marquardt"` (optimistix's Levenberg-Marquardt on the same
+        residual: a damped Newton method that converges from the rougher guesses of
+        a simulated chain, where the flow's derivative is large across each
+        stick-slip switch; More, *The Levenberg-Marquardt algorithm* (1978)).
 
     **Raises:**
 
@@ -41,8 +49,16 @@ class ShootingOptions(eqx.Module):
     newton_tol: float = eqx.field(static=True, default=1e-9)
     newton_steps: int = eqx.field(static=True, default=40)
     n_samples: int = eqx.field(static=True, default=4096)
+    phase_oscillator: int = eqx.field(static=True, default=0)
+    root_finder: str = eqx.field(static=True, default="newton")
 
     def __check_init__(self):
+        if self.phase_oscillator < 0:
+            raise ValueError(f"ShootingOptions.phase_oscillator must be >= 0, got "
+                             f"{self.phase_oscillator!r}")
+        if self.root_finder not in ("newton", "levenberg-marquardt"):
+            raise ValueError(f"ShootingOptions.root_finder must be 'newton' or "
+                             f"'levenberg-marquardt', got {self.root_finder!r}")
         for name in ("rtol", "atol", "max_steps", "newton_tol", "newton_steps", "n_samples"):
             value = getattr(self, name)
             if not value > 0:
@@ -74,9 +90,10 @@ def shooting_residual(u: Float[Array, " 2n+1"], params: ChainParams,
                       options: ShootingOptions) -> Float[Array, " 2n+1"]:
     """Single-shooting residual of a periodic orbit (Seydel, *Practical Bifurcation
     and Stability Analysis*, 3rd ed. (2010), Sect. 7.1): the flow over one period
-    minus the start, phi_T(y0) - y0, and the phase condition x_1'(0) = 0 (the
-    orbit starts at a turning point of oscillator 1, a Poincare section crossed by
-    every stick-slip and every small Hopf cycle).
+    minus the start, phi_T(y0) - y0, and the phase condition x_n'(0) = 0 with n =
+    `options.phase_oscillator` (the orbit starts at a turning point of oscillator
+    n, a Poincare section crossed by every stick-slip and every small Hopf cycle in
+    which n vibrates).
 
     **Arguments:**
 
@@ -90,7 +107,8 @@ def shooting_residual(u: Float[Array, " 2n+1"], params: ChainParams,
     """
     y0, period = unpack(u)
     y1 = flow(params, y0, period, options).ys[-1]
-    return jnp.concatenate([jnp.reshape(y1 - y0, (-1,)), y0[1, :1]])
+    n = options.phase_oscillator
+    return jnp.concatenate([jnp.reshape(y1 - y0, (-1,)), y0[1, n:n + 1]])
 
 
 def monodromy(params: ChainParams, y0: State, period, options: ShootingOptions
@@ -193,12 +211,22 @@ def describe_orbit(params: ChainParams, u: Float[Array, " 2n+1"], options: Shoot
 
 @eqx.filter_jit
 def _solve(params, u0, options):
-    sol = optx.root_find(
-        lambda u, p: shooting_residual(u, p, options),
-        optx.Newton(rtol=options.newton_tol, atol=options.newton_tol), u0, params,
-        max_steps=options.newton_steps, throw=False)
-    return describe_orbit(params, sol.value, options,
-                          sol.result == optx.RESULTS.successful)
+    def fn(u, p):
+        return shooting_residual(u, p, options)
+
+    tol = options.newton_tol
+    if options.root_finder == "newton":
+        sol = optx.root_find(fn, optx.Newton(rtol=tol, atol=tol), u0, params,
+                             max_steps=options.newton_steps, throw=False)
+    else:  # forward-mode Jacobian: the flow is differentiated with ForwardMode
+        sol = optx.least_squares(fn, optx.LevenbergMarquardt(rtol=tol, atol=tol), u0, params,
+                                 options={"jac": "fwd"}, max_steps=5 * options.newton_steps,
+                                 throw=False)
+    orbit = describe_orbit(params, sol.value, options, sol.result == optx.RESULTS.successful)
+    # Levenberg-Marquardt also stops at a local minimum of the residual: only a root
+    # counts as converged.
+    return eqx.tree_at(lambda o: o.converged, orbit,
+                       orbit.converged & (orbit.residual <= 1e3 * tol))
 
 
 def periodic_orbit(params: ChainParams, y0: State, period: float,
@@ -214,7 +242,8 @@ def periodic_orbit(params: ChainParams, y0: State, period: float,
 
     - `params`: the chain parameters.
     - `y0`: a guess of a state on the orbit, shape (2, n_osc); a state from a long
-        simulation, for instance. Its velocity x_1' is set to 0 first.
+        simulation, for instance. Its velocity x_n' (n = `options.phase_oscillator`)
+        is set to 0 first.
     - `period`: a guess of the period.
     - `options`: `ShootingOptions`.
     - `throw`: raise if Newton's method does not converge (default); otherwise
@@ -226,7 +255,8 @@ def periodic_orbit(params: ChainParams, y0: State, period: float,
 
     **Raises:**
 
-    `ValueError` for a guess of the wrong shape or a non-positive period;
+    `ValueError` for a guess of the wrong shape, a non-positive period or a phase
+    oscillator outside the chain;
     `RuntimeError` if Newton's method does not converge and `throw=True`.
     """
     y0 = jnp.asarray(y0, dtype=float)
@@ -234,7 +264,11 @@ def periodic_orbit(params: ChainParams, y0: State, period: float,
         raise ValueError(f"y0 must have shape (2, {params.n_osc}), got {y0.shape}")
     if not period > 0:
         raise ValueError(f"period must be > 0, got {period!r}")
-    orbit = _solve(params, pack(y0.at[1, 0].set(0.0), period), options)
+    if options.phase_oscillator >= params.n_osc:
+        raise ValueError(f"ShootingOptions.phase_oscillator must be < n_osc = "
+                         f"{params.n_osc}, got {options.phase_oscillator}")
+    y0 = y0.at[1, options.phase_oscillator].set(0.0)
+    orbit = _solve(params, pack(y0, period), options)
     if throw and not bool(orbit.converged):
         raise RuntimeError("shooting did not converge: start from a state closer to the "
                            "orbit (after a longer simulation) or a better period guess")

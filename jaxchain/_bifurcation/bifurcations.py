@@ -1,0 +1,150 @@
+"""Bifurcations of periodic orbits detected on a continued branch, classified by the
+Floquet multiplier that crosses the unit circle, and located by bisection along
+the branch."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Complex, Float
+
+from .continuation import Branch, ContinuationProblem, PseudoArclength, _correct, _record, \
+    _tangent
+
+#: The kinds of codimension-one bifurcation of limit cycles (Kuznetsov, *Elements of
+#: Applied Bifurcation Theory*, 3rd ed. (2004), Sect. 5.4), by their critical
+#: multiplier: +1 with a turning point in p (fold of limit cycles), +1 without one
+#: (branch point: a symmetry-breaking pitchfork or transcritical point, where another
+#: branch crosses), -1 (period doubling), a complex pair (Neimark-Sacker, torus).
+BIFURCATION_KINDS = ("fold", "branch point", "period doubling", "Neimark-Sacker")
+
+
+class BifurcationPoint(eqx.Module):
+    """A bifurcation located on a branch of periodic orbits.
+
+    **Fields:**
+
+    - `kind`: one of `BIFURCATION_KINDS`.
+    - `p`: the continued parameter there (dimensionless, eq. (6)).
+    - `z`: the solution (u, p) there, shape (n + 1,).
+    - `multiplier`: the critical Floquet multiplier there (complex; modulus 1 up to
+        the bisection's resolution).
+    - `record`: `problem.describe` there (a `PeriodicOrbit` for limit cycles).
+    - `after`: the index of the converged point of the branch after which it lies.
+    - `width`: the arclength of the last bisection interval (the location's
+        resolution along the branch).
+    """
+
+    kind: str = eqx.field(static=True)
+    p: Float[Array, ""]
+    z: Float[Array, " n+1"]
+    multiplier: Complex[Array, ""]
+    record: eqx.Module
+    after: int = eqx.field(static=True)
+    width: float = eqx.field(static=True)
+
+
+def _critical(record) -> tuple[float, complex]:
+    """(largest non-trivial |multiplier| - 1, that multiplier) of a `PeriodicOrbit`."""
+    m = complex(np.asarray(record.critical_multiplier))
+    return abs(m) - 1.0, m
+
+
+def _bisect(test, s_hi: float, steps: int, f_hi: float) -> tuple[float, float]:
+    """Bisection on s in [0, s_hi] for a sign change of test(s), test(0) and
+    f_hi (the test function at the next point of the branch) of opposite signs.
+    Returns (s, width of the last interval), or
+    (None, 0) when the ends have no sign change (a change of stability that the
+    test function does not see: a multiplier taken for the trivial one)."""
+    lo, hi = 0.0, s_hi
+    f_lo = test(lo)
+    if f_lo is None or np.sign(f_lo) == np.sign(f_hi):
+        return None, 0.0
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        f_mid = test(mid)
+        if f_mid is None:  # the corrector failed: shrink towards the known side
+            hi = mid
+            continue
+        if np.sign(f_mid) == np.sign(f_lo):
+            lo, f_lo = mid, f_mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi), hi - lo
+
+
+def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
+                        algorithm: PseudoArclength = PseudoArclength(), *,
+                        steps: int = 24) -> tuple[BifurcationPoint, ...]:
+    """Classify and locate the folds and changes of stability of a branch of
+    periodic orbits (`continuation` of `limit_cycle_problem`).
+
+    Between two converged points z_i, z_(i+1) where dp/ds changes sign (a fold) or
+    the largest non-trivial Floquet multiplier leaves the unit circle, the point is
+    located by bisection on the arclength s along the tangent t_i: each trial point
+    is z_i + s t_i corrected onto the branch (the pseudo-arclength corrector), and
+    the test function is dp/ds (fold) or |mu| - 1 (the critical multiplier mu).
+    This needs no extended system, so it converges where many multipliers crowd
+    near +1 (a weakly coupled chain). The kind follows from the multiplier at the
+    located point (`BIFURCATION_KINDS`).
+
+    **Arguments:**
+
+    - `problem`: the branch's `ContinuationProblem` (with `describe` giving a
+        `PeriodicOrbit`).
+    - `branch`: its `Branch`.
+    - `algorithm`: the corrector (`PseudoArclength`).
+    - `steps`: bisection steps (the interval shrinks by 2^-steps).
+
+    **Returns:**
+
+    The `BifurcationPoint`s, in the order of the branch.
+
+    **Raises:**
+
+    `ValueError` if `problem.describe` is None (no multipliers to classify by).
+    """
+    if problem.describe is None:
+        raise ValueError("problem.describe is None: bifurcations are classified by the "
+                         "Floquet multipliers of its records")
+    ok = np.asarray(branch.converged)
+    zs = jnp.concatenate([branch.u, branch.p[:, None]], axis=1)[ok]
+    tangents = branch.tangent[ok]
+    folds = set(branch.folds)
+    found = []
+    for i in sorted(folds | set(branch.stability_changes)):
+        z0, t0 = zs[i], tangents[i]
+        s_hi = float(t0 @ (zs[i + 1] - z0))
+
+        def corrected(s, z0=z0, t0=t0):
+            new, good, _, _ = _correct(problem, algorithm, z0 + s * t0, t0)
+            return new if bool(good) else None
+
+        if i in folds:
+            def test(s, t0=t0):
+                z = corrected(s)
+                return None if z is None else float(_tangent(problem, z, t0)[-1])
+        else:
+            def test(s):
+                z = corrected(s)
+                return None if z is None else _critical(_record(problem, z))[0]
+        if i in folds:
+            f_hi = float(tangents[i + 1, -1])
+        else:
+            f_hi = float(np.abs(np.asarray(branch.records.critical_multiplier)[i + 1]) - 1)
+        s, width = _bisect(test, s_hi, steps, f_hi)
+        z = None if s is None else corrected(s)
+        if z is None:
+            continue
+        record = _record(problem, z)
+        _, m = _critical(record)
+        if i in folds:
+            kind = "fold"
+        elif abs(m.imag) > 1e-6 * max(1.0, abs(m)) and abs(m.imag) > 1e-3:
+            kind = "Neimark-Sacker"
+        elif m.real < 0:
+            kind = "period doubling"
+        else:
+            kind = "branch point"
+        found.append(BifurcationPoint(kind=kind, p=z[-1], z=z, multiplier=jnp.asarray(m),
+                                      record=record, after=int(i), width=float(width)))
+    return tuple(found)

@@ -1,0 +1,129 @@
+"""`jaxchain snake`: the branches of the chain's localized periodic states over the
+belt speed, with their stability and bifurcations."""
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from .._bifurcation.continuation import ContinuationOptions
+from .._snake import SITES, localized_branches
+from .._plots.snake import plot_snake
+from .chain import CHAIN_HELP, add_chain_options, chain_params
+from .common import (RunsFailed, UsageError, add_output_options, comma_list, json_ready,
+                     param_default, positive_float, positive_int, save_figure,
+                     show_progress, writable_folder)
+
+HELP = "continuation of the localized periodic states (the snake), with stability"
+DESCRIPTION = """\
+Compute the branches of the chain's periodic localized states over the belt speed,
+which the paper's Fig. 3(b) only suggests by simulation ("snaking"):
+
+  - start: eq. (8) with k oscillators excited (--sites), simulated at --vd; a
+    turning point of the oscillator of largest amplitude and the time to the next
+    are the guesses of shooting (diffrax, Levenberg-Marquardt of optimistix, phase
+    condition x_n'(0) = 0); an irregular state does not converge and is reported;
+  - Floquet multipliers from the monodromy matrix (forward mode through the
+    solver); the trivial multiplier's distance from 1 is reported;
+  - pseudo-arclength continuation of each branch both ways in v_d through its
+    folds, within [--vd-min, --vd-max] and --max-points points each way;
+  - folds of limit cycles, branch points, period doubling and Neimark-Sacker
+    points, classified by the critical multiplier and located by bisection along
+    the branch;
+  - which branches meet (the same orbit up to the chain's symmetries), and
+    direct simulation just inside and outside each end of each stable range
+    (--no-simulation skips it).
+
+Writes <out>/snake.png, <out>/snake.json and each branch to
+<out>/snake/branch_k<k>.nc as it finishes; a second run with the same settings
+reads the stored branches back (resume). --sweep DIR/sweep.zarr draws the points of
+a `jaxchain sweep` underneath. About 6 minutes on 2 CPU cores with the defaults."""
+
+
+def add_parser(sub):
+    p = sub.add_parser("snake", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    g = p.add_argument_group("model (eq. (5) of the paper; other parameters eq. (7))")
+    g.add_argument("--n-osc", type=positive_int, default=20, metavar="N",
+                   help="number of oscillators (default 20)")
+    g.add_argument("--eps", type=positive_float, default=param_default("eps"),
+                   help=f"tanh smoothing velocity (default {param_default('eps'):g})")
+    add_chain_options(g)
+    g = p.add_argument_group("continuation")
+    g.add_argument("--vd", type=positive_float, default=1.5,
+                   help="belt speed where the states are found by simulation (default 1.5)")
+    g.add_argument("--sites", type=comma_list(int), default=list(SITES), metavar="K,K,...",
+                   help="oscillators excited by eq. (8) for each branch (default "
+                        f"{','.join(map(str, SITES))}; those above N are dropped)")
+    g.add_argument("--vd-min", type=positive_float, default=1.0,
+                   help="smallest belt speed of the branches (default 1.0)")
+    g.add_argument("--vd-max", type=positive_float, default=2.2,
+                   help="largest belt speed of the branches (default 2.2)")
+    g.add_argument("--max-points", type=positive_int, default=60,
+                   help="continuation points each way (default 60)")
+    g.add_argument("--no-simulation", action="store_true",
+                   help="skip the check by direct simulation at the ends of stable ranges")
+    g.add_argument("--sweep", type=Path, default=None, metavar="STORE",
+                   help="a sweep store (jaxchain sweep's sweep.zarr) to draw underneath")
+    add_output_options(p)
+    p.set_defaults(run=run)
+    return p
+
+
+def run(args) -> None:
+    params = chain_params(args, args.n_osc, eps=args.eps, v_d=args.vd)
+    sites = [k for k in args.sites if k <= params.n_osc]
+    if not sites or min(sites) < 1:
+        raise UsageError(f"--sites: give numbers in 1..{params.n_osc}, got {args.sites}")
+    if not args.vd_min < args.vd < args.vd_max:
+        raise UsageError(f"--vd must lie between --vd-min and --vd-max, got {args.vd_min}, "
+                         f"{args.vd}, {args.vd_max}")
+    sweep = None
+    if args.sweep is not None:
+        from .._sweep.sweep import open_sweep
+        sweep = open_sweep(args.sweep)
+    writable_folder(args.out)
+    start = time.perf_counter()
+    options = ContinuationOptions(ds=0.02, ds_max=0.1, p_min=args.vd_min, p_max=args.vd_max,
+                                  max_points=args.max_points)
+    found = localized_branches(params, sites, continuation_options=options,
+                               simulation_check=not args.no_simulation,
+                               out=args.out / "snake", progress=show_progress(args))
+    png = args.out / "snake.png"
+    save_figure(plot_snake(found["datasets"], sweep,
+                           title=f"N = {params.n_osc}, eps = {args.eps:g}: stable solid, "
+                                 "unstable dashed"), png)
+    s = found["summary"] | {"wall_time_s": time.perf_counter() - start, "figure": str(png),
+                            "eps": args.eps, "n_osc": params.n_osc}
+    text = json.dumps(json_ready(s), allow_nan=False)
+    (args.out / "snake.json").write_text(text)
+    if args.json:
+        print(text)
+    else:
+        _print_summary(s)
+    disagree = [c for b in s["branches"] for c in b.get("simulation_check", [])
+                if c["agrees"] is False]
+    if not s["branches"]:
+        raise RunsFailed("no periodic state to continue: every start was irregular or "
+                         "steady sliding")
+    if disagree:
+        raise RunsFailed(f"direct simulation disagrees with {len(disagree)} stability "
+                         f"end(s) (simulation_check in {args.out / 'snake.json'})")
+
+
+def _print_summary(s: dict) -> None:
+    for b in s["branches"]:
+        ranges = ", ".join(f"[{lo:.4f}, {hi:.4f}]" for lo, hi in b["stable_ranges"]) or "none"
+        print(f"{b['label']} excited: {b['sites']} on the HALC where stable; stable on "
+              f"{ranges}; connects to {', '.join(b['connects_to']) or 'nothing found'}")
+        for r in b["stable_range_ends"]:
+            print("   ends: " + "; ".join(f"{e['type']} at {e['v_d']:.5f}" for e in r))
+        for c in b.get("simulation_check", []):
+            print(f"   simulation at v_d = {c['v_d']:.4f} ({c['side']} the {c['end']}): "
+                  f"{'persists' if c['persists'] else 'lost'} ("
+                  + {True: "agrees", False: "DISAGREES",
+                     None: f"undecided: growth {c['expected_growth']:.3g} over the horizon"}
+                  [c["agrees"]] + ")")
+    for f in s["not_periodic"]:
+        print(f"k={f['excited']} excited: {f['reason']}")
+    print(f"figure: {s['figure']}; {s['wall_time_s']:.0f} s")

@@ -1,0 +1,406 @@
+"""The snake: branches of the chain's localized periodic states over the belt speed,
+with their Floquet stability and bifurcations, started from direct simulation."""
+
+import dataclasses
+import json
+from pathlib import Path
+
+import diffrax
+import jax.numpy as jnp
+import numpy as np
+import xarray as xr
+from tqdm.auto import tqdm
+
+from ._bifurcation.bifurcations import locate_bifurcations
+from ._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
+from ._bifurcation.limit_cycles import limit_cycle_problem
+from ._bifurcation.shooting import ShootingOptions, flow, periodic_orbit, unpack
+from ._ensemble import ensemble
+from ._options import SimulationOptions
+from ._physics.initial import GivenState, OutOfPhaseExcitation, excited_block
+from ._physics.params import ChainParams, with_parameter
+from ._physics.record import chain_record
+from ._simulate import simulate
+from ._store import read_dataset, write_dataset
+
+#: The branches of `localized_branches` by default: eq. (8) with 1, 2, 4 and 8
+#: oscillators excited, and the whole chain (the paper's Figs. 4 and 8).
+SITES = (1, 2, 4, 8, 20)
+
+#: Shooting on a chain: Levenberg-Marquardt converges from a simulated state.
+SNAKE_SHOOTING = ShootingOptions(root_finder="levenberg-marquardt")
+
+
+def _turning_point(params: ChainParams, y: np.ndarray, oscillator: int,
+                   options: ShootingOptions) -> tuple[np.ndarray, float] | None:
+    """A state where x_n' passes from + to - (n = `oscillator`), and the time to the
+    next such crossing, from the flow sampled every 1e-3 over 40 time units."""
+    ts = jnp.linspace(0.0, 40.0, 40_001)
+    ys = np.asarray(flow(params, jnp.asarray(y), 40.0, options, diffrax.SaveAt(ts=ts)).ys)
+    v = ys[:, 1, oscillator]
+    down = np.flatnonzero((v[:-1] > 0) & (v[1:] <= 0))
+    if down.size < 2:
+        return None
+    return ys[down[0]], float(ts[down[1]] - ts[down[0]])
+
+
+def start_orbits(params: ChainParams, sites=SITES, *, options: SimulationOptions =
+                 SimulationOptions(t_end=3000.0, transient=2500.0),
+                 shooting: ShootingOptions = SNAKE_SHOOTING, progress: bool = False):
+    """Periodic localized states of the chain at `params.v_d`, refined by shooting
+    from direct simulation: eq. (8) with k oscillators excited (`excited_block`),
+    integrated over `options`, then a turning point of the oscillator of largest
+    amplitude (the phase condition's oscillator) and the time to the next one as the
+    guesses of `periodic_orbit`.
+
+    **Arguments:**
+
+    - `params`: the chain; `params.v_d` is the belt speed of the start.
+    - `sites`: the numbers of excited oscillators, each in 1..n_osc.
+    - `options`: `SimulationOptions` of the simulations.
+    - `shooting`: `ShootingOptions` (its `phase_oscillator` is replaced).
+    - `progress`: progress bars.
+
+    **Returns:**
+
+    A dict k -> (`PeriodicOrbit` or None, the simulation's n_HALC and energy, why
+    it failed or None). A start fails when the simulated state is not periodic
+    (irregular: shooting does not converge) or never turns.
+
+    **Raises:**
+
+    `ValueError` for a k outside 1..n_osc.
+    """
+    sites = tuple(int(k) for k in sites)
+    if not sites or min(sites) < 1 or max(sites) > params.n_osc:
+        raise ValueError(f"sites must be in 1..n_osc = {params.n_osc}, got {sites}")
+    masks = np.stack([excited_block(params.n_osc, k, params.boundary) for k in sites])
+    ics = OutOfPhaseExcitation(excited=jnp.asarray(masks),
+                               velocity=jnp.zeros(len(sites)), base_sign=-1.0)
+    ds = ensemble(params, [float(params.v_d)], ics, options=options, progress=progress)
+    out = {}
+    for i, k in enumerate(sites):
+        amplitudes = ds["amplitudes"].values[0, i]
+        sim = {"n_halc": int(ds["n_halc"].values[0, i]),
+               "energy": float(ds["energy"].values[0, i])}
+        if int(ds["status"].values[0, i]) != 0:
+            out[k] = (None, sim, "the simulation failed")
+            continue
+        n = int(np.argmax(amplitudes))
+        opts = dataclasses.replace(shooting, phase_oscillator=n)
+        guess = _turning_point(params, ds["y_final"].values[0, i], n, opts)
+        if guess is None:
+            out[k] = (None, sim, "no turning point: steady sliding")
+            continue
+        orbit = periodic_orbit(params, guess[0], guess[1], opts, throw=False)
+        reason = None if bool(orbit.converged) else (
+            f"shooting did not converge (residual {float(orbit.residual):.2g}): the "
+            f"simulated state is not periodic")
+        out[k] = (orbit if reason is None else None, sim, reason)
+    return out
+
+
+def _branch_dataset(k: int, orbit, problem, branch, bifurcations) -> xr.Dataset:
+    ok = np.asarray(branch.converged)
+    r = branch.records
+    multipliers = np.asarray(r.multipliers)
+    return xr.Dataset(
+        {"energy": ("point", np.asarray(r.energy)),
+         "period": ("point", np.asarray(r.period)),
+         "n_halc": ("point", np.asarray(r.n_halc)),
+         "stable": ("point", np.asarray(branch.stable)),
+         "critical_multiplier_abs": ("point", np.abs(np.asarray(r.critical_multiplier))),
+         "trivial_multiplier_error": ("point", np.abs(
+             np.take_along_axis(multipliers, np.asarray(r.trivial)[:, None], 1)[:, 0] - 1)),
+         "amplitudes": (("point", "osc"), np.asarray(r.amplitudes)),
+         "u": (("point", "unknown"), np.asarray(branch.u)[ok])},
+        coords={"v_d": ("point", np.asarray(branch.p)[ok])},
+        attrs={"excited": k, "phase_oscillator": problem.residual.options.phase_oscillator,
+               "stop": branch.stop,
+               "bifurcations": json.dumps([
+                   {"type": b.kind, "v_d": float(b.p), "energy": float(b.record.energy),
+                    "multiplier": [float(np.real(b.multiplier)), float(np.imag(b.multiplier))],
+                    "n_halc": int(b.record.n_halc), "after": b.after, "width": b.width}
+                   for b in bifurcations])})
+
+
+def follow_branch(orbit, options: ShootingOptions, continuation_options: ContinuationOptions,
+                  algorithm: PseudoArclength = PseudoArclength(), *, k: int = 0,
+                  progress: bool = False) -> xr.Dataset:
+    """Continue the branch of periodic orbits through `orbit` over v_d both ways
+    (pseudo-arclength, `continuation`), join the two halves in the order of the
+    branch, and locate its bifurcations (`locate_bifurcations`).
+
+    **Returns:**
+
+    An `xarray.Dataset` over the converged points (dim `point`, coordinate `v_d`):
+    energy (eq. (9)), period, n_halc, stable, the largest non-trivial |multiplier|,
+    the trivial multiplier's distance from 1, amplitudes (point, osc) and the
+    shooting unknowns u; attributes `bifurcations` (JSON list of type, v_d, energy,
+    multiplier, n_halc) and `stop`.
+    """
+    problem = limit_cycle_problem(orbit, options)
+    halves, found = [], []
+    for direction in (-1, 1):
+        opts = dataclasses.replace(continuation_options, direction=direction)
+        branch = continuation(problem, algorithm, opts, progress=progress)
+        bifs = locate_bifurcations(problem, branch, algorithm)
+        halves.append(_branch_dataset(k, orbit, problem, branch, bifs))
+        found.append(bifs)
+    down, up = halves
+    joined = xr.concat([down.isel(point=slice(None, None, -1)), up.isel(point=slice(1, None))],
+                       dim="point", data_vars="all")
+    bifs = json.loads(down.attrs["bifurcations"])[::-1] + json.loads(up.attrs["bifurcations"])
+    return joined.assign_attrs(down.attrs | {
+        "bifurcations": json.dumps(bifs),
+        "stop": json.dumps({"low": down.attrs["stop"], "high": up.attrs["stop"]})})
+
+
+def stable_ranges(branch: xr.Dataset) -> list[dict]:
+    """The stable segments of a joined branch: their v_d ranges, each end the
+    bifurcation located there (or the end of the computed branch)."""
+    stable = branch["stable"].values
+    v = branch["v_d"].values
+    bifs = json.loads(branch.attrs["bifurcations"])
+    out = []
+    i = 0
+    while i < stable.size:
+        if not stable[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < stable.size and stable[j + 1]:
+            j += 1
+        ends = []
+        for idx, other in ((i, i - 1), (j, j + 1)):
+            if not 0 <= other < stable.size:
+                ends.append({"type": "end of branch", "v_d": float(v[idx])})
+                continue
+            # the located bifurcation nearest to the change (a fold may lie just
+            # beyond both points, where the branch turns)
+            mid, gap = 0.5 * (v[idx] + v[other]), abs(v[idx] - v[other])
+            near = sorted(bifs, key=lambda b: abs(b["v_d"] - mid))
+            ends.append(near[0] if near and abs(near[0]["v_d"] - mid) <= gap + 1e-3 else
+                        {"type": "stability change", "v_d": float(mid)})
+        pair = sorted(ends, key=lambda e: e["v_d"])
+        out.append({"v_d": [pair[0]["v_d"], pair[1]["v_d"]], "ends": pair,
+                    "n_halc": int(np.bincount(branch["n_halc"].values[i:j + 1]).argmax())})
+        i = j + 1
+    return out
+
+
+def connections(branches: dict, tol: float = 1e-3) -> dict:
+    """Which branches meet: two branches connect when a point of one matches a point
+    of the other at the same belt speed (within `tol`), with the same period (within
+    `tol`, relative) and the same amplitudes sorted by size (within 10 `tol`): a
+    signature that no rotation or reflection of the chain changes. A branch whose
+    energy falls below 1e-4 ends on steady sliding (a Hopf point)."""
+    out = {k: [] for k in branches}
+    keys = list(branches)
+    for a in keys:
+        if float(branches[a]["energy"].min()) < 1e-4:
+            out[a].append("steady sliding")
+        for b in keys:
+            if b == a:
+                continue
+            A, B = branches[a], branches[b]
+            va, vb = A["v_d"].values, B["v_d"].values
+            close = np.abs(va[:, None] - vb[None, :]) < tol
+            period = np.abs(A["period"].values[:, None] / B["period"].values[None, :] - 1) < tol
+            sa = np.sort(A["amplitudes"].values, axis=1)
+            sb = np.sort(B["amplitudes"].values, axis=1)
+            cand = np.argwhere(close & period)
+            if any(np.max(np.abs(sa[i] - sb[j])) < 10 * tol for i, j in cand):
+                out[a].append(b)
+    return out
+
+
+def _phase_lags(params: ChainParams, y, sites, options: ShootingOptions) -> np.ndarray | None:
+    """The phase of each oscillator of `sites` relative to the first, in periods
+    (0 to 1): from the first turning point (x_n' from + to -) of each over 40 time
+    units of the flow from `y`, sampled every 1e-3."""
+    ts = jnp.linspace(0.0, 40.0, 40_001)
+    v = np.asarray(flow(params, jnp.asarray(y), 40.0, options, diffrax.SaveAt(ts=ts)).ys)[:, 1]
+    first = []
+    for n in sites:
+        down = np.flatnonzero((v[:-1, n] > 0) & (v[1:, n] <= 0))
+        if down.size < 2:
+            return None
+        first.append(ts[down[0]])
+    down = np.flatnonzero((v[:-1, sites[0]] > 0) & (v[1:, sites[0]] <= 0))
+    period = float(ts[down[1]] - ts[down[0]])
+    return np.mod((np.asarray(first) - first[0]) / period, 1.0)
+
+
+def check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, *,
+                        delta: float = 0.03, perturbation: float = 1e-3, seed: int = 0,
+                        shooting: ShootingOptions = SNAKE_SHOOTING,
+                        options: SimulationOptions = SimulationOptions(t_end=5000.0,
+                                                                       transient=4500.0)
+                        ) -> list[dict]:
+    """Direct simulation just inside and just outside each end of a stable segment
+    that a bifurcation ends: from the orbit of the branch nearest to the end on its
+    stable side (its state at t = 0, positions perturbed by `perturbation`), at
+    v_d = end -+ `delta`. The state persists when the simulation ends with the same
+    oscillators on the HALC (amplitude above half the largest) and, among them, the
+    same phase lags within 0.05 of a period (a symmetry-breaking instability keeps
+    the sites and changes their phases); it is lost otherwise.
+
+    **Returns:**
+
+    One dict per end and side: v_d, side ("inside"/"outside"), the sites of the
+    orbit and of the simulation, the largest phase-lag difference, `persists`,
+    `expected_growth` (outside: |mu|^(t_end / T) of the nearest unstable point of
+    the branch) and `agrees` (persists inside, lost outside), None where the
+    perturbation times the expected growth stays below 1, too weak an instability
+    for the horizon to decide.
+    """
+    rng = np.random.default_rng(seed)
+    v = branch["v_d"].values
+    stable = branch["stable"].values
+    lo, hi = segment["v_d"]
+    inside_idx = np.flatnonzero(stable & (v >= lo) & (v <= hi))
+    out = []
+    for end, sign in ((segment["ends"][0], 1.0), (segment["ends"][1], -1.0)):
+        if end["type"] == "end of branch":
+            continue
+        i = inside_idx[np.argmin(np.abs(v[inside_idx] - end["v_d"]))]
+        y_orbit, _ = unpack(jnp.asarray(branch["u"].values[i]))
+        a = branch["amplitudes"].values[i]
+        sites = np.flatnonzero(a > 0.5 * a.max())
+        p_orbit = with_parameter(params, "v_d", float(v[i]))
+        lags = _phase_lags(p_orbit, y_orbit, sites, shooting)
+        y0 = np.asarray(y_orbit).copy()
+        y0[0] += perturbation * rng.standard_normal(y0.shape[1])
+        for side, s in (("inside", sign), ("outside", -sign)):
+            vd = float(end["v_d"] + s * delta)
+            p = with_parameter(params, "v_d", vd)
+            obs = simulate(p, GivenState(jnp.asarray(y0)), options=options)
+            amp = np.asarray(obs.amplitudes)
+            sim_sites = np.flatnonzero(amp > 0.5 * amp.max())
+            lag_difference = None
+            if np.array_equal(sites, sim_sites) and lags is not None:
+                sim_lags = _phase_lags(p, obs.y_final, sites, shooting)
+                if sim_lags is not None:
+                    d = np.mod(sim_lags - lags, 1.0)
+                    lag_difference = float(np.max(np.minimum(d, 1 - d)))
+            persists = lag_difference is not None and lag_difference < 0.05
+            # Outside, the perturbation grows like |mu|^(t / T): a weak instability
+            # is not seen within the horizon, and then the check cannot decide.
+            growth = 1.0
+            if side == "outside":
+                unstable = np.flatnonzero(~stable)
+                if unstable.size:
+                    j = unstable[np.argmin(np.abs(v[unstable] - vd))]
+                    growth = float(branch["critical_multiplier_abs"].values[j]
+                                   ** (options.t_end / branch["period"].values[j]))
+            resolved = side == "inside" or perturbation * growth > 1.0
+            out.append({"end": end["type"], "end_v_d": end["v_d"], "side": side, "v_d": vd,
+                        "sites_orbit": sites.tolist(), "sites_simulation": sim_sites.tolist(),
+                        "phase_lag_difference": lag_difference, "persists": persists,
+                        "expected_growth": growth if side == "outside" else None,
+                        "agrees": (persists == (side == "inside")) if resolved else None})
+    return out
+
+
+def localized_branches(params: ChainParams = ChainParams(), sites=SITES, *,
+                       shooting: ShootingOptions = SNAKE_SHOOTING,
+                       continuation_options: ContinuationOptions = ContinuationOptions(
+                           ds=0.02, ds_max=0.1, p_min=1.0, p_max=2.2, max_points=60),
+                       start_options: SimulationOptions = SimulationOptions(
+                           t_end=3000.0, transient=2500.0),
+                       simulation_check: bool = True, out: Path | None = None,
+                       progress: bool = False) -> dict:
+    """The snake: each localized periodic state that simulation finds at
+    `params.v_d` (eq. (8) with k excited, for k in `sites`), refined by shooting,
+    continued over v_d both ways by pseudo-arclength through its folds, with its
+    Floquet multipliers, bifurcations (`locate_bifurcations`), stable ranges, the
+    branches it meets (`connections`) and, optionally, direct simulation just inside
+    and outside each end of each stable range (`check_by_simulation`).
+
+    **Arguments:**
+
+    - `params`: the chain (any chain of `ChainParams`); `params.v_d` is where the
+        states are found (1.5 by default, inside the paper's bistable range).
+    - `sites`: excited oscillators of each start.
+    - `shooting`: `ShootingOptions` of every orbit.
+    - `continuation_options`: `ContinuationOptions` (direction is set both ways).
+    - `start_options`: `SimulationOptions` of the starting simulations.
+    - `simulation_check`: run `check_by_simulation` on every stable range.
+    - `out`: a folder: each branch is stored there as `branch_k<k>.nc` with the key
+        of its settings (`write_dataset`) as it finishes, and read back on a later
+        call with equal settings (resume).
+    - `progress`: progress bars.
+
+    **Returns:**
+
+    A dict with `summary` (JSON-ready: `branches`, a list of objects with `label`,
+    `excited`, `sites`, `stable_ranges`, `bifurcations`, `connects_to`, ...) and
+    `datasets` (label -> the branch's `xarray.Dataset`).
+
+    **Raises:**
+
+    `ValueError` for bad sites or options.
+    """
+    sites = tuple(int(k) for k in sites)
+    datasets, starts, failed = {}, {}, {}
+    settings = {"chain": chain_record(params), "shooting": shooting,
+                "continuation": continuation_options, "start": start_options}
+    paths = {k: None if out is None else Path(out) / f"branch_k{k}.nc" for k in sites}
+    todo = []
+    for k in sites:
+        stored = None if out is None else read_dataset(paths[k], "snake branch", k=k,
+                                                       **settings)
+        if stored is not None:
+            datasets[f"k={k}"] = stored
+        else:
+            todo.append(k)
+    if todo:
+        for k, (orbit, sim, reason) in start_orbits(params, todo, options=start_options,
+                                                    shooting=shooting,
+                                                    progress=progress).items():
+            starts[k] = sim
+            if orbit is None:
+                failed[k] = reason
+                continue
+            opts = dataclasses.replace(
+                shooting, phase_oscillator=int(np.argmax(np.asarray(orbit.amplitudes))))
+            ds = follow_branch(orbit, opts, continuation_options, k=k, progress=progress)
+            ds = ds.assign_attrs(start_vd=float(params.v_d),
+                                 start_energy=float(orbit.energy),
+                                 start_n_halc=int(orbit.n_halc))
+            if out is not None:
+                Path(out).mkdir(parents=True, exist_ok=True)
+                write_dataset(ds, paths[k], "snake branch", k=k, **settings)
+            datasets[f"k={k}"] = ds
+    links = connections(datasets)
+    branches = []
+    bar = tqdm(total=len(datasets), desc="simulation check", disable=not (progress and
+                                                                           simulation_check))
+    for label, ds in datasets.items():
+        ranges = stable_ranges(ds)
+        entry = {"label": label, "excited": int(ds.attrs["excited"]),
+                 "sites": (int(np.bincount(ds["n_halc"].values[ds["stable"].values]).argmax())
+                           if ds["stable"].values.any() else None),
+                 "stable_ranges": [r["v_d"] for r in ranges],
+                 "stable_range_ends": [r["ends"] for r in ranges],
+                 "bifurcations": json.loads(ds.attrs["bifurcations"]),
+                 "connects_to": links[label],
+                 "v_d_computed": [float(ds["v_d"].min()), float(ds["v_d"].max())],
+                 "points": int(ds.sizes["point"]),
+                 "stop": json.loads(ds.attrs["stop"]),
+                 "start": {"v_d": ds.attrs["start_vd"], "energy": ds.attrs["start_energy"],
+                           "n_halc": ds.attrs["start_n_halc"]},
+                 "largest_trivial_multiplier_error": float(
+                     ds["trivial_multiplier_error"].max())}
+        if simulation_check:
+            entry["simulation_check"] = [c for r in ranges for c in
+                                         check_by_simulation(params, ds, r, shooting=shooting)]
+        branches.append(entry)
+        bar.update()
+    bar.close()
+    summary = {"branches": branches,
+               "not_periodic": [{"excited": k, "reason": r, "simulation": starts[k]}
+                                for k, r in failed.items()]}
+    return {"summary": summary, "datasets": datasets}
+

@@ -1,0 +1,121 @@
+"""The snake on a small ring: shooting from simulated chain states, Floquet
+multipliers against their closed-form estimate, bifurcations located along a branch
+against the extended (Moore-Spence) system, stable ends against direct simulation,
+the stored branches read back, and the command line."""
+
+import json
+
+import numpy as np
+import pytest
+
+import jaxchain as jc
+from jaxchain._bifurcation.bifurcations import locate_bifurcations
+from jaxchain._snake import localized_branches, start_orbits
+
+from helpers import assert_usage_error
+
+pytestmark = pytest.mark.numerics
+
+RING = jc.ChainParams(n_osc=4, v_d=1.5)
+OPTIONS = jc.ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.2, p_max=1.75, max_points=14)
+
+
+@pytest.fixture(scope="module")
+def one_site(tmp_path_factory):
+    out = tmp_path_factory.mktemp("snake")
+    found = localized_branches(RING, (1,), continuation_options=OPTIONS, out=out)
+    return found, out
+
+
+def test_shooting_from_simulation_gives_the_simulated_state_and_its_multipliers():
+    """The 1-site state of a ring of 4 at v_d = 1.5: the orbit has the simulated
+    energy (within 0.5 %) and sites; the trivial multiplier is 1 to 1e-6; each quiet
+    oscillator contributes a pair of modulus about exp(-(2 xi - |mu'(v_d)|) T / 2)."""
+    orbit, sim, reason = start_orbits(RING, (1,))[1]
+    assert reason is None and bool(orbit.converged)
+    assert int(orbit.n_halc) == sim["n_halc"] == 1
+    assert abs(float(orbit.energy) / sim["energy"] - 1) < 5e-3
+    m = np.asarray(orbit.multipliers)
+    assert abs(m[int(orbit.trivial)] - 1) < 1e-6
+    f = RING.friction
+    slope = (f.mu_st - f.mu_d) / f.v0 * np.exp(-RING.v_d / f.v0)  # |mu'(v_d)|, eq. (1)
+    quiet = np.exp(-(2 * RING.xi - slope) * float(orbit.period) / 2)
+    others = np.delete(np.abs(m), int(orbit.trivial))
+    assert abs(others[0] / quiet - 1) < 0.02  # the largest: a quiet oscillator's pair
+
+
+def test_bisection_along_the_branch_finds_the_fold_of_the_extended_system():
+    """On the single oscillator's branch from the Hopf point, the fold located by
+    bisection on dp/ds agrees with the Moore-Spence fold to 1e-6."""
+    orbit = jc.hopf_cycle(jc.ChainParams(n_osc=1))
+    problem = jc.limit_cycle_problem(orbit)
+    branch = jc.continuation(problem, options=jc.ContinuationOptions(
+        ds=0.01, ds_max=0.1, p_min=1.0, p_max=2.5, max_points=50))
+    found = locate_bifurcations(problem, branch)
+    folds = [b for b in found if b.kind == "fold"]
+    assert len(folds) == 1
+    reference = jc.fold_point(problem, branch)
+    assert abs(float(folds[0].p) - float(reference.p)) < 1e-6
+    assert abs(complex(folds[0].multiplier) - 1) < 1e-3
+
+
+def test_the_one_site_branch_ends_where_simulation_says(one_site):
+    """Its low end is a Neimark-Sacker point (a complex pair leaves the unit circle:
+    the quiet neighbours start to oscillate), and direct simulation keeps the state
+    just above it and loses it just below."""
+    found, _ = one_site
+    (branch,) = found["summary"]["branches"]
+    assert branch["sites"] == 1 and len(branch["stable_ranges"]) == 1
+    low = branch["stable_range_ends"][0][0]
+    assert low["type"] == "Neimark-Sacker" and 1.2 < low["v_d"] < 1.5
+    assert abs(low["multiplier"][1]) > 1e-3  # complex
+    checks = [c for c in branch["simulation_check"] if c["end"] == "Neimark-Sacker"]
+    assert {c["side"]: c["agrees"] for c in checks} == {"inside": True, "outside": True}
+    assert branch["largest_trivial_multiplier_error"] < 1e-6
+
+
+def test_continuation_reproduces_itself_from_a_perturbed_start(one_site):
+    """The Neimark-Sacker point again, from the starting orbit perturbed by a
+    relative 1e-6: the same belt speed to 1e-6."""
+    found, _ = one_site
+    ds = found["datasets"]["k=1"]
+    low = found["summary"]["branches"][0]["stable_range_ends"][0][0]["v_d"]
+    start = int(np.argmin(np.abs(ds["v_d"].values - 1.5)))
+    u = ds["u"].values[start] * (1 + 1e-6)
+    params = jc.with_parameter(RING, "v_d", float(ds["v_d"].values[start]))
+    options = jc.ShootingOptions(root_finder="levenberg-marquardt",
+                                 phase_oscillator=int(ds.attrs["phase_oscillator"]))
+    orbit = jc.periodic_orbit(params, u[:-1].reshape(2, -1), float(u[-1]), options)
+    problem = jc.limit_cycle_problem(orbit, options)
+    branch = jc.continuation(problem, options=jc.ContinuationOptions(
+        ds=0.02, ds_max=0.1, p_min=1.2, p_max=1.75, max_points=14, direction=-1))
+    ns = [b for b in locate_bifurcations(problem, branch) if b.kind == "Neimark-Sacker"]
+    assert len(ns) == 1 and abs(float(ns[0].p) - low) < 1e-6
+
+
+def test_stored_branches_are_read_back_only_for_equal_settings(one_site):
+    found, out = one_site
+    again = localized_branches(RING, (1,), continuation_options=OPTIONS, out=out,
+                               simulation_check=False)
+    a, b = found["datasets"]["k=1"], again["datasets"]["k=1"]
+    np.testing.assert_array_equal(a["energy"].values, b["energy"].values)
+    assert again["summary"]["branches"][0]["bifurcations"] == \
+        found["summary"]["branches"][0]["bifurcations"]
+    other = jc.ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.3, p_max=1.75, max_points=4)
+    fresh = localized_branches(RING, (1,), continuation_options=other, out=out,
+                               simulation_check=False)
+    assert fresh["datasets"]["k=1"].sizes["point"] <= 7 < a.sizes["point"]  # recomputed
+
+
+def test_snake_command_json_and_bad_options(tmp_path, capsys):
+    from jaxchain._cli.main import main
+    code = main(["snake", "--n-osc", "3", "--sites", "1", "--max-points", "4",
+                 "--no-simulation", "--out", str(tmp_path), "--json", "--no-progress"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    (branch,) = out["branches"]
+    assert set(branch) >= {"sites", "stable_ranges", "bifurcations", "connects_to"}
+    assert branch["sites"] == 1 and (tmp_path / "snake.png").exists()
+    assert (tmp_path / "snake" / "branch_k1.nc").exists()
+    assert_usage_error(["snake", "--sites", "0"], "--sites", capsys)
+    assert_usage_error(["snake", "--vd", "3"], "--vd", capsys)
