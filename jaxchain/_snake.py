@@ -161,6 +161,7 @@ def stable_ranges(branch: xr.Dataset) -> list[dict]:
     bifurcation located there (or the end of the computed branch)."""
     stable = branch["stable"].values
     v = branch["v_d"].values
+    energy = branch["energy"].values
     bifs = json.loads(branch.attrs["bifurcations"])
     out = []
     i = 0
@@ -177,9 +178,12 @@ def stable_ranges(branch: xr.Dataset) -> list[dict]:
                 ends.append({"type": "end of branch", "v_d": float(v[idx])})
                 continue
             # the located bifurcation nearest to the change (a fold may lie just
-            # beyond both points, where the branch turns)
+            # beyond both points, where the branch turns), nearest in (v_d, E): an
+            # unstable part of the branch may turn back at nearly the same v_d
             mid, gap = 0.5 * (v[idx] + v[other]), abs(v[idx] - v[other])
-            near = sorted(bifs, key=lambda b: abs(b["v_d"] - mid))
+            e_mid = 0.5 * (energy[idx] + energy[other])
+            near = sorted(bifs, key=lambda b: abs(b["v_d"] - mid)
+                          + abs(b["energy"] - e_mid) / max(abs(e_mid), 1e-12))
             ends.append(near[0] if near and abs(near[0]["v_d"] - mid) <= gap + 1e-3 else
                         {"type": "stability change", "v_d": float(mid)})
         pair = sorted(ends, key=lambda e: e["v_d"])
