@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import diffrax
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
@@ -14,7 +15,8 @@ from tqdm.auto import tqdm
 from ._bifurcation.bifurcations import locate_bifurcations
 from ._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
 from ._bifurcation.limit_cycles import limit_cycle_problem
-from ._bifurcation.shooting import ShootingOptions, flow, periodic_orbit, unpack
+from ._bifurcation.shooting import (ShootingOptions, floquet_multipliers, flow, periodic_orbit,
+                                    unpack)
 from ._ensemble import ensemble
 from ._options import SimulationOptions
 from ._physics.initial import GivenState, OutOfPhaseExcitation, excited_block
@@ -30,22 +32,40 @@ SITES = (1, 2, 4, 8, 20)
 #: Shooting on a chain: Levenberg-Marquardt converges from a simulated state.
 SNAKE_SHOOTING = ShootingOptions(root_finder="levenberg-marquardt")
 
+#: The starting simulations: a chain of 20 settles slowly (the paper removes
+#: 10^4 time units of transient); after 2500 the four- and eight-site states of
+#: eq. (8) at v_d = 1.5 are not yet periodic to the shooting tolerance.
+SNAKE_START = SimulationOptions(t_end=12_000.0, transient=11_500.0)
+
+#: Continuation of each branch: far enough each way (150 points) to pass its folds.
+SNAKE_CONTINUATION = ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.0, p_max=2.2,
+                                         max_points=150)
+
+
+def _downward_crossings(params: ChainParams, y, options: ShootingOptions,
+                        horizon: float = 40.0) -> tuple[np.ndarray, np.ndarray, list]:
+    """The flow from `y` sampled every 1e-3 over `horizon`: (times, states, and for
+    each oscillator the sample indices where x_n' passes from + to -)."""
+    ts = np.linspace(0.0, horizon, int(round(horizon * 1000)) + 1)
+    ys = np.asarray(flow(params, jnp.asarray(y), horizon, options,
+                         diffrax.SaveAt(ts=jnp.asarray(ts))).ys)
+    v = ys[:, 1]
+    down = [np.flatnonzero((v[:-1, n] > 0) & (v[1:, n] <= 0)) for n in range(v.shape[1])]
+    return ts, ys, down
+
 
 def _turning_point(params: ChainParams, y: np.ndarray, oscillator: int,
                    options: ShootingOptions) -> tuple[np.ndarray, float] | None:
     """A state where x_n' passes from + to - (n = `oscillator`), and the time to the
-    next such crossing, from the flow sampled every 1e-3 over 40 time units."""
-    ts = jnp.linspace(0.0, 40.0, 40_001)
-    ys = np.asarray(flow(params, jnp.asarray(y), 40.0, options, diffrax.SaveAt(ts=ts)).ys)
-    v = ys[:, 1, oscillator]
-    down = np.flatnonzero((v[:-1] > 0) & (v[1:] <= 0))
+    next such crossing (`_downward_crossings`)."""
+    ts, ys, down = _downward_crossings(params, y, options)
+    down = down[oscillator]
     if down.size < 2:
         return None
     return ys[down[0]], float(ts[down[1]] - ts[down[0]])
 
 
-def start_orbits(params: ChainParams, sites=SITES, *, options: SimulationOptions =
-                 SimulationOptions(t_end=3000.0, transient=2500.0),
+def start_orbits(params: ChainParams, sites=SITES, *, options: SimulationOptions = SNAKE_START,
                  shooting: ShootingOptions = SNAKE_SHOOTING, progress: bool = False):
     """Periodic localized states of the chain at `params.v_d`, refined by shooting
     from direct simulation: eq. (8) with k oscillators excited (`excited_block`),
@@ -100,7 +120,7 @@ def start_orbits(params: ChainParams, sites=SITES, *, options: SimulationOptions
     return out
 
 
-def _branch_dataset(k: int, orbit, problem, branch, bifurcations) -> xr.Dataset:
+def _branch_dataset(k: int, problem, branch, bifurcations) -> xr.Dataset:
     ok = np.asarray(branch.converged)
     r = branch.records
     multipliers = np.asarray(r.multipliers)
@@ -145,7 +165,7 @@ def follow_branch(orbit, options: ShootingOptions, continuation_options: Continu
         opts = dataclasses.replace(continuation_options, direction=direction)
         branch = continuation(problem, algorithm, opts, progress=progress)
         bifs = locate_bifurcations(problem, branch, algorithm)
-        halves.append(_branch_dataset(k, orbit, problem, branch, bifs))
+        halves.append(_branch_dataset(k, problem, branch, bifs))
         found.append(bifs)
     down, up = halves
     joined = xr.concat([down.isel(point=slice(None, None, -1)), up.isel(point=slice(1, None))],
@@ -158,7 +178,9 @@ def follow_branch(orbit, options: ShootingOptions, continuation_options: Continu
 
 def stable_ranges(branch: xr.Dataset) -> list[dict]:
     """The stable segments of a joined branch: their v_d ranges, each end the
-    bifurcation located there (or the end of the computed branch)."""
+    bifurcation located there (or the end of the computed branch), and for each
+    end the index of its last stable point and of the first point beyond it
+    (None at the end of the branch)."""
     stable = branch["stable"].values
     v = branch["v_d"].values
     energy = branch["energy"].values
@@ -175,7 +197,7 @@ def stable_ranges(branch: xr.Dataset) -> list[dict]:
         ends = []
         for idx, other in ((i, i - 1), (j, j + 1)):
             if not 0 <= other < stable.size:
-                ends.append({"type": "end of branch", "v_d": float(v[idx])})
+                ends.append(({"type": "end of branch", "v_d": float(v[idx])}, idx, None))
                 continue
             # the located bifurcation nearest to the change (a fold may lie just
             # beyond both points, where the branch turns), nearest in (v_d, E): an
@@ -184,10 +206,12 @@ def stable_ranges(branch: xr.Dataset) -> list[dict]:
             e_mid = 0.5 * (energy[idx] + energy[other])
             near = sorted(bifs, key=lambda b: abs(b["v_d"] - mid)
                           + abs(b["energy"] - e_mid) / max(abs(e_mid), 1e-12))
-            ends.append(near[0] if near and abs(near[0]["v_d"] - mid) <= gap + 1e-3 else
-                        {"type": "stability change", "v_d": float(mid)})
-        pair = sorted(ends, key=lambda e: e["v_d"])
-        out.append({"v_d": [pair[0]["v_d"], pair[1]["v_d"]], "ends": pair,
+            ends.append((near[0] if near and abs(near[0]["v_d"] - mid) <= gap + 1e-3 else
+                         {"type": "stability change", "v_d": float(mid)}, idx, other))
+        ends.sort(key=lambda e: e[0]["v_d"])
+        out.append({"v_d": [ends[0][0]["v_d"], ends[1][0]["v_d"]],
+                    "ends": [e[0] for e in ends],
+                    "points": [(e[1], e[2]) for e in ends],
                     "n_halc": int(np.bincount(branch["n_halc"].values[i:j + 1]).argmax())})
         i = j + 1
     return out
@@ -221,19 +245,14 @@ def connections(branches: dict, tol: float = 1e-3) -> dict:
 
 def _phase_lags(params: ChainParams, y, sites, options: ShootingOptions) -> np.ndarray | None:
     """The phase of each oscillator of `sites` relative to the first, in periods
-    (0 to 1): from the first turning point (x_n' from + to -) of each over 40 time
-    units of the flow from `y`, sampled every 1e-3."""
-    ts = jnp.linspace(0.0, 40.0, 40_001)
-    v = np.asarray(flow(params, jnp.asarray(y), 40.0, options, diffrax.SaveAt(ts=ts)).ys)[:, 1]
-    first = []
-    for n in sites:
-        down = np.flatnonzero((v[:-1, n] > 0) & (v[1:, n] <= 0))
-        if down.size < 2:
-            return None
-        first.append(ts[down[0]])
-    down = np.flatnonzero((v[:-1, sites[0]] > 0) & (v[1:, sites[0]] <= 0))
-    period = float(ts[down[1]] - ts[down[0]])
-    return np.mod((np.asarray(first) - first[0]) / period, 1.0)
+    (0 to 1): from the first turning point (x_n' from + to -) of each
+    (`_downward_crossings`)."""
+    ts, _, down = _downward_crossings(params, y, options)
+    if any(down[n].size < 2 for n in sites):
+        return None
+    first = np.asarray([ts[down[n][0]] for n in sites])
+    period = float(ts[down[sites[0]][1]] - ts[down[sites[0]][0]])
+    return np.mod((first - first[0]) / period, 1.0)
 
 
 def check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, *,
@@ -245,39 +264,46 @@ def check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, 
     """Direct simulation just inside and just outside each end of a stable segment
     that a bifurcation ends: from the orbit of the branch nearest to the end on its
     stable side (its state at t = 0, positions perturbed by `perturbation`), at
-    v_d = end -+ `delta`. The state persists when the simulation ends with the same
-    oscillators on the HALC (amplitude above half the largest) and, among them, the
-    same phase lags within 0.05 of a period (a symmetry-breaking instability keeps
+    v_d = end -+ `delta` beyond a fold (where the state ceases to exist); beyond a
+    change of stability, at the first unstable point of the branch at least
+    `delta` away where the perturbation grows to 100 within the horizon
+    (`_unstable_point`: a weak instability needs the branch's |mu| to grow). The
+    state persists when the simulation ends with the same oscillators on the HALC
+    (amplitude above half the largest) and, among them, the same phase lags within 0.05 of a period (a symmetry-breaking instability keeps
     the sites and changes their phases); it is lost otherwise.
 
     **Returns:**
 
     One dict per end and side: v_d, side ("inside"/"outside"), the sites of the
     orbit and of the simulation, the largest phase-lag difference, `persists`,
-    `expected_growth` (outside: |mu|^(t_end / T) of the nearest unstable point of
-    the branch) and `agrees` (persists inside, lost outside), None where the
+    `expected_growth` (outside a change of stability: |mu|^(t_end / T) of the
+    branch's point there) and `agrees` (persists inside, lost outside), None where the
     perturbation times the expected growth stays below 1, too weak an instability
     for the horizon to decide.
     """
     rng = np.random.default_rng(seed)
     v = branch["v_d"].values
     stable = branch["stable"].values
-    lo, hi = segment["v_d"]
-    inside_idx = np.flatnonzero(stable & (v >= lo) & (v <= hi))
+    mu = branch["critical_multiplier_abs"].values
+    growth = mu ** (options.t_end / branch["period"].values)
     out = []
-    for end, sign in ((segment["ends"][0], 1.0), (segment["ends"][1], -1.0)):
+    for end, (i, beyond) in zip(segment["ends"], segment["points"]):
         if end["type"] == "end of branch":
             continue
-        i = inside_idx[np.argmin(np.abs(v[inside_idx] - end["v_d"]))]
         y_orbit, _ = unpack(jnp.asarray(branch["u"].values[i]))
         a = branch["amplitudes"].values[i]
         sites = np.flatnonzero(a > 0.5 * a.max())
-        p_orbit = with_parameter(params, "v_d", float(v[i]))
-        lags = _phase_lags(p_orbit, y_orbit, sites, shooting)
+        lags = _phase_lags(with_parameter(params, "v_d", float(v[i])), y_orbit, sites, shooting)
         y0 = np.asarray(y_orbit).copy()
         y0[0] += perturbation * rng.standard_normal(y0.shape[1])
-        for side, s in (("inside", sign), ("outside", -sign)):
-            vd = float(end["v_d"] + s * delta)
+        inward = np.sign(v[i] - end["v_d"]) or 1.0
+        sides = [("inside", float(end["v_d"] + inward * delta), None)]
+        if end["type"] == "fold":  # beyond a fold the state does not exist
+            sides.append(("outside", float(end["v_d"] - inward * delta), None))
+        else:
+            sides.append(("outside",) + _unstable_point(v, stable, growth, beyond, i, end,
+                                                        delta, perturbation))
+        for side, vd, expected in sides:
             p = with_parameter(params, "v_d", vd)
             obs = simulate(p, GivenState(jnp.asarray(y0)), options=options)
             amp = np.asarray(obs.amplitudes)
@@ -289,30 +315,79 @@ def check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, 
                     d = np.mod(sim_lags - lags, 1.0)
                     lag_difference = float(np.max(np.minimum(d, 1 - d)))
             persists = lag_difference is not None and lag_difference < 0.05
-            # Outside, the perturbation grows like |mu|^(t / T): a weak instability
-            # is not seen within the horizon, and then the check cannot decide.
-            growth = 1.0
-            if side == "outside":
-                unstable = np.flatnonzero(~stable)
-                if unstable.size:
-                    j = unstable[np.argmin(np.abs(v[unstable] - vd))]
-                    growth = float(branch["critical_multiplier_abs"].values[j]
-                                   ** (options.t_end / branch["period"].values[j]))
-            resolved = side == "inside" or perturbation * growth > 1.0
+            resolved = expected is None or perturbation * expected > 1.0
             out.append({"end": end["type"], "end_v_d": end["v_d"], "side": side, "v_d": vd,
                         "sites_orbit": sites.tolist(), "sites_simulation": sim_sites.tolist(),
                         "phase_lag_difference": lag_difference, "persists": persists,
-                        "expected_growth": growth if side == "outside" else None,
+                        "expected_growth": expected,
                         "agrees": (persists == (side == "inside")) if resolved else None})
     return out
 
 
+def _unstable_point(v, stable, growth, beyond, last, end, delta, perturbation
+                    ) -> tuple[float, float]:
+    """(v_d, expected growth) of the simulation outside a change of stability: the
+    first unstable point of the branch beyond it, walking away from the stable
+    segment, that lies at least `delta` from the end and where a perturbation of
+    size `perturbation` grows to 100 within the horizon; the point of largest
+    growth when none does."""
+    step = beyond - last
+    walk = []
+    k = beyond
+    while 0 <= k < v.size and not stable[k]:
+        walk.append(k)
+        k += step
+    far = [k for k in walk if abs(v[k] - end["v_d"]) >= delta]
+    for k in far:
+        if perturbation * growth[k] >= 100.0:
+            return float(v[k]), float(growth[k])
+    k = max(far or walk, key=lambda k: growth[k])
+    return float(v[k]), float(growth[k])
+
+
+_multipliers = eqx.filter_jit(floquet_multipliers)
+
+
+def multiplier_accuracy(params: ChainParams, branch: xr.Dataset, points,
+                        shooting: ShootingOptions = SNAKE_SHOOTING, factor: float = 100.0
+                        ) -> dict:
+    """How accurate the branch's Floquet multipliers are: at the given points, the
+    multipliers again from the same orbits with the flow's tolerances divided by
+    `factor`; the difference estimates the error at the branch's tolerances.
+
+    **Returns:**
+
+    A dict: `points`, `rtol` (the two), the largest difference of the critical
+    multiplier (`critical_difference`) and of its modulus (`modulus_difference`),
+    and the largest |trivial multiplier - 1| at each tolerance.
+    """
+    tight = dataclasses.replace(shooting, rtol=shooting.rtol / factor,
+                                atol=shooting.atol / factor)
+    v = branch["v_d"].values
+    critical, modulus, trivial = [], [], ([], [])
+    for i in sorted(set(int(i) for i in points)):
+        y0, period = unpack(jnp.asarray(branch["u"].values[i]))
+        p = with_parameter(params, "v_d", float(v[i]))
+        got = []
+        for options, errors in zip((shooting, tight), trivial):
+            values, index = _multipliers(p, y0, period, options)
+            values = np.asarray(values)
+            errors.append(abs(values[int(index)] - 1))
+            got.append(np.delete(values, int(index)))
+        first = got[0][0]  # the critical multiplier, and its match at the tight tolerance
+        second = got[1][np.argmin(np.abs(got[1] - first))]
+        critical.append(abs(first - second))
+        modulus.append(abs(abs(first) - abs(second)))
+    return {"points": len(critical), "rtol": [shooting.rtol, tight.rtol],
+            "critical_difference": float(max(critical, default=np.nan)),
+            "modulus_difference": float(max(modulus, default=np.nan)),
+            "trivial_error": [float(max(e, default=np.nan)) for e in trivial]}
+
+
 def localized_branches(params: ChainParams = ChainParams(), sites=SITES, *,
                        shooting: ShootingOptions = SNAKE_SHOOTING,
-                       continuation_options: ContinuationOptions = ContinuationOptions(
-                           ds=0.02, ds_max=0.1, p_min=1.0, p_max=2.2, max_points=60),
-                       start_options: SimulationOptions = SimulationOptions(
-                           t_end=3000.0, transient=2500.0),
+                       continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
+                       start_options: SimulationOptions = SNAKE_START,
                        simulation_check: bool = True, out: Path | None = None,
                        progress: bool = False) -> dict:
     """The snake: each localized periodic state that simulation finds at
@@ -397,6 +472,10 @@ def localized_branches(params: ChainParams = ChainParams(), sites=SITES, *,
                            "n_halc": ds.attrs["start_n_halc"]},
                  "largest_trivial_multiplier_error": float(
                      ds["trivial_multiplier_error"].max())}
+        ends = [i for r in ranges for pair in r["points"] for i in pair if i is not None]
+        start = int(np.argmin(np.abs(ds["v_d"].values - ds.attrs["start_vd"])))
+        entry["multiplier_accuracy"] = multiplier_accuracy(params, ds, ends + [start],
+                                                           shooting)
         if simulation_check:
             entry["simulation_check"] = [c for r in ranges for c in
                                          check_by_simulation(params, ds, r, shooting=shooting)]

@@ -107,3 +107,32 @@ def test_bad_arguments():
     with pytest.raises(RuntimeError, match="shooting did not converge"):
         jc.periodic_orbit(params, jnp.array([[50.0], [0.0]]), 1.0,
                           jc.ShootingOptions(newton_steps=3))
+
+
+@pytest.mark.parametrize("n_osc", [1, 2])
+def test_deflated_multipliers_obey_liouville(n_osc):
+    """The non-trivial multipliers come from the monodromy matrix with the flow
+    direction deflated; their product times the trivial one is det M, which
+    Liouville's formula gives as exp(integral of tr J over the period). On the
+    small Hopf cycle (pure slip, smooth tr J) that integral is taken by Simpson's
+    rule along scipy's orbit, independently of the monodromy."""
+    from scipy.integrate import simpson
+    orbit = jc.hopf_cycle(jc.ChainParams(n_osc=n_osc), offset=0.01)
+    T = float(orbit.period)
+    ts = np.linspace(0.0, T, 8001)
+    sol = solve_ivp(reference_rhs(orbit.params), (0.0, T), np.ravel(orbit.y0),
+                    method="DOP853", rtol=1e-12, atol=1e-13, t_eval=ts)
+    traces = jax.vmap(lambda y: jnp.trace(jc.jacobian(orbit.params, jnp.reshape(y, (2, -1)))))(
+        jnp.asarray(sol.y.T))
+    det = np.exp(simpson(np.asarray(traces), x=ts))
+    values = np.asarray(orbit.multipliers)
+    assert abs(values[int(orbit.trivial)] - 1) < 1e-6
+    assert abs(np.prod(values).real / det - 1) < 1e-6
+    assert abs(np.prod(values).imag) < 1e-9
+    # the deflated spectrum is the full one without the multiplier at 1
+    full = np.linalg.eigvals(np.asarray(jc.monodromy(orbit.params, orbit.y0, orbit.period,
+                                                     jc.ShootingOptions())))
+    others = np.delete(full, np.argmin(np.abs(full - 1)))
+    nontrivial = np.delete(values, int(orbit.trivial))
+    for m in nontrivial:
+        assert np.min(np.abs(others - m)) < 1e-6 * max(1.0, abs(m))

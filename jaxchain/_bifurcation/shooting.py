@@ -122,23 +122,33 @@ def monodromy(params: ChainParams, y0: State, period, options: ShootingOptions
 
 def floquet_multipliers(params: ChainParams, y0: State, period, options: ShootingOptions
                         ) -> tuple[Complex[Array, " 2n"], Array]:
-    """Floquet multipliers, the eigenvalues of the monodromy matrix, and the index
-    of the trivial one: the multiplier whose eigenvector is the flow direction
-    f(y0) (it is 1 on an exact orbit; its distance from 1 measures the accuracy
-    of the flow).
+    """Floquet multipliers of the orbit through `y0`, with the trivial one deflated.
+
+    The flow direction f = f(y0) is an eigenvector of the monodromy matrix M with
+    multiplier 1 on an exact orbit. In an orthonormal basis [f/|f|, V] (Householder
+    QR of f), M is block upper triangular up to the flow's error, so the
+    non-trivial multipliers are the eigenvalues of V^T M V (the linearized
+    Poincare map on the quotient by the flow direction), and the trivial one is
+    the Rayleigh quotient f^T M f / |f|^2. No multiplier near 1 (a weakly damped
+    quiet oscillator, a slowly drifting phase between sites) can then be taken for
+    the trivial one (Seydel, *Practical Bifurcation and Stability Analysis*,
+    3rd ed., Sect. 7.4; Wielandt deflation).
 
     **Returns:**
 
-    (multipliers of shape (2 n_osc,), complex, by decreasing modulus; index of the
-    trivial multiplier, shape ()).
+    (multipliers of shape (2 n_osc,), complex, by decreasing modulus: the 2 n_osc - 1
+    non-trivial ones and the trivial one; index of the trivial one, shape ()).
+    Its distance from 1 measures the accuracy of the flow.
     """
-    values, vectors = jnp.linalg.eig(monodromy(params, y0, period, options))
-    order = jnp.argsort(-jnp.abs(values))
-    values, vectors = values[order], vectors[:, order]
+    m = monodromy(params, y0, period, options)
     direction = jnp.reshape(vector_field(0.0, y0, params), (-1,))
     direction = direction / jnp.linalg.norm(direction)
-    alignment = jnp.abs(vectors.conj().T @ direction) / jnp.linalg.norm(vectors, axis=0)
-    return values, jnp.argmax(alignment)
+    basis, _ = jnp.linalg.qr(direction[:, None], mode="complete")
+    rest = basis[:, 1:]
+    values = jnp.concatenate([jnp.linalg.eigvals(rest.T @ m @ rest),
+                              (direction @ m @ direction)[None].astype(complex)])
+    order = jnp.argsort(-jnp.abs(values))
+    return values[order], jnp.argmax(order == values.size - 1)
 
 
 def orbit_extrema(params: ChainParams, y0: State, period, options: ShootingOptions

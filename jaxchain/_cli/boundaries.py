@@ -8,9 +8,9 @@ import time
 from .._boundaries import RATIO_VALUES, XI_VALUES, boundaries, fig3a_simulations
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, UsageError, add_output_options, comma_list, json_ready,
-                     param_default, positive_float, positive_int, save_figure,
-                     show_progress, writable_folder)
+from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
+                     comma_list, json_ready, param_default, positive_float, positive_int,
+                     save_figure, show_progress, writable_folder)
 
 HELP = "Hopf and fold belt speeds of the bistable range (gradients, continuation)"
 DESCRIPTION = """\
@@ -41,10 +41,7 @@ def add_parser(sub):
     p = sub.add_parser("boundaries", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("model (eq. (5) of the paper; other parameters eq. (7))")
-    g.add_argument("--n-osc", type=positive_int, default=20, metavar="N",
-                   help="number of oscillators on the ring (default 20)")
-    g.add_argument("--eps", type=positive_float, default=param_default("eps"),
-                   help=f"tanh smoothing velocity (default {param_default('eps'):g})")
+    add_ring_options(g)
     g.add_argument("--xi", type=positive_float, default=param_default("xi"),
                    help=f"damping ratio (default {param_default('xi'):g})")
     add_chain_options(g)

@@ -2,16 +2,16 @@
 belt speed, with their stability and bifurcations."""
 
 import argparse
+import dataclasses
 import json
 import time
 from pathlib import Path
 
-from .._bifurcation.continuation import ContinuationOptions
-from .._snake import SITES, localized_branches
+from .._snake import SITES, SNAKE_CONTINUATION, localized_branches
 from .._plots.snake import plot_snake
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, UsageError, add_output_options, comma_list, json_ready,
-                     param_default, positive_float, positive_int, save_figure,
+from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
+                     comma_list, json_ready, positive_float, positive_int, save_figure,
                      show_progress, writable_folder)
 
 HELP = "continuation of the localized periodic states (the snake), with stability"
@@ -44,10 +44,7 @@ def add_parser(sub):
     p = sub.add_parser("snake", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("model (eq. (5) of the paper; other parameters eq. (7))")
-    g.add_argument("--n-osc", type=positive_int, default=20, metavar="N",
-                   help="number of oscillators (default 20)")
-    g.add_argument("--eps", type=positive_float, default=param_default("eps"),
-                   help=f"tanh smoothing velocity (default {param_default('eps'):g})")
+    add_ring_options(g)
     add_chain_options(g)
     g = p.add_argument_group("continuation")
     g.add_argument("--vd", type=positive_float, default=1.5,
@@ -59,8 +56,9 @@ def add_parser(sub):
                    help="smallest belt speed of the branches (default 1.0)")
     g.add_argument("--vd-max", type=positive_float, default=2.2,
                    help="largest belt speed of the branches (default 2.2)")
-    g.add_argument("--max-points", type=positive_int, default=60,
-                   help="continuation points each way (default 60)")
+    g.add_argument("--max-points", type=positive_int, default=SNAKE_CONTINUATION.max_points,
+                   help="continuation points each way (default "
+                        f"{SNAKE_CONTINUATION.max_points})")
     g.add_argument("--no-simulation", action="store_true",
                    help="skip the check by direct simulation at the ends of stable ranges")
     g.add_argument("--sweep", type=Path, default=None, metavar="STORE",
@@ -84,7 +82,7 @@ def run(args) -> None:
         sweep = open_sweep(args.sweep)
     writable_folder(args.out)
     start = time.perf_counter()
-    options = ContinuationOptions(ds=0.02, ds_max=0.1, p_min=args.vd_min, p_max=args.vd_max,
+    options = dataclasses.replace(SNAKE_CONTINUATION, p_min=args.vd_min, p_max=args.vd_max,
                                   max_points=args.max_points)
     found = localized_branches(params, sites, continuation_options=options,
                                simulation_check=not args.no_simulation,
