@@ -157,7 +157,7 @@ def follow_branch(orbit, options: ShootingOptions, continuation_options: Continu
     energy (eq. (9)), period, n_halc, stable, the largest non-trivial |multiplier|,
     the trivial multiplier's distance from 1, amplitudes (point, osc) and the
     shooting unknowns u; attributes `bifurcations` (JSON list of type, v_d, energy,
-    multiplier, n_halc) and `stop`.
+    multiplier, n_halc, and `after`: the index of the point before it) and `stop`.
     """
     problem = limit_cycle_problem(orbit, options)
     halves, found = [], []
@@ -170,7 +170,11 @@ def follow_branch(orbit, options: ShootingOptions, continuation_options: Continu
     down, up = halves
     joined = xr.concat([down.isel(point=slice(None, None, -1)), up.isel(point=slice(1, None))],
                        dim="point", data_vars="all")
-    bifs = json.loads(down.attrs["bifurcations"])[::-1] + json.loads(up.attrs["bifurcations"])
+    # "after": the first of the two joined points that the bifurcation lies between
+    last = down.sizes["point"] - 1
+    bifs = ([b | {"after": last - b["after"] - 1} for b in json.loads(down.attrs["bifurcations"])]
+            [::-1] + [b | {"after": last + b["after"]} for b in
+                      json.loads(up.attrs["bifurcations"])])
     return joined.assign_attrs(down.attrs | {
         "bifurcations": json.dumps(bifs),
         "stop": json.dumps({"low": down.attrs["stop"], "high": up.attrs["stop"]})})
@@ -183,7 +187,6 @@ def stable_ranges(branch: xr.Dataset) -> list[dict]:
     (None at the end of the branch)."""
     stable = branch["stable"].values
     v = branch["v_d"].values
-    energy = branch["energy"].values
     bifs = json.loads(branch.attrs["bifurcations"])
     out = []
     i = 0
@@ -199,15 +202,11 @@ def stable_ranges(branch: xr.Dataset) -> list[dict]:
             if not 0 <= other < stable.size:
                 ends.append(({"type": "end of branch", "v_d": float(v[idx])}, idx, None))
                 continue
-            # the located bifurcation nearest to the change (a fold may lie just
-            # beyond both points, where the branch turns), nearest in (v_d, E): an
-            # unstable part of the branch may turn back at nearly the same v_d
-            mid, gap = 0.5 * (v[idx] + v[other]), abs(v[idx] - v[other])
-            e_mid = 0.5 * (energy[idx] + energy[other])
-            near = sorted(bifs, key=lambda b: abs(b["v_d"] - mid)
-                          + abs(b["energy"] - e_mid) / max(abs(e_mid), 1e-12))
-            ends.append((near[0] if near and abs(near[0]["v_d"] - mid) <= gap + 1e-3 else
-                         {"type": "stability change", "v_d": float(mid)}, idx, other))
+            # the bifurcation located between the two points, else an unlocated change
+            between = [b for b in bifs if b["after"] == min(idx, other)]
+            ends.append((between[0] if between else
+                         {"type": "stability change", "v_d": float(0.5 * (v[idx] + v[other]))},
+                         idx, other))
         ends.sort(key=lambda e: e[0]["v_d"])
         out.append({"v_d": [ends[0][0]["v_d"], ends[1][0]["v_d"]],
                     "ends": [e[0] for e in ends],

@@ -27,6 +27,9 @@ SMALL = {
     "05_any_chain.ipynb":
         ("N_OSC = 4\nSIGMA, SEED = 0.01, 1\nV_D = 1.2\nT_END, TRANSIENT = 300.0, 200.0",
          "the stored chain rebuilds the same parameters: True"),
+    "07_snaking.ipynb":
+        ("N_OSC = 4\nSITES = (1,)\nMAX_POINTS = 5\nSTART_T_END = 1500.0\nCHECK = False",
+         "trivial multiplier error"),
 }
 #: A cell that draws: it calls one of jaxchain's plot functions or plt.show().
 PLOTTING = re.compile(r"\bplt\.show\(|\bjc\.plot_\w+\(")

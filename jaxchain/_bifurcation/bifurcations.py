@@ -49,27 +49,30 @@ def _critical(record) -> tuple[float, complex]:
     return abs(m) - 1.0, m
 
 
-def _bisect(test, s_hi: float, steps: int, f_hi: float) -> tuple[float, float]:
+def _bisect(test, s_hi: float, steps: int, f_hi: float):
     """Bisection on s in [0, s_hi] for a sign change of test(s), test(0) and
     f_hi (the test function at the next point of the branch) of opposite signs.
-    Returns (s, width of the last interval), or
-    (None, 0) when the ends have no sign change (a change of stability that the
-    test function does not see: a multiplier taken for the trivial one)."""
+    test(s) gives (value, corrected point) or None where the corrector fails.
+    Returns (s, width of the last interval, the corrected point of the last
+    successful trial nearest the change), or (None, 0, None) when the ends have
+    no sign change."""
     lo, hi = 0.0, s_hi
-    f_lo = test(lo)
-    if f_lo is None or np.sign(f_lo) == np.sign(f_hi):
-        return None, 0.0
+    first = test(lo)
+    if first is None or np.sign(first[0]) == np.sign(f_hi):
+        return None, 0.0, None
+    f_lo, best = first
     for _ in range(steps):
         mid = 0.5 * (lo + hi)
-        f_mid = test(mid)
-        if f_mid is None:  # the corrector failed: shrink towards the known side
+        trial = test(mid)
+        if trial is None:  # the corrector failed: shrink towards the known side
             hi = mid
             continue
-        if np.sign(f_mid) == np.sign(f_lo):
-            lo, f_lo = mid, f_mid
+        best = trial[1]
+        if np.sign(trial[0]) == np.sign(f_lo):
+            lo = mid
         else:
             hi = mid
-    return 0.5 * (lo + hi), hi - lo
+    return 0.5 * (lo + hi), hi - lo, best
 
 
 def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
@@ -122,17 +125,16 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
         if i in folds:
             def test(s, t0=t0):
                 z = corrected(s)
-                return None if z is None else float(_tangent(problem, z, t0)[-1])
+                return None if z is None else (float(_tangent(problem, z, t0)[-1]), z)
         else:
             def test(s):
                 z = corrected(s)
-                return None if z is None else _critical(_record(problem, z))[0]
+                return None if z is None else (_critical(_record(problem, z))[0], z)
         if i in folds:
             f_hi = float(tangents[i + 1, -1])
         else:
             f_hi = float(np.abs(np.asarray(branch.records.critical_multiplier)[i + 1]) - 1)
-        s, width = _bisect(test, s_hi, steps, f_hi)
-        z = None if s is None else corrected(s)
+        s, width, z = _bisect(test, s_hi, steps, f_hi)
         if z is None:
             continue
         record = _record(problem, z)
