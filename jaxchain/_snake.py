@@ -261,49 +261,56 @@ def check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, 
                                                                        transient=4500.0)
                         ) -> list[dict]:
     """Direct simulation just inside and just outside each end of a stable segment
-    that a bifurcation ends: from the orbit of the branch nearest to the end on its
-    stable side (its state at t = 0, positions perturbed by `perturbation`), at
-    v_d = end -+ `delta` beyond a fold (where the state ceases to exist); beyond a
-    change of stability, at the first unstable point of the branch at least
-    `delta` away where the perturbation grows to 100 within the horizon
-    (`_unstable_point`: a weak instability needs the branch's |mu| to grow). The
-    state persists when the simulation ends with the same oscillators on the HALC
-    (amplitude above half the largest) and, among them, the same phase lags within 0.05 of a period (a symmetry-breaking instability keeps
-    the sites and changes their phases); it is lost otherwise.
+    that a bifurcation ends, each from an orbit of the branch with its positions
+    perturbed by `perturbation`:
+
+    - inside: at v_d = end -+ `delta`, from the segment's orbit nearest there;
+    - outside a fold (the state ceases to exist): at end +- `delta`, from the
+      orbit nearest the fold;
+    - outside a change of stability: on the unstable sheet beyond it, from its
+      orbit where the perturbation grows to 100 within the horizon
+      (`_unstable_point`; a weak instability needs |mu| to grow).
+
+    The state persists when the simulation ends with the oscillators of the
+    starting orbit on the HALC (amplitude above half the largest) and, among them,
+    the same phase lags within 0.05 of a period (a symmetry-breaking instability
+    keeps the sites and changes their phases); it is lost otherwise.
 
     **Returns:**
 
-    One dict per end and side: v_d, side ("inside"/"outside"), the sites of the
-    orbit and of the simulation, the largest phase-lag difference, `persists`,
-    `expected_growth` (outside a change of stability: |mu|^(t_end / T) of the
-    branch's point there) and `agrees` (persists inside, lost outside), None where the
-    perturbation times the expected growth stays below 1, too weak an instability
-    for the horizon to decide.
+    One dict per end and side: v_d, start_v_d (the orbit started from), side
+    ("inside"/"outside"), the sites of the orbit and of the simulation, the largest
+    phase-lag difference, `persists`, `expected_growth` (outside a change of
+    stability: |mu|^(t_end / T) of the starting orbit) and `agrees` (persists
+    inside, lost outside), None where the perturbation times the expected growth
+    stays below 1, too weak an instability for the horizon to decide.
     """
     rng = np.random.default_rng(seed)
     v = branch["v_d"].values
     stable = branch["stable"].values
-    mu = branch["critical_multiplier_abs"].values
-    growth = mu ** (options.t_end / branch["period"].values)
+    growth = (branch["critical_multiplier_abs"].values
+              ** (options.t_end / branch["period"].values))
     out = []
-    for end, (i, beyond) in zip(segment["ends"], segment["points"]):
+    for end, (last, beyond) in zip(segment["ends"], segment["points"]):
         if end["type"] == "end of branch":
             continue
-        y_orbit, _ = unpack(jnp.asarray(branch["u"].values[i]))
-        a = branch["amplitudes"].values[i]
-        sites = np.flatnonzero(a > 0.5 * a.max())
-        lags = _phase_lags(with_parameter(params, "v_d", float(v[i])), y_orbit, sites, shooting)
-        y0 = np.asarray(y_orbit).copy()
-        y0[0] += perturbation * rng.standard_normal(y0.shape[1])
-        inward = np.sign(v[i] - end["v_d"]) or 1.0
-        sides = [("inside", float(end["v_d"] + inward * delta), None)]
+        outward = np.sign(end["v_d"] - v[last]) or 1.0
+        inside = _segment_point(v, stable, last, end["v_d"] - outward * delta)
+        sides = [("inside", end["v_d"] - outward * delta, inside, None)]
         if end["type"] == "fold":  # beyond a fold the state does not exist
-            sides.append(("outside", float(end["v_d"] - inward * delta), None))
+            sides.append(("outside", end["v_d"] + outward * delta, last, None))
         else:
-            sides.append(("outside",) + _unstable_point(v, stable, growth, beyond, i, end,
+            sides.append(("outside",) + _unstable_point(v, stable, growth, beyond, last, end,
                                                         delta, perturbation))
-        for side, vd, expected in sides:
-            p = with_parameter(params, "v_d", vd)
+        for side, vd, start, expected in sides:
+            y_orbit, _ = unpack(jnp.asarray(branch["u"].values[start]))
+            a = branch["amplitudes"].values[start]
+            sites = np.flatnonzero(a > 0.5 * a.max())
+            lags = _phase_lags(with_parameter(params, "v_d", float(v[start])), y_orbit, sites,
+                               shooting)
+            y0 = np.asarray(y_orbit).copy()
+            y0[0] += perturbation * rng.standard_normal(y0.shape[1])
+            p = with_parameter(params, "v_d", float(vd))
             obs = simulate(p, GivenState(jnp.asarray(y0)), options=options)
             amp = np.asarray(obs.amplitudes)
             sim_sites = np.flatnonzero(amp > 0.5 * amp.max())
@@ -315,7 +322,8 @@ def check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, 
                     lag_difference = float(np.max(np.minimum(d, 1 - d)))
             persists = lag_difference is not None and lag_difference < 0.05
             resolved = expected is None or perturbation * expected > 1.0
-            out.append({"end": end["type"], "end_v_d": end["v_d"], "side": side, "v_d": vd,
+            out.append({"end": end["type"], "end_v_d": end["v_d"], "side": side,
+                        "v_d": float(vd), "start_v_d": float(v[start]),
                         "sites_orbit": sites.tolist(), "sites_simulation": sim_sites.tolist(),
                         "phase_lag_difference": lag_difference, "persists": persists,
                         "expected_growth": expected,
@@ -323,25 +331,45 @@ def check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, 
     return out
 
 
+def _segment_point(v, stable, last, target) -> int:
+    """The stable point of the segment that ends at `last` nearest to v_d = `target`."""
+    same = [last]
+    for step in (-1, 1):
+        k = last + step
+        while 0 <= k < v.size and stable[k]:
+            same.append(k)
+            k += step
+    return min(same, key=lambda k: abs(v[k] - target))
+
+
 def _unstable_point(v, stable, growth, beyond, last, end, delta, perturbation
-                    ) -> tuple[float, float]:
-    """(v_d, expected growth) of the simulation outside a change of stability: the
-    first unstable point of the branch beyond it, walking away from the stable
-    segment, that lies at least `delta` from the end and where a perturbation of
-    size `perturbation` grows to 100 within the horizon; the point of largest
-    growth when none does."""
+                    ) -> tuple[float, int, float | None]:
+    """(v_d, starting point, expected growth) of the simulation outside a change of
+    stability. Its sheet is the unstable part of the branch beyond the change, as
+    far as it runs on in v_d (up to a fold). On it: the first point at least
+    `delta` from the end where a perturbation of size `perturbation` grows to 100
+    within the horizon, else the farthest such point; the simulation starts from
+    that orbit. If none grows enough and the sheet turns at a fold within `delta`,
+    v_d = end + `delta` outward, past the fold, where the state does not exist
+    (expected growth None); otherwise the point of largest growth (undecided)."""
     step = beyond - last
-    walk = []
+    outward = np.sign(v[beyond] - v[last]) or 1.0
+    sheet = []
     k = beyond
-    while 0 <= k < v.size and not stable[k]:
-        walk.append(k)
+    while 0 <= k < v.size and not stable[k] and (
+            not sheet or (v[k] - v[sheet[-1]]) * outward > 0):
+        sheet.append(k)
         k += step
-    far = [k for k in walk if abs(v[k] - end["v_d"]) >= delta]
-    for k in far:
-        if perturbation * growth[k] >= 100.0:
-            return float(v[k]), float(growth[k])
-    k = max(far or walk, key=lambda k: growth[k])
-    return float(v[k]), float(growth[k])
+    strong = [k for k in sheet if perturbation * growth[k] >= 100.0]
+    far = [k for k in strong if abs(v[k] - end["v_d"]) >= delta]
+    if far or strong:
+        k = (far or strong[::-1])[0]
+        return float(v[k]), k, float(growth[k])
+    turns = 0 <= k < v.size and not stable[k]
+    if turns and abs(v[sheet[-1]] - end["v_d"]) < delta:
+        return float(end["v_d"] + outward * delta), last, None
+    k = max(sheet, key=lambda k: growth[k])
+    return float(v[k]), k, float(growth[k])
 
 
 _multipliers = eqx.filter_jit(floquet_multipliers)
