@@ -24,7 +24,8 @@ which the paper's Fig. 3(b) only suggests by simulation ("snaking"):
     are the guesses of shooting (diffrax, Levenberg-Marquardt of optimistix, phase
     condition x_n'(0) = 0); an irregular state does not converge and is reported;
   - Floquet multipliers from the monodromy matrix (forward mode through the
-    solver); the trivial multiplier's distance from 1 is reported;
+    solver), the trivial one deflated (the flow direction); its distance from 1
+    and the multipliers' change at 100x tighter tolerances are reported;
   - pseudo-arclength continuation of each branch both ways in v_d through its
     folds, within [--vd-min, --vd-max] and --max-points points each way;
   - folds of limit cycles, branch points, period doubling and Neimark-Sacker
@@ -37,7 +38,7 @@ which the paper's Fig. 3(b) only suggests by simulation ("snaking"):
 Writes <out>/snake.png, <out>/snake.json and each branch to
 <out>/snake/branch_k<k>.nc as it finishes; a second run with the same settings
 reads the stored branches back (resume). --sweep DIR/sweep.zarr draws the points of
-a `jaxchain sweep` underneath. About 6 minutes on 2 CPU cores with the defaults."""
+a `jaxchain sweep` underneath. About 10 minutes on 2 CPU cores with the defaults."""
 
 
 def add_parser(sub):
