@@ -27,6 +27,10 @@ SMALL = {
     "05_any_chain.ipynb":
         ("N_OSC = 4\nSIGMA, SEED = 0.01, 1\nV_D = 1.2\nT_END, TRANSIENT = 300.0, 200.0",
          "the stored chain rebuilds the same parameters: True"),
+    "06_anderson_meets_friction.ipynb":
+        ("N_OSC = 4\nSIGMAS = (0.0, 2.0)\nDRAWS = 2\nSAMPLES = 2\nV_D = (1.5,)\n"
+         "T_END, TRANSIENT = 300.0, 200.0\nEDGE_T_END = 300.0\nFOLDS = 0\nOUT = 'anderson'",
+         "staircase kept"),
     "07_snaking.ipynb":
         ("N_OSC = 4\nSITES = (1,)\nMAX_POINTS = 5\nSTART_T_END = 1500.0\nCHECK = False",
          "trivial multiplier error"),

@@ -58,9 +58,34 @@ def test_inverse_participation_ratio_of_the_homogeneous_open_chain():
     assert mistuned.mean() > 2 * ipr.mean()
 
 
+def _forced_ring_response(eta_c, omega, damping, n=201):
+    """|x_n| of the damped ring driven at oscillator 0, by a dense complex solve of
+    (K - omega^2 + i omega c) x = e_0 (numpy, independent of the transfer matrix)."""
+    k = np.asarray(jc.stiffness_matrix(jc.ChainParams(n_osc=n, eta_c=eta_c)))
+    force = np.zeros(n)
+    force[0] = 1.0
+    return np.abs(np.linalg.solve(k - omega**2 * np.eye(n) + 1j * omega * damping
+                                  * np.eye(n), force))
+
+
+@pytest.mark.parametrize("omega2, damping", [(1.0099, 0.0502), (0.98, 0.0), (1.02, 0.03)])
+def test_damped_decay_is_the_forced_chain_s_envelope(omega2, damping):
+    """The decay per cell of the driven damped ring (inside the passband with
+    damping, below it without) matches `damped_decay`; at sigma = 0,
+    `localization_factor` is the undamped value exactly."""
+    x = _forced_ring_response(ETA, np.sqrt(omega2), damping)
+    measured = np.log(x[3] / x[4])
+    assert abs(measured - jc.damped_decay(ETA, omega2, damping)) < 1e-6
+    if damping == 0:
+        g, err = jc.localization_factor(ETA, 0.0, omega2)
+        assert err == 0 and abs(g - measured) < 1e-6
+
+
 def test_bad_arguments():
     with pytest.raises(ValueError, match="sigma"):
-        jc.localization_factor(ETA, 0.0, 1.0)
+        jc.localization_factor(ETA, -0.01, 1.0)
+    with pytest.raises(ValueError, match="eta_c"):
+        jc.damped_decay(0.0, 1.0, 0.1)
     with pytest.raises(ValueError, match="eta_c"):
         jc.localization_factor(-1.0, 0.01, 1.0)
     with pytest.raises(ValueError, match="batches"):

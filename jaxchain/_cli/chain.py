@@ -25,19 +25,21 @@ eta_c (one value per link), stiffness, load (one value per oscillator), friction
 mistuning_sigma and mistuning_seed."""
 
 
-def add_chain_options(g, seed: bool = True) -> None:
+def add_chain_options(g, seed: bool = True, mistuning: bool = True) -> None:
     """--boundary, --friction, --mistuning, --seed and --chain, in the argument group
     (or parser) `g`; without --seed where the command has its own (basin: one seed
-    for the samples and the mistuning draw)."""
+    for the samples and the mistuning draw), without --mistuning and --seed where
+    the command draws the mistuning itself (mistuning)."""
     g.add_argument("--boundary", choices=BOUNDARIES, default="ring",
                    help="ring (eq. (5), default), free or fixed ends")
     g.add_argument("--friction", default=None, metavar="NAME:k=v,...",
                    help=f"friction law, one of {', '.join(FRICTION_LAWS)} with its "
                         "parameters (default eq. (1) of the paper, exponential)")
-    g.add_argument("--mistuning", type=_non_negative, default=None, metavar="SIGMA",
-                   help="standard deviation of random stiffness mistuning delta_n "
-                        "(default none)")
-    if seed:
+    if mistuning:
+        g.add_argument("--mistuning", type=_non_negative, default=None, metavar="SIGMA",
+                       help="standard deviation of random stiffness mistuning delta_n "
+                            "(default none)")
+    if seed and mistuning:
         g.add_argument("--seed", type=int, default=0, metavar="S",
                        help="seed of the mistuning draw (default 0)")
     g.add_argument("--chain", type=Path, default=None, metavar="FILE",
@@ -118,6 +120,6 @@ def chain_params(args, n_osc: int, **fields) -> ChainParams:
             params = chain_from_record(read_chain_file(args.chain), base)
         except (ValueError, TypeError) as err:
             raise UsageError(f"--chain {args.chain}: {err}") from None
-    if args.mistuning is not None:
+    if getattr(args, "mistuning", None) is not None:
         params = mistune(params, args.mistuning, args.seed)
     return params

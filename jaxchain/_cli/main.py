@@ -13,7 +13,7 @@ from .common import Parser, RunsFailed, UsageError, one_line, usage_message
 
 #: The subcommands, each a module of this package with `add_parser(sub)`.
 COMMANDS = ("localized", "sweep", "figure", "crosscheck", "work-precision", "boundaries",
-            "stress", "basin", "snake")
+            "stress", "basin", "snake", "mistuning")
 
 
 def build_parser(commands=COMMANDS) -> Parser:

@@ -67,7 +67,8 @@ def localization_factor(eta_c: float, sigma: float, omega2, *, cells: int = 200_
 
     - `eta_c`: coupling stiffness (a number; per-link coupling has no single
         transfer matrix).
-    - `sigma`: standard deviation of delta_n, > 0.
+    - `sigma`: standard deviation of delta_n, >= 0; at 0 the homogeneous chain's
+        exact gamma = arccosh(|a| / 2) outside the passband and 0 inside (error 0).
     - `omega2`: squared frequencies, any shape (dimensionless; the passband is
         [1, 1 + 4 eta_c], `passband_frequency`).
     - `cells`: cells per estimate after `warmup` cells (the start vector's
@@ -80,17 +81,20 @@ def localization_factor(eta_c: float, sigma: float, omega2, *, cells: int = 200_
 
     **Raises:**
 
-    `ValueError` for eta_c <= 0, sigma <= 0, or counts below 1 (batches below 2).
+    `ValueError` for eta_c <= 0, sigma < 0, or counts below 1 (batches below 2).
     """
     if not np.ndim(eta_c) == 0 or not float(eta_c) > 0:
         raise ValueError(f"eta_c must be a number > 0, got {eta_c!r}")
-    if not float(sigma) > 0:
-        raise ValueError(f"sigma must be > 0, got {sigma!r}")
+    if not float(sigma) >= 0:
+        raise ValueError(f"sigma must be >= 0, got {sigma!r}")
     for name, value, least in (("cells", cells, 1), ("batches", batches, 2),
                                ("warmup", warmup, 0)):
         if int(value) != value or value < least:
             raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")
     omega2 = np.asarray(omega2, dtype=float)
+    if float(sigma) == 0:
+        a = np.abs(1.0 + 2.0 * eta_c - omega2) / eta_c
+        return np.arccosh(np.maximum(a / 2, 1.0)), np.zeros_like(omega2)
     keys = jax.random.split(jax.random.key(seed), max(omega2.size, 1))
     gammas, errors = [], []
     for key, w2 in zip(keys, omega2.ravel()):
@@ -114,3 +118,34 @@ def inverse_participation_ratio(params) -> tuple[np.ndarray, np.ndarray]:
     """
     values, vectors = np.linalg.eigh(np.asarray(stiffness_matrix(params)))
     return values, np.sum(vectors**4, axis=0)
+
+
+def damped_decay(eta_c: float, omega2, damping: float) -> np.ndarray:
+    """The decay per cell of the forced response of the homogeneous damped chain
+    x_n'' + c x_n' + x_n + eta_c (2 x_n - x_(n-1) - x_(n+1)) = F e^(i omega t)
+    delta_(n, 0): x_n ~ exp(-kappa |n|) with cosh(kappa + i phi) = a / 2,
+    a = (1 + 2 eta_c - omega^2 + i omega c) / eta_c (the decaying root of the
+    transfer matrix). With c = 2 xi + mu'(v_d) of steady sliding it is the
+    envelope of a state localized by friction, whose neighbours slip about steady
+    sliding (README, "Anderson meets friction"). Dimensionless.
+
+    **Arguments:**
+
+    - `eta_c`: coupling stiffness, > 0.
+    - `omega2`: squared frequencies, any shape.
+    - `damping`: c, the effective viscous damping of the neighbours.
+
+    **Returns:**
+
+    kappa, of the shape of `omega2`; at c = 0 it is the undamped chain's
+    (0 in the passband).
+
+    **Raises:**
+
+    `ValueError` for eta_c <= 0.
+    """
+    if not np.ndim(eta_c) == 0 or not float(eta_c) > 0:
+        raise ValueError(f"eta_c must be a number > 0, got {eta_c!r}")
+    omega2 = np.asarray(omega2, dtype=float)
+    a = (1.0 + 2.0 * eta_c - omega2 + 1j * np.sqrt(omega2) * damping) / eta_c
+    return np.abs(np.real(np.arccosh(a / 2)))

@@ -1,0 +1,210 @@
+"""`jaxchain mistuning`: the paper's open question, what random stiffness mistuning
+(Anderson localization) does to the friction-localized states."""
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from .._mistuning.edges import EDGE_OPTIONS
+from .._mistuning.study import (STUDY_OPTIONS, STUDY_SIGMAS, STUDY_VD, TABLE_SIGMAS, THETAS,
+                                mistuning_study)
+from .._mistuning.summary import (halc_correlation, localization_table, localized_fraction,
+                                  staircase_fraction, vibrating_fraction)
+from .._options import SimulationOptions
+from .._physics.record import chain_record
+from .._plots.mistuning import plot_mistuned_states, plot_mistuning_study, plot_site_edges
+from .chain import CHAIN_HELP, add_chain_options, chain_params
+from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
+                     comma_list, json_ready, positive_float, positive_int, save_figure,
+                     show_progress,
+                     writable_folder)
+from .sweep import belt_speeds
+
+HELP = "random mistuning against the localized states (Anderson meets friction)"
+DESCRIPTION = """\
+The paper ends by asking how its friction-induced localization interacts with
+Anderson localization, which any real chain's mistuning brings. With eta_c = 0.01
+a stiffness mistuning of the same order already localizes the linear modes. This
+command maps what it does to the localized states:
+
+  - the localization factor gamma of the linear chain (transfer matrices,
+    Castanier & Pierre 1995) at the band centre and at theta = pi/3 for
+    sigma / eta_c = 0.25, 0.5, 1, 2, 4, with its error and the weak-disorder
+    formula sigma^2 / (8 eta_c^2 sin^2 theta);
+  - for each sigma / eta_c of --sigmas and each of --draws draws delta_n ~
+    N(0, sigma^2) (draw d: seed d, the same normal numbers at every sigma), at
+    each belt speed of --vd: the Fig. 4 staircase (eq. (8), k = 1..N excited:
+    the share that keeps n_HALC = k) and basin stability from --samples random
+    initial states (x in [-2, 2], x' in [0, 2], seed --seed), with 95 % Wilson
+    intervals, and the correlation between an oscillator being on the HALC and
+    its delta_n;
+  - per draw, the edges of the bistable range: the Hopf point of steady sliding
+    (eigenvalues of the Jacobian), and the largest belt speed at which the
+    single-site state at each oscillator survives (bisection of simulations);
+    for the first --folds draws of each sigma the fold of the highest one by
+    shooting and pseudo-arclength continuation;
+  - the decay per cell of the single-site state's amplitudes, against the damped
+    homogeneous chain at the state's frequency and against gamma there.
+
+Each chain's runs go to <out>/chains/*.zarr as they finish, the bisection to
+<out>/edges.nc after each step and the folds to <out>/folds.csv: --resume
+continues a killed run (a store is reused only with equal settings). Writes
+<out>/mistuning.nc, mistuning.json, mistuning.png (the summary), mistuning_edges.png
+(each single-site state's end against its delta_n) and mistuned_fig4.png (Fig. 4
+of draw 0 at sigma = eta_c beside its delta_n). About 12 minutes on 2 CPU cores
+with the defaults."""
+
+
+def add_parser(sub):
+    p = sub.add_parser("mistuning", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    g = p.add_argument_group("model (eq. (5) of the paper; other parameters eq. (7))")
+    add_ring_options(g)
+    add_chain_options(g, mistuning=False)
+    g = p.add_argument_group("study")
+    g.add_argument("--sigmas", type=comma_list(float), default=list(STUDY_SIGMAS),
+                   metavar="S,S,...", help="sigma / eta_c of the draws (default "
+                   f"{','.join(f'{s:g}' for s in STUDY_SIGMAS)})")
+    g.add_argument("--draws", type=positive_int, default=8, metavar="D",
+                   help="mistuning draws per sigma > 0 (default 8)")
+    g.add_argument("--vd", type=belt_speeds, default=list(STUDY_VD), metavar="LIST",
+                   help="belt speeds of the staircase and basin stability (default "
+                        f"{','.join(f'{v:g}' for v in STUDY_VD)})")
+    g.add_argument("--samples", type=int, default=8, metavar="S",
+                   help="random initial states per chain and belt speed (default 8)")
+    g.add_argument("--seed", type=int, default=0, metavar="K",
+                   help="seed of the random initial states (default 0)")
+    g.add_argument("--folds", type=int, default=1, metavar="F",
+                   help="draws per sigma whose upper edge is refined by shooting "
+                        "(default 1)")
+    g.add_argument("--t-end", type=positive_float, default=STUDY_OPTIONS.t_end, metavar="T",
+                   help=f"final time of each run (default {STUDY_OPTIONS.t_end:g})")
+    g.add_argument("--transient", type=float, default=STUDY_OPTIONS.transient, metavar="T",
+                   help=f"classify after this time (default {STUDY_OPTIONS.transient:g})")
+    g.add_argument("--edge-t-end", type=positive_float, default=EDGE_OPTIONS.t_end,
+                   metavar="T", help="final time of each simulation of the bisection of "
+                   f"the upper edges (default {EDGE_OPTIONS.t_end:g}; the state is judged "
+                   "over the last fifth)")
+    add_output_options(p)
+    p.add_argument("--resume", action="store_true",
+                   help="continue the stores in <out> (a killed run)")
+    p.set_defaults(run=run)
+    return p
+
+
+def run(args) -> None:
+    if not 0 <= args.transient < args.t_end:
+        raise UsageError(f"--transient must lie in [0, t_end = {args.t_end:g}), got "
+                         f"{args.transient:g}")
+    params = chain_params(args, args.n_osc, eps=args.eps, v_d=1.5)
+    writable_folder(args.out)
+    if (args.out / "chains").exists() and not args.resume:
+        raise UsageError(f"--out {args.out}: a study is stored there; use --resume to "
+                         "continue it, or another --out")
+    start = time.perf_counter()
+    study = mistuning_study(params, args.sigmas, args.draws, v_d=args.vd,
+                            n_samples=args.samples, key=args.seed, n_folds=args.folds,
+                            options=SimulationOptions(t_end=args.t_end,
+                                                      transient=args.transient),
+                            edge_options=SimulationOptions(t_end=args.edge_t_end,
+                                                           transient=0.8 * args.edge_t_end),
+                            out=args.out, resume=args.resume, progress=show_progress(args))
+    table = localization_table(float(params.eta_c), TABLE_SIGMAS, THETAS)
+    wall = time.perf_counter() - start
+    figures = {"summary": args.out / "mistuning.png", "edges": args.out / "mistuning_edges.png"}
+    save_figure(plot_mistuning_study(study), figures["summary"])
+    save_figure(plot_site_edges(study), figures["edges"])
+    shown = 1.0 if 1.0 in study["sigma"].values else float(study["sigma"].values[-1])
+    figures["fig4"] = args.out / "mistuned_fig4.png"
+    save_figure(plot_mistuned_states(study, shown, 0, 1.5), figures["fig4"])
+    s = summary(study) | {"localization_factor": table, "chain": chain_record(params),
+                          "wall_time_s": wall,
+                          "figures": {k: str(v) for k, v in figures.items()}}
+    text = json.dumps(json_ready(s), allow_nan=False)
+    (args.out / "mistuning.json").write_text(text)
+    if args.json:
+        print(text)
+    else:
+        _print_summary(s)
+    failed = int((study["staircase_status"].values > 0).sum()
+                 + (study["basin_status"].values > 0).sum())
+    if failed:
+        raise RunsFailed(f"{failed} runs failed; they are left out of the shares "
+                         f"(status in {args.out / 'mistuning.nc'})")
+
+
+def _stats(values) -> dict:
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return {"count": 0}
+    return {"count": int(v.size), "mean": float(v.mean()), "std": float(v.std(ddof=1))
+            if v.size > 1 else 0.0, "min": float(v.min()), "max": float(v.max())}
+
+
+def summary(study) -> dict:
+    """The JSON summary of a `mistuning_study`: per sigma, the staircase and basin
+    shares per belt speed with their intervals, the HALC correlation, and the
+    distributions of the edges and of the envelope decay."""
+    stair, basin, corr = staircase_fraction(study), vibrating_fraction(study), \
+        halc_correlation(study)
+    local = localized_fraction(study)
+    n_halc = np.where(study["basin_status"].values == 0, study["basin_n_halc"].values, np.nan)
+    rows = []
+    for i, sigma in enumerate(study["sigma"].values):
+        rows.append({
+            "sigma_over_eta_c": float(sigma),
+            "v_d": study["v_d"].values.tolist(),
+            "staircase_fraction": stair["fraction"][i].tolist(),
+            "staircase_ci": [stair["low"][i].tolist(), stair["high"][i].tolist()],
+            "staircase_runs": stair["total"][i].tolist(),
+            "basin_stability_vibrating": basin["fraction"][i].tolist(),
+            "basin_ci": [basin["low"][i].tolist(), basin["high"][i].tolist()],
+            "basin_runs": basin["total"][i].tolist(),
+            "basin_stability_localized": local["fraction"][i].tolist(),
+            "localized_ci": [local["low"][i].tolist(), local["high"][i].tolist()],
+            "mean_n_halc_random_starts": np.nanmean(n_halc[i], axis=(0, 2)).tolist(),
+            "halc_deviation_correlation": corr["correlation"][i].tolist(),
+            "mean_deviation_on_halc_over_sigma": corr["mean_deviation_on_halc"][i].tolist(),
+            "hopf_vd": _stats(study["hopf_vd"].values[i]),
+            "upper_edge": _stats(study["upper_edge"].values[i]) | {
+                "per_draw": study["upper_edge"].values[i].tolist()},
+            "fold_by_shooting": [{"draw": int(d), "v_d": float(f), "site": int(j) + 1,
+                                  "upper_edge_simulation": float(e)}
+                                 for d, (f, j, e) in enumerate(zip(
+                                     study["fold_vd"].values[i], study["fold_site"].values[i],
+                                     study["upper_edge"].values[i])) if np.isfinite(f)],
+            "envelope_decay": _stats(study["envelope_decay"].values[i]),
+            "anderson_gamma_at_state_frequency": float(study["state_gamma"].values[i]),
+            "anderson_gamma_at_state_frequency_error":
+                float(study["state_gamma_error"].values[i])})
+    a = study.attrs
+    return {"sigmas": rows, "state_period": a["state_period"],
+            "state_omega2": a["state_omega2"], "sliding_damping": a["sliding_damping"],
+            "damped_chain_decay": a["state_damped_decay"],
+            "edge_resolution": a["edge_resolution"], "n_draws": a["n_draws"],
+            "n_samples": a["n_samples"], "t_end": a["t_end"], "transient": a["transient"]}
+
+
+def _print_summary(s: dict) -> None:
+    print("localization factor of the linear chain (gamma per cell, +- error; "
+          "weak-disorder formula):")
+    for r in s["localization_factor"]:
+        print(f"  sigma/eta_c {r['sigma_over_eta_c']:g}, theta {r['theta']:.4f}: "
+              f"{r['gamma']:.5f} +- {r['error']:.1e} ({r['weak_disorder']:.5f}, "
+              f"{r['deviation_in_errors']:+.1f} errors)")
+    for r in s["sigmas"]:
+        stair = ", ".join(f"{v:g}: {f:.2f}" for v, f in zip(r["v_d"], r["staircase_fraction"]))
+        basin = ", ".join(f"{v:g}: {f:.2f}/{g:.2f}" for v, f, g in
+                          zip(r["v_d"], r["basin_stability_vibrating"],
+                              r["basin_stability_localized"]))
+        e = r["upper_edge"]
+        edge = (f"{e['mean']:.4f} +- {e['std']:.4f} [{e['min']:.4f}, {e['max']:.4f}]"
+                if e["count"] else "none found")
+        print(f"sigma/eta_c = {r['sigma_over_eta_c']:g}: staircase kept {stair}; "
+              f"random starts vibrating/localized {basin}; upper edge {edge}")
+    print(f"single-site state: decay per cell {s['damped_chain_decay']:.3f} on the damped "
+          f"homogeneous chain (period {s['state_period']:.4f}); "
+          f"figures in {s['figures']['summary']}; {s['wall_time_s']:.0f} s")

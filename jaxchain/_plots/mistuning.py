@@ -1,0 +1,150 @@
+"""Figures of `mistuning_study`: what random mistuning does to the localized states
+(staircase, basin stability, the edges of the bistable range, localization
+lengths), and Fig. 4 for one mistuned draw beside its stiffness deviations."""
+
+import matplotlib.pyplot as plt
+import numpy as np
+import xarray as xr
+
+from .._mistuning.summary import localized_fraction, staircase_fraction
+from .localized import plot_localized_states
+
+
+def _errorbars(ax, x, share, labels):
+    for j, label in enumerate(labels):
+        f = share["fraction"][:, j]
+        ax.errorbar(x + 0.03 * (j - 1), f, yerr=[f - share["low"][:, j],
+                                                  share["high"][:, j] - f],
+                    marker="o", capsize=3, label=label)
+
+
+def plot_mistuning_study(study: xr.Dataset):
+    """Four panels over sigma / eta_c: (a) the share of eq. (8) starts with k
+    excited that keep n_HALC = k (the Fig. 4 staircase), (b) basin stability of
+    the localized states (0 < n_HALC < N), each per belt speed with 95 % Wilson intervals; (c) the
+    upper edge of the bistable range of each draw (simulation, and the fold by
+    shooting where computed) with the Hopf point; (d) the decay per cell of the
+    single-site state's amplitudes against the linear predictions.
+
+    **Arguments:**
+
+    - `study`: the Dataset of `mistuning_study`.
+
+    **Returns:**
+
+    The matplotlib Figure.
+    """
+    s = study["sigma"].values
+    labels = [f"v_d = {v:g}" for v in study["v_d"].values]
+    fig, axes = plt.subplots(2, 2, figsize=(10, 7.5))
+    ax = axes[0, 0]
+    _errorbars(ax, s, staircase_fraction(study), labels)
+    ax.set_ylabel("share with n_HALC = k")
+    ax.set_title("(a) the Fig. 4 staircase: k excited gives k on the HALC", fontsize=9)
+    ax.legend(fontsize=8)
+    ax = axes[0, 1]
+    _errorbars(ax, s, localized_fraction(study), labels)
+    ax.set_ylabel("basin stability of localized states")
+    ax.set_title(f"(b) random starts ({study.attrs['n_samples']} per draw) ending "
+                 "localized (0 < n_HALC < N)", fontsize=9)
+    ax = axes[1, 0]
+    for i, sigma in enumerate(s):
+        edge = study["upper_edge"].values[i]
+        edge = edge[np.isfinite(edge)]
+        ax.plot(np.full(edge.size, sigma), edge, "o", color="tab:blue", alpha=0.5,
+                label="upper edge, simulation" if i == 0 else None)
+        fold = study["fold_vd"].values[i]
+        fold = fold[np.isfinite(fold)]
+        ax.plot(np.full(fold.size, sigma), fold, "x", color="k", ms=8,
+                label="fold by shooting" if i == 0 else None)
+    hopf = study["hopf_vd"].values
+    ax.axhline(np.nanmean(hopf), color="tab:red", lw=1,
+               label=f"Hopf point (every draw: {np.nanmin(hopf):.5f}-{np.nanmax(hopf):.5f})")
+    ax.set_ylabel("v_d")
+    ax.set_title("(c) edges of the bistable range, per draw", fontsize=9)
+    ax.legend(fontsize=7)
+    ax = axes[1, 1]
+    decay = study["envelope_decay"].values
+    for i, sigma in enumerate(s):
+        d = decay[i][np.isfinite(decay[i])]
+        ax.plot(np.full(d.size, sigma), d, "o", color="tab:blue", alpha=0.5,
+                label="single-site state, fitted" if i == 0 else None)
+    ax.axhline(study.attrs["state_damped_decay"], color="k", ls="--", lw=1,
+               label="damped homogeneous chain")
+    ax.errorbar(s, study["state_gamma"].values, yerr=study["state_gamma_error"].values,
+                color="tab:green", marker="s", label="Anderson, at the state's frequency")
+    ax.errorbar(s, study["gamma"].values[:, 0], yerr=study["gamma_error"].values[:, 0],
+                color="tab:orange", marker="^", label="Anderson, band centre")
+    ax.set_ylabel("decay per cell")
+    ax.set_title("(d) localization: the state's envelope against linear chains",
+                 fontsize=9)
+    ax.legend(fontsize=7)
+    for ax in axes.ravel():
+        ax.set_xlabel("sigma / eta_c")
+    fig.tight_layout()
+    return fig
+
+
+def plot_site_edges(study: xr.Dataset):
+    """The largest belt speed at which the single-site state at each oscillator
+    survives, against that oscillator's stiffness deviation, every draw and sigma.
+
+    **Returns:**
+
+    The matplotlib Figure.
+    """
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    eta_c = float(study.attrs["eta_c"])
+    for i, sigma in enumerate(study["sigma"].values):
+        if sigma == 0:
+            continue
+        dev = study["deviations"].values[i].ravel() / eta_c
+        edge = study["site_edge"].values[i].ravel()
+        keep = np.isfinite(dev) & np.isfinite(edge)
+        ax.plot(dev[keep], edge[keep], ".", alpha=0.6, label=f"sigma = {sigma:g} eta_c")
+    homogeneous = study["site_edge"].sel(sigma=0.0).values if 0.0 in study["sigma"] else None
+    if homogeneous is not None:
+        ax.axhline(np.nanmedian(homogeneous), color="k", lw=1, ls="--",
+                   label="homogeneous ring")
+    ax.set_xlabel("delta_n / eta_c of the excited oscillator")
+    ax.set_ylabel("upper edge of its single-site state, v_d")
+    ax.set_title("Where a single-site state ends, against its own stiffness", fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def plot_mistuned_states(study: xr.Dataset, sigma: float, draw: int = 0, v_d: float = 1.5):
+    """Fig. 4 of the paper for one mistuned draw: the states reached from eq. (8)
+    with k = 1..N excited, beside the stiffness deviations delta_n / eta_c.
+
+    **Arguments:**
+
+    - `study`: the Dataset of `mistuning_study`.
+    - `sigma`: sigma / eta_c of the draw (nearest); `draw`: its index;
+        `v_d`: the belt speed (nearest).
+
+    **Returns:**
+
+    The matplotlib Figure.
+    """
+    row = study.sel(sigma=sigma, v_d=v_d, method="nearest").isel(draw=draw)
+    amps = row["staircase_amplitudes"].values
+    ds = xr.Dataset({"amplitudes": (("v_d", "ic", "osc"), amps[None]),
+                     "n_halc": (("v_d", "ic"), row["staircase_n_halc"].values[None]),
+                     "status": (("v_d", "ic"), row["staircase_status"].values[None]),
+                     "energy": (("v_d", "ic"), 0.5 * np.nansum(amps**2, -1)[None])},
+                    coords={"v_d": [float(row["v_d"])], "n_excited": ("ic", row["k"].values)})
+    n = amps.shape[-1]
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(0.45 * n + 2.5, 0.4 * n + 3.2),
+                                      gridspec_kw={"height_ratios": [1, 4]}, sharex=True)
+    dev = row["deviations"].values / float(study.attrs["eta_c"])
+    top.bar(np.arange(1, n + 1), dev, color=np.where(dev > 0, "tab:red", "tab:blue"))
+    top.axhline(0, color="k", lw=0.5)
+    top.set_ylabel("delta_n / eta_c")
+    top.set_title(f"draw {draw} at sigma = {float(row['sigma']):g} eta_c: stiffness "
+                  "deviations (red stiffer, blue softer)", fontsize=9)
+    plot_localized_states(ds, ax=bottom)
+    bottom.set_aspect("auto")
+    fig.tight_layout()
+    return fig
