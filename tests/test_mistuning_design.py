@@ -1,6 +1,8 @@
-"""Intentional mistuning by gradient (issue 26, item 3) on a ring of four: the
-single-site folds moved along the ring by symmetry, and the gradient of each fold
-in the design variables against central finite differences of the fold itself."""
+"""Intentional mistuning by gradient (issue 26, item 3) on a ring of four: the fold
+of the single-site state at another oscillator, reached through the ring's
+symmetry and followed along the pattern, against the fold found from scratch on
+the mistuned ring; the gradient of each fold against central finite
+differences."""
 
 import jax.numpy as jnp
 import numpy as np
@@ -10,42 +12,46 @@ import jaxchain as jc
 from jaxchain._mistuning.design import design_problems, pattern_deviations, pattern_folds
 
 RING = jc.ChainParams(n_osc=4, v_d=1.5)
-BUDGET = 0.02
+BUDGET = 0.004
+THETA = np.array([0.4, -0.2, 0.1, 0.3])
 
 
 @pytest.fixture(scope="module")
-def problems():
-    return design_problems(RING, 2, BUDGET)
-
-
-def test_the_moved_folds_are_the_same_fold(problems):
-    """On the homogeneous ring the single-site states at the two kinds of site are
-    one state moved by the ring's symmetry: Newton's method from the moved solution
-    stays at the same fold belt speed (to its tolerance)."""
-    probs, sols, sites, homogeneous = problems
-    assert sites == [2, 3]
-    folds, _, _, ok = pattern_folds(probs, sols, np.zeros(2), BUDGET, True)
+def followed():
+    problem, solutions, homogeneous = design_problems(RING, BUDGET)
+    folds, grads, sols, ok = pattern_folds(problem, solutions, np.zeros(4), THETA, BUDGET,
+                                           False)
     assert ok.all()
-    np.testing.assert_allclose(folds, homogeneous, atol=1e-7)
+    return problem, folds, grads, sols, homogeneous
 
 
-def test_fold_gradients_match_finite_differences(problems):
+def test_followed_fold_is_the_mistuned_ring_s_own_fold(followed):
+    """The fold of the state at oscillator 1 (0-based), followed from the
+    homogeneous ring through the pattern and the ring's symmetry, is the fold that
+    `localized_fold` finds from scratch on the mistuned ring (simulation,
+    shooting, continuation, Moore-Spence), to Newton's tolerance."""
+    _, folds, _, _, homogeneous = followed
+    delta = np.asarray(pattern_deviations(jnp.asarray(THETA), BUDGET, 4, False))
+    chain = jc.ChainParams(n_osc=4, v_d=1.5, stiffness=1 + delta)
+    fold, _ = jc.localized_fold(chain, 1)
+    assert abs(float(fold.p) - folds[1]) < 1e-7
+    assert abs(folds[1] - homogeneous) > 1e-5  # the pattern moved it
+
+
+def test_fold_gradients_match_finite_differences(followed):
     """d fold_j / d theta by implicit differentiation (forward mode through
     optimistix's ImplicitAdjoint) against central differences of the fold solved
-    again at theta +- h e_k (h = 1e-3: truncation error h^2 f''' ~ 1e-7, Newton's
-    tolerance 1e-9 / h ~ 1e-6, both well below the gradients ~ 1e-2)."""
-    probs, sols, _, _ = problems
-    theta = np.array([0.4, -0.2])
-    folds, grads, sols, ok = pattern_folds(probs, sols, theta, BUDGET, False)
-    assert ok.all()
+    again at theta +- h e_k (h = 1e-3: truncation ~ h^2 f''' and Newton's
+    tolerance 1e-9 / h, both far below the gradients)."""
+    problem, folds, grads, sols, _ = followed
     h = 1e-3
-    for k in range(2):
-        e = np.eye(2)[k] * h
-        plus = pattern_folds(probs, sols, theta + e, BUDGET, False)[0]
-        minus = pattern_folds(probs, sols, theta - e, BUDGET, False)[0]
-        fd = (plus - minus) / (2 * h)
-        np.testing.assert_allclose(grads[:, k], fd, atol=2e-5, rtol=1e-3)
-    assert np.abs(grads).max() > 1e-3  # the folds do move with the stiffness
+    for k in range(4):
+        e = np.eye(4)[k] * h
+        plus = pattern_folds(problem, sols, THETA, THETA + e, BUDGET, False)[0]
+        minus = pattern_folds(problem, sols, THETA, THETA - e, BUDGET, False)[0]
+        np.testing.assert_allclose(grads[:, k], (plus - minus) / (2 * h), atol=1e-6,
+                                   rtol=1e-3)
+    assert np.abs(grads).max() > 1e-4  # the folds do move with the stiffness
 
 
 def test_pattern_keeps_budget_and_mean():
@@ -58,9 +64,9 @@ def test_pattern_keeps_budget_and_mean():
 
 
 def test_bad_design_settings():
-    with pytest.raises(ValueError, match="period"):
-        design_problems(RING, 3, BUDGET)
     with pytest.raises(ValueError, match="budget"):
-        design_problems(RING, 2, 1.5)
+        design_problems(RING, 1.5)
     with pytest.raises(ValueError, match="homogeneous ring"):
-        design_problems(jc.mistune(RING, 0.01, 0), 2, BUDGET)
+        design_problems(jc.mistune(RING, 0.01, 0), 0.01)
+    with pytest.raises(ValueError, match="sense"):
+        jc.intentional_mistuning(RING, sense="up")

@@ -87,6 +87,16 @@ def add_parser(sub):
                    metavar="T", help="final time of each simulation of the bisection of "
                    f"the upper edges (default {EDGE_OPTIONS.t_end:g}; the state is judged "
                    "over the last fifth)")
+    g = p.add_argument_group("design (item 3 of issue 26)")
+    g.add_argument("--design", action="store_true",
+                   help="instead of the study: intentional mistuning by gradient on a "
+                        "ring of --period oscillators within --budget, lowering and "
+                        "raising the highest fold, against the A-B pattern and random "
+                        "draws (about 5 minutes)")
+    g.add_argument("--budget", type=positive_float, default=0.05, metavar="B",
+                   help="largest |delta_n| of the design (default 0.05)")
+    g.add_argument("--period", type=positive_int, default=4, metavar="P",
+                   help="oscillators in one period of the designed pattern (default 4)")
     add_output_options(p)
     p.add_argument("--resume", action="store_true",
                    help="continue the stores in <out> (a killed run)")
@@ -95,6 +105,8 @@ def add_parser(sub):
 
 
 def run(args) -> None:
+    if args.design:
+        return run_design(args)
     if not 0 <= args.transient < args.t_end:
         raise UsageError(f"--transient must lie in [0, t_end = {args.t_end:g}), got "
                          f"{args.transient:g}")
@@ -208,3 +220,43 @@ def _print_summary(s: dict) -> None:
     print(f"single-site state: decay per cell {s['damped_chain_decay']:.3f} on the damped "
           f"homogeneous chain (period {s['state_period']:.4f}); "
           f"figures in {s['figures']['summary']}; {s['wall_time_s']:.0f} s")
+
+
+def run_design(args) -> None:
+    """`--design`: `design_study`, its JSON and figure."""
+    from .._mistuning.design_study import design_study
+    from .._plots.mistuning import plot_mistuning_design
+
+    if not 0 < args.budget < 1:
+        raise UsageError(f"--budget must lie in (0, 1), got {args.budget:g}")
+    if args.period < 2 or args.n_osc % args.period:
+        raise UsageError(f"--period must be >= 2 and divide --n-osc {args.n_osc}, got "
+                         f"{args.period}")
+    params = chain_params(args, args.period, eps=args.eps, v_d=1.5)
+    writable_folder(args.out)
+    start = time.perf_counter()
+    result = design_study(params, budget=args.budget, chain_n_osc=args.n_osc,
+                          progress=show_progress(args))
+    result |= {"wall_time_s": time.perf_counter() - start, "chain": chain_record(params),
+               "figure": str(args.out / "design.png")}
+    save_figure(plot_mistuning_design(result), args.out / "design.png")
+    text = json.dumps(json_ready(result), allow_nan=False)
+    (args.out / "design.json").write_text(text)
+    if args.json:
+        print(text)
+    else:
+        hom = result["homogeneous_fold"]
+        print(f"homogeneous ring of {params.n_osc}: highest single-site fold {hom:.6f}")
+        for name, d in result["designs"].items():
+            print(f"{name}: pattern {np.round(d['pattern'], 4).tolist()}, highest fold "
+                  f"{d['edge']:.6f} ({d['moved_by']:+.6f}); gradient vs finite differences "
+                  f"{d['gradient_check']['largest_difference']:.1e}; simulation "
+                  f"{'agrees' if d['simulation']['agrees'] else 'DISAGREES'}")
+        rand = [r["edge"] for r in result["random"] if r["edge"] is not None]
+        print(f"A-B: {result['ab']['edge']:.6f}; random draws: {min(rand):.6f} to "
+              f"{max(rand):.6f}; tiled on N = {args.n_osc} (simulation): "
+              + ", ".join(f"{k} {v:.4f}" for k, v in result["chain_edges"]["edge"].items()
+                          if not k.startswith("random")))
+    bad = [k for k, d in result["designs"].items() if not d["simulation"]["agrees"]]
+    if bad:
+        raise RunsFailed(f"direct simulation disagrees with the fold of {', '.join(bad)}")

@@ -3,7 +3,7 @@ within a budget, that lowers the belt speed above which no single-site localized
 state survives (the highest of their folds), through implicit differentiation of
 the folds' extended systems."""
 
-import dataclasses
+import sys
 
 import equinox as eqx
 import jax
@@ -12,11 +12,9 @@ import numpy as np
 import optax
 from jaxtyping import Array, Float
 
-from .._bifurcation.continuation import ContinuationProblem
 from .._bifurcation.fold import solve_fold
-from .._bifurcation.limit_cycles import DescribeOrbit, ShootingResidual
 from .._physics.initial import excited_block
-from .._physics.params import ChainParams, with_parameter
+from .._physics.params import ChainParams
 from .edges import localized_fold
 
 
@@ -38,40 +36,75 @@ def _with_stiffness(params: ChainParams, delta) -> ChainParams:
     return eqx.tree_at(lambda p: p.stiffness, params, 1.0 + delta)
 
 
-def _site_problem(problem: ContinuationProblem, fold_solution, shift: int, site: int):
-    """The fold problem and solution of the single-site state moved by `shift`
-    oscillators along the ring (a symmetry of the homogeneous ring), with the phase
-    condition on its new site."""
+def _solve_at(problem, start, theta, shift, budget, zero_mean):
+    """The fold of the state at the problem's site on the ring mistuned by the
+    pattern theta rolled by `shift` oscillators: by the ring's symmetry, the fold
+    of the state `shift` sites before it on the unrolled pattern."""
     n = problem.params.n_osc
-    u, p, w = (fold_solution[: 2 * n + 1], fold_solution[2 * n + 1],
-               fold_solution[2 * n + 2:])
-
-    def roll(z):
-        return jnp.concatenate([jnp.roll(z[: 2 * n].reshape(2, n), shift, axis=1).ravel(),
-                                z[2 * n:]])
-
-    opts = dataclasses.replace(problem.residual.options, phase_oscillator=int(site))
-    moved = ContinuationProblem(residual=ShootingResidual(opts), u0=roll(u),
-                                params=problem.params, where=problem.where,
-                                describe=DescribeOrbit(opts))
-    return moved, jnp.concatenate([roll(u), p[None], roll(w)])
+    delta = jnp.roll(pattern_deviations(theta, budget, n, zero_mean), shift)
+    return solve_fold(problem.with_params(_with_stiffness(problem.params, delta)), start)
 
 
 @eqx.filter_jit
-def _fold_and_gradient(problem, start, theta, budget, zero_mean):
-    """The fold belt speed at the pattern theta, and its gradient in theta
-    (forward mode through optimistix's ImplicitAdjoint)."""
+def _solve(problem, start, theta, shift, budget, zero_mean):
+    """Newton's method on the fold's extended system at the pattern theta."""
+    return _solve_at(problem, start, theta, shift, budget, zero_mean)
+
+
+@eqx.filter_jit
+def _tangent(problem, solution, theta, shift, step, budget, zero_mean):
+    """d solution / d theta along `step` (forward mode through optimistix's
+    ImplicitAdjoint): the predictor of `track_fold`."""
+    return jax.jvp(lambda th: _solve_at(problem, solution, th, shift, budget, zero_mean)[0],
+                   (theta,), (step,))[1]
+
+
+@eqx.filter_jit
+def _gradient(problem, solution, theta, shift, budget, zero_mean):
+    """d fold / d theta, shape (period,): one forward-mode pass per variable
+    through the implicit function (optimistix's ImplicitAdjoint)."""
     n = problem.params.n_osc
+    return jax.jacfwd(lambda th: _solve_at(problem, solution, th, shift, budget,
+                                           zero_mean)[0][2 * n + 1])(theta)
 
-    def fold(th):
-        params = _with_stiffness(problem.params,
-                                 pattern_deviations(th, budget, n, zero_mean))
-        solution, ok = solve_fold(problem.with_params(params), start)
-        return solution[2 * n + 1], (solution, ok)
 
-    value, aux = fold(theta)
-    grad = jax.jacfwd(lambda th: fold(th)[0])(theta)
-    return value, grad, aux[0], aux[1]
+def track_fold(problem, solution, theta_from, theta_to, shift, budget: float,
+               zero_mean: bool, *, min_step: float = 2.0**-14, max_jump: float = 2e-3):
+    """Follow a fold's extended-system solution from the pattern `theta_from` to
+    `theta_to` along the straight path: a tangent predictor (`_tangent`) and
+    Newton's corrector, the step halved where Newton's method fails and doubled
+    after a success. The fold of a stick-slip orbit is a smoothed grazing of the
+    stick phase (its non-smooth limit is the existence limit of stick-slip), so
+    Newton's method converges only within about eps of it. A corrected fold
+    further than `max_jump` in v_d from its prediction has jumped to another fold
+    and counts as a failure.
+
+    **Returns:**
+
+    (solution at `theta_to`, whether it was reached).
+    """
+    theta_from, theta_to = jnp.asarray(theta_from, float), jnp.asarray(theta_to, float)
+    p_index = 2 * problem.params.n_osc + 1
+    s, h = 0.0, 1.0
+    while s < 1.0:
+        h = min(h, 1.0 - s)
+        here = theta_from + s * (theta_to - theta_from)
+        step = (theta_to - theta_from) * h
+        try:
+            guess = solution + _tangent(problem, solution, here, shift, step, budget,
+                                        zero_mean)
+            new, ok = _solve(problem, guess, here + step, shift, budget, zero_mean)
+            # a corrector that lands far from its prediction jumped to another fold
+            ok = bool(ok) and abs(float(new[p_index] - guess[p_index])) < max_jump
+        except eqx.EquinoxRuntimeError:  # a singular extended system: shorter steps
+            ok = False
+        if ok:
+            solution, s, h = new, s + h, 2.0 * h
+        else:
+            h *= 0.5
+            if h < min_step:
+                return solution, False
+    return solution, True
 
 
 class MistuningDesign(eqx.Module):
@@ -79,127 +112,157 @@ class MistuningDesign(eqx.Module):
 
     **Fields:**
 
-    - `deviations`: delta_n of the design, shape (n_osc,).
-    - `pattern`: its period, shape (period,).
-    - `folds`: the fold of the single-site state at each site of one period
-        (ring sites `sites`), shape (period,); the chain's edge is their maximum.
-    - `sites`: those oscillators (0-based), shape (period,).
+    - `pattern`: the deviations d of one period, shape (period,); delta_n =
+        d_(n mod period).
+    - `folds`: the fold of the single-site state at each site of one period,
+        shape (period,); the edge is their maximum.
     - `edge`: max(folds); `homogeneous_edge`: the same on the homogeneous ring.
-    - `gradient`: d smooth-max / d theta at the design, shape (period,).
-    - `history`: (smooth max, max fold) at each iteration, shape (iterations, 2).
-    - `solutions`: the folds' extended-system solutions, shape (period, 2(2n+1)+1).
+    - `theta`: the design variables; `gradient`: d objective / d theta there.
+    - `history`: (smooth maximum, highest fold) at each iteration, shape
+        (iterations, 2).
+    - `solutions`: the folds' extended-system solutions, shape (period, m).
+    - `sense`: "lower" or "raise".
     """
 
-    deviations: Float[Array, " n_osc"]
     pattern: Float[Array, " period"]
     folds: Float[Array, " period"]
-    sites: np.ndarray = eqx.field(static=True)
     edge: float = eqx.field(static=True)
     homogeneous_edge: float = eqx.field(static=True)
     theta: Float[Array, " period"]
     gradient: Float[Array, " period"]
     history: Float[Array, "iterations 2"]
     solutions: Float[Array, "period m"]
+    sense: str = eqx.field(static=True)
 
 
-def _smooth_max(values, temperature):
-    return temperature * jax.nn.logsumexp(values / temperature)
+def pattern_folds(problem, solutions, theta_from, theta_to, budget, zero_mean):
+    """The fold of the single-site state at each oscillator j of the ring at the
+    pattern `theta_to`, followed from its solution at `theta_from` (`track_fold`;
+    the state at j is the problem's state at its site c on the pattern rolled by
+    c - j), and their gradients in theta: (folds (n,), gradients (n, n),
+    solutions, reached (n,))."""
+    n = problem.params.n_osc
+    centre = int(problem.residual.options.phase_oscillator)
+    folds, grads, sols, ok = [], [], [], []
+    for j, solution in enumerate(solutions):
+        shift = jnp.asarray(centre - j)
+        sol, reached = track_fold(problem, solution, theta_from, theta_to, shift, budget,
+                                  zero_mean)
+        sols.append(sol)
+        ok.append(reached)
+        folds.append(float(sol[2 * n + 1]))
+        try:
+            grads.append(np.asarray(_gradient(problem, sol, jnp.asarray(theta_to, float),
+                                              shift, budget, zero_mean)))
+        except eqx.EquinoxRuntimeError:  # the fold is degenerate there
+            grads.append(np.full(len(theta_to), np.nan))
+            ok[-1] = False
+    return np.array(folds), np.stack(grads), sols, np.array(ok)
 
 
-def pattern_folds(problems, solutions, theta, budget, zero_mean):
-    """The fold of each site's single-site state at the pattern theta, each from
-    its previous solution, with their gradients in theta: (folds (p,), gradients
-    (p, p), solutions, converged (p,))."""
-    out = [_fold_and_gradient(pr, s, jnp.asarray(theta), budget, zero_mean)
-           for pr, s in zip(problems, solutions)]
-    return (np.array([float(o[0]) for o in out]), np.stack([np.asarray(o[1]) for o in out]),
-            [o[2] for o in out], np.array([bool(o[3]) for o in out]))
+def intentional_mistuning(params: ChainParams = ChainParams(n_osc=4), *, budget: float = 0.05,
+                          sense: str = "lower", zero_mean: bool = True, steps: int = 15,
+                          learning_rate: float = 0.2, temperature: float = 2e-3,
+                          seed: int = 0, start=None, progress: bool = True) -> MistuningDesign:
+    """A stiffness mistuning pattern of period n_osc, |delta_n| <= `budget`, that
+    lowers (or raises) the highest fold of the single-site localized states
+    (eq. (8), k = 1): the upper edge of the bistable range of the ring (README,
+    "The snake"), the belt speed above which no localized vibration survives.
+    Tiled along a longer ring (`pattern_deviations`) it mistunes that ring.
 
-
-def intentional_mistuning(params: ChainParams = ChainParams(), *, budget: float = 0.05,
-                          period: int = 4, zero_mean: bool = True, steps: int = 12,
-                          learning_rate: float = 0.3, temperature: float = 2e-3,
-                          seed: int = 0, progress: bool = True):
-    """A periodic stiffness mistuning delta_n = d_(n mod period), |d| <= `budget`,
-    that lowers the highest fold of the single-site localized states (eq. (8),
-    k = 1; the upper edge of the bistable range of the ring, README "The snake"):
-    the belt speed above which no localized vibration survives.
-
-    With period p the ring has p kinds of site; the fold of the state at each is
-    located by Newton's method on its Moore-Spence extended system (`solve_fold`),
-    continued from the previous iteration's, and differentiated in the design
-    variables by implicit differentiation (optimistix's `ImplicitAdjoint`, forward
-    mode: one linear solve per variable, never through Newton's iterations). The
-    objective, a smooth maximum t log sum exp(fold_j / t) of the p folds, is
-    minimised by optax's Adam over theta, d = budget tanh(theta)
-    (`pattern_deviations`).
+    The fold of the state at each site is located by Newton's method on its
+    Moore-Spence extended system (`solve_fold`), followed from the previous
+    pattern (`track_fold`), and differentiated in the design variables by implicit
+    differentiation (optimistix's `ImplicitAdjoint`, forward mode: never through
+    Newton's iterations). The objective, the smooth maximum t log sum
+    exp(fold_j / t) of the folds, is minimised (maximised to raise) by optax's Adam
+    over theta, d = budget tanh(theta), with the mean removed (`zero_mean`); the
+    best iterate is returned.
 
     **Arguments:**
 
-    - `params`: a homogeneous ring (v_d is the belt speed of the starting orbit,
-        1.5 is good for eq. (7)); n_osc a multiple of `period`.
-    - `budget`: the largest |delta_n|, > 0; `zero_mean`: keep the mean stiffness.
-    - `period`: p >= 2.
+    - `params`: a homogeneous ring, one period of the pattern (v_d: the belt speed
+        of the starting orbit, 1.5 for eq. (7)).
+    - `budget`: the largest |delta_n|, in (0, 1).
+    - `sense`: "lower" (a quieter chain) or "raise".
+    - `zero_mean`: keep the mean stiffness (mistuning, not retuning).
     - `steps`, `learning_rate`: Adam's iterations and step size in theta.
     - `temperature`: t of the smooth maximum (belt-speed units).
-    - `seed`: the random start of theta (small, so that the symmetric start is
-        left).
+    - `seed`: the small random start of theta, off the symmetric point.
+    - `start`: the output of `design_problems(params, budget)`, to reuse it.
     - `progress`: print each iteration.
 
     **Returns:**
 
-    A `MistuningDesign`; `pattern_folds` and `design_problems` evaluate other
-    patterns the same way.
+    A `MistuningDesign`.
 
     **Raises:**
 
-    `ValueError` for a chain that is not a homogeneous ring, n_osc not a multiple
-    of `period`, or a bad budget or count; `RuntimeError` when a fold is lost
-    (lower `learning_rate`).
+    `ValueError` for a chain that is not a homogeneous ring of at least 2, a bad
+    budget or sense; `RuntimeError` when a fold cannot be followed.
     """
-    problems, solutions, sites, homogeneous = design_problems(params, period, budget)
-    key = np.random.default_rng(seed)
-    theta = jnp.asarray(0.1 * key.standard_normal(period))
+    if sense not in ("lower", "raise"):
+        raise ValueError(f"sense must be 'lower' or 'raise', got {sense!r}")
+    sign = 1.0 if sense == "lower" else -1.0
+    problem, solutions, homogeneous = start or design_problems(params, budget)
+    period = params.n_osc
+    theta = jnp.asarray(0.05 * np.random.default_rng(seed).standard_normal(period))
+    folds, grads, solutions, ok = pattern_folds(problem, solutions, jnp.zeros(period), theta,
+                                                budget, zero_mean)
+    if not ok.all():
+        raise RuntimeError("the folds could not be followed to the starting pattern")
     opt = optax.adam(learning_rate)
     state = opt.init(theta)
-    history = []
+    history, best = [], None
     for i in range(steps + 1):
-        folds, grads, new, ok = pattern_folds(problems, solutions, theta, budget, zero_mean)
-        if not ok.all():
-            raise RuntimeError(f"the fold of a site was lost at iteration {i}: lower "
-                               "learning_rate")
-        solutions = new
         weights = np.asarray(jax.nn.softmax(jnp.asarray(folds) / temperature))
-        value = float(_smooth_max(jnp.asarray(folds), temperature))
-        gradient = weights @ grads
-        history.append((value, float(folds.max())))
+        smooth_max = float(temperature * jax.nn.logsumexp(jnp.asarray(folds) / temperature))
+        objective, gradient = sign * smooth_max, sign * (weights @ grads)
+        history.append((smooth_max, float(folds.max())))
+        if best is None or objective < best[0]:
+            best = (objective, theta, folds, solutions, gradient)
         if progress:
-            print(f"design {i}: highest fold {folds.max():.5f}, folds "
-                  f"{np.round(folds, 5).tolist()}", flush=True)
+            print(f"design {i}: highest fold {folds.max():.6f}, pattern "
+                  f"{np.round(np.asarray(pattern_deviations(theta, budget, period, zero_mean)), 4).tolist()}",
+                  file=sys.stderr, flush=True)
         if i == steps:
             break
-        updates, state = opt.update(jnp.asarray(gradient), state, theta)
-        theta = optax.apply_updates(theta, updates)
-    deviations = pattern_deviations(theta, budget, params.n_osc, zero_mean)
-    return MistuningDesign(deviations=deviations, pattern=deviations[:period],
-                           folds=jnp.asarray(folds), sites=np.asarray(sites),
-                           edge=float(folds.max()), homogeneous_edge=homogeneous,
-                           theta=theta, gradient=jnp.asarray(gradient),
-                           history=jnp.asarray(history), solutions=jnp.stack(solutions))
+        updates, new_state = opt.update(jnp.asarray(gradient), state, theta)
+        for _ in range(6):  # a step the folds cannot follow is halved
+            target = optax.apply_updates(theta, updates)
+            out = pattern_folds(problem, solutions, theta, target, budget, zero_mean)
+            if out[3].all():
+                break
+            updates = jax.tree_util.tree_map(lambda u: 0.5 * u, updates)
+        else:
+            raise RuntimeError(f"the folds could not be followed at iteration {i}: lower "
+                               "learning_rate")
+        theta, state = target, new_state
+        folds, grads, solutions, _ = out
+    _, theta, folds, solutions, gradient = best  # the best iterate, not the last
+    return MistuningDesign(pattern=pattern_deviations(theta, budget, period, zero_mean),
+                           folds=jnp.asarray(folds), edge=float(folds.max()),
+                           homogeneous_edge=homogeneous, theta=theta,
+                           gradient=jnp.asarray(gradient), history=jnp.asarray(history),
+                           solutions=jnp.stack(solutions), sense=sense)
 
 
-def design_problems(params: ChainParams, period: int, budget: float):
-    """The fold problems of the p kinds of site of a pattern of period p, from the
-    fold of the homogeneous ring's single-site state (`localized_fold`) moved along
-    the ring: (problems, solutions, sites, the homogeneous fold)."""
+def design_problems(params: ChainParams, budget: float):
+    """The fold problem of the single-site state at the ring's centre oscillator
+    (`localized_fold`), and a starting solution for the state at each oscillator
+    (on the homogeneous ring they are one state): (problem, solutions, the
+    homogeneous fold).
+
+    **Raises:**
+
+    `ValueError` for a chain that is not a homogeneous ring of at least 2, or a
+    budget outside (0, 1); `RuntimeError` when no fold is found.
+    """
     n = params.n_osc
-    if params.boundary != "ring" or np.ndim(params.stiffness) or np.ndim(params.xi) \
-            or np.ndim(params.load):
-        raise ValueError("params: the design starts from a homogeneous ring")
-    if isinstance(period, bool) or not isinstance(period, (int, np.integer)) or period < 2 \
-            or n % period:
-        raise ValueError(f"period must be an integer >= 2 dividing n_osc = {n}, got "
-                         f"{period!r}")
+    if params.boundary != "ring" or n < 2 or np.ndim(params.stiffness) \
+            or np.ndim(params.xi) or np.ndim(params.load):
+        raise ValueError("params: the design starts from a homogeneous ring of at least "
+                         "2 oscillators")
     if not (isinstance(budget, (int, float)) and 0 < budget < 1):
         raise ValueError(f"budget must lie in (0, 1), got {budget!r}")
     centre = int(np.flatnonzero(excited_block(n, 1, "ring"))[0])
@@ -208,6 +271,4 @@ def design_problems(params: ChainParams, period: int, budget: float):
         raise RuntimeError("no fold of the single-site state was found from "
                            f"v_d = {float(params.v_d):g}")
     solution = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
-    sites = [(centre + j) % n for j in range(period)]
-    moved = [_site_problem(problem, solution, s - centre, s) for s in sites]
-    return [m[0] for m in moved], [m[1] for m in moved], sites, float(fold.p)
+    return problem, [solution] * n, float(fold.p)

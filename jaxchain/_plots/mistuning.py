@@ -148,3 +148,42 @@ def plot_mistuned_states(study: xr.Dataset, sigma: float, draw: int = 0, v_d: fl
     bottom.set_aspect("auto")
     fig.tight_layout()
     return fig
+
+
+def plot_mistuning_design(result: dict):
+    """The designs of `design_study` against the A-B pattern and random draws of the
+    same budget: the highest single-site fold on the design's ring (shooting),
+    and the upper edge of the patterns tiled on the longer ring (simulation).
+
+    **Arguments:**
+
+    - `result`: the dict of `design_study`.
+
+    **Returns:**
+
+    The matplotlib Figure.
+    """
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4.2), sharey=True)
+    hom = result["homogeneous_fold"]
+    names = ["homogeneous"] + list(result["designs"]) + ["ab"]
+    values = [hom] + [d["edge"] for d in result["designs"].values()] + [result["ab"]["edge"]]
+    left.plot(range(len(names)), values, "o", color="tab:blue", ms=8)
+    rand = [r["edge"] for r in result["random"] if r["edge"] is not None]
+    left.plot(np.full(len(rand), len(names)), rand, "x", color="tab:gray")
+    left.set_xticks(range(len(names) + 1), names + ["random"], rotation=20)
+    left.axhline(hom, color="k", lw=0.6, ls="--")
+    left.set_ylabel("highest fold of the single-site states, v_d")
+    left.set_title(f"ring of {result['n_osc']} (period of the pattern), shooting, "
+                   f"|delta_n| <= {result['budget']:g}", fontsize=9)
+    edges = result["chain_edges"]["edge"]
+    fixed = [k for k in edges if not k.startswith("random")]
+    right.plot(range(len(fixed)), [edges[k] for k in fixed], "o", color="tab:green", ms=8)
+    rand = [v for k, v in edges.items() if k.startswith("random")]
+    right.plot(np.full(len(rand), len(fixed)), rand, "x", color="tab:gray")
+    right.set_xticks(range(len(fixed) + 1), fixed + ["random"], rotation=20)
+    right.axhline(edges["homogeneous"], color="k", lw=0.6, ls="--")
+    right.set_title(f"tiled on the ring of {result['chain_edges']['n_osc']}: upper edge by "
+                    f"simulation (+- {result['chain_edges']['resolution'] / 2:.4f})",
+                    fontsize=9)
+    fig.tight_layout()
+    return fig
