@@ -10,7 +10,7 @@ import numpy as np
 from .._mistuning.edges import EDGE_OPTIONS
 from .._mistuning.study import (STUDY_OPTIONS, STUDY_SIGMAS, STUDY_VD, TABLE_SIGMAS, THETAS,
                                 mistuning_study)
-from .._mistuning.summary import (halc_correlation, localization_table, localized_fraction,
+from .._mistuning.summary import (edge_correlations, halc_correlation, localization_table, localized_fraction,
                                   staircase_fraction, vibrating_fraction)
 from .._options import SimulationOptions
 from .._physics.record import chain_record
@@ -196,7 +196,8 @@ def summary(study) -> dict:
     return {"sigmas": rows, "state_period": a["state_period"],
             "state_omega2": a["state_omega2"], "sliding_damping": a["sliding_damping"],
             "damped_chain_decay": a["state_damped_decay"],
-            "edge_resolution": a["edge_resolution"], "n_draws": a["n_draws"],
+            "edge_resolution": a["edge_resolution"],
+            "site_edge_correlation": edge_correlations(study), "n_draws": a["n_draws"],
             "n_samples": a["n_samples"], "t_end": a["t_end"], "transient": a["transient"]}
 
 

@@ -131,3 +131,28 @@ def localization_table(eta_c: float, sigmas, thetas, **kwargs) -> list[dict]:
                          "error": float(e), "weak_disorder": float(w),
                          "deviation_in_errors": float((g - w) / e)})
     return rows
+
+
+def neighbour_detuning(deviations: np.ndarray, boundary: str = "ring") -> np.ndarray:
+    """delta_n minus the mean of its neighbours' delta (one neighbour at the end of
+    an open chain): how far oscillator n is tuned away from the oscillators it is
+    coupled to. Shape of `deviations` (..., n_osc)."""
+    d = np.asarray(deviations, dtype=float)
+    left, right = np.roll(d, 1, -1), np.roll(d, -1, -1)
+    if boundary != "ring":
+        left[..., 0], right[..., -1] = right[..., 0], left[..., -1]
+    return d - 0.5 * (left + right)
+
+
+def edge_correlations(study) -> dict:
+    """Over every oscillator of every mistuned draw, the correlation of the upper
+    edge of its single-site state with |delta_n| and with |neighbour_detuning|."""
+    boundary = str(study.attrs.get("boundary", "ring"))
+    dev = study["deviations"].values
+    edge = study["site_edge"].values
+    keep = np.isfinite(dev) & np.isfinite(edge) & (study["sigma"].values[:, None, None] > 0)
+    if keep.sum() < 3:
+        return {"own_deviation": None, "neighbour_detuning": None}
+    det = np.abs(neighbour_detuning(dev, boundary))
+    return {"own_deviation": float(np.corrcoef(np.abs(dev)[keep], edge[keep])[0, 1]),
+            "neighbour_detuning": float(np.corrcoef(det[keep], edge[keep])[0, 1])}

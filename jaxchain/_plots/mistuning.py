@@ -6,7 +6,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import xarray as xr
 
-from .._mistuning.summary import localized_fraction, staircase_fraction
+from .._mistuning.summary import (edge_correlations, localized_fraction,
+                                  neighbour_detuning, staircase_fraction)
 from .localized import plot_localized_states
 
 
@@ -23,7 +24,7 @@ def plot_mistuning_study(study: xr.Dataset):
     excited that keep n_HALC = k (the Fig. 4 staircase), (b) basin stability of
     the localized states (0 < n_HALC < N), each per belt speed with 95 % Wilson intervals; (c) the
     upper edge of the bistable range of each draw (simulation, and the fold by
-    shooting where computed) with the Hopf point; (d) the decay per cell of the
+    shooting where computed), the Hopf points in the title; (d) the decay per cell of the
     single-site state's amplitudes against the linear predictions.
 
     **Arguments:**
@@ -58,10 +59,9 @@ def plot_mistuning_study(study: xr.Dataset):
         ax.plot(np.full(fold.size, sigma), fold, "x", color="k", ms=8,
                 label="fold by shooting" if i == 0 else None)
     hopf = study["hopf_vd"].values
-    ax.axhline(np.nanmean(hopf), color="tab:red", lw=1,
-               label=f"Hopf point (every draw: {np.nanmin(hopf):.5f}-{np.nanmax(hopf):.5f})")
     ax.set_ylabel("v_d")
-    ax.set_title("(c) edges of the bistable range, per draw", fontsize=9)
+    ax.set_title(f"(c) upper edge of the bistable range, per draw (Hopf point of every "
+                 f"draw: {np.nanmin(hopf):.5f}-{np.nanmax(hopf):.5f})", fontsize=9)
     ax.legend(fontsize=7)
     ax = axes[1, 1]
     decay = study["envelope_decay"].values
@@ -87,7 +87,8 @@ def plot_mistuning_study(study: xr.Dataset):
 
 def plot_site_edges(study: xr.Dataset):
     """The largest belt speed at which the single-site state at each oscillator
-    survives, against that oscillator's stiffness deviation, every draw and sigma.
+    survives, against how far that oscillator is tuned from its neighbours
+    (`neighbour_detuning`), every draw and sigma.
 
     **Returns:**
 
@@ -95,20 +96,22 @@ def plot_site_edges(study: xr.Dataset):
     """
     fig, ax = plt.subplots(figsize=(6, 4.2))
     eta_c = float(study.attrs["eta_c"])
+    detuning = neighbour_detuning(study["deviations"].values,
+                                  str(study.attrs.get("boundary", "ring"))) / eta_c
     for i, sigma in enumerate(study["sigma"].values):
         if sigma == 0:
             continue
-        dev = study["deviations"].values[i].ravel() / eta_c
-        edge = study["site_edge"].values[i].ravel()
-        keep = np.isfinite(dev) & np.isfinite(edge)
-        ax.plot(dev[keep], edge[keep], ".", alpha=0.6, label=f"sigma = {sigma:g} eta_c")
-    homogeneous = study["site_edge"].sel(sigma=0.0).values if 0.0 in study["sigma"] else None
-    if homogeneous is not None:
-        ax.axhline(np.nanmedian(homogeneous), color="k", lw=1, ls="--",
-                   label="homogeneous ring")
-    ax.set_xlabel("delta_n / eta_c of the excited oscillator")
+        x, edge = detuning[i].ravel(), study["site_edge"].values[i].ravel()
+        keep = np.isfinite(x) & np.isfinite(edge)
+        ax.plot(x[keep], edge[keep], ".", alpha=0.6, label=f"sigma = {sigma:g} eta_c")
+    if 0.0 in study["sigma"]:
+        ax.axhline(np.nanmedian(study["site_edge"].sel(sigma=0.0).values), color="k", lw=1,
+                   ls="--", label="homogeneous ring")
+    r = edge_correlations(study)["neighbour_detuning"]
+    ax.set_xlabel("(delta_n - mean of its neighbours' delta) / eta_c")
     ax.set_ylabel("upper edge of its single-site state, v_d")
-    ax.set_title("Where a single-site state ends, against its own stiffness", fontsize=9)
+    ax.set_title("Where a single-site state ends, against its detuning from its "
+                 f"neighbours\n(correlation of the edge with |detuning|: {r:.2f})", fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
     return fig
