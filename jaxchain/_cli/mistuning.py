@@ -53,8 +53,16 @@ Each chain's runs go to <out>/chains/*.zarr as they finish, the bisection to
 continues a killed run (a store is reused only with equal settings). Writes
 <out>/mistuning.nc, mistuning.json, mistuning.png (the summary), mistuning_edges.png
 (each single-site state's end against its delta_n) and mistuned_fig4.png (Fig. 4
-of draw 0 at sigma = eta_c beside its delta_n). About 12 minutes on 2 CPU cores
-with the defaults."""
+of draw 0 at sigma = eta_c beside its delta_n). About 9 minutes on 2 CPU cores
+with the defaults.
+
+--design runs, instead, intentional mistuning by gradient (jc.design_study): on a
+ring of --period oscillators, a pattern |delta_n| <= --budget that lowers (mean
+kept, and mean free) or raises the highest fold of the single-site states, with
+implicit gradients checked by finite differences and each optimum's fold checked
+by simulation on both sides; against the A-B pattern and 8 random draws, and the
+patterns tiled on the ring of --n-osc by simulation. Writes <out>/design.json and
+design.png (about 3 minutes)."""
 
 
 def add_parser(sub):
@@ -92,7 +100,7 @@ def add_parser(sub):
                    help="instead of the study: intentional mistuning by gradient on a "
                         "ring of --period oscillators within --budget, lowering and "
                         "raising the highest fold, against the A-B pattern and random "
-                        "draws (about 5 minutes)")
+                        "draws (about 3 minutes)")
     g.add_argument("--budget", type=positive_float, default=0.05, metavar="B",
                    help="largest |delta_n| of the design (default 0.05)")
     g.add_argument("--period", type=positive_int, default=4, metavar="P",

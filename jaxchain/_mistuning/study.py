@@ -2,6 +2,7 @@
 by draw: the Fig. 4 staircase, basin stability, where the vibration sits, the
 edges of the bistable range, and the localization lengths against Anderson's."""
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -41,11 +42,19 @@ TABLE_SIGMAS = (0.25, 0.5, 1.0, 2.0, 4.0)
 def study_chains(params: ChainParams, sigmas, n_draws: int) -> list[tuple[int, int, ChainParams]]:
     """(sigma index, draw, chain) of the study: draw d of every sigma > 0 is
     `mistune(params, sigma eta_c, seed=d)`, the same normal draws scaled (common
-    random numbers across sigma); sigma = 0 is the one homogeneous chain."""
+    random numbers across sigma), its `Mistuning` record dropped (the study keeps
+    sigma and the draw) and its stiffness of shape (n_osc,); sigma = 0 is the one
+    homogeneous chain."""
     out = []
     for i, s in enumerate(sigmas):
         for d in range(1 if s == 0 else n_draws):
-            out.append((i, d, mistune(params, float(s) * float(params.eta_c), d)))
+            chain = mistune(params, float(s) * float(params.eta_c), d)
+            # the record is static metadata: dropped, and the stiffness always one
+            # value per oscillator, so that every chain runs the one compiled program
+            fields = {f.name: getattr(chain, f.name) for f in dataclasses.fields(chain)}
+            stiffness = np.broadcast_to(np.asarray(chain.stiffness, float), (params.n_osc,))
+            out.append((i, d, ChainParams(**(fields | {"mistuning": None,
+                                                       "stiffness": stiffness.copy()}))))
     return out
 
 
