@@ -127,3 +127,32 @@ def assert_usage_error(argv: list[str], says: str, capsys) -> None:
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and says in err
+
+
+#: The small sweep of the store tests (test_sweep, test_dask): eq. (8) with k = 1..3
+#: on a ring of 3, in batches of 2. The horizon makes a batch last about a second,
+#: so that a run can be killed between two batches.
+SWEEP_N_OSC, SWEEP_BATCH, SWEEP_T_END, SWEEP_TRANSIENT = 3, 2, 10000.0, 9000.0
+#: What a sweep computes; the bookkeeping (batch flags, counts, store) is left out.
+SWEEP_RESULTS = ["amplitudes", "energy", "n_halc", "n_halc_halves", "min_slip_speed",
+                 "x_max", "x_min", "v_max", "y_initial", "y_final", "num_steps", "status",
+                 "front"]
+
+
+def sweep_cli(vd: str) -> list[str]:
+    """`jaxchain sweep` arguments of the small sweep at the belt speeds `vd`."""
+    return ["sweep", "--n-osc", str(SWEEP_N_OSC), "--vd", vd, "--ics", "eq8", "--t-end",
+            str(SWEEP_T_END), "--transient", str(SWEEP_TRANSIENT), "--batch-size",
+            str(SWEEP_BATCH), "--no-progress"]
+
+
+def small_sweep(vd: str, **kw):
+    """The small sweep at the belt speeds `vd` (as `--vd` reads them) through
+    `jc.sweep`."""
+    from jaxchain._cli.sweep import belt_speeds
+
+    return jc.sweep(jc.ChainParams(n_osc=SWEEP_N_OSC), belt_speeds(vd),
+                    {"eq8": jc.localized_family(SWEEP_N_OSC)},
+                    options=jc.SimulationOptions(t_end=SWEEP_T_END,
+                                                 transient=SWEEP_TRANSIENT),
+                    batch_size=SWEEP_BATCH, progress=False, **kw)

@@ -13,7 +13,7 @@ import xarray as xr
 
 import jaxchain as jc
 import jaxchain._sweep.sweep as sweep_module
-from helpers import SHORT
+from helpers import SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, small_sweep, sweep_cli
 from jaxchain._cli.main import main
 from jaxchain._sweep.store import SweepStore
 
@@ -22,22 +22,14 @@ from jaxchain._sweep.store import SweepStore
 pytestmark = pytest.mark.numerics
 
 #: The grid of the kill-and-resume tests: 2 belt speeds x eq. (8) with k = 1..3 on
-#: a ring of 3, in 3 batches of 2. The horizon makes a batch last about a second,
-#: so that the sweep can be killed between two batches.
-N_OSC, VD, BATCH = 3, "1.4:1.6:2", 2
-T_END, TRANSIENT = 10000.0, 9000.0
-CLI = ["sweep", "--n-osc", str(N_OSC), "--vd", VD, "--ics", "eq8", "--t-end", str(T_END),
-       "--transient", str(TRANSIENT), "--batch-size", str(BATCH), "--no-progress"]
-#: What a sweep computes; the bookkeeping (batch flags, counts, store) is left out.
-RESULTS = ["amplitudes", "energy", "n_halc", "n_halc_halves", "min_slip_speed", "x_max",
-           "x_min", "v_max", "y_initial", "y_final", "num_steps", "status", "front"]
+#: a ring of 3, in 3 batches of 2 (`small_sweep`).
+VD = "1.4:1.6:2"
+CLI = sweep_cli(VD)
+RESULTS = SWEEP_RESULTS
 
 
 def _api_sweep(**kw):
-    return jc.sweep(jc.ChainParams(n_osc=N_OSC), np.linspace(1.4, 1.6, 2),
-                    {"eq8": jc.localized_family(N_OSC)},
-                    options=jc.SimulationOptions(t_end=T_END, transient=TRANSIENT),
-                    batch_size=BATCH, progress=False, **kw)
+    return small_sweep(VD, **kw)
 
 
 @pytest.fixture(scope="module")

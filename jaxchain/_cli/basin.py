@@ -13,8 +13,9 @@ from .._options import SimulationOptions
 from .._plots.basin import plot_basin_stability, plot_halc_histogram
 from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, UsageError, json_ready, positive_float, positive_int,
-                     save_figure, show_progress, writable_folder)
+from .common import (RunsFailed, UsageError, add_scheduler_option, cluster_client,
+                     json_ready, positive_float, positive_int, save_figure,
+                     show_progress, writable_folder)
 from .sweep import belt_speeds
 
 HELP = "basin stability: how likely each state is from random initial states"
@@ -25,12 +26,13 @@ each at every belt speed of --vd to --t-end, and classify the state after
 --transient by n_HALC (for one oscillator: steady sliding or stick-slip) and by the
 number of separate groups of HALC oscillators. Prints, per belt speed, the fraction
 of samples in each class with its 95 % Wilson interval (Menck et al., Nature
-Physics 9, 89 (2013)). A subset of up to 50 samples runs again to 2 t_end: the
-share whose class changed says whether t_end was long enough, and its stick-slip
-states are classified periodic or irregular by their time delays.
+Physics 9, 89 (2013)). A subset of --check samples (up to 50 by default) runs again
+to 2 t_end: the share whose class changed says whether t_end was long enough, and
+its stick-slip states are classified periodic or irregular by their time delays.
 
 The runs are stored batch by batch in <out>/basin.zarr (--resume continues a killed
-run with the same settings). Writes <out>/basin.nc (the result, with the sampled
+run with the same settings); --scheduler runs the batches on a Dask cluster (local:N:
+N worker processes here), with the same result to the last bit. Writes <out>/basin.nc (the result, with the sampled
 initial states and the key), <out>/basin.png (the probabilities against v_d as
 stacked areas) and <out>/basin_halc.png (the distribution of n_HALC at the belt
 speed nearest 1.5). --quick: one oscillator, v_d = 0.8:2.2:8, 200 samples, t_end
@@ -68,6 +70,9 @@ def add_parser(sub):
     p.add_argument("--transient", type=float, default=None, metavar="T",
                    help=f"classify after this time (default {BASIN_OPTIONS.transient:g}; "
                         "--quick 400)")
+    p.add_argument("--check", type=int, default=None, metavar="C",
+                   help="samples of the convergence check, run again to 2 t_end "
+                        "(default min(S, 50); 0 for none)")
     p.add_argument("--seed", type=int, default=0, metavar="K",
                    help="seed of the JAX PRNG key of the samples and of the mistuning "
                         "draw (default 0)")
@@ -78,6 +83,7 @@ def add_parser(sub):
                    metavar="DIR", help="output folder (default ./jaxchain-out/)")
     p.add_argument("--resume", action="store_true",
                    help="continue the runs stored in <out>/basin.zarr")
+    add_scheduler_option(p)
     p.add_argument("--quick", action="store_true", help="the small single-oscillator run")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
@@ -105,8 +111,11 @@ def run(args) -> None:
     if store.exists() and not args.resume:
         raise UsageError(f"--out {args.out}: basin.zarr exists; use --resume to continue "
                          "it, or another --out")
-    ds = basin_stability(params, v_d, samples, box, args.seed, options=options,
-                         store=store, resume=args.resume, progress=show_progress(args))
+    with cluster_client(args) as client:
+        ds = basin_stability(params, v_d, samples, box, args.seed, options=options,
+                             n_check=args.check, store=store, resume=args.resume,
+                             client=client,
+                             progress=show_progress(args))
     wall = time.perf_counter() - start
     ds.to_netcdf(args.out / "basin.nc")
     save_figure(plot_basin_stability(ds), args.out / "basin.png")
@@ -123,6 +132,9 @@ def run(args) -> None:
             "n_samples": samples, "wall_time_s": wall,
             "changed_fraction": ds["changed_fraction"].values.tolist(),
             "periodic_fraction": ds["periodic_fraction"].values.tolist(),
+            "periodic_ci_low": ds["periodic_ci_low"].values.tolist(),
+            "periodic_ci_high": ds["periodic_ci_high"].values.tolist(),
+            "n_check": int(ds.attrs["n_check"]), "scheduler": args.scheduler,
             "n_osc": n_osc, "box": {"x": list(box.x), "v": list(box.v)},
             "seed": args.seed, "t_end": t_end, "transient": transient}), allow_nan=False))
     else:

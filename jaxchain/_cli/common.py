@@ -3,7 +3,9 @@ line, the errors that `main` turns into one line and an exit status, and the sol
 table."""
 
 import argparse
+import contextlib
 import importlib
+import logging
 import math
 import sys
 import tempfile
@@ -26,6 +28,7 @@ OPTION_NAMES = {
     "SimulationOptions.rtol": "--rtol", "SimulationOptions.atol": "--atol",
     "SimulationOptions.controller": "--controller",
     "SimulationOptions.max_steps": "--max-steps", "batch_size": "--batch-size",
+    "n_check": "--check",
     "NonsmoothOptions.rtol": "--ref-rtol", "NonsmoothOptions.atol": "--ref-rtol",
     "NonsmoothOptions.t_end": "--t-end", "NonsmoothOptions.transient": "--transient",
 }
@@ -144,6 +147,45 @@ def add_output_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--json", action="store_true",
                    help="print one JSON object on stdout instead of the table")
     g.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+def scheduler(text: str) -> str:
+    """An argparse type: a Dask scheduler's address, or local:N."""
+    from .._sweep.cluster import local_workers  # imports Dask only when asked
+
+    try:
+        local_workers(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err).split(": ", 1)[1]) from None
+    return text
+
+
+def add_scheduler_option(g) -> None:
+    """--scheduler, in the argument group (or parser) `g`."""
+    g.add_argument("--scheduler", type=scheduler, default=None, metavar="ADDRESS|local:N",
+                   help="run the batches as tasks on a Dask cluster: the address of its "
+                        "scheduler (tcp://HOST:8786, its workers started by `dask worker`, "
+                        "dask-jobqueue or dask-cuda, with the store on a file system "
+                        "they share), or local:N to start N worker processes of one core "
+                        "each on this machine (default: run in this process)")
+
+
+@contextlib.contextmanager
+def cluster_client(args):
+    """The `distributed.Client` of --scheduler (a `LocalCluster` for local:N, closed
+    at the end), or None when the option is not given. Dask's own log (its
+    tracebacks when a connection drops) is silenced: the command reports a failure
+    in one line."""
+    if getattr(args, "scheduler", None) is None:
+        yield None
+        return
+    from .._sweep.cluster import connect
+
+    for name in ["distributed", *logging.root.manager.loggerDict]:
+        if name.split(".")[0] == "distributed":  # Dask sets some levels one by one
+            logging.getLogger(name).setLevel(logging.CRITICAL)
+    with connect(args.scheduler) as client:
+        yield client
 
 
 def one_line(err: BaseException) -> str:

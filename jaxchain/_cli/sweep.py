@@ -16,9 +16,9 @@ from .._sweep.fronts import front_fractions, front_ranges
 from .._sweep.sweep import sweep
 from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, add_output_options, add_ring_options,
-                     add_run_options, json_ready, positive_int, save_figure, show_progress,
-                     writable_folder)
+from .common import (RunsFailed, add_output_options, add_ring_options, add_run_options,
+                     add_scheduler_option, cluster_client, json_ready, positive_int,
+                     save_figure, show_progress, writable_folder)
 
 HELP = "bifurcation diagram over belt speeds, stored as it runs (Fig. 3(b))"
 DESCRIPTION = """\
@@ -35,6 +35,10 @@ batch is written to <out>/sweep.zarr (a zarr store, read with
 xarray.open_zarr or jaxchain.open_sweep) before the next starts, so a crash or a
 kill loses at most the batches running; --resume skips the stored ones. The store
 records a hash of every setting: it is never resumed with other settings.
+--scheduler runs each batch as a task on a Dask cluster (local:N starts N worker
+processes here): a lost worker's batches are run again, the result is the
+in-process one to the last bit, and if the scheduler goes away the command exits
+with status 1 and --resume (with or without a cluster) finishes the store.
 
 Prints, per belt speed, the distinct states found (n_HALC values) and the
 fraction of initial conditions that make a propagating front: stick-slip invades
@@ -100,6 +104,7 @@ def add_parser(sub):
                         "finished batches (refused if it was made with other settings)")
     s.add_argument("--overwrite", action="store_true",
                    help="delete <out>/sweep.zarr and start again")
+    add_scheduler_option(s)
     add_output_options(p)
     p.set_defaults(run=run)
     return p
@@ -117,9 +122,11 @@ def run(args) -> None:
     store = args.out / "sweep.zarr"
 
     start = time.perf_counter()
-    ds = sweep(params, args.vd, ics, args.solver, options,
-               batch_size=args.batch_size, store=store, resume=args.resume,
-               overwrite=args.overwrite, progress=show_progress(args)).load()
+    with cluster_client(args) as client:
+        ds = sweep(params, args.vd, ics, args.solver, options,
+                   batch_size=args.batch_size, store=store, resume=args.resume,
+                   overwrite=args.overwrite, client=client,
+                   progress=show_progress(args)).load()
     wall = time.perf_counter() - start
     png = args.out / "sweep.png"
     save_figure(plot_bifurcation_diagram(ds), png)

@@ -3,6 +3,7 @@ batch by batch, each batch stored as it finishes; a killed sweep resumes where i
 stopped."""
 
 import dataclasses
+import uuid
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
@@ -35,7 +36,7 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
           options: SimulationOptions = SimulationOptions(), *,
           where: Callable | str = "v_d", batch_size: int = 64,
           store: str | Path | None = None, resume: bool = False, overwrite: bool = False,
-          engine: str | None = None, progress: bool = True) -> xr.Dataset:
+          engine: str | None = None, client=None, progress: bool = True) -> xr.Dataset:
     """Run every (value, initial condition) pair of a grid, batch by batch, and
     write each batch to a zarr store as it finishes: the bifurcation diagram of
     Fig. 3(b) of the paper when `where` is the belt speed.
@@ -50,14 +51,15 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     initial conditions, the solver, the options and the batch size), and is never
     resumed with other settings.
 
-    Several hosts share one sweep through JAX's distributed runtime: after
-    `jax.distributed.initialize()`, process i of n (`jax.process_index()`,
-    `jax.process_count()`) takes the batches b with b % n == i into the same store
-    on a shared file system, each calling `sweep(..., store=path, resume=True)`.
-    No process waits for another (no collective is needed): each returns what the
-    store holds when its share is done, and `open_sweep(path)` reads the whole
-    sweep once all are. The batches of a process that died stay unflagged; a rerun
-    with `resume=True`, on any number of processes, computes them.
+    With a Dask `client`, each batch is one task on its cluster (`run_tasks`):
+    the worker that takes it integrates its trajectories with the usual engine, on
+    its own devices, writes them into their region of the store and flags the
+    batch done. The cluster computes the same programs as this process (the same
+    block of the queue engine, chosen here), so its result equals the in-process
+    sweep to the last bit. A lost worker's batches are run again by Dask; a batch
+    written twice is written identically. If the scheduler goes away, the flagged
+    batches stay in the store, and `resume=True` (in process or on any cluster)
+    runs the others.
 
     **Arguments:**
 
@@ -79,8 +81,12 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
         keep the results in memory only.
     - `resume`: continue the sweep in `store`, skipping its finished batches.
     - `overwrite`: delete what `store` holds and start again.
-    - `engine`: "queue" or "vmap" (see `run_lanes`).
-    - `progress`: a tqdm bar over the trajectories, with an ETA.
+    - `engine`: "queue" or "vmap" (see `run_lanes`); on a cluster, each worker's
+        default by default (the queue on CPUs, vmap on GPUs).
+    - `client`: a `distributed.Client` to run the batches on its cluster (needs
+        a `store` that every worker can reach); None to run them in this process.
+    - `progress`: a tqdm bar over the trajectories (over the batches on a
+        cluster), with an ETA.
 
     **Returns:**
 
@@ -99,7 +105,8 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     `ValueError` for a bad value (naming the parameter), an empty grid, initial
     conditions of the wrong shape, batch_size < 1, an existing store without
     `resume` or `overwrite`, or a store made with other settings (naming the
-    settings that differ).
+    settings that differ), or a `client` without a `store`. `RuntimeError` when
+    the scheduler of `client` goes away.
     """
     params = check_params(params)
     solver = as_solver(solver, params=params)
@@ -119,9 +126,9 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
         options=options, batch_size=batch_size)
     key, text = settings_key(KIND, **settings), settings_json(KIND, **settings)
 
-    hosts = jax.process_count()
-    if hosts > 1 and store is None:
-        raise ValueError("store: a sweep over several processes needs a shared store")
+    if client is not None and store is None:
+        raise ValueError("store: a sweep on a Dask cluster needs a store its workers "
+                         "can reach")
     st = SweepStore(store) if store is not None else None
     done = np.zeros(n_batches, dtype=bool)
     if st is not None and st.exists():
@@ -132,7 +139,7 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
             done = st.done()
         else:
             raise ValueError(f"store {st.path} exists: resume it or overwrite it")
-    todo = [b for b in range(n_batches) if b % hosts == jax.process_index() and not done[b]]
+    todo = [b for b in range(n_batches) if not done[b]]
 
     coords = {name: grid.values, "ic": np.arange(grid.n_ics), **grid.ic_coords(),
               "osc": np.arange(1, params.n_osc + 1),
@@ -140,23 +147,26 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     attrs = run_attributes(params, solver, options, ",".join(grid.families), name)
     attrs |= {"swept": name, "batch_size": batch_size, "settings_key": key,
               "settings": text}
-    block = block_size(batch_size, len(jax.local_devices()))
+    work = _Batches(grid, batch_size, solver, options, engine,
+                    block_size(batch_size, len(jax.local_devices())), coords, attrs)
     parts = []
-    initial = sum(min(n, (b + 1) * batch_size) - b * batch_size for b in np.flatnonzero(done))
-    with tqdm(total=n, initial=initial, desc="sweep", unit="trajectory",
-              disable=not progress, smoothing=0.1) as bar:
-        for b in todo:
-            start, stop = b * batch_size, min(n, (b + 1) * batch_size)
-            lane_params, y0 = grid.lanes(start, stop)
-            obs = run_lanes(lane_params, y0, solver, options, engine=engine, block=block,
-                            progress=bar)
-            batch = xr.Dataset(observables_variables(obs, ("trajectory",)))
-            if st is None:
-                parts.append(batch)
-                continue
-            if not st.exists():
-                st.create(batch, n, batch_size, coords, attrs)
-            st.write(b, start, batch)
+    if client is not None:
+        from .cluster import run_tasks
+
+        with tqdm(total=n_batches, initial=n_batches - len(todo), desc="sweep",
+                  unit="batch", disable=not progress) as bar:
+            run_tasks(client, work.store, [(st.path.resolve(), b) for b in todo],
+                      [f"sweep-{key[:12]}-batch-{b}-{uuid.uuid4().hex[:8]}" for b in todo],
+                      bar)
+    else:
+        initial = sum(work.size(b) for b in np.flatnonzero(done))
+        with tqdm(total=n, initial=initial, desc="sweep", unit="trajectory",
+                  disable=not progress, smoothing=0.1) as bar:
+            for b in todo:
+                if st is None:
+                    parts.append(work.run(b, bar))
+                else:
+                    work.store(st.path, b, bar)
 
     if st is None:
         flat = xr.concat(parts, "trajectory").assign_coords(coords).assign_attrs(attrs)
@@ -168,6 +178,45 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     ds.attrs |= {"batches_total": n_batches, "batches_done": n_done,
                  "batches_run": len(todo), "store": str(st.path) if st else ""}
     return ds
+
+
+@dataclasses.dataclass(frozen=True)
+class _Batches:
+    """The batches of a sweep: batch b holds the trajectories [b B, (b + 1) B) of
+    the grid, B the batch size, run through `run_lanes` with a fixed `block`
+    (chosen by the process that plans the sweep, so that a batch is the same
+    compiled program wherever it runs)."""
+
+    grid: SweepGrid
+    batch_size: int
+    solver: diffrax.AbstractSolver
+    options: SimulationOptions
+    engine: str | None
+    block: int
+    coords: dict
+    attrs: dict
+
+    def size(self, b: int) -> int:
+        return min(self.grid.n_trajectories, (b + 1) * self.batch_size) - b * self.batch_size
+
+    def run(self, b: int, progress: bool | tqdm = False) -> xr.Dataset:
+        """Batch b's observables, dims (trajectory, ...)."""
+        start = b * self.batch_size
+        lane_params, y0 = self.grid.lanes(start, start + self.size(b))
+        obs = run_lanes(lane_params, y0, self.solver, self.options, engine=self.engine,
+                        block=self.block, progress=progress)
+        return xr.Dataset(observables_variables(obs, ("trajectory",)))
+
+    def store(self, path: Path, b: int, progress: bool | tqdm = False) -> None:
+        """Run batch b and write it into its region of the store at `path`
+        (creating the store's layout if no batch made it yet), then flag it done:
+        the task of the Dask route."""
+        batch = self.run(b, progress)
+        st = SweepStore(path)
+        if not st.exists():
+            st.create(batch, self.grid.n_trajectories, self.batch_size, self.coords,
+                      self.attrs)
+        st.write(b, b * self.batch_size, batch)
 
 
 def open_sweep(store: str | Path) -> xr.Dataset:

@@ -1,0 +1,163 @@
+"""The Dask route of the batched studies: a sweep and a basin-stability run on a
+`LocalCluster` of two spawned worker processes equal the in-process runs to the last
+bit; a worker killed in the middle of a sweep is replaced and its batches run again;
+a scheduler that goes away leaves a command that exits 1 in one line and a store
+that `--resume` finishes in process."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+import xarray as xr
+
+import jaxchain as jc
+from helpers import SWEEP_RESULTS, small_sweep, sweep_cli
+from jaxchain._cli.main import main
+from jaxchain._sweep.cluster import connect, local_workers
+from jaxchain._sweep.store import SweepStore
+
+#: A ring of 3 at 4 belt speeds x eq. (8) with k = 1..3 (`small_sweep`): 12
+#: trajectories in 6 batches of 2, each about a second, so that a worker or the
+#: scheduler can be killed in the middle of the sweep.
+VD = "1.4:1.7:4"
+CLI = sweep_cli(VD)
+RESULTS = SWEEP_RESULTS
+
+
+def _api_sweep(**kw):
+    return small_sweep(VD, **kw)
+
+
+@pytest.fixture(scope="module")
+def in_process():
+    """The sweep run in this process, in memory."""
+    return _api_sweep().load()
+
+
+@pytest.fixture(scope="module")
+def client():
+    with connect("local:2") as c:
+        yield c
+
+
+def _wait_for_a_batch(store, deadline_s=300) -> int:
+    """Block until the store at `store` has at least one flagged batch (a written
+    chunk of `batch_done`: the layout alone writes none), and return their count."""
+    deadline = time.monotonic() + deadline_s
+    while time.monotonic() < deadline:
+        flags = list((store / "batch_done" / "c").glob("*"))
+        if flags:
+            return len(flags)
+        time.sleep(0.005)
+    raise AssertionError("no batch was stored in time")
+
+
+def test_a_sweep_on_a_local_cluster_equals_the_in_process_sweep(tmp_path, client, in_process):
+    """Each batch is a task on one of two spawned worker processes, which writes
+    its region of the store: the result equals the in-process sweep bit for bit
+    (the same compiled programs), and the batches are all flagged."""
+    ds = _api_sweep(store=tmp_path / "s.zarr", client=client).load()
+    assert ds.attrs["batches_done"] == ds.attrs["batches_total"] == 6
+    ran = client.run(lambda: __import__("jax").device_count())
+    assert sorted(ran.values()) == [1, 1], "one JAX device per worker thread"
+    xr.testing.assert_equal(ds[RESULTS], in_process[RESULTS])
+    xr.testing.assert_equal(jc.open_sweep(tmp_path / "s.zarr").load()[RESULTS],
+                            in_process[RESULTS])
+
+
+def test_a_worker_killed_mid_sweep_is_replaced_and_the_sweep_equals_the_uninterrupted_one(
+        tmp_path, client, in_process):
+    """One worker process is killed (SIGKILL) while the sweep runs, after its first
+    batch is stored: Dask runs its lost task on the other worker (and on the
+    worker the nanny restarts), and the result is the uninterrupted sweep."""
+    store = tmp_path / "s.zarr"
+    result = {}
+    thread = threading.Thread(target=lambda: result.update(
+        ds=_api_sweep(store=store, client=client).load()))
+    thread.start()
+    stored = _wait_for_a_batch(store)
+    victim = next(iter(client.run(os.getpid).values()))
+    os.kill(victim, signal.SIGKILL)
+    thread.join(timeout=600)
+    assert not thread.is_alive() and "ds" in result
+    assert stored < 6, "killed before the end"
+    ds = result["ds"]
+    assert ds.attrs["batches_done"] == ds.attrs["batches_total"]
+    xr.testing.assert_equal(ds[RESULTS], in_process[RESULTS])
+
+
+def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_process(
+        tmp_path, in_process):
+    """`jaxchain sweep --scheduler ADDRESS` on a scheduler and one worker started
+    with Dask's own commands: the scheduler is killed once a batch is stored. The
+    command exits 1 with one line on stderr, the store keeps the flagged batches,
+    and `--resume` without a cluster completes it to the uninterrupted sweep."""
+    out, file = tmp_path / "out", tmp_path / "scheduler.json"
+    scheduler = subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--scheduler-file", str(file),
+         "--port", "0", "--no-dashboard"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    worker = None
+    try:
+        deadline = time.monotonic() + 60
+        while not file.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        address = json.loads(file.read_text())["address"]
+        worker = subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_worker", "--scheduler-file", str(file),
+             "--nthreads", "1", "--no-dashboard", "--death-timeout", "5"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        cmd = [sys.executable, "-m", "jaxchain._cli.main", *CLI, "--out", str(out),
+               "--scheduler", address]
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                text=True)
+        stored = _wait_for_a_batch(out / "sweep.zarr")
+        scheduler.send_signal(signal.SIGKILL)
+        _, err = proc.communicate(timeout=300)
+    finally:
+        for p in (scheduler, worker):
+            if p is not None and p.poll() is None:
+                p.kill()
+                p.wait()
+    assert proc.returncode == 1, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "scheduler" in lines[0], err
+    done = SweepStore(out / "sweep.zarr").done()
+    assert 1 <= stored <= done.sum() < done.size
+
+    assert main([*CLI, "--out", str(out), "--resume"]) == 0
+    xr.testing.assert_equal(jc.open_sweep(out / "sweep.zarr").load()[RESULTS],
+                            in_process[RESULTS])
+
+
+def test_basin_on_a_local_cluster_equals_basin_in_process(tmp_path):
+    """`jaxchain basin --scheduler local:2` writes the basin.nc of the in-process
+    command, to the last bit."""
+    args = ["basin", "--n-osc", "2", "--vd", "1.5", "--samples", "8", "--t-end", "400",
+            "--transient", "300", "--check", "2", "--no-progress", "--json"]
+    assert main([*args, "--out", str(tmp_path / "here")]) == 0
+    assert main([*args, "--out", str(tmp_path / "dask"), "--scheduler", "local:2"]) == 0
+    here = xr.open_dataset(tmp_path / "here" / "basin.nc").load()
+    there = xr.open_dataset(tmp_path / "dask" / "basin.nc").load()
+    xr.testing.assert_identical(here.drop_attrs(), there.drop_attrs())
+
+
+def test_bad_scheduler_addresses_are_refused():
+    for bad in ("local:0", "local:x", "", "local:"):
+        with pytest.raises(ValueError, match="scheduler"):
+            local_workers(bad)
+    assert local_workers("local:3") == 3 and local_workers("tcp://h:8786") is None
+    with pytest.raises(ValueError, match="store"):
+        _api_sweep(client=object())
+
+
+def test_bad_scheduler_option_exits_2_in_one_line(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([*CLI, "--out", str(tmp_path), "--scheduler", "local:0"])
+    assert exc.value.code == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1
