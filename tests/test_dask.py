@@ -57,6 +57,17 @@ def _wait_for_a_batch(store, deadline_s=300) -> int:
     raise AssertionError("no batch was stored in time")
 
 
+def _scheduler_address(file, deadline_s=60) -> str:
+    """The address in a scheduler file, once the scheduler has written it whole."""
+    deadline = time.monotonic() + deadline_s
+    while time.monotonic() < deadline:
+        try:
+            return json.loads(file.read_text())["address"]
+        except (OSError, ValueError, KeyError):
+            time.sleep(0.1)
+    raise AssertionError("the scheduler wrote no address in time")
+
+
 def test_a_sweep_on_a_local_cluster_equals_the_in_process_sweep(tmp_path, client, in_process):
     """Each batch is a task on one of two spawned worker processes, which writes
     its region of the store: the result equals the in-process sweep bit for bit
@@ -72,18 +83,24 @@ def test_a_sweep_on_a_local_cluster_equals_the_in_process_sweep(tmp_path, client
 
 def test_a_worker_killed_mid_sweep_is_replaced_and_the_sweep_equals_the_uninterrupted_one(
         tmp_path, client, in_process):
-    """One worker process is killed (SIGKILL) while the sweep runs, after its first
-    batch is stored: Dask runs its lost task on the other worker (and on the
-    worker the nanny restarts), and the result is the uninterrupted sweep."""
+    """A worker process running a batch is killed (SIGKILL) once a batch is stored:
+    Dask runs its lost task again (on the other worker, or the one the nanny
+    restarts), and the result is the uninterrupted sweep."""
     store = tmp_path / "s.zarr"
     result = {}
     thread = threading.Thread(target=lambda: result.update(
-        ds=_api_sweep(store=store, client=client).load()))
+        ds=_api_sweep(store=store, client=client).load()), daemon=True)
     thread.start()
-    stored = _wait_for_a_batch(store)
-    victim = next(iter(client.run(os.getpid).values()))
-    os.kill(victim, signal.SIGKILL)
-    thread.join(timeout=600)
+    try:
+        stored = _wait_for_a_batch(store)
+        deadline, busy = time.monotonic() + 10, []
+        while not busy and time.monotonic() < deadline:  # between two tasks
+            busy = [w for w, keys in client.processing().items() if keys]
+        assert busy, "a batch is running"
+        victim = client.run(os.getpid, workers=busy[:1])[busy[0]]
+        os.kill(victim, signal.SIGKILL)
+    finally:
+        thread.join(timeout=600)
     assert not thread.is_alive() and "ds" in result
     assert stored < 6, "killed before the end"
     ds = result["ds"]
@@ -98,30 +115,30 @@ def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_pro
     command exits 1 with one line on stderr, the store keeps the flagged batches,
     and `--resume` without a cluster completes it to the uninterrupted sweep."""
     out, file = tmp_path / "out", tmp_path / "scheduler.json"
-    scheduler = subprocess.Popen(
-        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--scheduler-file", str(file),
-         "--port", "0", "--no-dashboard"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    worker = None
+    started = []
+
+    def start(*args):
+        started.append(subprocess.Popen(args, stdout=subprocess.DEVNULL,
+                                        stderr=subprocess.DEVNULL))
+        return started[-1]
+
     try:
-        deadline = time.monotonic() + 60
-        while not file.exists() and time.monotonic() < deadline:
-            time.sleep(0.1)
-        address = json.loads(file.read_text())["address"]
-        worker = subprocess.Popen(
-            [sys.executable, "-m", "distributed.cli.dask_worker", "--scheduler-file", str(file),
-             "--nthreads", "1", "--no-dashboard", "--death-timeout", "5"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        cmd = [sys.executable, "-m", "jaxchain._cli.main", *CLI, "--out", str(out),
-               "--scheduler", address]
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                text=True)
+        scheduler = start(sys.executable, "-m", "distributed.cli.dask_scheduler",
+                          "--scheduler-file", str(file), "--port", "0", "--no-dashboard")
+        address = _scheduler_address(file)
+        start(sys.executable, "-m", "distributed.cli.dask_worker", "--scheduler-file",
+              str(file), "--nthreads", "1", "--no-dashboard", "--death-timeout", "5")
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "jaxchain._cli.main", *CLI, "--out", str(out),
+             "--scheduler", address], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+            text=True)
+        started.append(proc)
         stored = _wait_for_a_batch(out / "sweep.zarr")
         scheduler.send_signal(signal.SIGKILL)
         _, err = proc.communicate(timeout=300)
     finally:
-        for p in (scheduler, worker):
-            if p is not None and p.poll() is None:
+        for p in started:
+            if p.poll() is None:
                 p.kill()
                 p.wait()
     assert proc.returncode == 1, err

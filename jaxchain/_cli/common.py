@@ -181,9 +181,9 @@ def cluster_client(args):
         return
     from .._sweep.cluster import connect
 
-    for name in ["distributed", *logging.root.manager.loggerDict]:
-        if name.split(".")[0] == "distributed":  # Dask sets some levels one by one
-            logging.getLogger(name).setLevel(logging.CRITICAL)
+    for name in ["distributed", "tornado", "asyncio", *logging.root.manager.loggerDict]:
+        if name.split(".")[0] in ("distributed", "tornado", "asyncio"):
+            logging.getLogger(name).setLevel(logging.CRITICAL)  # Dask sets some one by one
     with connect(args.scheduler) as client:
         yield client
 

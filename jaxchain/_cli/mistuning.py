@@ -10,8 +10,9 @@ import numpy as np
 from .._mistuning.edges import EDGE_OPTIONS
 from .._mistuning.study import (STUDY_OPTIONS, STUDY_SIGMAS, STUDY_VD, TABLE_SIGMAS, THETAS,
                                 mistuning_study)
-from .._mistuning.summary import (edge_correlations, halc_correlation, localization_table, localized_fraction,
-                                  staircase_fraction, vibrating_fraction)
+from .._mistuning.summary import (edge_correlations, halc_correlation, localization_table,
+                                  localized_fraction, staircase_fraction,
+                                  vibrating_fraction)
 from .._options import SimulationOptions
 from .._physics.record import chain_record
 from .._plots.mistuning import plot_mistuned_states, plot_mistuning_study, plot_site_edges

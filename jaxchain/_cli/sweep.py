@@ -37,8 +37,9 @@ kill loses at most the batches running; --resume skips the stored ones. The stor
 records a hash of every setting: it is never resumed with other settings.
 --scheduler runs each batch as a task on a Dask cluster (local:N starts N worker
 processes here): a lost worker's batches are run again, the result is the
-in-process one to the last bit, and if the scheduler goes away the command exits
-with status 1 and --resume (with or without a cluster) finishes the store.
+in-process one to the last bit on the same kind of device, and if the scheduler
+goes away the command exits with status 1 and --resume (with or without a
+cluster) finishes the store.
 
 Prints, per belt speed, the distinct states found (n_HALC values) and the
 fraction of initial conditions that make a propagating front: stick-slip invades

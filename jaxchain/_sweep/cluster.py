@@ -6,10 +6,14 @@ done, whatever happens to the cluster."""
 
 import concurrent.futures
 import contextlib
+import logging
+import os
+import queue
 from collections.abc import Callable, Iterator, Sequence
 
 import dask
 import jax
+import numpy as np
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed
 from distributed.comm.core import CommClosedError
 from tqdm.auto import tqdm
@@ -44,9 +48,11 @@ def connect(scheduler: str, timeout: float = 30.0) -> Iterator:
     """A `distributed.Client` of `scheduler`, closed on exit.
 
     "local:N" starts a `LocalCluster` of N worker processes on this machine, one
-    thread each, and closes it on exit. Its processes are spawned (Dask's default
-    multiprocessing method, set here explicitly), never forked from this process,
-    which has started JAX. Any other text is the address of a running scheduler,
+    thread each, without a memory limit (a worker holds JAX and its compiled
+    programs; the batch size sets the rest), and closes it on exit. Its processes,
+    and those that replace a lost worker, are spawned (Dask's default
+    multiprocessing method, set here for the cluster's life), never forked from
+    this process, which has started JAX. Any other text is the address of a running scheduler,
     for example "tcp://10.0.0.1:8786", whose workers were started by `dask worker`,
     `dask-jobqueue` or `dask-cuda`.
 
@@ -58,10 +64,11 @@ def connect(scheduler: str, timeout: float = 30.0) -> Iterator:
     n = local_workers(scheduler)
     with contextlib.ExitStack() as stack:
         if n is not None:
-            with dask.config.set({"distributed.worker.multiprocessing-method": "spawn"}):
-                cluster = stack.enter_context(LocalCluster(
-                    n_workers=n, threads_per_worker=1, processes=True,
-                    dashboard_address=None, silence_logs=40))
+            stack.enter_context(dask.config.set(
+                {"distributed.worker.multiprocessing-method": "spawn"}))
+            cluster = stack.enter_context(LocalCluster(
+                n_workers=n, threads_per_worker=1, processes=True, memory_limit=0,
+                dashboard_address=None, silence_logs=logging.CRITICAL))
             client = stack.enter_context(Client(cluster))
         else:
             try:
@@ -80,15 +87,18 @@ class JaxWorker(WorkerPlugin):
 
     name = "jaxchain-jax"
 
-    def __init__(self, cache: str | None, traced: str | None):
-        self.cache, self.traced = cache, traced
+    def __init__(self, cache: str | None, min_compile_s: float, traced: str | None):
+        self.cache, self.min_compile_s, self.traced = cache, min_compile_s, traced
 
     @classmethod
     def of_this_process(cls) -> "JaxWorker":
-        """The plugin that gives workers this process's cache folders."""
-        folder = program_folder()
-        return cls(jax.config.jax_compilation_cache_dir or None,
-                   None if folder is None else str(folder))
+        """The plugin that gives workers this process's compilation cache (JAX's
+        `jax_compilation_cache_dir`, from JAX_COMPILATION_CACHE_DIR or the command
+        line's `compilation_cache`) and kept traced programs, as absolute paths."""
+        cache, folder = jax.config.jax_compilation_cache_dir, program_folder()
+        return cls(os.path.abspath(cache) if cache else None,
+                   jax.config.jax_persistent_cache_min_compile_time_secs,
+                   None if folder is None else os.path.abspath(folder))
 
     def setup(self, worker):
         import jaxchain  # noqa: F401  (float64, XLA flags)
@@ -97,15 +107,42 @@ class JaxWorker(WorkerPlugin):
             jax.config.update("jax_num_cpu_devices", max(1, worker.state.nthreads))
         if self.cache:
             jax.config.update("jax_compilation_cache_dir", self.cache)
+            jax.config.update("jax_persistent_cache_min_compile_time_secs",
+                              self.min_compile_s)
         keep_programs(self.traced)
+        _free_devices.queue.clear()
+        for device in jax.local_devices():
+            _free_devices.put(device)
 
 
-def run_tasks(client, task: Callable, arguments: Sequence[tuple], names: Sequence[str],
-              bar: tqdm, sizes: Sequence[int] | None = None) -> None:
-    """Run `task(*arguments[i])` for every i on the cluster of `client`, each a
-    task named `names[i]`, and advance `bar` by `sizes[i]` (1 by default) as each
-    finishes, whichever worker ran it. The results stay on the workers: the tasks
-    write them to a store.
+#: The devices of this worker not in use by one of its tasks (`JaxWorker.setup`):
+#: a worker of k threads runs up to k tasks at once, each on a device of its own.
+_free_devices: queue.Queue = queue.Queue()
+
+
+def on_a_free_device(task: Callable, *args):
+    """`task(*args, devices=[device])` on a device of this worker that no other of
+    its tasks is using, waiting for one if all are busy: the body of each task of
+    `run_tasks`."""
+    device = _free_devices.get()
+    try:
+        return task(*args, devices=[device])
+    finally:
+        _free_devices.put(device)
+
+
+def run_tasks(client, task: Callable, shared, arguments: Sequence[tuple],
+              names: Sequence[str], bar: tqdm, costs: Sequence[float] | None = None
+              ) -> None:
+    """Run `task(shared, *arguments[i], devices=[device])` for every i on the
+    cluster of `client`, each on a device of its worker that none of its other
+    tasks is using (`on_a_free_device`), as a task named `names[i]` (unique: the
+    scheduler hands back the result of a key it holds without running the task
+    again). `shared` (the plan of the whole run) is sent to the cluster once, not
+    with every task. `bar` advances by one as each task finishes, whichever worker
+    ran it. The results stay on the workers: the tasks write them to a store. With
+    `costs`, the costliest tasks go first (longest processing time first), so that
+    the short ones fill the workers' last gaps.
 
     A worker that dies takes its running tasks with it, and the scheduler runs them
     again on another worker (up to Dask's `distributed.scheduler.allowed-failures`
@@ -113,21 +150,24 @@ def run_tasks(client, task: Callable, arguments: Sequence[tuple], names: Sequenc
 
     **Raises:**
 
-    The first exception of a task (the others are cancelled); `RuntimeError` (one
-    line) when the scheduler goes away.
+    The first exception of a task, as the task raised it (the others are
+    cancelled); `RuntimeError` (one line) when the scheduler goes away.
     """
-    sizes = list(sizes) if sizes is not None else [1] * len(arguments)
+    rank = np.argsort(np.argsort(-np.asarray(costs if costs is not None
+                                             else np.zeros(len(arguments)))))
     client.register_plugin(JaxWorker.of_this_process())
-    futures = [client.submit(task, *args, key=name, pure=False)
-               for args, name in zip(arguments, names)]
-    size = dict(zip((f.key for f in futures), sizes))
+    plan = client.scatter(shared, broadcast=False, hash=False)
+    futures = [client.submit(on_a_free_device, task, plan, *args, key=name,
+                             priority=-int(r))
+               for args, name, r in zip(arguments, names, rank)]
     try:
         for future in as_completed(futures):
+            if future.status == "error":
+                raise future.exception()
             future.result()
-            bar.update(size[future.key])
-    except (concurrent.futures.CancelledError, CommClosedError, OSError,
-            TimeoutError) as err:
-        if client.status == "running" and not isinstance(err, (CommClosedError, OSError)):
+            bar.update(1)
+    except (concurrent.futures.CancelledError, OSError) as err:
+        if client.status == "running" and not isinstance(err, CommClosedError):
             raise
         raise RuntimeError(f"the Dask scheduler went away ({type(err).__name__}); the "
                            "finished batches are flagged in the store, and --resume "

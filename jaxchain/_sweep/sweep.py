@@ -16,7 +16,7 @@ from tqdm.auto import tqdm
 
 from .._checks import as_solver, check_options, check_params
 from .._physics.initial import AbstractInitialCondition
-from .._lanes import block_size, run_lanes
+from .._lanes import block_size, expected_cost, run_lanes
 from .._options import SimulationOptions
 from .._physics.params import ChainParams
 from .._results import observables_variables, run_attributes
@@ -55,9 +55,10 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     the worker that takes it integrates its trajectories with the usual engine, on
     its own devices, writes them into their region of the store and flags the
     batch done. The cluster computes the same programs as this process (the same
-    block of the queue engine, chosen here), so its result equals the in-process
-    sweep to the last bit. A lost worker's batches are run again by Dask; a batch
-    written twice is written identically. If the scheduler goes away, the flagged
+    block of the queue engine, chosen here), so on the same kind of device (and
+    XLA_FLAGS) its result equals the in-process sweep to the last bit. A lost
+    worker's batches are run again by Dask; a batch written twice is written
+    identically. If the scheduler goes away, the flagged
     batches stay in the store, and `resume=True` (in process or on any cluster)
     runs the others.
 
@@ -84,7 +85,8 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     - `engine`: "queue" or "vmap" (see `run_lanes`); on a cluster, each worker's
         default by default (the queue on CPUs, vmap on GPUs).
     - `client`: a `distributed.Client` to run the batches on its cluster (needs
-        a `store` that every worker can reach); None to run them in this process.
+        a `store` on a file system that this process and every worker share);
+        None to run them in this process.
     - `progress`: a tqdm bar over the trajectories (over the batches on a
         cluster), with an ETA.
 
@@ -106,7 +108,8 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     conditions of the wrong shape, batch_size < 1, an existing store without
     `resume` or `overwrite`, or a store made with other settings (naming the
     settings that differ), or a `client` without a `store`. `RuntimeError` when
-    the scheduler of `client` goes away.
+    the scheduler of `client` goes away, or when batches the cluster ran are
+    not in the store (the workers do not share its file system).
     """
     params = check_params(params)
     solver = as_solver(solver, params=params)
@@ -155,9 +158,15 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
 
         with tqdm(total=n_batches, initial=n_batches - len(todo), desc="sweep",
                   unit="batch", disable=not progress) as bar:
-            run_tasks(client, work.store, [(st.path.resolve(), b) for b in todo],
+            run_tasks(client, _Batches.store, work, [(st.path.resolve(), b) for b in todo],
                       [f"sweep-{key[:12]}-batch-{b}-{uuid.uuid4().hex[:8]}" for b in todo],
-                      bar)
+                      bar, costs=[work.cost(b) for b in todo])
+        missing = [b for b in todo if not (st.exists() and st.done()[b])]
+        if missing:
+            raise RuntimeError(f"the cluster ran {len(todo)} batches but {len(missing)} "
+                               f"are not in {st.path.resolve()}: its workers write to a "
+                               "file system this process does not see; give a store on a "
+                               "shared one")
     else:
         initial = sum(work.size(b) for b in np.flatnonzero(done))
         with tqdm(total=n, initial=initial, desc="sweep", unit="trajectory",
@@ -199,23 +208,41 @@ class _Batches:
     def size(self, b: int) -> int:
         return min(self.grid.n_trajectories, (b + 1) * self.batch_size) - b * self.batch_size
 
-    def run(self, b: int, progress: bool | tqdm = False) -> xr.Dataset:
-        """Batch b's observables, dims (trajectory, ...)."""
+    def lanes(self, b: int):
         start = b * self.batch_size
-        lane_params, y0 = self.grid.lanes(start, start + self.size(b))
+        return self.grid.lanes(start, start + self.size(b))
+
+    def cost(self, b: int) -> float:
+        """A proxy of batch b's cost: the sum of its lanes' `expected_cost`."""
+        return float(np.sum(expected_cost(*self.lanes(b))))
+
+    def run(self, b: int, progress: bool | tqdm = False, devices=None) -> xr.Dataset:
+        """Batch b's observables, dims (trajectory, ...), on `devices` (all of this
+        process's by default)."""
+        lane_params, y0 = self.lanes(b)
         obs = run_lanes(lane_params, y0, self.solver, self.options, engine=self.engine,
-                        block=self.block, progress=progress)
+                        block=self.block, progress=progress, devices=devices)
         return xr.Dataset(observables_variables(obs, ("trajectory",)))
 
-    def store(self, path: Path, b: int, progress: bool | tqdm = False) -> None:
+    def store(self, path: Path, b: int, progress: bool | tqdm = False,
+              devices=None) -> None:
         """Run batch b and write it into its region of the store at `path`
         (creating the store's layout if no batch made it yet), then flag it done:
-        the task of the Dask route."""
-        batch = self.run(b, progress)
+        the task of the Dask route.
+
+        **Raises:**
+
+        `RuntimeError` when the store at `path` holds another sweep (it was
+        overwritten with other settings while this batch ran), before and after
+        making the layout: a batch of a cancelled run never lands in another."""
+        batch = self.run(b, progress, devices)
         st = SweepStore(path)
         if not st.exists():
             st.create(batch, self.grid.n_trajectories, self.batch_size, self.coords,
                       self.attrs)
+        if st.settings()[0] != self.attrs["settings_key"]:
+            raise RuntimeError(f"{path} now holds another sweep: batch {b} of this one "
+                               "is not written")
         st.write(b, b * self.batch_size, batch)
 
 
