@@ -1,6 +1,8 @@
 """Small shared systems and references for the tests."""
 
 import sys
+import time
+from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
@@ -156,3 +158,17 @@ def small_sweep(vd: str, **kw):
                     options=jc.SimulationOptions(t_end=SWEEP_T_END,
                                                  transient=SWEEP_TRANSIENT),
                     batch_size=SWEEP_BATCH, progress=False, **kw)
+
+
+def wait_for_a_batch(store, deadline_s: float = 300) -> int:
+    """Block until the sweep store at `store` has at least one flagged batch (a
+    written chunk of `batch_done`: the layout alone writes none), and return their
+    count. Reads the folder, not the store, so that it sees a flag within
+    milliseconds."""
+    deadline = time.monotonic() + deadline_s
+    while time.monotonic() < deadline:
+        flags = list((Path(store) / "batch_done" / "c").glob("*"))
+        if flags:
+            return len(flags)
+        time.sleep(0.005)
+    raise AssertionError("no batch was stored in time")

@@ -16,7 +16,7 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from helpers import SWEEP_RESULTS, small_sweep, sweep_cli
+from helpers import SWEEP_RESULTS, small_sweep, sweep_cli, wait_for_a_batch
 from jaxchain._cli.main import main
 from jaxchain._sweep.cluster import connect, local_workers
 from jaxchain._sweep.store import SweepStore
@@ -43,18 +43,6 @@ def in_process():
 def client():
     with connect("local:2") as c:
         yield c
-
-
-def _wait_for_a_batch(store, deadline_s=300) -> int:
-    """Block until the store at `store` has at least one flagged batch (a written
-    chunk of `batch_done`: the layout alone writes none), and return their count."""
-    deadline = time.monotonic() + deadline_s
-    while time.monotonic() < deadline:
-        flags = list((store / "batch_done" / "c").glob("*"))
-        if flags:
-            return len(flags)
-        time.sleep(0.005)
-    raise AssertionError("no batch was stored in time")
 
 
 def _scheduler_address(file, deadline_s=60) -> str:
@@ -92,7 +80,7 @@ def test_a_worker_killed_mid_sweep_is_replaced_and_the_sweep_equals_the_uninterr
         ds=_api_sweep(store=store, client=client).load()), daemon=True)
     thread.start()
     try:
-        stored = _wait_for_a_batch(store)
+        stored = wait_for_a_batch(store)
         deadline, busy = time.monotonic() + 10, []
         while not busy and time.monotonic() < deadline:  # between two tasks
             busy = [w for w, keys in client.processing().items() if keys]
@@ -133,7 +121,7 @@ def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_pro
              "--scheduler", address], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
             text=True)
         started.append(proc)
-        stored = _wait_for_a_batch(out / "sweep.zarr")
+        stored = wait_for_a_batch(out / "sweep.zarr")
         scheduler.send_signal(signal.SIGKILL)
         _, err = proc.communicate(timeout=300)
     finally:

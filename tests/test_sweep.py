@@ -5,7 +5,6 @@ gives the runs made one by one; propagating fronts are flagged."""
 import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -13,7 +12,8 @@ import xarray as xr
 
 import jaxchain as jc
 import jaxchain._sweep.sweep as sweep_module
-from helpers import SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, small_sweep, sweep_cli
+from helpers import (SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, small_sweep, sweep_cli,
+                     wait_for_a_batch)
 from jaxchain._cli.main import main
 from jaxchain._sweep.store import SweepStore
 
@@ -53,14 +53,11 @@ def test_sweep_killed_then_resumed_equals_an_uninterrupted_run(tmp_path, uninter
     out, store = tmp_path / "out", tmp_path / "out" / "sweep.zarr"
     cmd = [sys.executable, "-m", "jaxchain._cli.main", *CLI, "--out", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 300
-    while proc.poll() is None and time.monotonic() < deadline:
-        st = SweepStore(store)
-        if st.exists() and st.done().any():
-            proc.send_signal(signal.SIGKILL)
-            break
-        time.sleep(0.02)
-    proc.wait()
+    try:
+        wait_for_a_batch(store)
+    finally:
+        proc.send_signal(signal.SIGKILL)  # no-op if it has ended
+        proc.wait()
     assert proc.returncode == -signal.SIGKILL, proc.stderr.read().decode()
     done = SweepStore(store).done()
     assert 1 <= done.sum() < done.size, "killed before the end, after a stored batch"
