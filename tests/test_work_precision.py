@@ -124,7 +124,11 @@ def test_max_steps_is_recorded_and_tighter_rtols_skipped(tmp_path):
     assert rows[1]["status"].startswith("skipped")
 
 
-def test_work_precision_command(tmp_path, capsys):
+def test_work_precision_command(tmp_path, capsys, monkeypatch):
+    """The command end to end: the study with its reference points (one tolerance
+    here: each is a timed non-smooth run, and those at 1e-8 and 1e-10 cost most of
+    the study while running the same code), its CSV and its figure."""
+    monkeypatch.setattr(wp, "REFERENCE_RTOLS", wp.REFERENCE_RTOLS[:1])
     out = tmp_path / "out"
     code = main(["work-precision", "--scenes", "single", "--solvers", "tsit5",
                  "--rtols", "1e-6", "--eps", "1e-2", "--no-scipy", "--json",
