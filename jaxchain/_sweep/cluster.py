@@ -65,7 +65,10 @@ def connect(scheduler: str, timeout: float = 30.0) -> Iterator:
     with contextlib.ExitStack() as stack:
         if n is not None:
             stack.enter_context(dask.config.set(
-                {"distributed.worker.multiprocessing-method": "spawn"}))
+                {"distributed.worker.multiprocessing-method": "spawn",
+                 # Dask's sampling profiler of each worker's threads: a stack
+                 # every 10 ms, CPU the integrations need on a small machine
+                 "distributed.worker.profile.enabled": False}))
             cluster = stack.enter_context(LocalCluster(
                 n_workers=n, threads_per_worker=1, processes=True, memory_limit=0,
                 dashboard_address=None, silence_logs=logging.CRITICAL))
