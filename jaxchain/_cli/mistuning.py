@@ -18,8 +18,8 @@ from .._physics.record import chain_record
 from .._plots.mistuning import plot_mistuned_states, plot_mistuning_study, plot_site_edges
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
-                     comma_list, json_ready, positive_float, positive_int, save_figure,
-                     show_progress,
+                     add_scheduler_option, cluster_client, comma_list, json_ready,
+                     positive_float, positive_int, save_figure, show_progress,
                      writable_folder)
 from .sweep import belt_speeds
 
@@ -51,8 +51,9 @@ command maps what it does to the localized states:
 
 Each chain's runs go to <out>/chains/*.zarr as they finish, the bisection to
 <out>/edges.nc after each step and the folds to <out>/folds.csv: --resume
-continues a killed run (a store is reused only with equal settings). Writes
-<out>/mistuning.nc, mistuning.json, mistuning.png (the summary), mistuning_edges.png
+continues a killed run (a store is reused only with equal settings). --scheduler
+submits every chain's runs to a Dask cluster at once (local:N: N worker processes
+here), with the same results. Writes <out>/mistuning.nc, mistuning.json, mistuning.png (the summary), mistuning_edges.png
 (each single-site state's end against its delta_n) and mistuned_fig4.png (Fig. 4
 of draw 0 at sigma = eta_c beside its delta_n). About 9 minutes on 2 CPU cores
 with the defaults.
@@ -109,6 +110,7 @@ def add_parser(sub):
     add_output_options(p)
     p.add_argument("--resume", action="store_true",
                    help="continue the stores in <out> (a killed run)")
+    add_scheduler_option(p)
     p.set_defaults(run=run)
     return p
 
@@ -125,13 +127,14 @@ def run(args) -> None:
         raise UsageError(f"--out {args.out}: a study is stored there; use --resume to "
                          "continue it, or another --out")
     start = time.perf_counter()
-    study = mistuning_study(params, args.sigmas, args.draws, v_d=args.vd,
-                            n_samples=args.samples, key=args.seed, n_folds=args.folds,
-                            options=SimulationOptions(t_end=args.t_end,
-                                                      transient=args.transient),
-                            edge_options=SimulationOptions(t_end=args.edge_t_end,
-                                                           transient=0.8 * args.edge_t_end),
-                            out=args.out, resume=args.resume, progress=show_progress(args))
+    with cluster_client(args) as client:
+        study = mistuning_study(
+            params, args.sigmas, args.draws, v_d=args.vd, n_samples=args.samples,
+            key=args.seed, n_folds=args.folds,
+            options=SimulationOptions(t_end=args.t_end, transient=args.transient),
+            edge_options=SimulationOptions(t_end=args.edge_t_end,
+                                           transient=0.8 * args.edge_t_end),
+            out=args.out, resume=args.resume, client=client, progress=show_progress(args))
     table = localization_table(float(params.eta_c), TABLE_SIGMAS, THETAS)
     wall = time.perf_counter() - start
     figures = {"summary": args.out / "mistuning.png", "edges": args.out / "mistuning_edges.png"}

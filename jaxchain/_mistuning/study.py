@@ -2,6 +2,7 @@
 by draw: the Fig. 4 staircase, basin stability, where the vibration sits, the
 edges of the bistable range, and the localization lengths against Anderson's."""
 
+import concurrent.futures
 import dataclasses
 import math
 from pathlib import Path
@@ -64,7 +65,7 @@ def mistuning_study(params: ChainParams = ChainParams(), sigmas=STUDY_SIGMAS,
                     options: SimulationOptions = STUDY_OPTIONS,
                     edge_options: SimulationOptions = EDGE_OPTIONS,
                     out: str | Path | None = None,
-                    resume: bool = False, overwrite: bool = False,
+                    resume: bool = False, overwrite: bool = False, client=None,
                     progress: bool = True) -> xr.Dataset:
     """What random stiffness mistuning (Anderson localization of the linear modes)
     does to the friction-localized states of eq. (5): the paper's open question
@@ -97,6 +98,10 @@ def mistuning_study(params: ChainParams = ChainParams(), sigmas=STUDY_SIGMAS,
     - `out`: a folder for the stores (chains/*.zarr, edges.nc, folds.csv) and
         mistuning.nc; None keeps everything in memory.
     - `resume`: continue the stores in `out`; `overwrite`: start them again.
+    - `client`: a `distributed.Client`: every chain's sweep is submitted to its
+        cluster at once (`sweep(client=...)`, each chain one task), with `out` on a
+        file system its workers share; the upper edges and folds run in this
+        process.
     - `progress`: progress bars.
 
     **Returns:**
@@ -151,23 +156,30 @@ def mistuning_study(params: ChainParams = ChainParams(), sigmas=STUDY_SIGMAS,
             "basin_status": np.full(shape + (n_samples,), -1),
             "basin_on_halc": np.zeros(shape + (n_samples, n), dtype=bool)}
     deviations = np.full((sigmas.size, n_draws, n), np.nan)
-    for i, d, chain in tqdm(chains, desc="mistuned chains", unit="chain",
-                            disable=not progress):
-        deviations[i, d] = np.broadcast_to(np.asarray(chain.stiffness, dtype=float), (n,)) - 1
+    def chain_sweep(i, d, chain):
         store = out / "chains" / f"sigma{sigmas[i]:g}_draw{d}.zarr" if out else None
         exists = store is not None and store.exists()
-        ds = sweep(chain, v, ics, solver, options,
-                   batch_size=v.size * (n + n_samples), store=store,
-                   resume=resume and exists, overwrite=overwrite and exists,
-                   progress=False).load()
-        stair, rand = slice(0, n), slice(n, n + n_samples)
-        data["staircase_n_halc"][i, d] = ds["n_halc"].values[:, stair]
-        data["staircase_status"][i, d] = ds["status"].values[:, stair]
-        data["staircase_amplitudes"][i, d] = ds["amplitudes"].values[:, stair]
-        data["staircase_on_halc"][i, d] = ds["on_halc"].values[:, stair]
-        data["basin_n_halc"][i, d] = ds["n_halc"].values[:, rand]
-        data["basin_status"][i, d] = ds["status"].values[:, rand]
-        data["basin_on_halc"][i, d] = ds["on_halc"].values[:, rand]
+        return sweep(chain, v, ics, solver, options, batch_size=v.size * (n + n_samples),
+                     store=store, resume=resume and exists, overwrite=overwrite and exists,
+                     client=client, progress=False).load()
+
+    bar = tqdm(total=len(chains), desc="mistuned chains", unit="chain", disable=not progress)
+    with bar, concurrent.futures.ThreadPoolExecutor(len(chains) if client else 1) as pool:
+        # on a cluster, every chain's sweep waits on its task at once
+        sweeps = [pool.submit(chain_sweep, *c) for c in chains]
+        for (i, d, chain), future in zip(chains, sweeps):
+            ds = future.result()
+            bar.update(1)
+            deviations[i, d] = np.broadcast_to(np.asarray(chain.stiffness, dtype=float),
+                                               (n,)) - 1
+            stair, rand = slice(0, n), slice(n, n + n_samples)
+            data["staircase_n_halc"][i, d] = ds["n_halc"].values[:, stair]
+            data["staircase_status"][i, d] = ds["status"].values[:, stair]
+            data["staircase_amplitudes"][i, d] = ds["amplitudes"].values[:, stair]
+            data["staircase_on_halc"][i, d] = ds["on_halc"].values[:, stair]
+            data["basin_n_halc"][i, d] = ds["n_halc"].values[:, rand]
+            data["basin_status"][i, d] = ds["status"].values[:, rand]
+            data["basin_on_halc"][i, d] = ds["on_halc"].values[:, rand]
 
     edges = upper_edges([c for *_, c in chains], solver, options=check_options(edge_options),
                         store=out / "edges.nc" if out else None, progress=progress)
@@ -227,7 +239,8 @@ def mistuning_study(params: ChainParams = ChainParams(), sigmas=STUDY_SIGMAS,
                "n_samples": int(n_samples), "key": _key_data(key), "box_x": list(box.x),
                "box_v": list(box.v), "state_period": period,
                "state_omega2": omega2, "sliding_damping": damping,
-               "state_damped_decay": float(damped_decay(eta_c, omega2, damping)), "edge_resolution": edges.attrs["resolution"],
+               "state_damped_decay": float(damped_decay(eta_c, omega2, damping)),
+               "edge_resolution": edges.attrs["resolution"],
                "sigma_units": "sigma / eta_c"})
     if out is not None:
         save_dataset(study, out / "mistuning.nc")
