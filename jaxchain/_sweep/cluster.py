@@ -113,14 +113,16 @@ class JaxWorker(WorkerPlugin):
             jax.config.update("jax_persistent_cache_min_compile_time_secs",
                               self.min_compile_s)
         keep_programs(self.traced)
-        _free_devices.queue.clear()
-        for device in jax.local_devices():
-            _free_devices.put(device)
+        if not _worker_devices:  # once per worker: a plugin registered again keeps them
+            _worker_devices.extend(jax.local_devices())
+            for device in _worker_devices:
+                _free_devices.put(device)
 
 
 #: The devices of this worker not in use by one of its tasks (`JaxWorker.setup`):
 #: a worker of k threads runs up to k tasks at once, each on a device of its own.
 _free_devices: queue.Queue = queue.Queue()
+_worker_devices: list = []
 
 
 def on_a_free_device(task: Callable, *args):
