@@ -159,6 +159,9 @@ def test_bad_scheduler_addresses_are_refused():
     assert local_workers("local:3") == 3 and local_workers("tcp://h:8786") is None
     with pytest.raises(ValueError, match="store"):
         _api_sweep(client=object())
+    with pytest.raises(RuntimeError, match="no Dask scheduler answers"), \
+            connect("tcp://127.0.0.1:9", timeout=1):  # the discard port: nobody listens
+        pass
 
 
 def test_bad_scheduler_option_exits_2_in_one_line(tmp_path, capsys):

@@ -52,9 +52,9 @@ def connect(scheduler: str, timeout: float = 30.0) -> Iterator:
     programs; the batch size sets the rest), and closes it on exit. Its processes,
     and those that replace a lost worker, are spawned (Dask's default
     multiprocessing method, set here for the cluster's life), never forked from
-    this process, which has started JAX. Any other text is the address of a running scheduler,
-    for example "tcp://10.0.0.1:8786", whose workers were started by `dask worker`,
-    `dask-jobqueue` or `dask-cuda`.
+    this process, which has started JAX. Any other text is the address of a running
+    scheduler, for example "tcp://10.0.0.1:8786", whose workers were started by
+    `dask worker`, `dask-jobqueue` or `dask-cuda`.
 
     **Raises:**
 
