@@ -47,7 +47,8 @@ def test_outside_the_band_the_exponent_is_the_evanescent_decay():
 
 def test_inverse_participation_ratio_of_the_homogeneous_open_chain():
     """Free ends: modes cos((n + 1/2) k pi / N); the uniform mode and the mode
-    k = N/2 (|phi_n| all equal) have IPR 1/N, the others 3 / (2 N). Mistuning of 4 eta_c localizes them (IPR well above)."""
+    k = N/2 (|phi_n| all equal) have IPR 1/N, the others 3 / (2 N). Mistuning of
+    4 eta_c localizes them (IPR well above)."""
     n = 12
     chain = jc.ChainParams(n_osc=n, boundary="free")
     omega2, ipr = jc.inverse_participation_ratio(chain)

@@ -36,8 +36,8 @@ N worker processes here), with the in-process result to the last bit on the same
 of device (the convergence subset runs in this process). Writes <out>/basin.nc (the
 result, with the sampled initial states and the key), <out>/basin.png (the
 probabilities against v_d as stacked areas) and <out>/basin_halc.png (the
-distribution of n_HALC at the belt speed nearest 1.5). --quick: one oscillator, v_d = 0.8:2.2:8, 200 samples, t_end
-500."""
+distribution of n_HALC at the belt speed nearest 1.5). --quick: one oscillator,
+v_d = 0.8:2.2:8, 200 samples, t_end 500."""
 
 
 def pair(text: str) -> tuple[float, float]:

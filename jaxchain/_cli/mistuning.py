@@ -53,9 +53,10 @@ Each chain's runs go to <out>/chains/*.zarr as they finish, the bisection to
 <out>/edges.nc after each step and the folds to <out>/folds.csv: --resume
 continues a killed run (a store is reused only with equal settings). --scheduler
 submits every chain's runs to a Dask cluster at once (local:N: N worker processes
-here), with the same results. Writes <out>/mistuning.nc, mistuning.json, mistuning.png (the summary), mistuning_edges.png
-(each single-site state's end against its delta_n) and mistuned_fig4.png (Fig. 4
-of draw 0 at sigma = eta_c beside its delta_n). About 9 minutes on 2 CPU cores
+here), with the same results. Writes <out>/mistuning.nc, mistuning.json,
+mistuning.png (the summary), mistuning_edges.png (each single-site state's end
+against its delta_n) and mistuned_fig4.png (Fig. 4 of draw 0 at sigma = eta_c
+beside its delta_n). About 9 minutes on 2 CPU cores
 with the defaults.
 
 --design runs, instead, intentional mistuning by gradient (jc.design_study): on a

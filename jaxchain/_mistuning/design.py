@@ -222,9 +222,9 @@ def intentional_mistuning(params: ChainParams = ChainParams(n_osc=4), *, budget:
         if best is None or objective < best[0]:
             best = (objective, theta, folds, solutions, gradient)
         if progress:
+            pattern = np.asarray(pattern_deviations(theta, budget, period, zero_mean))
             print(f"design {i}: highest fold {folds.max():.6f}, pattern "
-                  f"{np.round(np.asarray(pattern_deviations(theta, budget, period, zero_mean)), 4).tolist()}",
-                  file=sys.stderr, flush=True)
+                  f"{np.round(pattern, 4).tolist()}", file=sys.stderr, flush=True)
         if i == steps:
             break
         updates, new_state = opt.update(jnp.asarray(gradient), state, theta)

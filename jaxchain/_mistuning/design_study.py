@@ -11,7 +11,7 @@ from .._physics.params import ChainParams, with_parameter
 from .._bifurcation.shooting import periodic_orbit
 from .._simulate import simulate
 from .._solvers import DEFAULT_SOLVER, SOLVERS
-from .design import design_problems, intentional_mistuning, pattern_deviations, pattern_folds
+from .design import design_problems, intentional_mistuning, pattern_folds
 from .edges import upper_edges
 
 #: The simulations that check a fold, 5e-4 from it: tight tolerances, because the
@@ -63,8 +63,8 @@ def fold_by_simulation(problem, solution, delta: np.ndarray, site: int, *,
     problem's site): at v_d = fold - offset from the stable cycle there (shooting
     from the fold's orbit moved along its null vector, the first converged cycle
     whose non-trivial Floquet multipliers lie inside the unit circle), which must
-    persist; Tsit5 at rtol 1e-10 (`CHECK_OPTIONS`); at v_d = fold + offset from the fold's orbit, which must be lost (no
-    cycle is left).
+    persist; Tsit5 at rtol 1e-10 (`CHECK_OPTIONS`); at v_d = fold + offset from the
+    fold's orbit, which must be lost (no cycle is left).
 
     **Returns:**
 
