@@ -164,10 +164,12 @@ def wait_for_a_batch(store, deadline_s: float = 300) -> int:
     """Block until the sweep store at `store` has at least one flagged batch (a
     written chunk of `batch_done`: the layout alone writes none), and return their
     count. Reads the folder, not the store, so that it sees a flag within
-    milliseconds."""
+    milliseconds. zarr writes a chunk to a temporary `N.<uuid>.partial` file and
+    renames it to `N`: only the renamed chunks count."""
     deadline = time.monotonic() + deadline_s
     while time.monotonic() < deadline:
-        flags = list((Path(store) / "batch_done" / "c").glob("*"))
+        flags = [f for f in (Path(store) / "batch_done" / "c").glob("*")
+                 if f.name.isdigit()]
         if flags:
             return len(flags)
         time.sleep(0.005)
