@@ -3,6 +3,7 @@ reference, on a grid of belt speeds and initial conditions."""
 
 import dataclasses
 import time
+import uuid
 from pathlib import Path
 
 import diffrax
@@ -11,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import xarray as xr
+from tqdm.auto import tqdm
 
 from ._checks import as_solver, belt_speeds, check_options, check_params
 from ._physics.initial import FAMILIES, excited_block
@@ -75,30 +77,76 @@ def _reference_settings(params: ChainParams, y0: np.ndarray,
             "y0": y0, "options": options}
 
 
-def _reference_case(params, y0, options, label: str, folder: Path | None, device):
-    """One reference run on `device`. With a `folder`, the run is stored there
-    under the key of its settings (`_reference_settings`) and read back by a later
-    call with the same settings; a stored run of other settings is never read."""
-    settings = _reference_settings(params, y0, options)
-    path = None
-    if folder is not None:
-        key = settings_key(_REFERENCE_KIND, **settings)
-        path = Path(folder) / f"reference_{label}_{key[:16]}.nc"
-        stored = read_dataset(path, _REFERENCE_KIND, **settings)
+@dataclasses.dataclass(frozen=True)
+class _References:
+    """The reference runs of a cross-check, case i from `y0[i]` at `params_i`.
+    With a `folder`, each run is stored there under the key of its settings
+    (`_reference_settings`) and read back by a later call with the same settings;
+    a stored run of other settings is never read."""
+
+    params: tuple[ChainParams, ...]
+    y0: np.ndarray
+    options: NonsmoothOptions
+    labels: tuple[str, ...]
+    folder: Path | None
+
+    def _settings(self, i: int) -> dict:
+        return _reference_settings(self.params[i], self.y0[i], self.options)
+
+    def _path(self, i: int) -> Path:
+        key = settings_key(_REFERENCE_KIND, **self._settings(i))
+        return self.folder / f"reference_{self.labels[i]}_{key[:16]}.nc"
+
+    def read(self, i: int) -> tuple[dict, float] | None:
+        """Case i's stored run and its wall time, or None."""
+        if self.folder is None:
+            return None
+        stored = read_dataset(self._path(i), _REFERENCE_KIND, **self._settings(i))
+        if stored is None:
+            return None
+        return {k: stored[k].values for k in _REFERENCE_FIELDS}, stored.attrs["wall_time_s"]
+
+    def run(self, i: int, device) -> tuple[dict, float]:
+        """Case i on `device`: read back if stored, else computed (and stored)."""
+        stored = self.read(i)
         if stored is not None:
-            return ({k: stored[k].values for k in _REFERENCE_FIELDS},
-                    stored.attrs["wall_time_s"])
-    start = time.perf_counter()
-    v_d, y0_device = jax.device_put((jnp.asarray(params.v_d), jnp.asarray(y0)), device)
-    obs = _reference_run(with_parameter(params, "v_d", v_d), y0_device, options)
-    out = {k: np.asarray(getattr(obs, k)) for k in _REFERENCE_FIELDS}
-    wall = time.perf_counter() - start
-    if path is not None:
-        dims = {0: (), 1: ("osc",), 2: ("half", "osc")}
-        ds = xr.Dataset({k: (dims[v.ndim], v) for k, v in out.items()},
-                        attrs={"wall_time_s": wall})
-        write_dataset(ds, path, _REFERENCE_KIND, **settings)
-    return out, wall
+            return stored
+        start = time.perf_counter()
+        p = self.params[i]
+        v_d, y0 = jax.device_put((jnp.asarray(p.v_d), jnp.asarray(self.y0[i])), device)
+        obs = _reference_run(with_parameter(p, "v_d", v_d), y0, self.options)
+        out = {k: np.asarray(getattr(obs, k)) for k in _REFERENCE_FIELDS}
+        wall = time.perf_counter() - start
+        if self.folder is not None:
+            dims = {0: (), 1: ("osc",), 2: ("half", "osc")}
+            ds = xr.Dataset({k: (dims[v.ndim], v) for k, v in out.items()},
+                            attrs={"wall_time_s": wall})
+            write_dataset(ds, self._path(i), _REFERENCE_KIND, **self._settings(i))
+        return out, wall
+
+    def store(self, i: int, devices) -> None:
+        """Case i on the first of `devices`, stored: a task of the Dask route."""
+        self.run(i, devices[0])
+
+
+def _on_cluster(client, refs: _References, progress: bool) -> list[tuple[dict, float]]:
+    """Each reference run not yet stored is a task on the cluster of `client`
+    (`run_tasks`), which stores it; then all are read back here."""
+    from ._sweep.cluster import run_tasks
+
+    n = len(refs.labels)
+    todo = [i for i in range(n) if refs.read(i) is None]
+    with tqdm(total=n, initial=n - len(todo), desc="non-smooth reference", unit="case",
+              disable=not progress) as bar:
+        run_tasks(client, _References.store, refs, [(i,) for i in todo],
+                  [f"crosscheck-{refs.labels[i]}-{uuid.uuid4().hex[:8]}" for i in todo], bar)
+    results = [refs.read(i) for i in range(n)]
+    missing = [refs.labels[i] for i, r in enumerate(results) if r is None]
+    if missing:
+        raise RuntimeError(f"the cluster ran {len(todo)} reference runs but {len(missing)} "
+                           f"are not in {refs.folder}: its workers write to a file system "
+                           "this process does not see; give a checkpoint on a shared one")
+    return results
 
 
 def _amplitude_error(smoothed, reference):
@@ -111,7 +159,8 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
                options: SimulationOptions = SimulationOptions(),
                reference_options: NonsmoothOptions | None = None, *,
                tolerances: ClassTolerances = ClassTolerances(),
-               checkpoint: Path | None = None, progress: bool = False) -> xr.Dataset:
+               checkpoint: Path | None = None, client=None,
+               progress: bool = False) -> xr.Dataset:
     """Run the smoothed model and the non-smooth reference on the same grid of belt
     speeds x initial conditions, and compare their observables.
 
@@ -138,10 +187,14 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
         but eps, which the reference does not use, the initial state and every
         field of `reference_options`; see `jaxchain._store`), and only a run of
         equal settings is read back: the others are computed anew.
+    - `client`: a `distributed.Client` to run the reference runs on its cluster,
+        one task per case that stores its run in `checkpoint` (which its workers
+        must reach); this process reads them back.
     - `progress`: show a tqdm bar over the reference runs.
 
     The smoothed runs are lanes of `run_lanes`; the reference runs are spread over
-    the devices, one case at a time per device (`on_devices`).
+    the devices, one case at a time per device (`on_devices`), or over the workers
+    of `client`.
 
     **Returns:**
 
@@ -155,8 +208,14 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
 
     **Raises:**
 
-    `ValueError` for an unknown family, a k outside [1, N] or a bad belt speed.
+    `ValueError` for an unknown family, a k outside [1, N], a bad belt speed, or a
+    `client` without a `checkpoint`. `RuntimeError` when the scheduler of `client`
+    goes away, or when the runs its workers stored are not in `checkpoint` as this
+    process sees it.
     """
+    if client is not None and checkpoint is None:
+        raise ValueError("checkpoint: a cross-check on a Dask cluster needs a checkpoint "
+                         "folder its workers can reach")
     params = check_params(params)
     solver = as_solver(solver, params=params)
     options = check_options(options)
@@ -184,14 +243,16 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
     smooth = _gather(*_smoothed(params, vds, jnp.asarray(y0), solver, options))
     smooth_wall = time.perf_counter() - start
 
-    def reference(i, device):
-        vd, fam, k = cases[i]
-        return _reference_case(with_parameter(params, "v_d", vd), y0[i], reference_options,
-                               f"vd{vd:g}_{fam}_k{k}", checkpoint, device)
-
-    results = on_devices(reference, len(cases), "non-smooth reference", progress)
-    refs, walls = [r[0] for r in results], [r[1] for r in results]
-    ref = {k: np.stack([r[k] for r in refs]) for k in refs[0]}
+    refs = _References(tuple(with_parameter(params, "v_d", c[0]) for c in cases), y0,
+                       reference_options,
+                       tuple(f"vd{vd:g}_{fam}_k{k}" for vd, fam, k in cases),
+                       None if checkpoint is None else Path(checkpoint).resolve())
+    if client is None:
+        results = on_devices(refs.run, len(cases), "non-smooth reference", progress)
+    else:
+        results = _on_cluster(client, refs, progress)
+    walls = [r[1] for r in results]
+    ref = {k: np.stack([r[0][k] for r in results]) for k in results[0][0]}
 
     n = params.n_osc
     half_s = _half_difference(smooth)

@@ -1,6 +1,6 @@
-"""The Dask route of the batched studies: a sweep and a basin-stability run on a
-`LocalCluster` of two spawned worker processes equal the in-process runs to the last
-bit; a worker killed in the middle of a sweep is replaced and its batches run again;
+"""The Dask route of the batched studies: a sweep, a basin-stability run and a
+cross-check on a `LocalCluster` of two spawned worker processes equal the
+in-process runs to the last bit; a worker killed in the middle of a sweep is replaced and its batches run again;
 a scheduler that goes away leaves a command that exits 1 in one line and a store
 that `--resume` finishes in process."""
 
@@ -152,6 +152,22 @@ def test_basin_on_a_local_cluster_equals_basin_in_process(tmp_path):
     xr.testing.assert_identical(here.drop_attrs(), there.drop_attrs())
 
 
+def test_a_crosscheck_on_a_local_cluster_equals_the_in_process_one(tmp_path, client):
+    """Each non-smooth reference run is a task that stores its run in the
+    checkpoint folder: the cross-check equals the in-process one, wall times aside,
+    and the folder holds the same runs."""
+    kw = {"params": jc.ChainParams(n_osc=2), "v_d": (1.3, 1.6),
+          "ics": (("eq8", 1), ("eq8", 2)),
+          "options": jc.SimulationOptions(t_end=600.0, transient=300.0)}
+    here = jc.crosscheck(**kw, checkpoint=tmp_path / "here")
+    there = jc.crosscheck(**kw, checkpoint=tmp_path / "dask", client=client)
+    xr.testing.assert_equal(there.drop_vars("wall_time_s_reference"),
+                            here.drop_vars("wall_time_s_reference"))
+    assert (sorted(f.name for f in (tmp_path / "dask").iterdir())
+            == sorted(f.name for f in (tmp_path / "here").iterdir()))
+    assert len(list((tmp_path / "here").iterdir())) == 4
+
+
 def test_bad_scheduler_addresses_are_refused():
     for bad in ("local:0", "local:x", "", "local:"):
         with pytest.raises(ValueError, match="scheduler"):
@@ -159,6 +175,8 @@ def test_bad_scheduler_addresses_are_refused():
     assert local_workers("local:3") == 3 and local_workers("tcp://h:8786") is None
     with pytest.raises(ValueError, match="store"):
         _api_sweep(client=object())
+    with pytest.raises(ValueError, match="checkpoint"):
+        jc.crosscheck(jc.ChainParams(n_osc=1), client=object())
     with pytest.raises(RuntimeError, match="no Dask scheduler answers"), \
             connect("tcp://127.0.0.1:9", timeout=1):  # the discard port: nobody listens
         pass

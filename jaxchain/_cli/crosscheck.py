@@ -14,8 +14,9 @@ from .._results import save_dataset
 from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
-                     add_run_options, comma_list, json_ready, positive_float, save_figure,
-                     show_progress, writable_folder)
+                     add_run_options, add_scheduler_option, cluster_client, comma_list,
+                     json_ready, positive_float, save_figure, show_progress,
+                     writable_folder)
 
 HELP = "smoothed model against the non-smooth stick/slip reference"
 DESCRIPTION = f"""\
@@ -35,7 +36,9 @@ Writes <out>/crosscheck.nc and <out>/crosscheck.png; each reference run is store
 in <out>/crosscheck_cases/ as it finishes, under a hash of everything that
 determines it (parameters, initial state, reference options); a later run reads
 back only runs of equal settings (resume) and recomputes the others. About 5
-minutes on 2 CPU cores with the defaults."""
+minutes on 2 CPU cores with the defaults. --scheduler runs each reference run as a
+task on a Dask cluster (local:N starts N worker processes here), which stores it in
+<out>/crosscheck_cases/; the smoothed runs stay in this process."""
 
 
 def add_parser(sub):
@@ -59,6 +62,7 @@ def add_parser(sub):
     g.add_argument("--ref-rtol", type=positive_float, default=NonsmoothOptions().rtol,
                    help="tolerance (rtol = atol) of the reference's smooth phases "
                         f"(default {NonsmoothOptions().rtol:g})")
+    add_scheduler_option(g)
     add_output_options(p)
     p.set_defaults(run=run)
     return p
@@ -82,8 +86,10 @@ def run(args) -> None:
     writable_folder(args.out)
 
     start = time.perf_counter()
-    ds = crosscheck(params, args.vd, ics, args.solver, options, ref_options,
-                    checkpoint=args.out / "crosscheck_cases", progress=show_progress(args))
+    with cluster_client(args) as client:
+        ds = crosscheck(params, args.vd, ics, args.solver, options, ref_options,
+                        checkpoint=args.out / "crosscheck_cases", client=client,
+                        progress=show_progress(args))
     wall = time.perf_counter() - start
     ds.attrs["wall_time_s"] = wall
     nc = save_dataset(ds, args.out / "crosscheck.nc")
@@ -115,7 +121,7 @@ def run(args) -> None:
     if args.json:
         print(json.dumps(json_ready({
             "cases": rows, **summary, "chain": chain_record(params), "eps": args.eps,
-            "solver": args.solver,
+            "solver": args.solver, "scheduler": args.scheduler,
             "rtol": args.rtol, "reference_rtol": args.ref_rtol, "wall_time_s": wall,
             "smoothed_wall_time_s": ds.attrs["wall_time_s_smoothed"],
             "dataset": str(nc), "figure": str(png),
