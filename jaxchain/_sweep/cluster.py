@@ -6,9 +6,11 @@ done, whatever happens to the cluster."""
 
 import concurrent.futures
 import contextlib
+import importlib
 import logging
 import os
 import queue
+import threading
 from collections.abc import Callable, Iterator, Sequence
 
 import dask
@@ -23,6 +25,9 @@ from .._programs import keep_programs, program_folder
 #: The scheduler address that starts a cluster on this machine: "local:N", N
 #: worker processes of one thread (and one JAX device) each.
 LOCAL = "local:"
+#: The modules of the tasks of the batched studies, imported by each worker as it
+#: joins (`JaxWorker`): diffrax, xarray and zarr take seconds to import.
+STUDY_MODULES = ("jaxchain._sweep.sweep", "jaxchain._crosscheck")
 
 
 def local_workers(scheduler: str) -> int | None:
@@ -56,6 +61,9 @@ def connect(scheduler: str, timeout: float = 30.0) -> Iterator:
     scheduler, for example "tcp://10.0.0.1:8786", whose workers were started by
     `dask worker`, `dask-jobqueue` or `dask-cuda`.
 
+    The workers are set up for JAX (`JaxWorker`, with `STUDY_MODULES`) in the
+    background while the caller plans its tasks.
+
     **Raises:**
 
     `ValueError` for a bad "local:N"; `RuntimeError` (one line) when no scheduler
@@ -68,7 +76,10 @@ def connect(scheduler: str, timeout: float = 30.0) -> Iterator:
                 {"distributed.worker.multiprocessing-method": "spawn",
                  # Dask's sampling profiler of each worker's threads: a stack
                  # every 10 ms, CPU the integrations need on a small machine
-                 "distributed.worker.profile.enabled": False}))
+                 "distributed.worker.profile.enabled": False,
+                 # a task to a worker only when one of its threads is free: no
+                 # task waits behind a long batch until it is stolen
+                 "distributed.scheduler.worker-saturation": 1.0}))
             cluster = stack.enter_context(LocalCluster(
                 n_workers=n, threads_per_worker=1, processes=True, memory_limit=0,
                 dashboard_address=None, silence_logs=logging.CRITICAL))
@@ -79,33 +90,54 @@ def connect(scheduler: str, timeout: float = 30.0) -> Iterator:
             except (OSError, TimeoutError) as err:
                 raise RuntimeError(f"no Dask scheduler answers at {scheduler} "
                                    f"({type(err).__name__})") from None
+        plugin = JaxWorker.of_this_process(client, STUDY_MODULES)
+        setup = threading.Thread(target=_register_quietly, args=(client, plugin),
+                                 daemon=True)
+        setup.start()
+        stack.callback(setup.join)  # before the client closes
         yield client
+
+
+def _register_quietly(client, plugin) -> None:
+    """Register `plugin` with the workers of `client`; a failure here shows again
+    when `run_tasks` registers it."""
+    with contextlib.suppress(Exception):
+        client.register_plugin(plugin)
 
 
 class JaxWorker(WorkerPlugin):
     """Sets up JAX in each worker before its first task: float64 and the XLA flags
     of `import jaxchain`, one JAX CPU device per thread the worker is given (`dask
-    worker --nthreads`), and the client's compilation cache and traced programs,
-    shared through their folder (`JaxWorker.of_this_process`)."""
+    worker --nthreads`), the client's compilation cache and traced programs,
+    shared through their folder (`JaxWorker.of_this_process`), then imports the
+    `modules` of the tasks. On a `LocalCluster` (`pin`), each worker is first
+    pinned to as many cores of its own as it has threads."""
 
     name = "jaxchain-jax"
 
-    def __init__(self, cache: str | None, min_compile_s: float, traced: str | None):
+    def __init__(self, cache: str | None, min_compile_s: float, traced: str | None,
+                 modules: tuple[str, ...] = (), pin: bool = False):
         self.cache, self.min_compile_s, self.traced = cache, min_compile_s, traced
+        self.modules, self.pin = modules, pin
 
     @classmethod
-    def of_this_process(cls) -> "JaxWorker":
-        """The plugin that gives workers this process's compilation cache (JAX's
-        `jax_compilation_cache_dir`, from JAX_COMPILATION_CACHE_DIR or the command
-        line's `compilation_cache`) and kept traced programs, as absolute paths."""
+    def of_this_process(cls, client, modules: tuple[str, ...] = ()) -> "JaxWorker":
+        """The plugin that gives the workers of `client` this process's
+        compilation cache (JAX's `jax_compilation_cache_dir`, from
+        JAX_COMPILATION_CACHE_DIR or the command line's `compilation_cache`) and
+        kept traced programs, as absolute paths, imports `modules`, and on a
+        `LocalCluster` pins each worker to cores of its own (`_pin_to_own_cores`)."""
         cache, folder = jax.config.jax_compilation_cache_dir, program_folder()
         return cls(os.path.abspath(cache) if cache else None,
                    jax.config.jax_persistent_cache_min_compile_time_secs,
-                   None if folder is None else os.path.abspath(folder))
+                   None if folder is None else os.path.abspath(folder), modules,
+                   isinstance(getattr(client, "cluster", None), LocalCluster))
 
     def setup(self, worker):
         import jaxchain  # noqa: F401  (float64, XLA flags)
 
+        if self.pin and isinstance(worker.name, int) and not _worker_devices:
+            _pin_to_own_cores(worker.name, max(1, worker.state.nthreads))
         with contextlib.suppress(RuntimeError):  # backends already started
             jax.config.update("jax_num_cpu_devices", max(1, worker.state.nthreads))
         if self.cache:
@@ -117,6 +149,24 @@ class JaxWorker(WorkerPlugin):
             _worker_devices.extend(jax.local_devices())
             for device in _worker_devices:
                 _free_devices.put(device)
+        for module in self.modules:
+            importlib.import_module(module)
+
+
+def _pin_to_own_cores(index: int, n_threads: int) -> None:
+    """Pin this worker process, worker `index` of a cluster on one machine, to
+    `n_threads` cores of its own (taken in turn from the cores this process may
+    use), before JAX starts. XLA sizes its CPU thread pool by the cores a process
+    may use: unpinned, each of N workers keeps a pool as large as the machine, and
+    their threads contend for the cores (about 10-15 % of the wall time of a sweep
+    on 2 workers and 2 cores)."""
+    if not hasattr(os, "sched_setaffinity"):  # Linux only
+        return
+    cores = sorted(os.sched_getaffinity(0))
+    own = {cores[(index * n_threads + j) % len(cores)] for j in range(n_threads)}
+    for thread in os.listdir("/proc/self/task"):  # every thread, the later ones inherit
+        with contextlib.suppress(OSError):
+            os.sched_setaffinity(int(thread), own)
 
 
 #: The devices of this worker not in use by one of its tasks (`JaxWorker.setup`):
@@ -143,7 +193,7 @@ def run_tasks(client, task: Callable, shared, arguments: Sequence[tuple],
     cluster of `client`, each on a device of its worker that none of its other
     tasks is using (`on_a_free_device`), as a task named `names[i]` (unique: the
     scheduler hands back the result of a key it holds without running the task
-    again). `shared` (the plan of the whole run) is sent to the cluster once, not
+    again). `shared` (the plan of the whole run) is sent to every worker once, not
     with every task. `bar` advances by one as each task finishes, whichever worker
     ran it. The results stay on the workers: the tasks write them to a store. With
     `costs`, the costliest tasks go first (longest processing time first), so that
@@ -160,8 +210,8 @@ def run_tasks(client, task: Callable, shared, arguments: Sequence[tuple],
     """
     rank = np.argsort(np.argsort(-np.asarray(costs if costs is not None
                                              else np.zeros(len(arguments)))))
-    client.register_plugin(JaxWorker.of_this_process())
-    plan = client.scatter(shared, broadcast=False, hash=False)
+    client.register_plugin(JaxWorker.of_this_process(client, (task.__module__,)))
+    plan = client.scatter(shared, broadcast=True, hash=False)
     futures = [client.submit(on_a_free_device, task, plan, *args, key=name,
                              priority=-int(r))
                for args, name, r in zip(arguments, names, rank)]

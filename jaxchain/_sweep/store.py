@@ -87,8 +87,11 @@ class SweepStore:
                 raise
 
     def done(self) -> np.ndarray:
-        """Whether each batch has finished, shape (n_batches,)."""
-        return xr.open_zarr(self.path, consolidated=False)["batch_done"].values == 1
+        """Whether each batch has finished, shape (n_batches,). Read here, without
+        Dask: with a `distributed.Client` active, a Dask array would be read by
+        the cluster's workers, a task per flag."""
+        flags = xr.open_zarr(self.path, consolidated=False, chunks=None)["batch_done"]
+        return flags.values == 1
 
     def write(self, index: int, start: int, batch: xr.Dataset) -> None:
         """Write `batch` (trajectories start, start + 1, ...) into its region, then
@@ -103,7 +106,8 @@ class SweepStore:
         """The stored Dataset, lazily (dask arrays), with the entries of unfinished
         batches replaced by NaN, -1 or False."""
         ds = xr.open_zarr(self.path, consolidated=False)
-        done = ds["batch_done"].values == 1
+        done = self.done()
+        ds["batch_done"] = ("batch", done.astype(np.uint8))
         if done.all():
             return ds
         per_trajectory = xr.DataArray(np.repeat(done, ds.attrs["batch_size"])
