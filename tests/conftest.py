@@ -13,7 +13,6 @@ if _CACHE_OWNER:
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
 
 import jax  # noqa: E402
-import pytest  # noqa: E402
 
 # The command line's own persistent compilation cache stays off in the tests (one
 # test turns it on in a folder of its own), so that they never write to the user's
@@ -29,14 +28,17 @@ def pytest_unconfigure(config):
         shutil.rmtree(os.environ["JAX_COMPILATION_CACHE_DIR"], ignore_errors=True)
 
 
-@pytest.hookimpl(tryfirst=True)
-def pytest_collection_modifyitems(items):
-    """The scopes of pytest-xdist's `--dist loadgroup` (pyproject.toml): a test file
-    stays on one worker, so that its tests share the programs they compile and its
-    module fixtures run once, but each notebook of test_examples.py (a kernel of
-    its own, sharing nothing) is a scope of its own, so that the two workers share
-    them. Runs before xdist reads the marks."""
-    for item in items:
-        file = item.nodeid.split("::")[0]
-        group = item.nodeid if file.endswith("test_examples.py") else file
-        item.add_marker(pytest.mark.xdist_group(group))
+def pytest_xdist_make_scheduler(config, log):
+    """pytest-xdist's `--dist loadfile` (pyproject.toml), but each notebook of
+    test_examples.py is a scope of its own: a test file stays on one worker, so
+    that its tests share the programs they compile and its module fixtures run
+    once, while the notebooks (a kernel each, sharing nothing) are shared between
+    the workers."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class FileOrNotebook(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            file = nodeid.split("::")[0]
+            return nodeid if file.endswith("test_examples.py") else file
+
+    return FileOrNotebook(config, log)
