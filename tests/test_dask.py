@@ -1,8 +1,8 @@
 """The Dask route of the batched studies: a sweep, a basin-stability run and a
 cross-check on a `LocalCluster` of two spawned worker processes equal the
-in-process runs to the last bit; a worker killed in the middle of a sweep is replaced and its batches run again;
-a scheduler that goes away leaves a command that exits 1 in one line and a store
-that `--resume` finishes in process."""
+in-process runs to the last bit; a worker killed in the middle of a sweep is
+replaced and its batches run again; a scheduler that goes away leaves a command
+that exits 1 in one line and a store that `--resume` finishes in process."""
 
 import json
 import os

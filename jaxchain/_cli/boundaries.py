@@ -9,7 +9,8 @@ from .._boundaries import RATIO_VALUES, XI_VALUES, boundaries, fig3a_simulations
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
-                     comma_list, json_ready, param_default, positive_float, save_figure, show_progress, writable_folder)
+                     comma_list, json_ready, param_default, positive_float, save_figure,
+                     show_progress, writable_folder)
 
 HELP = "Hopf and fold belt speeds of the bistable range (gradients, continuation)"
 DESCRIPTION = """\
