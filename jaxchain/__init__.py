@@ -54,6 +54,7 @@ _compiled_step_loop()
 #: what it needs (diffrax, xarray, matplotlib and scipy are imported by the modules
 #: that use them).
 _EXPORTS = {
+    "ValidationError": "._errors",
     "ensemble": "._ensemble",
     "friction_coefficient": "._physics.friction",
     "slip_friction_force": "._physics.friction",
