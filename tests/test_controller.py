@@ -11,7 +11,6 @@ import jaxchain as jc
 from helpers import flat, reference_rhs
 from jaxchain._controller import CONTROLLERS, PIController
 
-pytestmark = pytest.mark.numerics
 
 RTOL, ATOL = 1e-4, 1e-6
 
@@ -28,6 +27,7 @@ def _state(prev_err=1.0):
             jnp.asarray(0.0))
 
 
+@pytest.mark.numerics
 def test_accepted_step_follows_the_pi_rule_and_may_shrink():
     c = PIController(rtol=RTOL, atol=ATOL)
     keep, t0, t1, _, state, _ = _adapt(c, _state(prev_err=0.5), 0.1, 0.95)
@@ -41,6 +41,7 @@ def test_accepted_step_follows_the_pi_rule_and_may_shrink():
     assert float(t1_diffrax) - 0.1 == pytest.approx(0.1)
 
 
+@pytest.mark.numerics
 def test_second_rejection_uses_the_observed_order():
     c = PIController(rtol=RTOL, atol=ATOL)
     keep, t0, t1, _, state, _ = _adapt(c, _state(), 0.05, 2.65)
@@ -59,12 +60,14 @@ def test_second_rejection_uses_the_observed_order():
     assert bool(keep) and float(state[1]) == 0.0 and float(state[2]) == 0.0
 
 
+@pytest.mark.numerics
 def test_rejection_with_a_nan_error_shrinks_by_factormin():
     c = PIController(rtol=RTOL, atol=ATOL)
     keep, _, t1, _, _, _ = _adapt(c, _state(), 0.1, np.nan)
     assert not bool(keep) and np.isclose(float(t1), 0.1 * c.factormin)
 
 
+@pytest.mark.numerics
 @pytest.mark.parametrize("controller", list(CONTROLLERS))
 def test_solution_matches_scipy_within_the_tolerance(controller):
     """Three oscillators through stick-slip switches, t in [0, 60]: the final state
@@ -82,6 +85,7 @@ def test_solution_matches_scipy_within_the_tolerance(controller):
     assert np.allclose(flat(obs.y_final), ref.y[:, -1], atol=1e-7 * 1e3)
 
 
+@pytest.mark.numerics
 def test_both_controllers_give_the_same_localized_state():
     """The default controller and diffrax's, at the default tolerances: the same
     oscillators on the HALC and amplitudes within the cross-check's 1 %."""

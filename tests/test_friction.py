@@ -6,11 +6,8 @@ from hypothesis import strategies as st
 
 import jaxchain as jc
 
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
 
-
+@pytest.mark.numerics
 def test_friction_coefficient_limits():
     p = jc.ChainParams()
     assert float(jc.friction_coefficient(p, 0.0)) == p.friction.mu_st
@@ -21,6 +18,7 @@ def test_friction_coefficient_limits():
     assert np.allclose(jc.friction_coefficient(p, jnp.array([-v0, v0])), expected)
 
 
+@pytest.mark.numerics
 def test_smoothed_force_tends_to_coulomb_law_away_from_zero():
     p = jc.ChainParams(eps=1e-3)
     v = jnp.array([-2.0, -0.5, 0.5, 2.0])
@@ -33,6 +31,7 @@ def test_smoothed_force_tends_to_coulomb_law_away_from_zero():
     assert np.isclose(float(slope), -p.friction.mu_st / p.eps, rtol=1e-5)
 
 
+@pytest.mark.numerics
 @settings(max_examples=50, deadline=None)
 @given(v=st.floats(-100, 100), eps=st.floats(1e-5, 1.0))
 def test_smoothed_force_is_odd_and_bounded_by_mu_st(v, eps):

@@ -9,11 +9,8 @@ import pytest
 
 import jaxchain as jc
 
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
 
-
+@pytest.mark.numerics
 def test_modal_eigenvalues_are_the_spectrum_of_the_jacobian():
     for v_d in (1.0, 1.5):
         params = jc.ChainParams(n_osc=6, v_d=v_d, eta_c=0.2)
@@ -23,6 +20,7 @@ def test_modal_eigenvalues_are_the_spectrum_of_the_jacobian():
         assert max(np.abs(full - e).min() for e in modal) < 1e-12
 
 
+@pytest.mark.numerics
 def test_hopf_point_is_the_analytic_one_for_every_mode():
     params = jc.ChainParams(n_osc=6, eta_c=0.2)  # strong coupling: modes far apart
     hopf = jc.hopf_point(params)
@@ -36,6 +34,7 @@ def test_hopf_point_is_the_analytic_one_for_every_mode():
                                rtol=1e-12)
 
 
+@pytest.mark.numerics
 @pytest.mark.parametrize("eps", [0.25, 0.2])
 def test_eps_correction_of_the_hopf_point(eps):
     params = jc.ChainParams(n_osc=1, eps=eps)
@@ -45,6 +44,7 @@ def test_eps_correction_of_the_hopf_point(eps):
     assert abs(shift - predicted) < 0.05 * abs(predicted)
 
 
+@pytest.mark.numerics
 def test_growth_rate_slope_and_hopf_sensitivity_against_finite_differences():
     params = jc.ChainParams(n_osc=1)
     hopf = jc.hopf_point(params)
@@ -63,6 +63,7 @@ def test_growth_rate_slope_and_hopf_sensitivity_against_finite_differences():
     assert abs(float(d_xi) - (-params.friction.v0 / params.xi)) < 1e-9
 
 
+@pytest.mark.numerics
 @pytest.mark.parametrize("xi", [0.05, 0.02])
 def test_first_lyapunov_coefficient_is_the_analytic_one(xi):
     single = jc.ChainParams(n_osc=1, xi=xi)

@@ -4,10 +4,6 @@ import pytest
 
 import jaxchain as jc
 
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
-
 
 def test_excited_block_grows_around_oscillator_11():
     assert np.flatnonzero(jc.excited_block(20, 1)).tolist() == [10]  # oscillator 11

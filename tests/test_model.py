@@ -6,11 +6,8 @@ import pytest
 import jaxchain as jc
 from helpers import flat, reference_rhs
 
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
 
-
+@pytest.mark.numerics
 @pytest.mark.parametrize("n_osc, v_d, eps", [(1, 1.5, 1e-2), (5, 0.8, 1e-3), (20, 2.0, 1e-2)])
 def test_steady_sliding_is_a_fixed_point(n_osc, v_d, eps):
     p = jc.ChainParams(n_osc=n_osc, v_d=v_d, eps=eps)
@@ -22,6 +19,7 @@ def test_steady_sliding_is_a_fixed_point(n_osc, v_d, eps):
     assert np.max(np.abs(jc.vector_field(0.0, y, p))) < 1e-14
 
 
+@pytest.mark.numerics
 def test_vector_field_matches_loop_reference_on_both_layouts():
     p = jc.ChainParams(n_osc=7, v_d=1.3)
     y = jax.random.normal(jax.random.key(0), (2, 7))
@@ -35,6 +33,7 @@ def test_vector_field_rejects_wrong_shape():
         jc.vector_field(0.0, jnp.zeros((2, 3)), jc.ChainParams(n_osc=4))
 
 
+@pytest.mark.numerics
 @pytest.mark.parametrize("n_osc, eps", [(1, 1e-2), (2, 1e-2), (8, 1e-2), (8, 0.3)])
 def test_steady_sliding_eigenvalues_match_analytic_damping(n_osc, eps):
     """Ring mode k has stiffness 1 + 2 eta_c (1 - cos(2 pi k / N)) and, for every k,
@@ -59,6 +58,7 @@ def test_steady_sliding_eigenvalues_match_analytic_damping(n_osc, eps):
         assert np.allclose(numeric.real, -(2 * p.xi - mu_prime) / 2, atol=1e-12)
 
 
+@pytest.mark.numerics
 def test_jacobian_matches_finite_differences_off_equilibrium():
     p = jc.ChainParams(n_osc=4)
     y = jc.steady_sliding(p) + 0.1 * jax.random.normal(jax.random.key(1), (2, 4))

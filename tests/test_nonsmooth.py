@@ -8,9 +8,6 @@ import pytest
 import jaxchain as jc
 from helpers import scipy_slip_arc, scipy_stick_slip_cycle
 
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
 
 ONE = jc.ChainParams(n_osc=1)
 
@@ -19,6 +16,7 @@ def _stick_exit_state(p):
     return jnp.array([[p.friction.mu_st - 2 * p.xi * p.v_d], [p.v_d]])
 
 
+@pytest.mark.numerics
 def test_stick_exit_time_and_oscillator_match_the_stick_force_formula():
     """A ring whose oscillators all stick moves rigidly with the belt, so f_n grows
     at the rate v_d and the first to leave stick is the one of largest f_n(0), at
@@ -37,6 +35,7 @@ def test_stick_exit_time_and_oscillator_match_the_stick_force_formula():
     assert abs(float(obs.log_time[logged][0]) - t_exit) < 1e-10
 
 
+@pytest.mark.numerics
 def test_single_oscillator_cycle_matches_scipy():
     """Amplitude and period of the stick-slip cycle at v_d = 1.5 against scipy's
     DOP853 with events, to 1e-8 relative (the acceptance asks 1e-6)."""
@@ -49,6 +48,7 @@ def test_single_oscillator_cycle_matches_scipy():
     assert int(obs.n_halc) == 1 and float(obs.half_difference) < 1e-9
 
 
+@pytest.mark.numerics
 def test_energy_balance_over_a_long_run():
     """Friction work = change of mechanical energy + viscous dissipation, for a ring
     with a localized stick-slip state over 3000 time units. Measured: the residual is
@@ -66,6 +66,7 @@ def test_energy_balance_over_a_long_run():
     assert abs(float(residual)) < 1e-9 * float(obs.friction_work)
 
 
+@pytest.mark.numerics
 def test_identical_oscillators_switch_together_like_one():
     """A ring started with every oscillator in the same state has no coupling force:
     all oscillators switch at the same instants (simultaneous events) and each
@@ -83,6 +84,7 @@ def test_identical_oscillators_switch_together_like_one():
     assert int(ring.num_events) == int(single.num_events)
 
 
+@pytest.mark.numerics
 def test_existence_limit_brackets_the_scipy_slip_arc():
     """Just below the limit the scipy slip arc returns to the belt speed; just above,
     it does not."""

@@ -15,10 +15,6 @@ import jaxchain as jc
 from helpers import SHORT, reference_rhs
 from jaxchain._lanes import _run_block, lane_params
 
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
-
 
 def lorenz(t, y, args):
     sigma, rho, beta = 10.0, 28.0, 8.0 / 3.0
@@ -26,6 +22,7 @@ def lorenz(t, y, args):
                       y[0] * y[1] - beta * y[2]])
 
 
+@pytest.mark.numerics
 @pytest.mark.parametrize("shift", [0.0, 1e-3, -2e-3])
 def test_lorenz_largest_exponent_is_0_9056_within_its_stated_error(shift):
     """Lorenz-63 at sigma = 10, rho = 28, beta = 8/3: 0.9056 (Sprott, Chaos and Time
@@ -44,6 +41,7 @@ def test_lorenz_largest_exponent_is_0_9056_within_its_stated_error(shift):
     assert abs(history[-1] - float(res["lyapunov"])) < 1e-12  # the running estimate ends there
 
 
+@pytest.mark.numerics
 def test_damped_linear_chain_has_every_exponent_at_minus_xi():
     """A ring with friction off: x'' + 2 xi x' + x + eta_c (2x - x_+ - x_-) = 0. Every
     mode is underdamped, with eigenvalues -xi +- i w_k: the largest exponent is -xi."""
@@ -62,6 +60,7 @@ def test_damped_linear_chain_has_every_exponent_at_minus_xi():
     assert abs(float(res["lyapunov"]) + xi) < float(res["lyapunov_error"]) < 2e-3
 
 
+@pytest.mark.numerics
 @pytest.mark.parametrize("solver", ["ros34pw2", "tsit5"])
 def test_steady_sliding_exponent_is_half_the_effective_damping(solver):
     """Linearised about steady sliding every mode has the damping 2 xi - mu'(v_d)
@@ -82,6 +81,7 @@ def stick_slip_orbit():
     return params, jc.periodic_orbit(params, jnp.array([[2.78], [1.5]]), 6.9)
 
 
+@pytest.mark.numerics
 def test_stable_stick_slip_cycle_has_exponent_zero_within_its_error(stick_slip_orbit):
     params, orbit = stick_slip_orbit
     assert bool(orbit.converged) and bool(orbit.stable)
@@ -93,6 +93,7 @@ def test_stable_stick_slip_cycle_has_exponent_zero_within_its_error(stick_slip_o
     assert np.ptp(np.asarray(out["lyapunov_history"])[-3:]) < error
 
 
+@pytest.mark.numerics
 def test_peak_times_of_a_periodic_orbit_are_spaced_by_its_period(stick_slip_orbit):
     """And the Poincare section at those peaks is one point, the orbit's peak."""
     params, orbit = stick_slip_orbit
@@ -113,6 +114,7 @@ def test_peak_times_of_a_periodic_orbit_are_spaced_by_its_period(stick_slip_orbi
     assert abs(section[0, 0] - float(orbit.y0[0, 0])) < 1e-6
 
 
+@pytest.mark.numerics
 def test_time_series_match_scipy():
     params = jc.ChainParams(n_osc=3, v_d=1.5, eps=1e-2)
     y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 2))(params)
@@ -160,6 +162,7 @@ def test_observers_are_checked():
                    options=jc.SimulationOptions(t_end=100.0, transient=50.0))
 
 
+@pytest.mark.numerics
 def test_energy_at_steady_sliding_and_against_scipy():
     """At steady sliding x_n = mu(v_d), x_n' = 0: the energy is N mu(v_d)^2 / 2. On a
     stick-slip trajectory, the mean and maximum match scipy's dense solution."""

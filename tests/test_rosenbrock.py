@@ -12,10 +12,6 @@ from helpers import SHORT, scipy_stick_slip_cycle
 from jaxchain._rosenbrock import Ros34PW2
 from jaxchain._simulate import terms
 
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
-
 
 def _fixed_step_error(split, y0, t1, exact, n_steps):
     sol = diffrax.diffeqsolve(split, Ros34PW2(), 0.0, t1, t1 / n_steps, y0,
@@ -28,6 +24,7 @@ def _orders(errors):
     return np.log2(np.asarray(errors[:-1]) / np.asarray(errors[1:]))
 
 
+@pytest.mark.numerics
 def test_order_three_on_a_linear_problem_whose_w_is_not_its_jacobian():
     """y' = R y - lam y, a rotation (explicit) plus a diagonal decay (the stiff term),
     has the exact solution exp(-lam t) R(t) y0. W holds only the decay, not the
@@ -43,6 +40,7 @@ def test_order_three_on_a_linear_problem_whose_w_is_not_its_jacobian():
     assert np.all(np.abs(_orders(errors) - 3) < 0.15), (errors, _orders(errors))
 
 
+@pytest.mark.numerics
 def test_order_three_on_the_smooth_chain_against_dopri8():
     """Eq. (5) with a wide smoothing (eps = 0.2, no sharp stick) from an excited
     state, over t in [0, 4]: the fixed-step error against Dopri8 at rtol 1e-13
@@ -63,6 +61,7 @@ def test_order_three_on_the_smooth_chain_against_dopri8():
     assert np.all(np.abs(_orders(errors) - 3) < 0.3), (errors, _orders(errors))
 
 
+@pytest.mark.numerics
 def test_converges_to_the_nonsmooth_stick_slip_cycle_as_eps_shrinks():
     """One oscillator at v_d = 1.5: the amplitude error against the non-smooth
     stick-slip cycle (scipy, with events) shrinks with eps down to 1e-5, where an
@@ -83,6 +82,7 @@ def test_converges_to_the_nonsmooth_stick_slip_cycle_as_eps_shrinks():
     assert errors[-1] < 2e-4, errors
 
 
+@pytest.mark.numerics
 def test_steps_are_not_bound_by_stiffness():
     """At eps = 1e-5 the stick phase has stiffness mu_st / eps = 2e5. The explicit
     Bosh3 must keep its step below its stability limit, about 1e-5, through every
