@@ -23,6 +23,7 @@ from ._physics.friction import ExponentialDecay
 from ._physics.params import ChainParams, single_oscillator, with_parameter
 from ._physics.record import chain_record
 from ._simulate import simulate
+from ._errors import ValidationError
 
 
 @dataclasses.dataclass
@@ -178,10 +179,10 @@ def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
 
     **Raises:**
 
-    `ValueError` for target <= 0; `RuntimeError` if a computation fails.
+    `ValidationError` for target <= 0; `RuntimeError` if a computation fails.
     """
     if not target > 0:
-        raise ValueError(f"target must be > 0, got {target!r}")
+        raise ValidationError(f"target must be > 0, got {target!r}")
     options = ShootingOptions()
     single = single_oscillator(params)
     exponential = isinstance(single.friction, ExponentialDecay)

@@ -7,6 +7,7 @@ import numpy as np
 from ._options import SimulationOptions
 from ._physics.params import ChainParams
 from ._solvers import AUTO, SOLVERS, auto_solver
+from ._errors import ValidationError
 
 
 def as_solver(solver, name: str = "solver", params: ChainParams | None = None
@@ -17,15 +18,15 @@ def as_solver(solver, name: str = "solver", params: ChainParams | None = None
 
     **Raises:**
 
-    `ValueError` for an unknown name; `TypeError` for anything else that is not a
+    `ValidationError` for an unknown name; `TypeError` for anything else that is not a
     `diffrax.AbstractSolver`.
     """
     if isinstance(solver, str):
         if solver == AUTO:
             return auto_solver(params) if params is not None else SOLVERS["ros34pw2"]()
         if solver not in SOLVERS:
-            raise ValueError(f"{name} must be one of {', '.join(sorted(SOLVERS))}, "
-                             f"'{AUTO}' or a diffrax solver, got {solver!r}")
+            raise ValidationError(f"{name} must be one of {', '.join(sorted(SOLVERS))}, "
+                                  f"'{AUTO}' or a diffrax solver, got {solver!r}")
         return SOLVERS[solver]()
     if not isinstance(solver, diffrax.AbstractSolver):
         raise TypeError(f"{name} must be a diffrax solver, '{AUTO}' or one of "
@@ -71,13 +72,13 @@ def belt_speeds(v_d, name: str = "v_d") -> np.ndarray:
 
     **Raises:**
 
-    `TypeError` for non-numbers; `ValueError` for an empty list, more than one
+    `TypeError` for non-numbers; `ValidationError` for an empty list, more than one
     dimension, or speeds that are not finite and > 0.
     """
     v = np.atleast_1d(real_array(v_d, name))
     if v.ndim != 1 or v.size == 0:
-        raise ValueError(f"{name} must be a 1-d list of at least one belt speed, "
-                         f"got shape {v.shape}")
+        raise ValidationError(f"{name} must be a 1-d list of at least one belt speed, "
+                              f"got shape {v.shape}")
     if not np.all(np.isfinite(v) & (v > 0)):
-        raise ValueError(f"{name} must hold finite belt speeds > 0, got {v.tolist()}")
+        raise ValidationError(f"{name} must hold finite belt speeds > 0, got {v.tolist()}")
     return v

@@ -14,6 +14,7 @@ from ._lanes import lane_params, run_lanes, take_lanes
 from ._options import SimulationOptions
 from ._physics.params import ChainParams, with_parameter
 from ._solvers import DEFAULT_SOLVER, SOLVERS
+from ._errors import ValidationError
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -56,7 +57,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
 
     **Raises:**
 
-    `ValueError` for an empty list of belt speeds or of initial conditions, belt
+    `ValidationError` for an empty list of belt speeds or of initial conditions, belt
     speeds that are not finite and > 0, initial conditions of the wrong shape, an
     unknown solver name or engine; `TypeError` for arguments of the wrong type.
     """
@@ -69,7 +70,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
                         f"GivenState, ...), got {type(ics).__name__}")
     n_ic = batch_length(ics)
     if n_ic == 0:
-        raise ValueError("ics must hold at least one initial condition, got 0")
+        raise ValidationError("ics must hold at least one initial condition, got 0")
     ics_first = take_lanes(ics, 0)
     ics_first(with_parameter(params, "v_d", v_d[0]))  # shape check, may raise
     lanes_vd, lanes_ic = np.repeat(v_d, n_ic), np.tile(np.arange(n_ic), v_d.size)

@@ -29,6 +29,7 @@ from ._physics.model import steady_sliding
 from ._physics.params import ChainParams, parameter_lens, with_parameter
 from ._observers.base import AbstractObserver
 from ._simulate import Observables, check_observers, run, run_observers
+from ._errors import ValidationError
 
 
 #: How `run_lanes` runs its lanes: "queue" (each device integrates one block of
@@ -84,17 +85,17 @@ def lane_params(params: ChainParams, n_lanes: int, **per_lane) -> ChainParams:
 
     **Raises:**
 
-    `ValueError` when `params` is already a batch, for an unknown name, or for
+    `ValidationError` when `params` is already a batch, for an unknown name, or for
     values that are not of shape (n_lanes,) or invalid for the parameter.
     """
     if np.ndim(params.v_d) != 0:
-        raise ValueError("lane_params takes one chain (v_d a scalar); give per-lane values "
-                         "by name, for example lane_params(params, n, v_d=values)")
+        raise ValidationError("lane_params takes one chain (v_d a scalar); give per-lane values "
+                              "by name, for example lane_params(params, n, v_d=values)")
     for name, values in per_lane.items():
         values = np.asarray(values, dtype=float)
         if values.shape != (n_lanes,):
-            raise ValueError(f"{name}: one value per lane, shape ({n_lanes},), got "
-                             f"{values.shape}")
+            raise ValidationError(f"{name}: one value per lane, shape ({n_lanes},), got "
+                                  f"{values.shape}")
         for value in np.unique(values):  # validated, naming the field
             with_parameter(params, name, value)
     lanes = jax.tree_util.tree_map(
@@ -111,15 +112,15 @@ def as_lanes(params: ChainParams, n_lanes: int) -> ChainParams:
 
     **Raises:**
 
-    `ValueError` when a batch's fields do not lead with n_lanes.
+    `ValidationError` when a batch's fields do not lead with n_lanes.
     """
     if np.ndim(params.v_d) == 0:
         return lane_params(params, n_lanes)
     leading = {np.shape(x)[:1] for x in jax.tree_util.tree_leaves(params)}
     if leading != {(n_lanes,)}:
-        raise ValueError(f"lane parameters must lead with the lane axis ({n_lanes},) in "
-                         f"every field (lane_params, stack_chains), got leading shapes "
-                         f"{sorted(leading)}")
+        raise ValidationError(f"lane parameters must lead with the lane axis ({n_lanes},) in "
+                              f"every field (lane_params, stack_chains), got leading shapes "
+                              f"{sorted(leading)}")
     return params
 
 
@@ -206,7 +207,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
 
     **Raises:**
 
-    `ValueError` for an unknown engine, an empty list of lanes, or lane parameters
+    `ValidationError` for an unknown engine, an empty list of lanes, or lane parameters
     that do not lead with (lanes,) (`as_lanes`); see also `check_observers`.
     """
     if observers is not None:
@@ -214,13 +215,13 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
     y0 = np.asarray(y0, dtype=float)
     n_lanes = y0.shape[0]
     if n_lanes == 0:
-        raise ValueError("run_lanes needs at least one lane, got 0")
+        raise ValidationError("run_lanes needs at least one lane, got 0")
     params = as_lanes(params, n_lanes)
     devices = list(devices or jax.local_devices())[:n_lanes]
     if engine is None:
         engine = "queue" if devices[0].platform == "cpu" else "vmap"
     if engine not in ENGINES:
-        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+        raise ValidationError(f"engine must be one of {ENGINES}, got {engine!r}")
     if engine == "queue":
         size = block or block_size(n_lanes, len(devices))
         starts = range(0, n_lanes, size)

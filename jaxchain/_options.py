@@ -7,6 +7,7 @@ import jax
 import numpy as np
 
 from ._controller import CONTROLLERS
+from ._errors import ValidationError
 
 
 class SimulationOptions(eqx.Module):
@@ -49,7 +50,7 @@ class SimulationOptions(eqx.Module):
 
     **Raises:**
 
-    `ValueError` naming the field for t_end <= 0, transient outside [0, t_end),
+    `ValidationError` naming the field for t_end <= 0, transient outside [0, t_end),
     non-positive or non-finite tolerances, sample_dt, chunk_length, max_steps or
     dtmin, and a controller not in `CONTROLLERS`.
     """
@@ -72,19 +73,19 @@ class SimulationOptions(eqx.Module):
                 value = float(value)
             if not (isinstance(value, (int, float, np.integer, np.floating))
                     and not isinstance(value, bool) and math.isfinite(value) and value > 0):
-                raise ValueError(f"SimulationOptions.{name} must be a finite number > 0, "
-                                 f"got {value!r}")
+                raise ValidationError(f"SimulationOptions.{name} must be a finite number > 0, "
+                                      f"got {value!r}")
         if self.controller not in CONTROLLERS:
-            raise ValueError(f"SimulationOptions.controller must be one of "
-                             f"{', '.join(CONTROLLERS)}, got {self.controller!r}")
+            raise ValidationError(f"SimulationOptions.controller must be one of "
+                                  f"{', '.join(CONTROLLERS)}, got {self.controller!r}")
         if isinstance(self.max_steps, bool) or not isinstance(self.max_steps, (int, np.integer)):
-            raise ValueError(f"SimulationOptions.max_steps must be an integer >= 1, got "
-                             f"{self.max_steps!r}")
+            raise ValidationError(f"SimulationOptions.max_steps must be an integer >= 1, got "
+                                  f"{self.max_steps!r}")
         if not (isinstance(self.transient, (int, float, np.integer, np.floating))
                 and not isinstance(self.transient, bool) and math.isfinite(self.transient)
                 and 0 <= self.transient < self.t_end):
-            raise ValueError(f"SimulationOptions.transient must lie in [0, t_end = "
-                             f"{self.t_end}), got {self.transient!r}")
+            raise ValidationError(f"SimulationOptions.transient must lie in [0, t_end = "
+                                  f"{self.t_end}), got {self.transient!r}")
 
     def chunks(self, t0: float, t1: float) -> tuple[int, float]:
         """Number and length of the equal chunks that cover [t0, t1]."""

@@ -24,6 +24,7 @@ from ._physics.params import ChainParams
 from ._progress import progress_bar, tick
 from ._rosenbrock import Ros34PW2
 from ._solvers import DEFAULT_SOLVER, SOLVERS
+from ._errors import ValidationError
 
 #: Status codes of a trajectory, with what to do about each.
 STATUS = (
@@ -314,7 +315,7 @@ def check_observers(observers: Sequence[AbstractObserver]) -> tuple:
 
     **Raises:**
 
-    `TypeError` for an entry that is not an `AbstractObserver`; `ValueError` when
+    `TypeError` for an entry that is not an `AbstractObserver`; `ValidationError` when
     two observers give a result of the same name (observe each thing once).
     """
     observers = tuple(observers)
@@ -323,7 +324,7 @@ def check_observers(observers: Sequence[AbstractObserver]) -> tuple:
             raise TypeError(f"observers must be AbstractObserver instances, got {o!r}")
     names = [type(o).__name__ for o in observers]
     if len(set(names)) != len(names):
-        raise ValueError(f"observers must be of distinct kinds, got {names}")
+        raise ValidationError(f"observers must be of distinct kinds, got {names}")
     return observers
 
 
@@ -368,7 +369,7 @@ def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
 
     **Raises:**
 
-    `ValueError` for a state of the wrong shape or an unknown solver name;
+    `ValidationError` for a state of the wrong shape or an unknown solver name;
     `TypeError` for arguments of the wrong type; `RuntimeError` with advice when
     the run fails and `throw=True`.
     """
@@ -417,7 +418,7 @@ def observe(params: ChainParams, y0: AbstractInitialCondition | State,
 
     **Raises:**
 
-    `ValueError` for a state of the wrong shape or observers of the same kind,
+    `ValidationError` for a state of the wrong shape or observers of the same kind,
     `TypeError` for an object that is not an observer; `RuntimeError` with advice
     when the run fails and `throw=True`.
     """

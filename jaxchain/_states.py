@@ -6,6 +6,8 @@ import math
 
 import equinox as eqx
 
+from ._errors import ValidationError
+
 #: The chain at rest on the belt: no oscillator on the HALC (n_HALC = 0).
 STEADY_SLIDING = "steady sliding"
 #: Some, not all, oscillators on the high-amplitude stick-slip limit cycle (HALC).
@@ -61,7 +63,7 @@ class ClassTolerances(eqx.Module):
 
     **Raises:**
 
-    `ValueError` naming the field for a tolerance that is not a finite number > 0,
+    `ValidationError` naming the field for a tolerance that is not a finite number > 0,
     or max_period < 1.
     """
 
@@ -75,9 +77,9 @@ class ClassTolerances(eqx.Module):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and not isinstance(value, bool)
                     and math.isfinite(value) and value > 0):
-                raise ValueError(f"ClassTolerances.{name} must be a finite number > 0, "
-                                 f"got {value!r}")
+                raise ValidationError(f"ClassTolerances.{name} must be a finite number > 0, "
+                                      f"got {value!r}")
         if isinstance(self.max_period, bool) or not isinstance(self.max_period, int) \
                 or self.max_period < 1:
-            raise ValueError(f"ClassTolerances.max_period must be an integer >= 1, got "
-                             f"{self.max_period!r}")
+            raise ValidationError(f"ClassTolerances.max_period must be an integer >= 1, got "
+                                  f"{self.max_period!r}")

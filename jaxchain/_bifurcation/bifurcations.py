@@ -9,6 +9,7 @@ from jaxtyping import Array, Complex, Float
 
 from .continuation import Branch, ContinuationProblem, PseudoArclength, _correct, _record, \
     _tangent
+from .._errors import ValidationError
 
 #: The kinds of codimension-one bifurcation of limit cycles (Kuznetsov, *Elements of
 #: Applied Bifurcation Theory*, 3rd ed. (2004), Sect. 5.4), by their critical
@@ -104,11 +105,11 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
 
     **Raises:**
 
-    `ValueError` if `problem.describe` is None (no multipliers to classify by).
+    `ValidationError` if `problem.describe` is None (no multipliers to classify by).
     """
     if problem.describe is None:
-        raise ValueError("problem.describe is None: bifurcations are classified by the "
-                         "Floquet multipliers of its records")
+        raise ValidationError("problem.describe is None: bifurcations are classified by the "
+                              "Floquet multipliers of its records")
     ok = np.asarray(branch.converged)
     zs = jnp.concatenate([branch.u, branch.p[:, None]], axis=1)[ok]
     tangents = branch.tangent[ok]

@@ -13,6 +13,7 @@ from jaxtyping import Array, Bool, Float
 from tqdm.auto import tqdm
 
 from .._physics.params import ChainParams, parameter_value, with_parameter
+from .._errors import ValidationError
 
 
 class ContinuationProblem(eqx.Module):
@@ -105,20 +106,20 @@ class ContinuationOptions(eqx.Module):
 
     def __check_init__(self):
         if not 0 < self.ds_min <= self.ds <= self.ds_max:
-            raise ValueError(f"ContinuationOptions needs 0 < ds_min <= ds <= ds_max, got "
-                             f"ds_min = {self.ds_min}, ds = {self.ds}, ds_max = {self.ds_max}")
+            raise ValidationError(f"ContinuationOptions needs 0 < ds_min <= ds <= ds_max, got "
+                                  f"ds_min = {self.ds_min}, ds = {self.ds}, ds_max = {self.ds_max}")
         if not self.p_min < self.p_max:
-            raise ValueError(f"ContinuationOptions.p_min must be < p_max, got "
-                             f"{self.p_min} and {self.p_max}")
+            raise ValidationError(f"ContinuationOptions.p_min must be < p_max, got "
+                                  f"{self.p_min} and {self.p_max}")
         if self.max_points < 1:
-            raise ValueError(f"ContinuationOptions.max_points must be >= 1, got "
-                             f"{self.max_points}")
+            raise ValidationError(f"ContinuationOptions.max_points must be >= 1, got "
+                                  f"{self.max_points}")
         if not self.max_correction > 0:
-            raise ValueError(f"ContinuationOptions.max_correction must be > 0, got "
-                             f"{self.max_correction!r}")
+            raise ValidationError(f"ContinuationOptions.max_correction must be > 0, got "
+                                  f"{self.max_correction!r}")
         if self.direction not in (1, -1):
-            raise ValueError(f"ContinuationOptions.direction must be +1 or -1, got "
-                             f"{self.direction!r}")
+            raise ValidationError(f"ContinuationOptions.direction must be +1 or -1, got "
+                                  f"{self.direction!r}")
 
 
 class Branch(eqx.Module):
@@ -219,8 +220,8 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
 
     **Raises:**
 
-    `ValueError` if `problem.u0` is not a solution (residual above 1e3 x the
-    Newton tolerance).
+    `ValueError` (a computed condition, not a `ValidationError`) if `problem.u0` is
+    not a solution (residual above 1e3 x the Newton tolerance).
     """
     z = jnp.concatenate([jnp.asarray(problem.u0, dtype=float),
                          jnp.atleast_1d(jnp.asarray(problem.value(), dtype=float))])

@@ -10,6 +10,7 @@ from jaxtyping import Array, Float
 from .._physics.params import with_parameter
 from .continuation import ContinuationProblem
 from .two_parameter import fold_curve, hopf_vd_and_derivative
+from .._errors import ValidationError
 
 
 class DampingDesign(eqx.Module):
@@ -62,11 +63,11 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
 
     **Raises:**
 
-    `ValueError` if target <= 0; `RuntimeError` if a fold along the way is lost or
+    `ValidationError` if target <= 0; `RuntimeError` if a fold along the way is lost or
     the Hopf point is not found.
     """
     if not target > 0:
-        raise ValueError(f"target must be > 0, got {target!r}")
+        raise ValidationError(f"target must be > 0, got {target!r}")
     n = problem.u0.size
     state = {"problem": problem, "solution": fold_solution}
 

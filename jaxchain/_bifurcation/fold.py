@@ -104,8 +104,8 @@ def fold_point(problem: ContinuationProblem, near: Branch | Float[Array, " n+1"]
 
     **Raises:**
 
-    `ValueError` if `near` is a branch without a fold; `RuntimeError` if Newton's
-    method fails and `throw=True`.
+    `ValueError` (a computed condition, not a `ValidationError`) if `near` is a
+    branch without a fold; `RuntimeError` if Newton's method fails and `throw=True`.
     """
     if isinstance(near, Branch):
         if not near.folds:

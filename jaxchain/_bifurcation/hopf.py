@@ -9,16 +9,19 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Complex, Float
 
+from .._checks import check_params, real_array
 from .._physics.chain import is_homogeneous_ring
 from .._physics.friction import ExponentialDecay, friction_coefficient
 from .._physics.model import jacobian
 from .._physics.params import ChainParams, with_parameter
+from .._errors import ValidationError
 
 
 def _require_ring(params: ChainParams, what: str) -> None:
     if not is_homogeneous_ring(params):
-        raise ValueError(f"{what} needs the homogeneous ring (boundary 'ring', scalar "
-                         "per-oscillator fields); use steady_sliding_eigenvalues for any chain")
+        raise ValidationError(f"{what} needs the homogeneous ring (boundary 'ring', scalar "
+                              "per-oscillator fields); use steady_sliding_eigenvalues for "
+                              "any chain")
 
 
 def fourier_blocks(params: ChainParams) -> Complex[Array, "n_osc 2 2"]:
@@ -44,7 +47,7 @@ def fourier_blocks(params: ChainParams) -> Complex[Array, "n_osc 2 2"]:
 
     **Raises:**
 
-    `ValueError` unless the chain is the homogeneous ring.
+    `ValidationError` unless the chain is the homogeneous ring.
     """
     _require_ring(params, "fourier_blocks")
     n = params.n_osc
@@ -125,20 +128,20 @@ def hopf_vd_analytic(params: ChainParams) -> Float[Array, ""]:
 
     **Raises:**
 
-    `ValueError` if xi = 0 or mu_st = mu_d (no Hopf point), or if the law is not
+    `ValidationError` if xi = 0 or mu_st = mu_d (no Hopf point), or if the law is not
     eq. (1) or the load and damping are not uniform.
     """
     law = params.friction
     if not isinstance(law, ExponentialDecay):
-        raise ValueError(f"hopf_vd_analytic is the closed form of eq. (1) "
-                         f"(ExponentialDecay), got {type(law).__name__}; use hopf_point")
+        raise ValidationError(f"hopf_vd_analytic is the closed form of eq. (1) "
+                              f"(ExponentialDecay), got {type(law).__name__}; use hopf_point")
     if any(np.ndim(a) for a in (params.xi, params.load, law.mu_st, law.mu_d, law.v0)):
-        raise ValueError("hopf_vd_analytic needs uniform xi, load and friction law; "
-                         "use hopf_point")
+        raise ValidationError("hopf_vd_analytic needs uniform xi, load and friction law; "
+                              "use hopf_point")
     xi, delta = np.asarray(params.xi), np.asarray(law.mu_st) - np.asarray(law.mu_d)
     if np.any(xi <= 0) or np.any(delta <= 0):
-        raise ValueError(f"hopf_vd_analytic needs xi > 0 and mu_st > mu_d, got xi = "
-                         f"{params.xi!r}, mu_st - mu_d = {delta!r}")
+        raise ValidationError(f"hopf_vd_analytic needs xi > 0 and mu_st > mu_d, got xi = "
+                              f"{params.xi!r}, mu_st - mu_d = {delta!r}")
     return law.v0 * jnp.log(params.load * (law.mu_st - law.mu_d) / (2 * params.xi * law.v0))
 
 
@@ -221,13 +224,13 @@ def critical_mode(params: ChainParams, mode: int = 0):
 
     **Raises:**
 
-    `ValueError` for a bad mode.
+    `ValidationError` for a bad mode.
     """
     n = params.n_osc
     if not is_homogeneous_ring(params):
         if mode != 0:
-            raise ValueError(f"mode must be 0 (the leading eigenvalue) on a chain other "
-                             f"than the homogeneous ring, got {mode!r}")
+            raise ValidationError(f"mode must be 0 (the leading eigenvalue) on a chain other "
+                                  f"than the homogeneous ring, got {mode!r}")
         a = jacobian(params)
         values, right = jnp.linalg.eig(a)
         i = jnp.argmax(jnp.where(values.imag > 0, values.real, -jnp.inf))
@@ -237,8 +240,8 @@ def critical_mode(params: ChainParams, mode: int = 0):
         omega = values[i].imag
     else:
         if mode not in (0, n / 2):
-            raise ValueError(f"mode must be 0 or N/2 = {n / 2} (a real mode shape), "
-                             f"got {mode!r}")
+            raise ValidationError(f"mode must be 0 or N/2 = {n / 2} (a real mode shape), "
+                                  f"got {mode!r}")
         block = fourier_blocks(params)[mode]
         values, right = jnp.linalg.eig(block)
         i = jnp.argmax(values.imag)
@@ -299,10 +302,11 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
 
     **Arguments:**
 
-    - `params`: the chain parameters; `params.v_d` is ignored.
-    - `guess`: starting belt speed of Newton's method (a law with several Hopf
-        points, such as a Stribeck curve, gives the one Newton's method reaches).
-    - `rtol`, `atol`: Newton tolerances on v_d.
+    - `params`: the chain parameters (a `ChainParams`); `params.v_d` is ignored.
+    - `guess`: starting belt speed of Newton's method, a finite number > 0 (a law
+        with several Hopf points, such as a Stribeck curve, gives the one Newton's
+        method reaches).
+    - `rtol`, `atol`: Newton tolerances on v_d, finite numbers > 0.
 
     **Returns:**
 
@@ -311,8 +315,18 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
 
     **Raises:**
 
-    `RuntimeError` if Newton's method fails for a mode (try another `guess`).
+    `TypeError` if `params` is not a `ChainParams`, or `guess`, `rtol` or `atol` is
+    not a real number;
+    `ValidationError` naming `guess`, `rtol` or `atol` for a value that is not a
+    finite number > 0; `RuntimeError` if Newton's method fails for a mode (try
+    another `guess`).
     """
+    check_params(params)
+    for name, value, what in (("guess", guess, "belt speed"), ("rtol", rtol, "number"),
+                              ("atol", atol, "number")):
+        a = real_array(value, name)
+        if a.ndim != 0 or not (np.isfinite(a) and a > 0):
+            raise ValidationError(f"{name} must be a finite {what} > 0, got {a.tolist()!r}")
     v, omega, slope, residual, steps, result = hopf_modes(params, guess, rtol, atol)
     if not bool(jnp.all(result == optx.RESULTS.successful)) or not bool(jnp.all(v > 0)):
         raise RuntimeError(f"Newton's method did not find the Hopf point from v_d = {guess}; "

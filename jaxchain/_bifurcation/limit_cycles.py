@@ -12,6 +12,7 @@ from .hopf import critical_mode, hopf_point
 from .lyapunov import first_lyapunov_coefficient
 from .shooting import (PeriodicOrbit, ShootingOptions, describe_orbit, pack,
                        periodic_orbit, shooting_residual)
+from .._errors import ValidationError
 
 
 class ShootingResidual(eqx.Module):
@@ -76,10 +77,10 @@ def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
 
     **Raises:**
 
-    `ValueError` for offset <= 0 or a bad mode; `RuntimeError` if shooting fails.
+    `ValidationError` for offset <= 0 or a bad mode; `RuntimeError` if shooting fails.
     """
     if not offset > 0:
-        raise ValueError(f"offset must be > 0, got {offset!r}")
+        raise ValidationError(f"offset must be > 0, got {offset!r}")
     hopf = hopf_point(params)
     at_hopf = with_parameter(params, "v_d", hopf.v_d[mode])
     l1 = first_lyapunov_coefficient(at_hopf, mode)

@@ -68,7 +68,7 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0) -> Float[Arra
 
     **Raises:**
 
-    `ValueError` for a bad mode.
+    `ValidationError` for a bad mode.
     """
     n = params.n_osc
     omega, q, p = critical_mode(params, mode)

@@ -12,6 +12,7 @@ from .._custom_types import State
 from .._physics.model import vector_field
 from .._physics.params import ChainParams
 from .._physics.stick import min_slip_speed, sticks
+from .._errors import ValidationError
 
 
 class ShootingOptions(eqx.Module):
@@ -39,7 +40,7 @@ class ShootingOptions(eqx.Module):
 
     **Raises:**
 
-    `ValueError` naming the field for a non-positive tolerance or count.
+    `ValidationError` naming the field for a non-positive tolerance or count.
     """
 
     solver: diffrax.AbstractSolver = diffrax.Tsit5()
@@ -54,15 +55,15 @@ class ShootingOptions(eqx.Module):
 
     def __check_init__(self):
         if self.phase_oscillator < 0:
-            raise ValueError(f"ShootingOptions.phase_oscillator must be >= 0, got "
-                             f"{self.phase_oscillator!r}")
+            raise ValidationError(f"ShootingOptions.phase_oscillator must be >= 0, got "
+                                  f"{self.phase_oscillator!r}")
         if self.root_finder not in ("newton", "levenberg-marquardt"):
-            raise ValueError(f"ShootingOptions.root_finder must be 'newton' or "
-                             f"'levenberg-marquardt', got {self.root_finder!r}")
+            raise ValidationError(f"ShootingOptions.root_finder must be 'newton' or "
+                                  f"'levenberg-marquardt', got {self.root_finder!r}")
         for name in ("rtol", "atol", "max_steps", "newton_tol", "newton_steps", "n_samples"):
             value = getattr(self, name)
             if not value > 0:
-                raise ValueError(f"ShootingOptions.{name} must be > 0, got {value!r}")
+                raise ValidationError(f"ShootingOptions.{name} must be > 0, got {value!r}")
 
 
 def flow(params: ChainParams, y0: State, period, options: ShootingOptions,
@@ -265,18 +266,18 @@ def periodic_orbit(params: ChainParams, y0: State, period: float,
 
     **Raises:**
 
-    `ValueError` for a guess of the wrong shape, a non-positive period or a phase
+    `ValidationError` for a guess of the wrong shape, a non-positive period or a phase
     oscillator outside the chain;
     `RuntimeError` if Newton's method does not converge and `throw=True`.
     """
     y0 = jnp.asarray(y0, dtype=float)
     if y0.shape != (2, params.n_osc):
-        raise ValueError(f"y0 must have shape (2, {params.n_osc}), got {y0.shape}")
+        raise ValidationError(f"y0 must have shape (2, {params.n_osc}), got {y0.shape}")
     if not period > 0:
-        raise ValueError(f"period must be > 0, got {period!r}")
+        raise ValidationError(f"period must be > 0, got {period!r}")
     if options.phase_oscillator >= params.n_osc:
-        raise ValueError(f"ShootingOptions.phase_oscillator must be < n_osc = "
-                         f"{params.n_osc}, got {options.phase_oscillator}")
+        raise ValidationError(f"ShootingOptions.phase_oscillator must be < n_osc = "
+                              f"{params.n_osc}, got {options.phase_oscillator}")
     y0 = y0.at[1, options.phase_oscillator].set(0.0)
     orbit = _solve(params, pack(y0, period), options)
     if throw and not bool(orbit.converged):

@@ -16,6 +16,7 @@ from .continuation import (Branch, ContinuationOptions, ContinuationProblem, Pse
                            continuation)
 from .fold import FoldSystem, solve_fold
 from .hopf import hopf_modes
+from .._errors import ValidationError
 
 
 def hopf_vd(params: ChainParams, guess: float = 1.0) -> Float[Array, ""]:
@@ -192,12 +193,12 @@ def fold_curve(problem: ContinuationProblem, fold_solution: Float[Array, " 2n+1"
 
     **Raises:**
 
-    `ValueError` if `values` is empty or Newton's method does not converge from
-    `fold_solution`.
+    `ValidationError` if `values` is empty; `ValueError` (a failed computation, not a
+    `ValidationError`) if Newton's method does not converge from `fold_solution`.
     """
     values = np.asarray(values, dtype=float)
     if values.size == 0:
-        raise ValueError("values must not be empty")
+        raise ValidationError("values must not be empty")
     fold_solution, ok = solve_fold(problem, jnp.asarray(fold_solution, dtype=float))
     if not bool(ok):
         raise ValueError("fold_solution is not near a fold of problem: Newton's method on "
@@ -256,8 +257,8 @@ def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 
 
     **Raises:**
 
-    `ValueError` if `values` is empty or Newton's method does not converge from
-    `fold_solution`.
+    `ValidationError` if `values` is empty; `ValueError` (a failed computation, not a
+    `ValidationError`) if Newton's method does not converge from `fold_solution`.
     """
     values = np.sort(np.asarray(values, dtype=float))
     solutions, derivatives, converged, branches = fold_curve(

@@ -44,7 +44,8 @@ def param_default(name: str) -> float:
 
 
 class UsageError(Exception):
-    """A bad option or value: reported in one line, exit status 2."""
+    """A bad option or value, found by a command's own checks: reported in one line,
+    exit status 2, as the library's `ValidationError`."""
 
 
 class RunsFailed(Exception):
@@ -201,8 +202,8 @@ def one_line(err: BaseException) -> str:
 
 
 def usage_message(err: Exception) -> str:
-    """A ValueError from the library in one line, with field names replaced by
-    option names."""
+    """A `UsageError`, or a `ValidationError` of the library, in one line, with field
+    names replaced by option names."""
     text = one_line(err)
     for field, option in OPTION_NAMES.items():
         text = text.replace(field, option)

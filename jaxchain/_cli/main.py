@@ -8,6 +8,7 @@ import sys
 import jax
 import platformdirs
 
+from .._errors import ValidationError
 from .._programs import keep_programs
 from .common import Parser, RunsFailed, UsageError, one_line, usage_message
 
@@ -40,10 +41,23 @@ def build_parser(commands=COMMANDS) -> Parser:
 
 
 def exit_status(err: Exception) -> tuple[int, str]:
-    """The exit status and the one-line message of a command's failure: 2 for a usage
-    error (a bad option, or a `ValueError` of the library's validation), 1 for a
-    failed run (a `RuntimeError`, failed trajectories, or anything else)."""
-    if isinstance(err, (UsageError, ValueError)):
+    """The exit status and the one-line message of a command's failure.
+
+    **Arguments:**
+
+    - `err`: the exception that ended the command's run.
+
+    **Returns:**
+
+    `(status, message)`: status 2 for a usage error, that is a bad option
+    (`UsageError`) or an argument that the library's own checks refuse
+    (`ValidationError`), with field names shown as the options a user typed; status
+    1 for a failed run, that is any other exception: `RunsFailed` and `RuntimeError`
+    with their message, anything else (a `ValueError` of NumPy, xarray, zarr or
+    SciPy, a bracket that does not bracket, an `OSError`) with its type's name
+    before it. The message is one line.
+    """
+    if isinstance(err, (UsageError, ValidationError)):
         return 2, usage_message(err)
     if isinstance(err, (RunsFailed, RuntimeError)):
         return 1, one_line(err)
@@ -82,9 +96,12 @@ def main(argv=None) -> int:
 
     **Returns:**
 
-    The exit status: 0 on success, 1 when a run failed, 2 for a usage error, 130
-    when interrupted. A failure is one line on stderr, never a traceback (set
-    JAXCHAIN_TRACEBACK=1 to let the exception through).
+    The exit status (`exit_status`): 0 on success; 2 for a usage error, that is a bad
+    option or an argument that the library's validation refuses (`ValidationError`)
+    before anything runs; 1 when a run failed, whatever the error raised during it
+    (a `ValueError` of NumPy or xarray included); 130 when interrupted. A failure is
+    one line on stderr, never a traceback (set JAXCHAIN_TRACEBACK=1 to let the
+    exception through).
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     named = [a for a in argv if a in COMMANDS][:1]

@@ -16,6 +16,7 @@ from .._bifurcation.fold import solve_fold
 from .._physics.initial import excited_block
 from .._physics.params import ChainParams
 from .edges import localized_fold
+from .._errors import ValidationError
 
 
 def pattern_deviations(theta: Float[Array, " period"], budget: float, n_osc: int,
@@ -198,11 +199,11 @@ def intentional_mistuning(params: ChainParams = ChainParams(n_osc=4), *, budget:
 
     **Raises:**
 
-    `ValueError` for a chain that is not a homogeneous ring of at least 2, a bad
+    `ValidationError` for a chain that is not a homogeneous ring of at least 2, a bad
     budget or sense; `RuntimeError` when a fold cannot be followed.
     """
     if sense not in ("lower", "raise"):
-        raise ValueError(f"sense must be 'lower' or 'raise', got {sense!r}")
+        raise ValidationError(f"sense must be 'lower' or 'raise', got {sense!r}")
     sign = 1.0 if sense == "lower" else -1.0
     problem, solutions, homogeneous = start or design_problems(params, budget)
     period = params.n_osc
@@ -255,16 +256,16 @@ def design_problems(params: ChainParams, budget: float):
 
     **Raises:**
 
-    `ValueError` for a chain that is not a homogeneous ring of at least 2, or a
+    `ValidationError` for a chain that is not a homogeneous ring of at least 2, or a
     budget outside (0, 1); `RuntimeError` when no fold is found.
     """
     n = params.n_osc
     if params.boundary != "ring" or n < 2 or np.ndim(params.stiffness) \
             or np.ndim(params.xi) or np.ndim(params.load):
-        raise ValueError("params: the design starts from a homogeneous ring of at least "
-                         "2 oscillators")
+        raise ValidationError("params: the design starts from a homogeneous ring of at least "
+                              "2 oscillators")
     if not (isinstance(budget, (int, float)) and 0 < budget < 1):
-        raise ValueError(f"budget must lie in (0, 1), got {budget!r}")
+        raise ValidationError(f"budget must lie in (0, 1), got {budget!r}")
     centre = int(np.flatnonzero(excited_block(n, 1, "ring"))[0])
     fold, problem = localized_fold(params, centre)
     if fold is None:

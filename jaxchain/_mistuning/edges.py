@@ -21,6 +21,7 @@ from .._physics.initial import OutOfPhaseExcitation, initial_states
 from .._physics.params import ChainParams, stack_chains, with_parameter
 from .._snake import SNAKE_SHOOTING, _turning_point
 from .._store import read_dataset, write_dataset
+from .._errors import ValidationError
 
 #: Each simulation of the bisection: long enough for a state just past its fold
 #: to die out (it lingers near the ghost of the fold for a time that grows as the
@@ -86,12 +87,12 @@ def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: fl
 
     **Raises:**
 
-    `ValueError` unless 0 < low < high and steps >= 1.
+    `ValidationError` unless 0 < low < high and steps >= 1.
     """
     if not 0 < low < high:
-        raise ValueError(f"low, high: need 0 < low < high, got {low!r}, {high!r}")
+        raise ValidationError(f"low, high: need 0 < low < high, got {low!r}, {high!r}")
     if steps < 1:
-        raise ValueError(f"steps must be >= 1, got {steps!r}")
+        raise ValidationError(f"steps must be >= 1, got {steps!r}")
     n_chains, n_osc = len(chains), chains[0].n_osc
     settings = dict(chains=[{f.name: getattr(c, f.name) for f in dataclasses.fields(c)
                               if f.name != "v_d"} for c in chains],

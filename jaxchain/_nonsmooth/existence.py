@@ -9,6 +9,7 @@ import optimistix as optx
 from .._physics.friction import static_friction
 from .._physics.params import ChainParams, with_parameter
 from .switching import mode_field
+from .._errors import ValidationError
 
 
 def _slip_arc_peak(v_d, args):
@@ -76,11 +77,13 @@ def stick_slip_existence_limit(params: ChainParams = ChainParams(n_osc=1),
 
     **Raises:**
 
-    `ValueError` if the bracket does not contain the limit, or for n_osc != 1.
+    `ValidationError` for n_osc != 1. `ValueError` (a failed computation, not a
+    `ValidationError`) when steady sliding has no Hopf point to start from and
+    `lower` is not given, or when the bracket does not contain the limit.
     """
     if params.n_osc != 1:
-        raise ValueError(f"the existence limit is that of one oscillator (n_osc = 1), got "
-                         f"n_osc = {params.n_osc}; see single_oscillator")
+        raise ValidationError(f"the existence limit is that of one oscillator (n_osc = 1), got "
+                              f"n_osc = {params.n_osc}; see single_oscillator")
     if lower is None:
         from .._bifurcation.hopf import hopf_point, hopf_vd_analytic  # for a default
 

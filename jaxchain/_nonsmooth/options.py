@@ -4,6 +4,8 @@ import math
 
 import equinox as eqx
 
+from .._errors import ValidationError
+
 
 class NonsmoothOptions(eqx.Module):
     """Horizon, tolerances and bookkeeping of `simulate_nonsmooth`.
@@ -33,7 +35,7 @@ class NonsmoothOptions(eqx.Module):
 
     **Raises:**
 
-    `ValueError` naming the field for t_end <= 0, transient outside [0, t_end), or
+    `ValidationError` naming the field for t_end <= 0, transient outside [0, t_end), or
     a tolerance, length or budget that is not a finite number > 0.
     """
 
@@ -53,11 +55,11 @@ class NonsmoothOptions(eqx.Module):
                      "max_steps", "max_events", "log_size"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ValueError(f"NonsmoothOptions.{name} must be a finite number > 0, "
-                                 f"got {value!r}")
+                raise ValidationError(f"NonsmoothOptions.{name} must be a finite number > 0, "
+                                      f"got {value!r}")
         if not (math.isfinite(self.transient) and 0 <= self.transient < self.t_end):
-            raise ValueError(f"NonsmoothOptions.transient must lie in [0, t_end = "
-                             f"{self.t_end}), got {self.transient!r}")
+            raise ValidationError(f"NonsmoothOptions.transient must lie in [0, t_end = "
+                                  f"{self.t_end}), got {self.transient!r}")
 
     def phases(self) -> list[tuple[float, float, int, int]]:
         """The phases of a run as (start, chunk length, number of chunks, half): the

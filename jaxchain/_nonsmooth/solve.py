@@ -284,7 +284,7 @@ def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State
 
     **Raises:**
 
-    `ValueError` for a state of the wrong shape; `RuntimeError` with advice when the
+    `ValidationError` for a state of the wrong shape; `RuntimeError` with advice when the
     run fails and `throw=True`.
     """
     if not isinstance(y0, AbstractInitialCondition):

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, PyTree
 
 from .._options import SimulationOptions
+from .._errors import ValidationError
 
 
 class Chunk(eqx.Module):
@@ -70,14 +71,14 @@ def window_start(t_start: float | None, options: SimulationOptions) -> float:
 
     **Raises:**
 
-    `ValueError` when `t_start` lies outside [transient, t_end).
+    `ValidationError` when `t_start` lies outside [transient, t_end).
     """
     if t_start is None:
         return options.transient
     if not options.transient <= t_start < options.t_end:
-        raise ValueError(f"an observer's t_start must lie in [transient = "
-                         f"{options.transient:g}, t_end = {options.t_end:g}), "
-                         f"got {t_start!r}")
+        raise ValidationError(f"an observer's t_start must lie in [transient = "
+                              f"{options.transient:g}, t_end = {options.t_end:g}), "
+                              f"got {t_start!r}")
     return float(t_start)
 
 

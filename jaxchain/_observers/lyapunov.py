@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 
 from .base import AbstractObserver
+from .._errors import ValidationError
 
 
 class LargestLyapunov(AbstractObserver):
@@ -56,8 +57,8 @@ class LargestLyapunov(AbstractObserver):
     def _start(self, options):
         start = options.transient if self.t_start is None else self.t_start
         if not 0 <= start < options.t_end:
-            raise ValueError(f"LargestLyapunov.t_start must lie in [0, t_end = "
-                             f"{options.t_end:g}), got {start!r}")
+            raise ValidationError(f"LargestLyapunov.t_start must lie in [0, t_end = "
+                                  f"{options.t_end:g}), got {start!r}")
         return float(start)
 
     def history_times(self, options):

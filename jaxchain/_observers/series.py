@@ -7,6 +7,7 @@ import jax.numpy as jnp
 
 from .base import AbstractObserver, window_start
 from .crossings import hermite_position, hermite_velocity
+from .._errors import ValidationError
 
 
 class TimeSeries(AbstractObserver):
@@ -28,7 +29,7 @@ class TimeSeries(AbstractObserver):
 
     **Raises:**
 
-    `ValueError` for dt <= 0 or a window outside [transient, t_end].
+    `ValidationError` for dt <= 0 or a window outside [transient, t_end].
     """
 
     oscillators: tuple[int, ...] | None = eqx.field(static=True, default=None)
@@ -39,12 +40,12 @@ class TimeSeries(AbstractObserver):
     def times(self, options):
         """The series' times, shape (times,)."""
         if not (math.isfinite(self.dt) and self.dt > 0):
-            raise ValueError(f"TimeSeries.dt must be a finite number > 0, got {self.dt!r}")
+            raise ValidationError(f"TimeSeries.dt must be a finite number > 0, got {self.dt!r}")
         start = window_start(self.t_start, options)
         stop = options.t_end if self.t_stop is None else self.t_stop
         if not start < stop <= options.t_end:
-            raise ValueError(f"TimeSeries.t_stop must lie in (t_start = {start:g}, "
-                             f"t_end = {options.t_end:g}], got {stop!r}")
+            raise ValidationError(f"TimeSeries.t_stop must lie in (t_start = {start:g}, "
+                                  f"t_end = {options.t_end:g}], got {stop!r}")
         return start + self.dt * jnp.arange(math.floor((stop - start) / self.dt + 1e-9) + 1)
 
     def init(self, y0, args, options):

@@ -10,6 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .._errors import ValidationError
+
 if TYPE_CHECKING:
     from .params import ChainParams
 
@@ -29,10 +31,10 @@ def n_links(boundary: str, n_osc: int) -> int:
 
     **Raises:**
 
-    `ValueError` for an unknown boundary.
+    `ValidationError` for an unknown boundary.
     """
     if boundary not in BOUNDARIES:
-        raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, got {boundary!r}")
+        raise ValidationError(f"boundary must be one of {', '.join(BOUNDARIES)}, got {boundary!r}")
     return {"ring": n_osc, "free": n_osc - 1, "fixed": n_osc + 1}[boundary]
 
 
@@ -141,7 +143,7 @@ class Mistuning(eqx.Module):
 
     **Raises:**
 
-    `ValueError` for a negative or non-finite sigma, or a seed that is not an
+    `ValidationError` for a negative or non-finite sigma, or a seed that is not an
     integer.
     """
 
@@ -151,9 +153,10 @@ class Mistuning(eqx.Module):
     def __check_init__(self):
         if not (isinstance(self.sigma, (int, float, np.floating, np.integer))
                 and np.isfinite(self.sigma) and self.sigma >= 0):
-            raise ValueError(f"Mistuning.sigma must be a finite number >= 0, got {self.sigma!r}")
+            raise ValidationError(f"Mistuning.sigma must be a finite number >= 0, got "
+                                  f"{self.sigma!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
-            raise ValueError(f"Mistuning.seed must be an integer, got {self.seed!r}")
+            raise ValidationError(f"Mistuning.seed must be an integer, got {self.seed!r}")
 
     def deviations(self, n_osc: int) -> np.ndarray:
         """delta_n, shape (n_osc,): sigma times standard normal draws of the key."""

@@ -11,6 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from .._errors import ValidationError
+
 if TYPE_CHECKING:
     from .params import ChainParams
 
@@ -51,7 +53,7 @@ def check_values(owner: str, values: dict, rules: dict) -> None:
 
     **Raises:**
 
-    `TypeError` for a value that is not real numbers; `ValueError` naming the
+    `TypeError` for a value that is not real numbers; `ValidationError` naming the
     field for a non-finite value or one that breaks its rule.
     """
     for name, value in values.items():
@@ -63,10 +65,10 @@ def check_values(owner: str, values: dict, rules: dict) -> None:
             continue
         shown = a.item() if a.ndim == 0 else a
         if not np.all(np.isfinite(a)):
-            raise ValueError(f"{owner}.{name} must be finite, got {shown!r}")
+            raise ValidationError(f"{owner}.{name} must be finite, got {shown!r}")
         ok, requirement = rules.get(name, (lambda a: True, ""))
         if not np.all(ok(a)):
-            raise ValueError(f"{owner}.{name} must be {requirement}, got {shown!r}")
+            raise ValidationError(f"{owner}.{name} must be {requirement}, got {shown!r}")
 
 
 def _positive(a):
@@ -129,7 +131,7 @@ class ExponentialDecay(AbstractFrictionLaw):
 
     **Raises:**
 
-    `ValueError` naming the field for a non-finite value, mu_d <= 0, v0 <= 0 or
+    `ValidationError` naming the field for a non-finite value, mu_d <= 0, v0 <= 0 or
     mu_st < mu_d.
     """
 
@@ -141,8 +143,8 @@ class ExponentialDecay(AbstractFrictionLaw):
         self.check()
         mu_st, mu_d = concrete(self.mu_st), concrete(self.mu_d)
         if mu_st is not None and mu_d is not None and not np.all(mu_st >= mu_d):
-            raise ValueError(f"ExponentialDecay.mu_st must be >= mu_d = {mu_d.tolist()!r}, "
-                             f"got {mu_st.tolist()!r}")
+            raise ValidationError(f"ExponentialDecay.mu_st must be >= mu_d = {mu_d.tolist()!r}, "
+                                  f"got {mu_st.tolist()!r}")
 
     @classmethod
     def rules(cls):
@@ -171,7 +173,7 @@ class Stribeck(AbstractFrictionLaw):
 
     **Raises:**
 
-    `ValueError` naming the field for a non-finite value, mu_c <= 0, v_s <= 0,
+    `ValidationError` naming the field for a non-finite value, mu_c <= 0, v_s <= 0,
     delta <= 0, viscous < 0 or mu_s < mu_c.
     """
 
@@ -185,8 +187,8 @@ class Stribeck(AbstractFrictionLaw):
         self.check()
         mu_s, mu_c = concrete(self.mu_s), concrete(self.mu_c)
         if mu_s is not None and mu_c is not None and not np.all(mu_s >= mu_c):
-            raise ValueError(f"Stribeck.mu_s must be >= mu_c = {mu_c.tolist()!r}, "
-                             f"got {mu_s.tolist()!r}")
+            raise ValidationError(f"Stribeck.mu_s must be >= mu_c = {mu_c.tolist()!r}, "
+                                  f"got {mu_s.tolist()!r}")
 
     @classmethod
     def rules(cls):
@@ -222,7 +224,7 @@ class Polynomial(AbstractFrictionLaw):
 
     **Raises:**
 
-    `ValueError` naming the field for a non-finite value, c0 <= 0, c3 < 0, or
+    `ValidationError` naming the field for a non-finite value, c0 <= 0, c3 < 0, or
     coefficients for which mu(v_rel) <= 0 at some |v_rel| <= 100.
     """
 
@@ -238,8 +240,8 @@ class Polynomial(AbstractFrictionLaw):
             s = np.linspace(0.0, 100.0, 100001)[:, None]
             mu = c[0] + c[1] * s + c[2] * s**2 + c[3] * s**3
             if not np.all(mu > 0):
-                raise ValueError("Polynomial coefficients must keep mu(v_rel) > 0 for "
-                                 f"|v_rel| <= 100, got c0..c3 = {[a.tolist() for a in c]!r}")
+                raise ValidationError("Polynomial coefficients must keep mu(v_rel) > 0 for "
+                                      f"|v_rel| <= 100, got c0..c3 = {[a.tolist() for a in c]!r}")
 
     @classmethod
     def rules(cls):
@@ -259,7 +261,7 @@ class Coulomb(AbstractFrictionLaw):
 
     **Raises:**
 
-    `ValueError` for a non-finite or non-positive mu.
+    `ValidationError` for a non-finite or non-positive mu.
     """
 
     mu: ArrayLike = eqx.field(converter=as_parameter, default=0.5)

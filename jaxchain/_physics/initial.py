@@ -12,6 +12,7 @@ from .._custom_types import State
 from .chain import BOUNDARIES
 from .model import steady_sliding
 from .params import ChainParams
+from .._errors import ValidationError
 
 
 def excited_block(n_osc: int, n_excited: int, boundary: str = "ring"
@@ -38,12 +39,12 @@ def excited_block(n_osc: int, n_excited: int, boundary: str = "ring"
 
     **Raises:**
 
-    `ValueError` if `n_excited` is outside [0, n_osc], or for an unknown boundary.
+    `ValidationError` if `n_excited` is outside [0, n_osc], or for an unknown boundary.
     """
     if not 0 <= n_excited <= n_osc:
-        raise ValueError(f"n_excited must lie in [0, {n_osc}], got {n_excited}")
+        raise ValidationError(f"n_excited must lie in [0, {n_osc}], got {n_excited}")
     if boundary not in BOUNDARIES:
-        raise ValueError(f"boundary must be one of {', '.join(BOUNDARIES)}, got {boundary!r}")
+        raise ValidationError(f"boundary must be one of {', '.join(BOUNDARIES)}, got {boundary!r}")
     centre = n_osc // 2  # 0-based index of oscillator N//2 + 1
     start = centre - (n_excited - 1) // 2
     if boundary != "ring":
@@ -100,7 +101,7 @@ class OutOfPhaseExcitation(AbstractInitialCondition):
     def __call__(self, params: ChainParams) -> State:
         excited = jnp.asarray(self.excited)
         if excited.shape != (params.n_osc,):
-            raise ValueError(
+            raise ValidationError(
                 f"excited must have shape ({params.n_osc},), got {excited.shape}"
             )
         n = jnp.arange(1, params.n_osc + 1)
@@ -135,7 +136,7 @@ class GivenState(AbstractInitialCondition):
 
     **Raises:**
 
-    `TypeError` when `y0` is not real numbers; `ValueError` when called with
+    `TypeError` when `y0` is not real numbers; `ValidationError` when called with
     parameters whose `n_osc` does not match the shape.
     """
 
@@ -144,7 +145,7 @@ class GivenState(AbstractInitialCondition):
     def __call__(self, params: ChainParams) -> State:
         n = params.n_osc
         if self.y0.shape not in ((2, n), (2 * n,)):
-            raise ValueError(
+            raise ValidationError(
                 f"y0 must have shape (2, {n}) or ({2 * n},), got {self.y0.shape}"
             )
         return jnp.reshape(self.y0, (2, n)).astype(float)
@@ -156,13 +157,13 @@ def batch_length(ics: AbstractInitialCondition) -> int:
 
     **Raises:**
 
-    `ValueError` when the array fields have no common leading axis.
+    `ValidationError` when the array fields have no common leading axis.
     """
     lengths = {np.shape(x)[0] for x in jax.tree_util.tree_leaves(ics)
                if eqx.is_array(x) and np.ndim(x) > 0}
     if len(lengths) != 1:
-        raise ValueError(f"ics must carry one leading batch axis on its array fields, "
-                         f"got leading lengths {sorted(lengths)}")
+        raise ValidationError(f"ics must carry one leading batch axis on its array fields, "
+                              f"got leading lengths {sorted(lengths)}")
     return lengths.pop()
 
 
@@ -203,10 +204,10 @@ def localized_family(n_osc: int, family: str = "eq8", boundary: str = "ring"
 
     **Raises:**
 
-    `ValueError` for an unknown family.
+    `ValidationError` for an unknown family.
     """
     if family not in FAMILIES:
-        raise ValueError(f"ics must be one of {sorted(FAMILIES)}, got {family!r}")
+        raise ValidationError(f"ics must be one of {sorted(FAMILIES)}, got {family!r}")
     masks = np.stack([excited_block(n_osc, k, boundary) for k in range(1, n_osc + 1)])
     one = FAMILIES[family](masks[0])
     return OutOfPhaseExcitation(

@@ -10,6 +10,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .chain import stiffness_matrix
+from .._errors import ValidationError
 
 
 def passband_frequency(eta_c: float, theta) -> np.ndarray:
@@ -81,16 +82,16 @@ def localization_factor(eta_c: float, sigma: float, omega2, *, cells: int = 200_
 
     **Raises:**
 
-    `ValueError` for eta_c <= 0, sigma < 0, or counts below 1 (batches below 2).
+    `ValidationError` for eta_c <= 0, sigma < 0, or counts below 1 (batches below 2).
     """
     if not np.ndim(eta_c) == 0 or not float(eta_c) > 0:
-        raise ValueError(f"eta_c must be a number > 0, got {eta_c!r}")
+        raise ValidationError(f"eta_c must be a number > 0, got {eta_c!r}")
     if not float(sigma) >= 0:
-        raise ValueError(f"sigma must be >= 0, got {sigma!r}")
+        raise ValidationError(f"sigma must be >= 0, got {sigma!r}")
     for name, value, least in (("cells", cells, 1), ("batches", batches, 2),
                                ("warmup", warmup, 0)):
         if int(value) != value or value < least:
-            raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")
+            raise ValidationError(f"{name} must be an integer >= {least}, got {value!r}")
     omega2 = np.asarray(omega2, dtype=float)
     if float(sigma) == 0:
         a = np.abs(1.0 + 2.0 * eta_c - omega2) / eta_c
@@ -142,10 +143,10 @@ def damped_decay(eta_c: float, omega2, damping: float) -> np.ndarray:
 
     **Raises:**
 
-    `ValueError` for eta_c <= 0.
+    `ValidationError` for eta_c <= 0.
     """
     if not np.ndim(eta_c) == 0 or not float(eta_c) > 0:
-        raise ValueError(f"eta_c must be a number > 0, got {eta_c!r}")
+        raise ValidationError(f"eta_c must be a number > 0, got {eta_c!r}")
     omega2 = np.asarray(omega2, dtype=float)
     a = (1.0 + 2.0 * eta_c - omega2 + 1j * np.sqrt(omega2) * damping) / eta_c
     return np.abs(np.real(np.arccosh(a / 2)))

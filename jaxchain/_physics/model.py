@@ -10,6 +10,7 @@ from .._custom_types import State
 from .chain import coupling_energy, coupling_force, is_homogeneous_ring, stiffness_matrix
 from .friction import smoothed_friction_force
 from .params import ChainParams
+from .._errors import ValidationError
 
 
 def vector_field(t, y: State | Float[Array, " 2n"],
@@ -37,7 +38,7 @@ def vector_field(t, y: State | Float[Array, " 2n"],
 
     **Raises:**
 
-    `ValueError` if the shape of `y` does not match `params.n_osc`.
+    `ValidationError` if the shape of `y` does not match `params.n_osc`.
     """
     elastic, friction = split_vector_field(t, y, params)
     return elastic + friction
@@ -59,12 +60,12 @@ def split_vector_field(t, y: State | Float[Array, " 2n"], params: ChainParams):
 
     **Raises:**
 
-    `ValueError` if the shape of `y` does not match `params.n_osc`.
+    `ValidationError` if the shape of `y` does not match `params.n_osc`.
     """
     shape = jnp.shape(y)
     n = params.n_osc
     if shape not in ((2, n), (2 * n,)):
-        raise ValueError(f"state must have shape (2, {n}) or ({2 * n},), got {shape}")
+        raise ValidationError(f"state must have shape (2, {n}) or ({2 * n},), got {shape}")
     x, v = jnp.reshape(y, (2, n))
     elastic = jnp.stack([v, -2 * params.xi * v - params.stiffness * x
                          - coupling_force(params, x)])

@@ -11,6 +11,7 @@ from jaxtyping import ArrayLike
 
 from .chain import BOUNDARIES, Mistuning, n_links
 from .friction import AbstractFrictionLaw, ExponentialDecay, as_parameter, check_values
+from .._errors import ValidationError
 
 #: The fields that hold one value per chain (never per oscillator).
 CHAIN_SCALARS = ("v_d", "eps")
@@ -78,7 +79,7 @@ class ChainParams(eqx.Module):
 
     **Raises:**
 
-    `ValueError` naming the field for a non-finite value, n_osc < 1, xi < 0,
+    `ValidationError` naming the field for a non-finite value, n_osc < 1, xi < 0,
     eta_c < 0, v_d <= 0, eps <= 0, stiffness <= 0, load <= 0, a field of the wrong
     shape, an unknown boundary, a friction law that is not an
     `AbstractFrictionLaw`, both `friction` and `mu_st`/`mu_d`/`v0`, or a
@@ -106,8 +107,8 @@ class ChainParams(eqx.Module):
         if friction is None:
             friction = ExponentialDecay(**shorthand)
         elif shorthand:
-            raise ValueError(f"ChainParams takes either friction or {', '.join(shorthand)} "
-                             "(the shorthand of ExponentialDecay), not both")
+            raise ValidationError(f"ChainParams takes either friction or {', '.join(shorthand)} "
+                                  "(the shorthand of ExponentialDecay), not both")
         self.n_osc = n_osc
         self.xi = xi
         self.eta_c = eta_c
@@ -121,19 +122,19 @@ class ChainParams(eqx.Module):
 
     def __check_init__(self):
         if isinstance(self.n_osc, bool) or not isinstance(self.n_osc, (int, np.integer)):
-            raise ValueError(f"ChainParams.n_osc must be an integer, got {self.n_osc!r}")
+            raise ValidationError(f"ChainParams.n_osc must be an integer, got {self.n_osc!r}")
         if self.n_osc < 1:
-            raise ValueError(f"ChainParams.n_osc must be >= 1, got {self.n_osc!r}")
+            raise ValidationError(f"ChainParams.n_osc must be >= 1, got {self.n_osc!r}")
         if not isinstance(self.boundary, str) or self.boundary not in BOUNDARIES:
-            raise ValueError(f"ChainParams.boundary must be one of {', '.join(BOUNDARIES)}, "
-                             f"got {self.boundary!r}")
+            raise ValidationError(f"ChainParams.boundary must be one of {', '.join(BOUNDARIES)}, "
+                                  f"got {self.boundary!r}")
         if not isinstance(self.friction, AbstractFrictionLaw):
-            raise ValueError(f"ChainParams.friction must be a friction law (jaxchain."
-                             f"ExponentialDecay, Stribeck, Polynomial, Coulomb or another "
-                             f"AbstractFrictionLaw), got {type(self.friction).__name__}")
+            raise ValidationError(f"ChainParams.friction must be a friction law (jaxchain."
+                                  f"ExponentialDecay, Stribeck, Polynomial, Coulomb or another "
+                                  f"AbstractFrictionLaw), got {type(self.friction).__name__}")
         if self.mistuning is not None and not isinstance(self.mistuning, Mistuning):
-            raise ValueError(f"ChainParams.mistuning must be a jaxchain.Mistuning or None, "
-                             f"got {type(self.mistuning).__name__}")
+            raise ValidationError(f"ChainParams.mistuning must be a jaxchain.Mistuning or None, "
+                                  f"got {type(self.mistuning).__name__}")
         positive = (lambda a: a > 0, "> 0")
         non_negative = (lambda a: a >= 0, ">= 0")
         check_values("ChainParams", {name: getattr(self, name) for name in
@@ -145,8 +146,9 @@ class ChainParams(eqx.Module):
             given = np.asarray(self.stiffness, dtype=float)
             if not np.array_equal(np.broadcast_to(given, (self.n_osc,)),
                                   self.mistuning.stiffness(self.n_osc)):
-                raise ValueError("ChainParams.stiffness is not the one its mistuning record "
-                                 f"{self.mistuning} draws; set mistuning=None to give your own")
+                raise ValidationError("ChainParams.stiffness is not the one its mistuning "
+                                      f"record {self.mistuning} draws; set mistuning=None "
+                                      "to give your own")
 
     def _check_shapes(self):
         n, links = self.n_osc, n_links(self.boundary, self.n_osc)
@@ -155,12 +157,12 @@ class ChainParams(eqx.Module):
         for name, shapes in expected.items():
             shape = np.shape(getattr(self, name))
             if shape not in shapes:
-                raise ValueError(_shape_message(f"ChainParams.{name}", shape, shapes))
+                raise ValidationError(_shape_message(f"ChainParams.{name}", shape, shapes))
         for name in self.friction.parameter_names():
             shape = np.shape(getattr(self.friction, name))
             if shape not in ((), (n,)):
-                raise ValueError(_shape_message(f"{type(self.friction).__name__}.{name}",
-                                                shape, ((), (n,))))
+                raise ValidationError(_shape_message(f"{type(self.friction).__name__}.{name}",
+                                                     shape, ((), (n,))))
 
 
 def _shape_message(name, shape, shapes) -> str:
@@ -190,7 +192,7 @@ def mistune(params: ChainParams, sigma: float, seed: int) -> ChainParams:
 
     **Raises:**
 
-    `ValueError` for a negative sigma or a seed that is not an integer, or when the
+    `ValidationError` for a negative sigma or a seed that is not an integer, or when the
     draw gives a stiffness <= 0 (sigma too large).
     """
     record = Mistuning(sigma=sigma, seed=seed)
@@ -206,10 +208,10 @@ def single_oscillator(params: ChainParams, index: int = 0) -> ChainParams:
 
     **Raises:**
 
-    `ValueError` for an index outside [0, n_osc).
+    `ValidationError` for an index outside [0, n_osc).
     """
     if not 0 <= index < params.n_osc:
-        raise ValueError(f"index must lie in [0, {params.n_osc}), got {index!r}")
+        raise ValidationError(f"index must lie in [0, {params.n_osc}), got {index!r}")
 
     def pick(value):
         a = np.asarray(value, dtype=float)
@@ -254,13 +256,13 @@ def parameter_lens(where: Callable | str, params: ChainParams | None = None) -> 
 
     **Raises:**
 
-    `ValueError` for an unknown name (for `params`' friction law, eq. (1) if None).
+    `ValidationError` for an unknown name (for `params`' friction law, eq. (1) if None).
     """
     if not isinstance(where, str):
         return where
     names = parameter_names(params)
     if where not in names:
-        raise ValueError(f"unknown parameter {where!r}: choose one of {', '.join(names)}")
+        raise ValidationError(f"unknown parameter {where!r}: choose one of {', '.join(names)}")
     return _Field(where)
 
 
@@ -282,7 +284,7 @@ def parameter_name(where: Callable | str, params: ChainParams | None = None) -> 
 
     **Raises:**
 
-    `ValueError` for an unknown name, for n_osc (it sets the shapes: it cannot vary
+    `ValidationError` for an unknown name, for n_osc (it sets the shapes: it cannot vary
     within one compiled run), or for a lens that does not return one field.
     """
     if isinstance(where, str):
@@ -295,17 +297,17 @@ def parameter_name(where: Callable | str, params: ChainParams | None = None) -> 
     try:
         picked = where(probe)
     except Exception as err:
-        raise ValueError(f"where must pick one field of ChainParams, got a lens that "
-                         f"raised {type(err).__name__}: {err}") from None
+        raise ValidationError(f"where must pick one field of ChainParams, got a lens that "
+                              f"raised {type(err).__name__}: {err}") from None
     if picked is probe.n_osc and isinstance(picked, int):
-        raise ValueError("n_osc cannot be swept: it sets the shapes of a compiled run; "
-                         "run one sweep per n_osc")
+        raise ValidationError("n_osc cannot be swept: it sets the shapes of a compiled run; "
+                              "run one sweep per n_osc")
     for name in parameter_names(base):
         if picked is _Field(name)(probe):
             return name
-    raise ValueError(f"where must pick one field of ChainParams "
-                     f"({', '.join(parameter_names(base))}), got a lens that returns "
-                     f"{picked!r}")
+    raise ValidationError(f"where must pick one field of ChainParams "
+                          f"({', '.join(parameter_names(base))}), got a lens that returns "
+                          f"{picked!r}")
 
 
 def parameter_value(params: ChainParams, where: Callable | str):
@@ -333,7 +335,7 @@ def with_parameter(params: ChainParams, where: Callable | str, value) -> ChainPa
 
     **Raises:**
 
-    `ValueError` naming the field for a bad value or shape, or for an unknown name.
+    `ValidationError` naming the field for a bad value or shape, or for an unknown name.
     """
     changed = eqx.tree_at(parameter_lens(where, params), params, value)
     law = changed.friction
@@ -352,16 +354,16 @@ def stack_chains(chains: list[ChainParams]) -> ChainParams:
 
     **Raises:**
 
-    `ValueError` for an empty list or chains of different structure.
+    `ValidationError` for an empty list or chains of different structure.
     """
     if not chains:
-        raise ValueError("stack_chains needs at least one chain")
+        raise ValidationError("stack_chains needs at least one chain")
     plain = [ChainParams(**({f.name: getattr(c, f.name) for f in dataclasses.fields(c)}
                             | {"mistuning": None})) for c in chains]
     structures = {jax.tree_util.tree_structure(c) for c in plain}
     if len(structures) != 1:
-        raise ValueError("stack_chains needs chains of one structure (n_osc, boundary, "
-                         "friction law)")
+        raise ValidationError("stack_chains needs chains of one structure (n_osc, boundary, "
+                              "friction law)")
 
     def stack(*xs):
         shape = np.broadcast_shapes(*(np.shape(x) for x in xs))

@@ -6,6 +6,7 @@ import numpy as np
 from .chain import Mistuning
 from .friction import FRICTION_LAWS
 from .params import ChainParams, _chain_fields
+from .._errors import ValidationError
 
 #: Keys of a record besides the array fields and the law's parameters.
 _META = ("n_osc", "boundary", "friction", "mistuning_sigma", "mistuning_seed")
@@ -26,14 +27,14 @@ def chain_record(params: ChainParams) -> dict:
 
     **Raises:**
 
-    `ValueError` for a friction law that is not in `FRICTION_LAWS` (it could not
+    `ValidationError` for a friction law that is not in `FRICTION_LAWS` (it could not
     be rebuilt by name).
     """
     names = {cls: name for name, cls in FRICTION_LAWS.items()}
     law = type(params.friction)
     if law not in names:
-        raise ValueError(f"a chain with the friction law {law.__name__} cannot be recorded "
-                         f"by name; the named laws are {', '.join(FRICTION_LAWS)}")
+        raise ValidationError(f"a chain with the friction law {law.__name__} cannot be recorded "
+                              f"by name; the named laws are {', '.join(FRICTION_LAWS)}")
     out = {"n_osc": params.n_osc, "boundary": params.boundary, "friction": names[law]}
     out |= {name: _plain(getattr(params, name)) for name in _chain_fields()}
     out |= {name: _plain(getattr(params.friction, name)) for name in law.parameter_names()}
@@ -60,22 +61,22 @@ def chain_from_record(record: dict, base: ChainParams | None = None) -> ChainPar
 
     **Raises:**
 
-    `ValueError` for an unknown key, law name or boundary, or a bad value (naming
+    `ValidationError` for an unknown key, law name or boundary, or a bad value (naming
     the field).
     """
     base = ChainParams() if base is None else base
     record = dict(record)
     unknown_law = record.get("friction", None)
     if unknown_law is not None and unknown_law not in FRICTION_LAWS:
-        raise ValueError(f"friction must be one of {', '.join(FRICTION_LAWS)}, "
-                         f"got {unknown_law!r}")
+        raise ValidationError(f"friction must be one of {', '.join(FRICTION_LAWS)}, "
+                              f"got {unknown_law!r}")
     law = FRICTION_LAWS[record.pop("friction")] if "friction" in record else type(base.friction)
     law_names = law.parameter_names()
     allowed = set(_META) | set(_chain_fields()) | set(law_names)
     unknown = sorted(set(record) - allowed)
     if unknown:
-        raise ValueError(f"unknown chain setting {unknown[0]!r}: the settings are "
-                         f"{', '.join(sorted(allowed - {'friction'}))} and friction")
+        raise ValidationError(f"unknown chain setting {unknown[0]!r}: the settings are "
+                              f"{', '.join(sorted(allowed - {'friction'}))} and friction")
     if law is type(base.friction):
         law_values = {name: getattr(base.friction, name) for name in law_names}
     else:
@@ -92,7 +93,7 @@ def chain_from_record(record: dict, base: ChainParams | None = None) -> ChainPar
         if "stiffness" in record and not np.array_equal(
                 np.broadcast_to(np.asarray(record["stiffness"], dtype=float), (n_osc,)),
                 np.broadcast_to(drawn, (n_osc,))):
-            raise ValueError("stiffness is not the one mistuning_sigma and mistuning_seed "
-                             "draw; give one or the other")
+            raise ValidationError("stiffness is not the one mistuning_sigma and mistuning_seed "
+                                  "draw; give one or the other")
         fields |= {"stiffness": drawn, "mistuning": mistuning}
     return ChainParams(**fields, friction=law(**law_values))

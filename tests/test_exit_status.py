@@ -1,0 +1,235 @@
+"""The exit status of every `jaxchain` command: 2 only for a usage error (a bad
+option, or an argument the library's own checks refuse: `ValidationError`), 1 with
+one line for a run that fails, whatever it raises. Nothing heavy runs here: each
+command's first heavy step is replaced by one that raises."""
+
+import contextlib
+import importlib
+import io
+import re
+import tempfile
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import jaxchain as jc
+from jaxchain._cli.common import RunsFailed, UsageError
+from jaxchain._cli.main import COMMANDS, build_parser, exit_status, main
+
+#: Per command, the first heavy step of its run, (module, name): reached only once
+#: the command's own checks and those of the library's entry point have passed
+#: (figure, boundaries and snake: their study, whose arguments the command checks).
+#: Dask's `connect` is there for --scheduler, which a command reaches before its
+#: study when given.
+STUDIES = {
+    "localized": [("jaxchain._ensemble", "lane_params")],
+    "sweep": [("jaxchain._sweep.sweep", "SweepStore")],
+    "figure": [("jaxchain._cli.figure", "_scene")],
+    "crosscheck": [("jaxchain._crosscheck", "excited_block")],  # the initial states
+    "work-precision": [("jaxchain._work_precision", "CsvStore")],
+    "boundaries": [("jaxchain._cli.boundaries", "boundaries")],
+    "stress": [("jaxchain._cli.stress", "stress_cases")],  # builds every case
+    "basin": [("jaxchain._basin.basin", "sample_states")],
+    "snake": [("jaxchain._cli.snake", "localized_branches")],
+    "mistuning": [("jaxchain._mistuning.study", "sample_states"),
+                  ("jaxchain._mistuning.study", "study_chains"),
+                  ("jaxchain._mistuning.design_study", "design_study")],
+}
+CLUSTER = ("jaxchain._sweep.cluster", "connect")
+
+#: The smallest command line of each command (beside --out): its defaults.
+ARGV = {command: [command] for command in COMMANDS} | {"figure": ["figure", "4"]}
+
+
+class Reached(BaseException):
+    """Raised in place of a command's first heavy step. Not an `Exception`, so that
+    neither the library nor `main` catches it."""
+
+
+def _raise(error: BaseException):
+    def replacement(*args, **kwargs):
+        raise error
+    return replacement
+
+
+def _patch(mp: pytest.MonkeyPatch, command: str, error: BaseException) -> None:
+    """Make `command`'s first heavy step (and Dask's `connect`) raise `error`."""
+    for module, name in [*STUDIES[command], CLUSTER]:
+        mp.setattr(importlib.import_module(module), name, _raise(error))
+
+
+def _run(argv: list[str]) -> tuple[int | str, list[str]]:
+    """`main(argv)`: its exit status ("reached" when the study was reached) and the
+    lines it wrote on stderr."""
+    stderr = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(stderr), contextlib.redirect_stdout(io.StringIO()):
+            status = main(argv)
+    except Reached:
+        status = "reached"
+    except SystemExit as exc:  # the parser's own errors
+        status = exc.code
+    return status, stderr.getvalue().strip().splitlines()
+
+
+def test_every_command_is_covered():
+    assert set(STUDIES) == set(COMMANDS) == set(ARGV)
+
+
+@pytest.mark.parametrize("argv", [*ARGV.values(), ["mistuning", "--design"],
+                                  ["mistuning", "--samples", "0"],
+                                  ["sweep", "--scheduler", "local:2"]])
+def test_a_default_command_line_reaches_its_study(argv, tmp_path, monkeypatch):
+    """The steps replaced below are the ones each command runs: with its defaults,
+    every command gets there (so that the tests below exercise its checks)."""
+    monkeypatch.delenv("JAXCHAIN_TRACEBACK", raising=False)
+    _patch(monkeypatch, argv[0], Reached())
+    status, err = _run([*argv, "--out", str(tmp_path)])
+    assert status == "reached", err
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+@pytest.mark.parametrize("error", [ValueError("boom from numpy: operands could not be "
+                                              "broadcast together\nwith shapes (3,) (4,)"),
+                                   RuntimeError("boom in a solve"),
+                                   KeyError("boom")],
+                         ids=["ValueError", "RuntimeError", "KeyError"])
+def test_an_error_inside_a_run_exits_1_with_one_line(command, error, tmp_path, monkeypatch):
+    """A run that fails, whatever it raises (NumPy's ValueError included), is exit
+    status 1 and one line on stderr naming the command and the error: no traceback,
+    and never status 2, which says the command line was wrong."""
+    monkeypatch.delenv("JAXCHAIN_TRACEBACK", raising=False)
+    _patch(monkeypatch, command, error)
+    status, err = _run([*ARGV[command], "--out", str(tmp_path)])
+    assert status == 1, err
+    assert len(err) == 1 and err[0].startswith(f"jaxchain {command}: error: "), err
+    assert "boom" in err[0] and "Traceback" not in err[0]
+
+
+#: A command line of each command that the parser takes and the library's own
+#: validation refuses, with a word its message must hold.
+REFUSED = [
+    (["localized", "--transient", "20000"], "--transient"),      # SimulationOptions
+    (["sweep", "--mistuning", "40"], "stiffness"),               # mistune's draw
+    (["figure", "4", "--mistuning", "40"], "stiffness"),
+    (["crosscheck", "--vd", "1.5,-1"], "--vd"),                  # ChainParams
+    (["work-precision", "--solvers", ""], "solvers"),            # work_precision
+    (["boundaries", "--mistuning", "40"], "stiffness"),
+    (["basin", "--samples", "10", "--check", "20"], "--check"),  # basin_stability
+    (["snake", "--mistuning", "40"], "stiffness"),
+    (["mistuning", "--sigmas", "-1"], "sigmas"),                 # mistuning_study
+]
+
+
+def test_every_command_has_a_refused_line():
+    assert {argv[0] for argv, _ in REFUSED} == set(COMMANDS) - {"stress"}  # no library check
+
+
+@pytest.mark.parametrize("argv, says", REFUSED)
+def test_a_validation_error_of_the_library_exits_2(argv, says, tmp_path, monkeypatch):
+    """The library's own checks, run by a command before its study: exit status 2
+    and one line naming the value; the exception is a `ValidationError`."""
+    _patch(monkeypatch, argv[0], Reached())
+    argv = [*argv, "--out", str(tmp_path)]
+    monkeypatch.delenv("JAXCHAIN_TRACEBACK", raising=False)
+    status, err = _run(argv)
+    assert status == 2 and len(err) == 1 and says in err[0], err
+    monkeypatch.setenv("JAXCHAIN_TRACEBACK", "1")  # the exception itself
+    with pytest.raises(jc.ValidationError), contextlib.redirect_stdout(io.StringIO()):
+        main(argv)
+
+
+@pytest.mark.parametrize("err, status", [
+    (UsageError("--vd: bad"), 2),
+    (jc.ValidationError("SimulationOptions.rtol must be > 0"), 2),
+    (ValueError("operands could not be broadcast together"), 1),
+    (RuntimeError("max_steps reached"), 1),
+    (RunsFailed("1 of 3 runs failed"), 1),
+    (KeyError("settings_key"), 1),
+    (OSError(28, "No space left on device"), 1),
+    (TypeError("unsupported operand"), 1),
+])
+def test_exit_status_is_2_only_for_usage_and_validation(err, status):
+    code, message = exit_status(err)
+    assert code == status and "\n" not in message and message
+    if status == 2:  # field names shown as the options a user typed
+        assert "SimulationOptions" not in message
+
+
+def test_the_existence_bracket_is_a_failed_run_not_a_usage_error():
+    """The issue's example: a bracket that does not bracket the existence limit is
+    found by integrating, not by checking the arguments; it stays a ValueError
+    (callers that catch ValueError still do) but is no ValidationError: status 1."""
+    single = jc.ChainParams(n_osc=1)
+    lower = 2.5  # above the limit, about 1.84 for eq. (7) (Fig. 3(a)): no cycle there
+    with pytest.raises(ValueError, match="must contain") as exc:
+        jc.stick_slip_existence_limit(single, lower=lower, upper=1.5 * lower)
+    assert not isinstance(exc.value, jc.ValidationError)
+    assert exit_status(exc.value)[0] == 1
+
+
+TOKENS = st.sampled_from(["abc", "-1", "0", "1", "3", "nan", "inf", "-inf", "1e-3", "0.5",
+                          "", ",", "1.5,", "2", "1:2:3", "1.0,2.0", "0.5,1", "1,0.5",
+                          "eq8", "eq10", "x,y", "1e400", "--", "--bogus", "-q",
+                          "ros34pw2", "euler", "20", "2.5", "local:0", "local:2",
+                          "exponential:mu_st=0.1", "coulomb:mu=1", "single", "chain"])
+
+
+def _subparser(command: str):
+    sub = next(a for a in build_parser([command])._actions if a.dest == "command")
+    return sub.choices[command]
+
+
+def _typical(action) -> list[str]:
+    """Values an option takes: its choices, else its default as typed (a list
+    comma-joined), twice and a tenth of a number."""
+    if action.choices:
+        return sorted(map(str, action.choices))
+    d = action.default
+    if isinstance(d, (list, tuple)):
+        return [",".join(map(str, d))]
+    if isinstance(d, (int, float)) and not isinstance(d, bool):
+        return [str(d), str(2 * d), str(d / 10)]
+    return [] if d is None else [str(d)]
+
+
+def _values(action):
+    """What follows an option, as many as it takes: half the time a typical value,
+    half a token."""
+    typical = _typical(action)
+    one = st.one_of(st.sampled_from(typical), TOKENS) if typical else TOKENS
+    count = {None: 1, 0: 0, "?": 1, "*": 1, "+": 1}.get(action.nargs, action.nargs)
+    return st.lists(one, min_size=count, max_size=count)
+
+
+def _command_argv(command: str):
+    """argv for one command: its positional arguments (one of their choices), then
+    options with typical values or tokens (`_values`), and stray tokens."""
+    parser = _subparser(command)
+    positional = [st.sampled_from(sorted(map(str, a.choices))) if a.choices else TOKENS
+                  for a in parser._actions if not a.option_strings]
+    options = [st.tuples(st.just([a.option_strings[-1]]), _values(a)).map(lambda t: t[0] + t[1])
+               for a in parser._actions if a.option_strings and a.dest != "help"]
+    items = st.lists(st.one_of(*options, TOKENS.map(lambda t: [t])), max_size=4)
+    return st.tuples(st.tuples(*positional), items).map(
+        lambda t: [command, *t[0], *(s for item in t[1] for s in item)])
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+@settings(max_examples=30, deadline=None)
+@given(data=st.data())
+def test_fuzzed_command_lines_exit_2_in_one_line_or_reach_the_study(command, data):
+    """Random options and values, through `main`: the parser, the command's checks
+    and those of the library's entry point. Each line either reaches the command's
+    study (replaced by one that raises) or ends with status 2 and one line on
+    stderr naming the command: never a traceback, nor another status."""
+    argv = data.draw(_command_argv(command))
+    with pytest.MonkeyPatch.context() as mp, tempfile.TemporaryDirectory() as folder:
+        mp.chdir(folder)  # the default --out and any relative one land here
+        mp.delenv("JAXCHAIN_TRACEBACK", raising=False)
+        _patch(mp, command, Reached())
+        status, err = _run(argv)
+    if status != "reached":
+        assert status == 2 and len(err) == 1, (argv, status, err)
+        assert re.match(rf"jaxchain( {command})?: error: ", err[0]), (argv, err)
