@@ -27,6 +27,7 @@ from ._simulate import STATUS
 from ._solvers import DEFAULT_SOLVER, SOLVERS
 from ._states import IRREGULAR, PERIODIC, ClassTolerances, state_class
 from ._store import read_dataset, settings_key, write_dataset
+from ._errors import ValidationError
 
 #: The grid of the issue: belt speeds across the bistable range and a set of
 #: eq. (8) and eq. (10) initial conditions, as (family, number excited).
@@ -208,32 +209,32 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
 
     **Raises:**
 
-    `ValueError` for an unknown family, a k outside [1, N], a bad belt speed, or a
+    `ValidationError` for an unknown family, a k outside [1, N], a bad belt speed, or a
     `client` without a `checkpoint`. `RuntimeError` when the scheduler of `client`
     goes away, or when the runs its workers stored are not in `checkpoint` as this
     process sees it.
     """
     if client is not None and checkpoint is None:
-        raise ValueError("checkpoint: a cross-check on a Dask cluster needs a checkpoint "
-                         "folder its workers can reach")
+        raise ValidationError("checkpoint: a cross-check on a Dask cluster needs a checkpoint "
+                              "folder its workers can reach")
     params = check_params(params)
     solver = as_solver(solver, params=params)
     options = check_options(options)
     v_d = belt_speeds(v_d)
     ics = list(ics)
     if not ics:
-        raise ValueError("ics must list at least one (family, n_excited) pair, got none")
+        raise ValidationError("ics must list at least one (family, n_excited) pair, got none")
     if reference_options is None:
         reference_options = NonsmoothOptions(t_end=options.t_end, transient=options.transient)
     check_options(reference_options, NonsmoothOptions, "reference_options")
     if (reference_options.t_end, reference_options.transient) != (options.t_end,
                                                                    options.transient):
-        raise ValueError("reference_options must observe the same window as options")
+        raise ValidationError("reference_options must observe the same window as options")
     cases = [(float(vd), fam, int(k)) for vd in v_d for fam, k in ics]
     y0 = []
     for vd, fam, k in cases:
         if fam not in FAMILIES:
-            raise ValueError(f"ics family must be one of {sorted(FAMILIES)}, got {fam!r}")
+            raise ValidationError(f"ics family must be one of {sorted(FAMILIES)}, got {fam!r}")
         p = with_parameter(params, "v_d", vd)
         y0.append(np.asarray(FAMILIES[fam](excited_block(params.n_osc, k, params.boundary))(p)))
     vds = np.array([c[0] for c in cases])

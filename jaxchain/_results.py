@@ -9,6 +9,7 @@ import numpy as np
 import xarray as xr
 from jaxtyping import ArrayLike
 
+from ._atomic import replacing
 from ._physics.initial import AbstractInitialCondition, OutOfPhaseExcitation
 from ._options import SimulationOptions
 from ._physics.params import ChainParams
@@ -113,13 +114,15 @@ def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
 
 
 def save_dataset(ds: xr.Dataset, path: str | Path) -> Path:
-    """Write `ds` to netCDF (h5netcdf engine), creating the parent folder.
+    """Write `ds` to netCDF (h5netcdf engine), creating the parent folder. The file
+    is written whole or not at all: to a temporary file beside `path`, renamed
+    into place, so that a run killed while it writes leaves the previous file
+    intact.
 
     **Returns:**
 
     The path written.
     """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    ds.to_netcdf(path, engine="h5netcdf")
-    return path
+    with replacing(path) as partial:
+        ds.to_netcdf(partial, engine="h5netcdf")
+    return Path(path)

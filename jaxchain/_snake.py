@@ -24,6 +24,7 @@ from ._physics.params import ChainParams, with_parameter
 from ._physics.record import chain_record
 from ._simulate import simulate
 from ._store import read_dataset, write_dataset
+from ._errors import ValidationError
 
 #: The branches of `localized_branches` by default: eq. (8) with 1, 2, 4 and 8
 #: oscillators excited, and the whole chain (the paper's Figs. 4 and 8).
@@ -89,11 +90,11 @@ def start_orbits(params: ChainParams, sites=SITES, *, options: SimulationOptions
 
     **Raises:**
 
-    `ValueError` for a k outside 1..n_osc.
+    `ValidationError` for a k outside 1..n_osc.
     """
     sites = tuple(int(k) for k in sites)
     if not sites or min(sites) < 1 or max(sites) > params.n_osc:
-        raise ValueError(f"sites must be in 1..n_osc = {params.n_osc}, got {sites}")
+        raise ValidationError(f"sites must be in 1..n_osc = {params.n_osc}, got {sites}")
     masks = np.stack([excited_block(params.n_osc, k, params.boundary) for k in sites])
     ics = OutOfPhaseExcitation(excited=jnp.asarray(masks),
                                velocity=jnp.zeros(len(sites)), base_sign=-1.0)
@@ -446,7 +447,7 @@ def localized_branches(params: ChainParams = ChainParams(), sites=SITES, *,
 
     **Raises:**
 
-    `ValueError` for bad sites or options.
+    `ValidationError` for bad sites or options.
     """
     sites = tuple(int(k) for k in sites)
     datasets, starts, failed = {}, {}, {}

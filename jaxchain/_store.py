@@ -2,14 +2,15 @@
 never reads back a result computed with other settings."""
 
 import csv
-import os
 from collections.abc import Callable
 from pathlib import Path
 
 import xarray as xr
 
+from ._atomic import replacing
 from ._keys import FORMAT_VERSION, canonical, settings_json, settings_key  # noqa: F401
 from ._results import save_dataset
+from ._errors import ValidationError
 
 
 def read_dataset(path: Path, kind: str, **settings) -> xr.Dataset | None:
@@ -35,8 +36,8 @@ def read_dataset(path: Path, kind: str, **settings) -> xr.Dataset | None:
 def write_dataset(ds: xr.Dataset, path: Path, kind: str, **settings) -> Path:
     """Store `ds` at `path` with the key of its settings (`settings_key`) and the
     JSON that the key hashes, as the attributes `settings_key` and `settings`. The
-    file is written whole or not at all: an interrupted run leaves no partial file
-    behind.
+    file is written whole or not at all (`save_dataset`): an interrupted run
+    leaves the previous file, never a truncated one.
 
     **Returns:**
 
@@ -45,9 +46,7 @@ def write_dataset(ds: xr.Dataset, path: Path, kind: str, **settings) -> Path:
     path = Path(path)
     ds = ds.assign_attrs(settings_key=settings_key(kind, **settings),
                          settings=settings_json(kind, **settings))
-    partial = save_dataset(ds, path.with_name(path.name + ".partial"))
-    os.replace(partial, path)
-    return path
+    return save_dataset(ds, path)
 
 
 class CsvStore:
@@ -57,7 +56,10 @@ class CsvStore:
     A row is read back only for its own key (`row`); rows of other keys stay in
     the file and are never read back. A file of another layout (columns) is
     rewritten in `columns` first, with its rows kept and the missing columns left
-    empty, so that its rows, without a key, are never read back either.
+    empty, so that its rows, without a key, are never read back either. Rows are
+    only ever appended, whole lines flushed one at a time; the rewrite goes to a
+    temporary file renamed into place (`replacing`), so that a kill never loses
+    the rows already written.
 
     **Arguments:**
 
@@ -66,12 +68,12 @@ class CsvStore:
 
     **Raises:**
 
-    `ValueError` when `columns` has no `key`.
+    `ValidationError` when `columns` has no `key`.
     """
 
     def __init__(self, path: Path, columns: tuple[str, ...]):
         if "key" not in columns:
-            raise ValueError(f"CsvStore columns must include 'key', got {columns}")
+            raise ValidationError(f"CsvStore columns must include 'key', got {columns}")
         self.path, self.columns = Path(path), tuple(columns)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         stored = []
@@ -117,9 +119,7 @@ class CsvStore:
         return stored if stored is not None else self.append(row | compute())
 
     def _rewrite(self, rows: list[dict]):
-        partial = self.path.with_name(self.path.name + ".partial")
-        with open(partial, "w", newline="") as f:
+        with replacing(self.path) as partial, open(partial, "w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=self.columns, extrasaction="ignore")
             writer.writeheader()
             writer.writerows({c: r.get(c, "") for c in self.columns} for r in rows)
-        os.replace(partial, self.path)

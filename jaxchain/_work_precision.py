@@ -4,6 +4,7 @@ smoothing eps, measured against the event-driven non-smooth reference."""
 import dataclasses
 import functools
 import math
+import os
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
@@ -14,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from ._checks import real_array
 from ._physics.initial import OutOfPhaseExcitation, excited_block
 from ._nonsmooth.options import NonsmoothOptions
 from ._nonsmooth.solve import simulate_nonsmooth
@@ -24,6 +26,7 @@ from ._physics.params import ChainParams
 from ._simulate import STATUS, run
 from ._solvers import SOLVERS
 from ._store import CsvStore, settings_key
+from ._errors import ValidationError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -318,18 +321,42 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
 
     **Raises:**
 
-    `ValueError` for an unknown scene or solver.
+    Before the CSV is opened or anything runs: `ValidationError` naming the argument
+    for no scene or solver, an unknown scene or solver, an empty `rtols` or `eps`,
+    an rtol outside (0, 1), an eps that is not a finite number > 0, a `max_steps`
+    that is not an integer >= 1 or a `scipy_budget_s` that is not a finite number
+    > 0; `TypeError` for a grid that is not a list of real numbers, a `path` that
+    is not a path or a `progress` that cannot be called.
     """
-    scenes, solvers = list(scenes), list(solvers)
+    if not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"path must be a path to a CSV file, got {type(path).__name__}")
+    scenes, solvers = _names(scenes, "scenes"), _names(solvers, "solvers")
+    if not scenes:
+        raise ValidationError(f"scenes must name at least one of {sorted(SCENES)}, got none")
     for name in scenes:
         if name not in SCENES:
-            raise ValueError(f"scene must be one of {sorted(SCENES)}, got {name!r}")
+            raise ValidationError(f"scene must be one of {sorted(SCENES)}, got {name!r}")
+    if not solvers:
+        raise ValidationError(f"solvers must name at least one of {sorted(SOLVERS)}, got "
+                              "none")
     for name in solvers:
-        solver_name, controller = split_method(name)
+        solver_name, controller = split_method(name) if isinstance(name, str) else (name, "")
         if solver_name not in SOLVERS or controller not in CONTROLLERS:
-            raise ValueError(f"solver must be one of {sorted(SOLVERS)}, optionally "
-                             f"followed by /CONTROLLER with CONTROLLER one of "
-                             f"{sorted(CONTROLLERS)}, got {name!r}")
+            raise ValidationError(f"solver must be one of {sorted(SOLVERS)}, optionally "
+                                  f"followed by /CONTROLLER with CONTROLLER one of "
+                                  f"{sorted(CONTROLLERS)}, got {name!r}")
+    rtols = _grid(rtols, "rtols", 1.0, "numbers in (0, 1)")
+    eps = _grid(eps, "eps", math.inf, "finite numbers > 0")
+    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) \
+            or max_steps < 1:
+        raise ValidationError(f"max_steps must be an integer >= 1, got {max_steps!r}")
+    if isinstance(scipy_budget_s, bool) \
+            or not isinstance(scipy_budget_s, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(scipy_budget_s) and scipy_budget_s > 0):
+        raise ValidationError(f"scipy_budget_s must be a finite number > 0, got "
+                              f"{scipy_budget_s!r}")
+    if not callable(progress):
+        raise TypeError(f"progress must be callable, got {type(progress).__name__}")
     rtols, eps = sorted(rtols, reverse=True), sorted(eps, reverse=True)
     rows: list[dict] = []
     with CsvStore(path, COLUMNS) as store:
@@ -338,6 +365,42 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
                    reference_points=reference_points, max_steps=max_steps,
                    scipy_budget_s=scipy_budget_s, progress=progress)
     return rows
+
+
+def _names(names, what: str) -> list:
+    """`names` (scenes or solvers) as a list; one name alone is a list of one.
+
+    **Raises:**
+
+    `TypeError` naming `what` when `names` is not an iterable of names.
+    """
+    if isinstance(names, str):
+        return [names]
+    try:
+        return list(names)
+    except TypeError:
+        raise TypeError(f"{what} must be a list of names, got {names!r}") from None
+
+
+def _grid(values, name: str, below: float, accepted: str) -> list:
+    """The values of one axis of the grid (`rtols` or `eps`), as given.
+
+    **Raises:**
+
+    `TypeError` naming `name` for values that are not real numbers;
+    `ValidationError` naming it for an empty list, or a value that is not finite, is
+    <= 0 or is not below `below` (`accepted` says what is).
+    """
+    try:
+        values = list(values)
+    except TypeError:
+        raise TypeError(f"{name} must be a list of numbers, got {values!r}") from None
+    a = real_array(values, name)
+    if a.ndim != 1 or a.size == 0:
+        raise ValidationError(f"{name} must be a list of at least one number, got {values!r}")
+    if not np.all(np.isfinite(a) & (a > 0) & (a < below)):
+        raise ValidationError(f"{name} must hold {accepted}, got {a.tolist()}")
+    return values
 
 
 def _scene(store: CsvStore, rows: list[dict], scene: Scene, solvers, rtols, eps, *,

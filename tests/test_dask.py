@@ -12,18 +12,21 @@ import sys
 import threading
 import time
 
+import numpy as np
 import pytest
 import xarray as xr
+from distributed.diagnostics.plugin import SchedulerPlugin
 
 import jaxchain as jc
-from helpers import SWEEP_RESULTS, small_sweep, sweep_cli, wait_for_a_batch
+from helpers import SWEEP_RESULTS, held, hold_env, kill, release, small_sweep, sweep_cli
+from jaxchain._atomic import HOLD
 from jaxchain._cli.main import main
 from jaxchain._sweep.cluster import connect, local_workers
 from jaxchain._sweep.store import SweepStore
 
 #: A ring of 3 at 4 belt speeds x eq. (8) with k = 1..3 (`small_sweep`): 12
-#: trajectories in 6 batches of 2, each about a second, so that a worker or the
-#: scheduler can be killed in the middle of the sweep.
+#: trajectories in 6 batches of 2; a worker or the scheduler is killed in the
+#: middle of the sweep at a batch write held by the writers' test hook.
 VD = "1.4:1.7:4"
 CLI = sweep_cli(VD)
 RESULTS = SWEEP_RESULTS
@@ -69,45 +72,71 @@ def test_a_sweep_on_a_local_cluster_equals_the_in_process_sweep(tmp_path, client
                             in_process[RESULTS])
 
 
-def test_a_worker_killed_mid_sweep_is_replaced_and_the_sweep_equals_the_uninterrupted_one(
+class _Attempts(SchedulerPlugin):
+    """The transitions of the sweep's tasks as the scheduler makes them: (key, new
+    state), a task handed to a worker being "processing"."""
+
+    name = "test-sweep-attempts"
+
+    def __init__(self):
+        self.log = []
+
+    def transition(self, key, start, finish, *args, **kwargs):
+        if str(key).startswith("sweep-"):
+            self.log.append((str(key), finish))
+
+
+def test_a_worker_killed_mid_sweep_is_replaced_and_its_batch_is_run_again(
         tmp_path, client, in_process):
-    """A worker process running a batch is killed (SIGKILL) once a batch is stored:
-    Dask runs its lost task again (on the other worker, or the one the nanny
-    restarts), and the result is the uninterrupted sweep."""
-    store = tmp_path / "s.zarr"
+    """The workers hold before each batch write (the writers' test hook, on in
+    the two worker processes): the first batch held is released, and the worker
+    holding the next one is killed (SIGKILL) with its task, that batch unwritten.
+    The scheduler's log shows that batch's task processed twice (lost, then run
+    again by Dask, on the other worker or the one the nanny restarts) and
+    finished once; the result is the uninterrupted sweep."""
+    store, hooks = tmp_path / "s.zarr", tmp_path / "hooks"
+    hooks.mkdir()
+    client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.add_plugin(_Attempts()))
+    client.run(lambda: os.environ.__setitem__(HOLD, str(hooks)))  # hold_env, in the workers
     result = {}
     thread = threading.Thread(target=lambda: result.update(
         ds=_api_sweep(store=store, client=client).load()), daemon=True)
-    thread.start()
     try:
-        stored = wait_for_a_batch(store)
-        deadline, busy = time.monotonic() + 10, []
-        while not busy and time.monotonic() < deadline:  # between two tasks
-            busy = [w for w, keys in client.processing().items() if keys]
-        assert busy, "a batch is running"
-        victim = client.run(os.getpid, workers=busy[:1])[busy[0]]
+        thread.start()
+        first, _ = held(hooks, 1)
+        release(hooks, 1)
+        victim_batch, victim = held(hooks, 2)
+        assert victim_batch != first and victim_batch.startswith("s.zarr batch ")
         os.kill(victim, signal.SIGKILL)
     finally:
+        release(hooks)  # every later hold passes
         thread.join(timeout=600)
+        client.run(lambda: os.environ.pop(HOLD, None))
+        log = client.run_on_scheduler(
+            lambda dask_scheduler: dask_scheduler.plugins.pop(_Attempts.name).log)
     assert not thread.is_alive() and "ds" in result
-    assert stored < 6, "killed before the end"
+    batch = int(victim_batch.split()[-1])
+    states = [finish for key, finish in log if f"-batch-{batch}-" in key]
+    assert states.count("processing") == 2 and states.count("memory") == 1, states
     ds = result["ds"]
-    assert ds.attrs["batches_done"] == ds.attrs["batches_total"]
+    assert ds.attrs["batches_done"] == ds.attrs["batches_total"] == 6
     xr.testing.assert_equal(ds[RESULTS], in_process[RESULTS])
 
 
 def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_process(
         tmp_path, in_process):
     """`jaxchain sweep --scheduler ADDRESS` on a scheduler and one worker started
-    with Dask's own commands: the scheduler is killed once a batch is stored. The
-    command exits 1 with one line on stderr, the store keeps the flagged batches,
-    and `--resume` without a cluster completes it to the uninterrupted sweep."""
-    out, file = tmp_path / "out", tmp_path / "scheduler.json"
+    with Dask's own commands: the scheduler is killed while the worker holds
+    before writing its second batch, the first stored (the writers' test hook,
+    on in the worker). The command exits 1 with one line on stderr, the store
+    keeps the flagged batch alone, and `--resume` without a cluster completes it
+    to the uninterrupted sweep."""
+    out, file, hooks = tmp_path / "out", tmp_path / "scheduler.json", tmp_path / "hooks"
     started = []
 
-    def start(*args):
+    def start(*args, env=None):
         started.append(subprocess.Popen(args, stdout=subprocess.DEVNULL,
-                                        stderr=subprocess.DEVNULL))
+                                        stderr=subprocess.DEVNULL, env=env))
         return started[-1]
 
     try:
@@ -115,25 +144,26 @@ def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_pro
                           "--scheduler-file", str(file), "--port", "0", "--no-dashboard")
         address = _scheduler_address(file)
         start(sys.executable, "-m", "distributed.cli.dask_worker", "--scheduler-file",
-              str(file), "--nthreads", "1", "--no-dashboard", "--death-timeout", "5")
+              str(file), "--nthreads", "1", "--no-dashboard", "--death-timeout", "5",
+              env=hold_env(hooks))
         proc = subprocess.Popen(
             [sys.executable, "-m", "jaxchain._cli.main", *CLI, "--out", str(out),
              "--scheduler", address], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
             text=True)
         started.append(proc)
-        stored = wait_for_a_batch(out / "sweep.zarr")
+        first = held(hooks, 1, proc)[0]
+        release(hooks, 1)
+        held(hooks, 2, proc)  # the worker's next batch: the first is flagged
         scheduler.send_signal(signal.SIGKILL)
         _, err = proc.communicate(timeout=300)
     finally:
-        for p in started:
-            if p.poll() is None:
-                p.kill()
-                p.wait()
+        for p in started:  # the worker too, still holding its second batch
+            kill(p)
     assert proc.returncode == 1, err
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "scheduler" in lines[0], err
     done = SweepStore(out / "sweep.zarr").done()
-    assert 1 <= stored <= done.sum() < done.size
+    assert np.flatnonzero(done).tolist() == [int(first.split()[-1])]
 
     assert main([*CLI, "--out", str(out), "--resume"]) == 0
     xr.testing.assert_equal(jc.open_sweep(out / "sweep.zarr").load()[RESULTS],

@@ -9,7 +9,7 @@ import pytest
 import jaxchain as jc
 import jaxchain._sweep.sweep as sweep_module
 from jaxchain._store import canonical, settings_key
-from helpers import SHORT
+from helpers import SWEEP_BATCH, SWEEP_N_OSC, SWEEP_T_END, SWEEP_TRANSIENT
 
 
 def _scaled(p, factor):
@@ -42,15 +42,18 @@ def test_a_sweep_through_a_lambda_lens_is_stored_under_the_parameter_it_selects(
     """The sweep resolves its lens to the name of the field it selects before keying:
     a lambda lens and the name give the same store, read back on resume without
     integrating anything."""
-    params, ics = jc.ChainParams(n_osc=2, v_d=1.5), jc.localized_family(2)
+    # the ring, options and batches of the sweep tests (`small_sweep`): their program
+    params = jc.ChainParams(n_osc=SWEEP_N_OSC, v_d=1.5)
+    ics = jc.localized_family(SWEEP_N_OSC)
+    options = jc.SimulationOptions(t_end=SWEEP_T_END, transient=SWEEP_TRANSIENT)
     store = tmp_path / "sweep.zarr"
-    by_lens = jc.sweep(params, [0.0, 0.01], ics, options=SHORT, where=lambda p: p.eta_c,
-                       store=store, progress=False)
+    by_lens = jc.sweep(params, [0.0, 0.01], ics, options=options, where=lambda p: p.eta_c,
+                       batch_size=SWEEP_BATCH, store=store, progress=False)
 
     def nothing(*args, **kwargs):
         raise AssertionError("the stored batches should have been read back")
     monkeypatch.setattr(sweep_module, "run_lanes", nothing)
-    by_name = jc.sweep(params, [0.0, 0.01], ics, options=SHORT, where="eta_c", store=store,
-                       resume=True, progress=False)
+    by_name = jc.sweep(params, [0.0, 0.01], ics, options=options, where="eta_c",
+                       batch_size=SWEEP_BATCH, store=store, resume=True, progress=False)
     assert by_lens.attrs["settings_key"] == by_name.attrs["settings_key"]
     assert np.array_equal(by_lens["amplitudes"].values, by_name["amplitudes"].values)

@@ -12,14 +12,10 @@ import xarray as xr
 
 import jaxchain as jc
 import jaxchain._sweep.sweep as sweep_module
-from helpers import (SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, small_sweep, sweep_cli,
-                     wait_for_a_batch)
+from helpers import (SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, held, hold_env, kill, release,
+                     small_sweep, sweep_cli)
 from jaxchain._cli.main import main
 from jaxchain._sweep.store import SweepStore
-
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
 
 #: The grid of the kill-and-resume tests: 2 belt speeds x eq. (8) with k = 1..3 on
 #: a ring of 3, in 3 batches of 2 (`small_sweep`).
@@ -45,22 +41,25 @@ def _chunk_times(store, batches) -> dict:
 
 
 def test_sweep_killed_then_resumed_equals_an_uninterrupted_run(tmp_path, uninterrupted):
-    """`jaxchain sweep` in its own process is killed (SIGKILL) once a batch is
-    stored, then resumed (here through the API, with the same settings: the store's
-    key admits it): the result equals the uninterrupted run, and only the batches
-    not stored at the kill are computed again (their count, and the stored chunks
-    of the others left untouched)."""
-    out, store = tmp_path / "out", tmp_path / "out" / "sweep.zarr"
+    """`jaxchain sweep` in its own process is killed (SIGKILL) while it holds
+    before writing batch 1, batch 0 stored (the writers' test hook), then resumed
+    (here through the API, with the same settings: the store's key admits it): the
+    result equals the uninterrupted run, and only the batches not stored at the
+    kill are computed again (their count, and the stored chunks of the others left
+    untouched)."""
+    out, store, hooks = tmp_path / "out", tmp_path / "out" / "sweep.zarr", tmp_path / "hooks"
     cmd = [sys.executable, "-m", "jaxchain._cli.main", *CLI, "--out", str(out)]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True, env=hold_env(hooks))
     try:
-        wait_for_a_batch(store)
+        assert held(hooks, 1, proc)[0] == "sweep.zarr batch 0"
+        release(hooks, 1)
+        assert held(hooks, 2, proc)[0] == "sweep.zarr batch 1"
     finally:
-        proc.send_signal(signal.SIGKILL)  # no-op if it has ended
-        proc.wait()
-    assert proc.returncode == -signal.SIGKILL, proc.stderr.read().decode()
+        kill(proc)
+    assert proc.returncode == -signal.SIGKILL
     done = SweepStore(store).done()
-    assert 1 <= done.sum() < done.size, "killed before the end, after a stored batch"
+    assert done.tolist() == [True, False, False], "killed with batch 0 alone stored"
     before = _chunk_times(store, np.flatnonzero(done))
 
     resumed = _api_sweep(store=store, resume=True).load()
@@ -114,6 +113,7 @@ def test_a_store_of_other_settings_is_refused_with_status_2(tmp_path, capsys):
     assert _chunk_times(out / "sweep.zarr", range(3)) == before  # nothing lost
 
 
+@pytest.mark.numerics
 def test_sweeping_eta_c_through_a_lens_equals_separate_runs(monkeypatch):
     """eta_c swept by `where=lambda p: p.eta_c` equals one ensemble per value (the
     same compiled run per trajectory: equal to the last bit). The engine never gets

@@ -25,6 +25,7 @@ from .._states import PERIODIC
 from .._sweep.sweep import sweep
 from .classes import class_index, class_names, halc_clusters, wilson_interval
 from .sampling import Box, sample_states
+from .._errors import ValidationError
 
 #: The horizon of `basin_stability` by default: t_end = 2000, classified over
 #: [1500, 2000].
@@ -118,7 +119,7 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
 
     **Raises:**
 
-    `ValueError` for n_samples < 1, bad belt speeds or a bad `n_check`, and as
+    `ValidationError` for n_samples < 1, bad belt speeds or a bad `n_check`, and as
     `sweep`; `TypeError` for a key that is neither a seed nor a PRNG key.
     """
     params = check_params(params)
@@ -127,14 +128,14 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
     v = belt_speeds(v_d)
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) \
             or n_samples < 1:
-        raise ValueError(f"n_samples must be an integer >= 1, got {n_samples!r}")
+        raise ValidationError(f"n_samples must be an integer >= 1, got {n_samples!r}")
     if not isinstance(box, Box):
         raise TypeError(f"box must be a jaxchain.Box, got {type(box).__name__}")
     n_check = min(n_samples, 50) if n_check is None else n_check
     if isinstance(n_check, bool) or not isinstance(n_check, (int, np.integer)) \
             or not 0 <= n_check <= n_samples:
-        raise ValueError(f"n_check must be an integer in [0, n_samples = {n_samples}], "
-                         f"got {n_check!r}")
+        raise ValidationError(f"n_check must be an integer in [0, n_samples = {n_samples}], "
+                              f"got {n_check!r}")
     key = _key(key)
     n_osc = params.n_osc
     states = sample_states(key, box, int(n_samples), n_osc)

@@ -1,9 +1,13 @@
 """The classes of a chain's final states, and their probabilities with Wilson
 confidence intervals."""
 
+import math
+
 import numpy as np
 from jaxtyping import Bool, Float, Int
 
+from .._checks import real_array
+from .._errors import ValidationError
 from .._states import FAILED, STEADY_SLIDING, STICK_SLIP
 
 #: The 97.5 % quantile of the standard normal: a 95 % two-sided interval.
@@ -64,13 +68,35 @@ def wilson_interval(k: Int[np.ndarray, "*shape"], n: int | Int[np.ndarray, "*sha
 
     **Arguments:**
 
-    - `k`: successes; `n`: trials (> 0); `z`: the normal quantile (95 %: `Z95`).
+    - `k`: successes, whole numbers with 0 <= k <= n.
+    - `n`: trials, whole numbers >= 1, of a shape that broadcasts with `k`.
+    - `z`: the normal quantile, a finite number > 0 (95 %: `Z95`).
 
     **Returns:**
 
     (low, high), of the broadcast shape of k and n.
+
+    **Raises:**
+
+    `ValidationError` naming `k`, `n` or `z` for counts that are not finite whole
+    numbers, n < 1, k < 0 or k > n, shapes that do not broadcast, or a `z` that is
+    not a finite number > 0; `TypeError` for values that are not real numbers.
     """
-    k, n = np.asarray(k, dtype=float), np.asarray(n, dtype=float)
+    k, n = _whole_numbers(k, "k"), _whole_numbers(n, "n")
+    if np.any(n < 1):
+        raise ValidationError(f"n must be a number of trials >= 1, got {n[n < 1].flat[0]:g}")
+    try:
+        k, n = np.broadcast_arrays(k, n)
+    except ValueError:
+        raise ValidationError(f"k and n must have shapes that broadcast, got {k.shape} "
+                              f"and {n.shape}") from None
+    outside = (k < 0) | (k > n)
+    if np.any(outside):
+        raise ValidationError(f"k must lie in [0, n], got k = {k[outside].flat[0]:g} with "
+                              f"n = {n[outside].flat[0]:g}")
+    if isinstance(z, bool) or not isinstance(z, (int, float, np.integer, np.floating)) \
+            or not (math.isfinite(z) and z > 0):
+        raise ValidationError(f"z must be a finite number > 0, got {z!r}")
     p = k / n
     denom = 1 + z**2 / n
     centre = (p + z**2 / (2 * n)) / denom
@@ -79,3 +105,19 @@ def wilson_interval(k: Int[np.ndarray, "*shape"], n: int | Int[np.ndarray, "*sha
     low = np.where(k == 0, 0.0, np.clip(centre - half, 0.0, 1.0))
     high = np.where(k == n, 1.0, np.clip(centre + half, 0.0, 1.0))
     return low, high
+
+
+def _whole_numbers(value, name: str) -> np.ndarray:
+    """`value` as a float64 array of whole numbers.
+
+    **Raises:**
+
+    `TypeError` (`real_array`) for values that are not real numbers;
+    `ValidationError` naming `name` for a value that is not finite or not whole.
+    """
+    a = real_array(value, name)
+    bad = ~np.isfinite(a) | (a != np.round(a))
+    if np.any(bad):
+        raise ValidationError(f"{name} must be whole numbers (counts), got "
+                              f"{float(a[bad].flat[0])!r}")
+    return a

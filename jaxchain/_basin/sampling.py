@@ -8,6 +8,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._errors import ValidationError
+
 
 class Box(eqx.Module):
     """A box of initial states in absolute coordinates (dimensionless, eqs.
@@ -20,7 +22,7 @@ class Box(eqx.Module):
 
     **Raises:**
 
-    `ValueError` naming `x` or `v` unless each is two finite numbers lo < hi.
+    `ValidationError` naming `x` or `v` unless each is two finite numbers lo < hi.
     """
 
     x: tuple[float, float] = eqx.field(static=True, default=(-2.0, 2.0))
@@ -33,8 +35,8 @@ class Box(eqx.Module):
                   and all(isinstance(b, (int, float)) and not isinstance(b, bool)
                           and math.isfinite(b) for b in pair) and pair[0] < pair[1])
             if not ok:
-                raise ValueError(f"Box.{name} must be two finite numbers lo < hi, "
-                                 f"got {pair!r}")
+                raise ValidationError(f"Box.{name} must be two finite numbers lo < hi, "
+                                      f"got {pair!r}")
 
 
 def sample_states(key: Array, box: Box, n_samples: int, n_osc: int

@@ -12,10 +12,11 @@ from .._basin.sampling import Box
 from .._options import SimulationOptions
 from .._plots.basin import plot_basin_stability, plot_halc_histogram
 from .._physics.record import chain_record
+from .._atomic import save_figure
+from .._results import save_dataset
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_scheduler_option, cluster_client,
-                     json_ready, positive_float, positive_int, save_figure,
-                     show_progress, writable_folder)
+                     json_ready, positive_float, positive_int, show_progress, writable_folder)
 from .sweep import belt_speeds
 
 HELP = "basin stability: how likely each state is from random initial states"
@@ -118,7 +119,7 @@ def run(args) -> None:
                              client=client,
                              progress=show_progress(args))
     wall = time.perf_counter() - start
-    ds.to_netcdf(args.out / "basin.nc")
+    save_dataset(ds, args.out / "basin.nc")
     save_figure(plot_basin_stability(ds), args.out / "basin.png")
     save_figure(plot_halc_histogram(ds, 1.5), args.out / "basin_halc.png")
     classes = ds["class"].values.tolist()

@@ -7,9 +7,10 @@ import time
 
 from .._boundaries import RATIO_VALUES, XI_VALUES, boundaries, fig3a_simulations
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
+from .._atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
-                     comma_list, json_ready, param_default, positive_float, save_figure,
+                     comma_list, json_ready, param_default, positive_float,
                      show_progress, writable_folder)
 
 HELP = "Hopf and fold belt speeds of the bistable range (gradients, continuation)"
@@ -94,7 +95,7 @@ def run(args) -> None:
     if sims is not None:
         s["simulation_energy"] = {"v_d": sims[0].tolist(), "energy": sims[1].tolist()}
     text = json.dumps(json_ready(s), allow_nan=False)
-    (args.out / "boundaries.json").write_text(text)
+    write_text(args.out / "boundaries.json", text)
     missing = sum(f is None for c in curves for f in s[c]["fold_vd"])
     if args.json:
         print(text)

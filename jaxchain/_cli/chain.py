@@ -110,7 +110,7 @@ def chain_params(args, n_osc: int, **fields) -> ChainParams:
 
     **Raises:**
 
-    `UsageError` or `ValueError` (exit status 2) for a bad chain.
+    `UsageError` or `ValidationError` (exit status 2) for a bad chain.
     """
     base = ChainParams(n_osc=n_osc, boundary=args.boundary,
                        friction=parse_friction(args.friction), **fields)

@@ -236,14 +236,6 @@ def prefetch(*modules: str) -> None:
     threading.Thread(target=load, name="jaxchain-prefetch", daemon=True).start()
 
 
-def save_figure(fig, path: Path, dpi: int = 150) -> None:
-    """Write a pyplot figure to `path` and close it (a command makes several)."""
-    import matplotlib.pyplot as plt  # imported by the figure's maker already
-
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
-
-
 def json_ready(obj):
     """Replace non-finite floats (failed runs) by None, so that the output is JSON."""
     if isinstance(obj, dict):

@@ -12,10 +12,11 @@ from .._physics.params import with_parameter
 from .._plots.crosscheck import plot_crosscheck
 from .._results import save_dataset
 from .._physics.record import chain_record
+from .._atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_run_options, add_scheduler_option, cluster_client, comma_list,
-                     json_ready, positive_float, save_figure, show_progress,
+                     json_ready, positive_float, show_progress,
                      writable_folder)
 
 HELP = "smoothed model against the non-smooth stick/slip reference"

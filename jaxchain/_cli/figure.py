@@ -19,9 +19,10 @@ from .._plots.localized import plot_localized_states
 from .._results import save_dataset
 from .._simulate import STATUS
 from .._physics.record import chain_record
+from .._atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (DEFAULT_SOLVER, SOLVERS, RunsFailed, add_output_options,
-                     add_tolerance_options, json_ready, param_default, positive_float, save_figure,
+                     add_tolerance_options, json_ready, param_default, positive_float,
                      show_progress, writable_folder)
 
 #: Each figure: its belt speed, initial conditions and what it shows.

@@ -12,10 +12,10 @@ from .._physics.initial import FAMILIES, localized_family
 from .._options import SimulationOptions
 from .._simulate import STATUS
 from .._physics.record import chain_record
+from .._atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, add_model_options, add_output_options,
-                     add_run_options, json_ready, prefetch, save_figure,
-                     show_progress, writable_folder)
+                     add_run_options, json_ready, prefetch, show_progress, writable_folder)
 
 HELP = "localized states at one belt speed, N initial conditions (Fig. 4)"
 DESCRIPTION = """\

@@ -16,10 +16,11 @@ from .._mistuning.summary import (edge_correlations, halc_correlation, localizat
 from .._options import SimulationOptions
 from .._physics.record import chain_record
 from .._plots.mistuning import plot_mistuned_states, plot_mistuning_study, plot_site_edges
+from .._atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_scheduler_option, cluster_client, comma_list, json_ready,
-                     positive_float, positive_int, save_figure, show_progress,
+                     positive_float, positive_int, show_progress,
                      writable_folder)
 from .sweep import belt_speeds
 
@@ -148,7 +149,7 @@ def run(args) -> None:
                           "wall_time_s": wall,
                           "figures": {k: str(v) for k, v in figures.items()}}
     text = json.dumps(json_ready(s), allow_nan=False)
-    (args.out / "mistuning.json").write_text(text)
+    write_text(args.out / "mistuning.json", text)
     if args.json:
         print(text)
     else:
@@ -255,7 +256,7 @@ def run_design(args) -> None:
                "figure": str(args.out / "design.png")}
     save_figure(plot_mistuning_design(result), args.out / "design.png")
     text = json.dumps(json_ready(result), allow_nan=False)
-    (args.out / "design.json").write_text(text)
+    write_text(args.out / "design.json", text)
     if args.json:
         print(text)
     else:

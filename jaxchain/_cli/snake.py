@@ -9,10 +9,11 @@ from pathlib import Path
 
 from .._snake import SITES, SNAKE_CONTINUATION, localized_branches
 from .._plots.snake import plot_snake
+from .._atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
-                     comma_list, json_ready, positive_float, positive_int, save_figure,
-                     show_progress, writable_folder)
+                     comma_list, json_ready, positive_float, positive_int, show_progress,
+                     writable_folder)
 
 HELP = "continuation of the localized periodic states (the snake), with stability"
 DESCRIPTION = """\
@@ -95,7 +96,7 @@ def run(args) -> None:
     s = found["summary"] | {"wall_time_s": time.perf_counter() - start, "figure": str(png),
                             "eps": args.eps, "n_osc": params.n_osc}
     text = json.dumps(json_ready(s), allow_nan=False)
-    (args.out / "snake.json").write_text(text)
+    write_text(args.out / "snake.json", text)
     if args.json:
         print(text)
     else:

@@ -10,6 +10,7 @@ from .._solvers import SOLVERS
 from .._stress.cases import MATRIX, QUICK_MATRIX, stress_cases
 from .._stress.report import counts, markdown
 from .._stress.run import PATHS, stress
+from .._atomic import write_text
 from .common import RunsFailed, UsageError, comma_list, json_ready, show_progress, writable_folder
 
 HELP = "numerical stability on stiff and extreme cases (the stress matrix)"
@@ -67,7 +68,7 @@ def run(args) -> None:
     rows = stress(cases, args.solvers, path=args.out / "stress.csv",
                   progress=show_progress(args))
     table = args.out / "stress.md"
-    table.write_text(markdown(rows))
+    write_text(table, markdown(rows))
     c = counts(rows)
     if args.json:
         keys = ("what", "value", "solver", "outcome", "status", "check", "hint")

@@ -15,10 +15,11 @@ from .._simulate import STATUS
 from .._sweep.fronts import front_fractions, front_ranges
 from .._sweep.sweep import sweep
 from .._physics.record import chain_record
+from .._atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, add_output_options, add_ring_options, add_run_options,
+from .common import (RunsFailed, UsageError, add_output_options, add_ring_options, add_run_options,
                      add_scheduler_option, cluster_client, json_ready, positive_int,
-                     save_figure, show_progress, writable_folder)
+                     show_progress, writable_folder)
 
 HELP = "bifurcation diagram over belt speeds, stored as it runs (Fig. 3(b))"
 DESCRIPTION = """\
@@ -101,10 +102,12 @@ def add_parser(sub):
                    help="trajectories per stored batch (default 64); memory is set by "
                         "it, never by the grid")
     s.add_argument("--resume", action="store_true",
-                   help="continue the sweep stored in <out>/sweep.zarr, skipping its "
-                        "finished batches (refused if it was made with other settings)")
+                   help="continue the sweep stored in <out>/sweep.zarr, or an --overwrite "
+                        "of it cut short, skipping its finished batches (refused if it "
+                        "was made with other settings)")
     s.add_argument("--overwrite", action="store_true",
-                   help="delete <out>/sweep.zarr and start again")
+                   help="replace <out>/sweep.zarr by a new sweep, built beside it and "
+                        "swapped in once complete: the old one stays whole until then")
     add_scheduler_option(s)
     add_output_options(p)
     p.set_defaults(run=run)
@@ -117,7 +120,7 @@ def run(args) -> None:
                                 rtol=args.rtol, atol=args.atol, max_steps=args.max_steps,
                                 controller=args.controller)
     if args.resume and args.overwrite:
-        raise ValueError("--resume and --overwrite exclude each other")
+        raise UsageError("--resume and --overwrite exclude each other")
     writable_folder(args.out)
     ics = {name: localized_family(params.n_osc, name, params.boundary) for name in args.ics}
     store = args.out / "sweep.zarr"

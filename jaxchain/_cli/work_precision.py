@@ -11,8 +11,9 @@ from .._plots.work_precision import plot_work_precision
 from .._solvers import SOLVERS
 from .._work_precision import (SCENES, WP_EPS, WP_RTOLS, WP_SOLVERS, recommend,
                                split_method, work_precision)
+from .._atomic import save_figure
 from .common import (RunsFailed, UsageError, comma_list, json_ready, positive_int,
-                     save_figure, writable_folder)
+                     writable_folder)
 
 HELP = "error against run time of every solver and eps (work-precision diagram)"
 DESCRIPTION = f"""\

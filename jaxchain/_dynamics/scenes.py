@@ -24,6 +24,7 @@ from .._simulate import STATUS, check_observers
 from .._solvers import DEFAULT_SOLVER, SOLVERS
 from .._states import ClassTolerances
 from .classify import classify
+from .._errors import ValidationError
 
 #: The solutions (numbers of excited oscillators) of Figs. 6 and 7 of the paper.
 PAPER_SOLUTIONS = (1, 2, 5, 8, 9, 12, 13, 19, 20)
@@ -39,8 +40,8 @@ def _check_solutions(solutions, n_osc: int) -> np.ndarray:
     except (TypeError, ValueError):
         raise TypeError(f"solutions must be a list of integers, got {solutions!r}") from None
     if solutions.size == 0 or solutions.min() < 1 or solutions.max() > n_osc:
-        raise ValueError(f"solutions must be numbers of excited oscillators in "
-                         f"[1, {n_osc}], got {solutions.tolist()}")
+        raise ValidationError(f"solutions must be numbers of excited oscillators in "
+                              f"[1, {n_osc}], got {solutions.tolist()}")
     return solutions
 
 
@@ -76,8 +77,8 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
 
     **Raises:**
 
-    `ValueError` for solutions outside [1, n_osc] or an unknown family;
-    `TypeError` or `ValueError` for bad observers (`check_observers`).
+    `ValidationError` for solutions outside [1, n_osc] or an unknown family;
+    `TypeError` or `ValidationError` for bad observers (`check_observers`).
     """
     observers = check_observers(observers)
     params = check_params(params)
@@ -138,7 +139,7 @@ def time_series_scene(params: ChainParams = ChainParams(v_d=1.5), n_excited: int
 
     **Raises:**
 
-    `ValueError` for t_end <= 0, dt <= 0 or n_excited outside [1, n_osc].
+    `ValidationError` for t_end <= 0, dt <= 0 or n_excited outside [1, n_osc].
     """
     options = SimulationOptions(t_end=t_end, transient=0.0)
     return observe_solutions(params, [n_excited], (TimeSeries(dt=dt),), ics, solver,
@@ -194,7 +195,7 @@ def phase_portrait_scene(params: ChainParams = ChainParams(v_d=1.5),
     if oscillators is None:
         oscillators = tuple((n // 2 + i) % n for i in range(3))
     if len(oscillators) != 3 or not all(0 <= i < n for i in oscillators):
-        raise ValueError(f"oscillators must be three indices in [0, {n}), got {oscillators}")
+        raise ValidationError(f"oscillators must be three indices in [0, {n}), got {oscillators}")
     observers = (TimeSeries(oscillators=tuple(int(i) for i in oscillators), dt=dt),)
     return observe_solutions(params, solutions, observers, ics, solver, options,
                              progress=progress)
@@ -218,7 +219,7 @@ def orbit_diagram_scene(params: ChainParams = ChainParams(v_d=1.5),
     `observe_solutions`'s Dataset, classified.
     """
     if ics not in FAMILIES:
-        raise ValueError(f"ics must be one of {sorted(FAMILIES)}, got {ics!r}")
+        raise ValidationError(f"ics must be one of {sorted(FAMILIES)}, got {ics!r}")
     observers = (Extrema(), PeakTimes(), LargestLyapunov())
     return observe_solutions(params, solutions, observers, ics, solver, options,
                              progress=progress, tolerances=tolerances)

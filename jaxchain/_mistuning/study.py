@@ -26,6 +26,7 @@ from .._store import CsvStore, settings_key
 from .._sweep.sweep import sweep
 from .edges import EDGE_OPTIONS, localized_fold, localized_orbit, upper_edges
 from .summary import envelope_decay
+from .._errors import ValidationError
 
 #: Mistuning strengths sigma / eta_c of the study by default.
 STUDY_SIGMAS = (0.0, 0.5, 1.0, 2.0, 4.0)
@@ -122,7 +123,7 @@ def mistuning_study(params: ChainParams = ChainParams(), sigmas=STUDY_SIGMAS,
 
     **Raises:**
 
-    `ValueError` for a bad count, sigma or belt speed, and as `sweep`.
+    `ValidationError` for a bad count, sigma or belt speed, and as `sweep`.
     """
     params = check_params(params)
     solver = as_solver(solver, params=params)
@@ -131,13 +132,13 @@ def mistuning_study(params: ChainParams = ChainParams(), sigmas=STUDY_SIGMAS,
     sigmas = np.atleast_1d(np.asarray(sigmas, dtype=float))
     if sigmas.ndim != 1 or sigmas.size == 0 or not np.all(np.isfinite(sigmas)) \
             or np.any(sigmas < 0):
-        raise ValueError(f"sigmas: give sigma / eta_c values >= 0, got {sigmas.tolist()}")
+        raise ValidationError(f"sigmas: give sigma / eta_c values >= 0, got {sigmas.tolist()}")
     for name, value, least in (("n_draws", n_draws, 1), ("n_samples", n_samples, 0),
                                ("n_folds", n_folds, 0)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
-            raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")
+            raise ValidationError(f"{name} must be an integer >= {least}, got {value!r}")
     if resume and overwrite:
-        raise ValueError("resume and overwrite exclude each other")
+        raise ValidationError("resume and overwrite exclude each other")
     n = params.n_osc
     key = _key(key)
     samples = np.asarray(sample_states(key, box, int(n_samples), n)) if n_samples else None

@@ -11,6 +11,7 @@ from .._physics.initial import OutOfPhaseExcitation, excited_block
 from .._physics.model import steady_sliding
 from .._options import SimulationOptions
 from .._physics.params import ChainParams, with_parameter
+from .._errors import ValidationError
 
 #: What varies, and its values. "mu_st/mu_d" varies mu_st at mu_d = 0.5; "ics" the
 #: initial state: exactly steady sliding, or steady sliding plus an out-of-phase
@@ -72,10 +73,10 @@ def make_case(what: str, value, options: SimulationOptions = OPTIONS) -> StressC
 
     **Raises:**
 
-    `ValueError` for a `what` not in `MATRIX`, or an "ics" value not listed there.
+    `ValidationError` for a `what` not in `MATRIX`, or an "ics" value not listed there.
     """
     if what not in MATRIX:
-        raise ValueError(f"what must be one of {', '.join(MATRIX)}, got {what!r}")
+        raise ValidationError(f"what must be one of {', '.join(MATRIX)}, got {what!r}")
     params = ChainParams()
     if what == "n_osc":
         params = ChainParams(n_osc=int(value))
@@ -94,7 +95,7 @@ def make_case(what: str, value, options: SimulationOptions = OPTIONS) -> StressC
     elif value == "x' ± 50":
         y0 = base.at[1].add(50.0 * _pattern(n))
     else:
-        raise ValueError(f"ics must be one of {MATRIX['ics']}, got {value!r}")
+        raise ValidationError(f"ics must be one of {MATRIX['ics']}, got {value!r}")
     return StressCase(what=what, value=value, params=params, y0=jnp.asarray(y0),
                       options=options)
 

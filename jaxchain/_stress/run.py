@@ -124,7 +124,7 @@ def stress(cases: Sequence[StressCase] | None = None, solvers: Sequence[str] = P
 
     **Raises:**
 
-    `ValueError` for an unknown solver name.
+    `ValidationError` for an unknown solver name.
     """
     for name in solvers:
         as_solver(name, "solvers")

@@ -21,6 +21,7 @@ from distributed.comm.core import CommClosedError
 from tqdm.auto import tqdm
 
 from .._programs import keep_programs, program_folder
+from .._errors import ValidationError
 
 #: The scheduler address that starts a cluster on this machine: "local:N", N
 #: worker processes of one thread (and one JAX device) each.
@@ -35,16 +36,16 @@ def local_workers(scheduler: str) -> int | None:
 
     **Raises:**
 
-    `ValueError` (naming `scheduler`) for "local:" followed by anything but an
+    `ValidationError` (naming `scheduler`) for "local:" followed by anything but an
     integer >= 1, or an empty address.
     """
     if not isinstance(scheduler, str) or not scheduler.strip():
-        raise ValueError(f"scheduler: expected an address or local:N, got {scheduler!r}")
+        raise ValidationError(f"scheduler: expected an address or local:N, got {scheduler!r}")
     if not scheduler.startswith(LOCAL):
         return None
     text = scheduler[len(LOCAL):]
     if not text.isdigit() or int(text) < 1:
-        raise ValueError(f"scheduler: local:N needs an integer N >= 1, got {scheduler!r}")
+        raise ValidationError(f"scheduler: local:N needs an integer N >= 1, got {scheduler!r}")
     return int(text)
 
 
@@ -66,7 +67,7 @@ def connect(scheduler: str, timeout: float = 30.0) -> Iterator:
 
     **Raises:**
 
-    `ValueError` for a bad "local:N"; `RuntimeError` (one line) when no scheduler
+    `ValidationError` for a bad "local:N"; `RuntimeError` (one line) when no scheduler
     answers at the address within `timeout` seconds.
     """
     n = local_workers(scheduler)

@@ -10,6 +10,7 @@ from .._physics.initial import (AbstractInitialCondition, OutOfPhaseExcitation, 
                         initial_states)
 from .._lanes import lane_params, take_lanes
 from .._physics.params import ChainParams, parameter_name, with_parameter
+from .._errors import ValidationError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -28,7 +29,7 @@ class SweepGrid:
 
     **Raises:**
 
-    `ValueError` for an empty or non-finite list of values, a value that
+    `ValidationError` for an empty or non-finite list of values, a value that
     `ChainParams` rejects (naming the field), no families, a family without a batch
     axis, or initial states of the wrong shape.
     """
@@ -43,14 +44,14 @@ class SweepGrid:
         name = parameter_name(where, params)
         values = np.atleast_1d(np.asarray(values, dtype=float))
         if values.ndim != 1 or values.size == 0:
-            raise ValueError(f"{name}: the sweep needs a 1-d list of at least one value, "
-                             f"got shape {values.shape}")
+            raise ValidationError(f"{name}: the sweep needs a 1-d list of at least one value, "
+                                  f"got shape {values.shape}")
         for value in values:  # validates every value, naming the field
             with_parameter(params, name, value)
         families = dict(ics) if isinstance(ics, Mapping) else {type(ics).__name__: ics}
         if not families:
-            raise ValueError("ics: the sweep needs at least one family of initial "
-                             "conditions")
+            raise ValidationError("ics: the sweep needs at least one family of initial "
+                                  "conditions")
         grid = cls(params, name, values, families)
         for family in families.values():  # shapes checked before anything runs
             batch_length(family)

@@ -11,6 +11,9 @@ import dask.array as da
 import numpy as np
 import xarray as xr
 
+from .._atomic import hold
+from .._errors import ValidationError
+
 #: Unwritten entries of a batch that has not finished, as they are read back.
 _MISSING = {"f": np.nan, "i": -1, "u": 0, "b": False}
 
@@ -27,6 +30,15 @@ class SweepStore:
         flags it done. zarr writes each chunk to a temporary file renamed into
         place, so a flag is either set or not; a batch whose writing was cut
         short is unflagged, and is redone.
+    - An overwrite never removes a store before its replacement is complete: the
+        new sweep is built in `pending` (`<name>.overwrite`, beside it), and
+        `swap_in` puts it in place once every batch is flagged. A kill at any
+        point leaves the old store whole at `path`, or, between the two renames
+        of the swap, whole at `<name>.replaced` beside the complete new one
+        (`recover` finishes that swap).
+    - Only a jaxchain sweep store is ever resumed, overwritten or removed
+        (`require_sweep`): a zarr group without the attributes `settings_key`
+        and `swept` and the flags `batch_done` is left untouched.
 
     **Arguments:**
 
@@ -37,7 +49,78 @@ class SweepStore:
         self.path = Path(path)
 
     def exists(self) -> bool:
+        """Whether a zarr group is at `path` (a sweep store or any other)."""
         return (self.path / "zarr.json").exists() or (self.path / ".zgroup").exists()
+
+    def occupied(self) -> bool:
+        """Whether anything but an empty folder is at `path`."""
+        return self.path.is_symlink() or (self.path.exists() and not (
+            self.path.is_dir() and not any(self.path.iterdir())))
+
+    def is_sweep(self) -> bool:
+        """Whether `path` holds a jaxchain sweep store: a zarr group with the
+        attributes `settings_key` and `swept` and the flags `batch_done`."""
+        import zarr
+
+        if not self.exists():
+            return False
+        try:
+            group = zarr.open_group(str(self.path), mode="r")
+            return ("settings_key" in group.attrs and "swept" in group.attrs
+                    and "batch_done" in group)
+        except (OSError, ValueError, KeyError):
+            return False
+
+    def require_sweep(self, action: str) -> None:
+        """**Raises:** `ValidationError` naming `path` when something other than a
+        jaxchain sweep store (`is_sweep`) or an empty folder is there: it is
+        not ours to `action` (resume, overwrite, ...), and is left untouched."""
+        if self.occupied() and not self.is_sweep():
+            raise ValidationError(
+                f"store {self.path} exists and is not a jaxchain sweep store (a zarr "
+                "group with the attributes settings_key and swept and the flags "
+                f"batch_done): refusing to {action} it, it is left untouched; choose "
+                "another store")
+
+    def key(self) -> str | None:
+        """The `settings_key` of the sweep stored here, or None if there is none."""
+        return self.settings()[0] if self.is_sweep() else None
+
+    def pending(self) -> "SweepStore":
+        """The store that an overwrite of this one builds beside it,
+        `<name>.overwrite`, until `swap_in` puts it in place."""
+        return SweepStore(self.path.with_name(self.path.name + ".overwrite"))
+
+    def _replaced(self) -> Path:
+        return self.path.with_name(self.path.name + ".replaced")
+
+    def swap_in(self, new: "SweepStore") -> None:
+        """Put the complete store `new` (`pending`) in place of this one: this one
+        is renamed to `<name>.replaced`, `new` to `path`, then the old one is
+        removed. Each step is a rename or comes after them, so that a kill leaves
+        a whole store at `path`, or the two whole stores that `recover` sorts
+        out."""
+        hold(f"swap {self.path.name}")
+        replaced = self._replaced()
+        if self.path.exists():
+            os.rename(self.path, replaced)
+        os.rename(new.path, self.path)
+        shutil.rmtree(replaced, ignore_errors=True)
+
+    def recover(self) -> None:
+        """Finish a `swap_in` cut short by a kill. With `path` missing and the old
+        store at `<name>.replaced`: the new one (`pending`) is renamed into place,
+        or, if there is none, the old one is put back. With `path` present, a
+        leftover `<name>.replaced` (the old store, partly removed) is removed.
+        `sweep` calls it before it plans a run; a reader (`open_sweep`) does not,
+        and finds no sweep at `path` in that state."""
+        replaced = self._replaced()
+        if not replaced.exists():
+            return
+        if not self.path.exists():
+            pending = self.pending()
+            os.rename(pending.path if pending.is_sweep() else replaced, self.path)
+        shutil.rmtree(replaced, ignore_errors=True)
 
     def settings(self) -> tuple[str, dict]:
         """The key and the settings (as JSON data) that made the store."""
@@ -45,18 +128,24 @@ class SweepStore:
         return attrs["settings_key"], json.loads(attrs["settings"])
 
     def check(self, key: str, settings: str) -> None:
-        """**Raises:** `ValueError`, in one line naming the settings that differ,
+        """**Raises:** `ValidationError`, in one line naming the settings that differ,
         when the store was made with settings other than those of `key`."""
         stored_key, stored = self.settings()
         if stored_key == key:
             return
         new = json.loads(settings)
         differ = sorted(_differences(stored, new)) or ["the format version"]
-        raise ValueError(f"{self.path} holds a sweep made with other settings "
-                         f"({', '.join(differ)} differ): choose another store, or "
-                         "overwrite it")
+        raise ValidationError(f"{self.path} holds a sweep made with other settings "
+                              f"({', '.join(differ)} differ): choose another store, or "
+                              "overwrite it")
 
     def remove(self) -> None:
+        """Remove the sweep store at `path`.
+
+        **Raises:**
+
+        `ValidationError` (`require_sweep`) when `path` holds anything else."""
+        self.require_sweep("remove")
         shutil.rmtree(self.path)
 
     def create(self, batch: xr.Dataset, n_trajectories: int, batch_size: int,
@@ -96,6 +185,7 @@ class SweepStore:
     def write(self, index: int, start: int, batch: xr.Dataset) -> None:
         """Write `batch` (trajectories start, start + 1, ...) into its region, then
         flag batch `index` done."""
+        hold(f"{self.path.name} batch {index}")
         region = {"trajectory": slice(start, start + batch.sizes["trajectory"])}
         batch.to_zarr(self.path, region=region, consolidated=False)
         flag = xr.Dataset({"batch_done": ("batch", np.ones(1, dtype=np.uint8))})

@@ -25,6 +25,7 @@ from .._store import settings_json, settings_key
 from .fronts import propagating_fronts
 from .grid import SweepGrid
 from .store import SweepStore
+from .._errors import ValidationError
 
 #: The kind of result in the key of a sweep's store (`settings_key`).
 KIND = "sweep"
@@ -80,8 +81,13 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
         resuming.
     - `store`: a folder for the zarr store (conventionally `*.zarr`), or None to
         keep the results in memory only.
-    - `resume`: continue the sweep in `store`, skipping its finished batches.
-    - `overwrite`: delete what `store` holds and start again.
+    - `resume`: continue the sweep in `store`, skipping its finished batches, or
+        an overwrite of `store` with these settings that was cut short.
+    - `overwrite`: replace the sweep that `store` holds by a new one, built
+        beside it (`<store>.overwrite`) and swapped in once every batch is
+        stored: until then the old one stays whole and readable (a killed
+        overwrite is finished by `resume=True` with the same settings, or started
+        again by `overwrite=True`).
     - `engine`: "queue" or "vmap" (see `run_lanes`); on a cluster, each worker's
         default by default (the queue on CPUs, vmap on GPUs).
     - `client`: a `distributed.Client` to run the batches on its cluster (needs
@@ -104,12 +110,14 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
 
     **Raises:**
 
-    `ValueError` for a bad value (naming the parameter), an empty grid, initial
+    `ValidationError` for a bad value (naming the parameter), an empty grid, initial
     conditions of the wrong shape, batch_size < 1, an existing store without
     `resume` or `overwrite`, or a store made with other settings (naming the
-    settings that differ), or a `client` without a `store`. `RuntimeError` when
-    the scheduler of `client` goes away, or when batches the cluster ran are
-    not in the store (the workers do not share its file system).
+    settings that differ), a `store` holding something other than a jaxchain
+    sweep (naming its path; it is left untouched), or a `client` without a
+    `store`. `RuntimeError` when the scheduler of `client` goes away, or when
+    batches the cluster ran are not in the store (the workers do not share its
+    file system).
     """
     params = check_params(params)
     solver = as_solver(solver, params=params)
@@ -117,9 +125,9 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     grid = SweepGrid.build(params, where, values, ics)
     if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) \
             or batch_size < 1:
-        raise ValueError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+        raise ValidationError(f"batch_size must be an integer >= 1, got {batch_size!r}")
     if resume and overwrite:
-        raise ValueError("resume and overwrite exclude each other")
+        raise ValidationError("resume and overwrite exclude each other")
     n, name = grid.n_trajectories, grid.name
     n_batches = -(-n // batch_size)
     settings = dict(
@@ -130,18 +138,12 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     key, text = settings_key(KIND, **settings), settings_json(KIND, **settings)
 
     if client is not None and store is None:
-        raise ValueError("store: a sweep on a Dask cluster needs a store its workers "
-                         "can reach")
+        raise ValidationError("store: a sweep on a Dask cluster needs a store its workers "
+                              "can reach")
     st = SweepStore(store) if store is not None else None
-    done = np.zeros(n_batches, dtype=bool)
-    if st is not None and st.exists():
-        if overwrite:
-            st.remove()
-        elif resume:
-            st.check(key, text)
-            done = st.done()
-        else:
-            raise ValueError(f"store {st.path} exists: resume it or overwrite it")
+    target = None if st is None else _target(st, key, text, resume, overwrite)
+    done = target.done() if target is not None and target.exists() \
+        else np.zeros(n_batches, dtype=bool)
     todo = [b for b in range(n_batches) if not done[b]]
 
     coords = {name: grid.values, "ic": np.arange(grid.n_ics), **grid.ic_coords(),
@@ -158,15 +160,16 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
 
         with tqdm(total=n_batches, initial=n_batches - len(todo), desc="sweep",
                   unit="batch", disable=not progress) as bar:
-            run_tasks(client, _Batches.store, work, [(st.path.resolve(), b) for b in todo],
+            run_tasks(client, _Batches.store, work,
+                      [(target.path.resolve(), b) for b in todo],
                       [f"sweep-{key[:12]}-batch-{b}-{uuid.uuid4().hex[:8]}" for b in todo],
                       bar, costs=[work.cost(b) for b in todo])
-        missing = [b for b in todo if not (st.exists() and st.done()[b])]
+        missing = [b for b in todo if not (target.exists() and target.done()[b])]
         if missing:
             raise RuntimeError(f"the cluster ran {len(todo)} batches but {len(missing)} "
-                               f"are not in {st.path.resolve()}: its workers write to a "
-                               "file system this process does not see; give a store on a "
-                               "shared one")
+                               f"are not in {target.path.resolve()}: its workers write to "
+                               "a file system this process does not see; give a store on "
+                               "a shared one")
     else:
         initial = sum(work.size(b) for b in np.flatnonzero(done))
         with tqdm(total=n, initial=initial, desc="sweep", unit="trajectory",
@@ -175,7 +178,9 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
                 if st is None:
                     parts.append(work.run(b, bar))
                 else:
-                    work.store(st.path, b, bar)
+                    work.store(target.path, b, bar)
+    if st is not None and target.path != st.path:  # an overwrite, now complete
+        st.swap_in(target)
 
     if st is None:
         flat = xr.concat(parts, "trajectory").assign_coords(coords).assign_attrs(attrs)
@@ -187,6 +192,45 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     ds.attrs |= {"batches_total": n_batches, "batches_done": n_done,
                  "batches_run": len(todo), "store": str(st.path) if st else ""}
     return ds
+
+
+def _target(st: SweepStore, key: str, text: str, resume: bool,
+            overwrite: bool) -> SweepStore:
+    """The store that the batches of the sweep of `key` go to, for the store `st`
+    asked for:
+
+    - nothing at `st`: `st` itself, a new store.
+    - `overwrite`: `st` itself if it holds nothing, else a new store beside it
+        (`st.pending()`, replacing any earlier unfinished overwrite), swapped in
+        when complete; the old one stays whole until then.
+    - `resume`: `st` if it holds this sweep; else the unfinished overwrite of
+        this sweep beside it (`pending`), if there is one, to finish and swap in.
+
+    A swap cut short by a kill is finished first (`recover`).
+
+    **Raises:**
+
+    `ValidationError` naming the path when something other than a jaxchain sweep
+    store is at `st` (or at `st.pending()` on overwrite), which is left untouched;
+    when `st` holds a sweep of other settings on `resume` (naming them); when it
+    holds a sweep and neither `resume` nor `overwrite` is given.
+    """
+    st.recover()
+    st.require_sweep("overwrite" if overwrite else "resume" if resume else "write into")
+    if not st.is_sweep():
+        return st
+    pending = st.pending()
+    if overwrite:
+        pending.require_sweep("overwrite")
+        if pending.occupied():
+            pending.remove()
+        return pending
+    if not resume:
+        raise ValidationError(f"store {st.path} exists: resume it or overwrite it")
+    if st.key() != key and pending.key() == key:
+        return pending
+    st.check(key, text)
+    return st
 
 
 @dataclasses.dataclass(frozen=True)
@@ -253,11 +297,11 @@ def open_sweep(store: str | Path) -> xr.Dataset:
 
     **Raises:**
 
-    `ValueError` when `store` holds no sweep.
+    `ValidationError` when `store` holds no sweep.
     """
     st = SweepStore(store)
-    if not st.exists():
-        raise ValueError(f"store {store} holds no sweep")
+    if not st.is_sweep():
+        raise ValidationError(f"store {store} holds no sweep")
     flat = st.open()
     name = flat.attrs["swept"]
     ds = _on_grid(flat, name, flat.sizes[name], flat.sizes["ic"])

@@ -1,0 +1,266 @@
+"""Writes that lose nothing: every output file is written beside its place and
+renamed into it, so that a process killed while it rewrites a file (netCDF, JSON,
+CSV, figure) or overwrites a sweep store leaves the previous one whole; a sweep
+never removes or resumes a folder that is not a jaxchain sweep store.
+
+The kills land where the tests say: the writers' test hook (`hold_env`, `held`)
+holds a writer just before it commits a write, and the test kills it there."""
+
+import ast
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import jaxchain as jc
+from helpers import held, hold_env, kill, release, small_sweep, sweep_cli
+from jaxchain._atomic import save_figure, write_text
+from jaxchain._cli.main import main
+from jaxchain._store import CsvStore
+from jaxchain._sweep.store import SweepStore
+
+
+def _snapshot(folder: Path) -> dict:
+    """Every entry under `folder` (or the file `folder`) by relative path: the
+    bytes of a file, None for a folder; the temporary files of writes cut short
+    (`*.partial`) left out."""
+    folder = Path(folder)
+    if folder.is_file():
+        return {".": folder.read_bytes()}
+    return {str(p.relative_to(folder)): (p.read_bytes() if p.is_file() else None)
+            for p in sorted(folder.rglob("*")) if not p.name.endswith(".partial")}
+
+
+#: Rewrites, in four threads of one process, a netCDF file (`save_dataset`, the
+#: writer of every command's .nc), a JSON file (`write_text`), a CSV store whose
+#: columns changed (`CsvStore`'s rewrite) and a figure (`save_figure`).
+_REWRITE = """
+import sys, threading
+from pathlib import Path
+import matplotlib
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import xarray as xr
+from jaxchain._atomic import save_figure, write_text
+from jaxchain._results import save_dataset
+from jaxchain._store import CsvStore
+
+out = Path(sys.argv[1])
+fig, ax = plt.subplots()
+ax.plot([0, 1], [1, 0])
+writes = [
+    lambda: save_dataset(xr.Dataset({"x": ("i", np.arange(4.0) + 1)}), out / "result.nc"),
+    lambda: write_text(out / "result.json", '{"n_halc": [2, 3]}'),
+    lambda: CsvStore(out / "table.csv", ("key", "value", "added")),
+    lambda: save_figure(fig, out / "figure.png"),
+]
+threads = [threading.Thread(target=w) for w in writes]
+for t in threads:
+    t.start()
+for t in threads:
+    t.join()
+"""
+
+
+def test_a_process_killed_as_it_rewrites_each_kind_of_file_leaves_the_previous_ones(
+        tmp_path):
+    """The previous files are written here; a process rewrites all four with other
+    content and is killed (SIGKILL) while each write holds just before its
+    rename. Every previous file is byte-identical, and still reads back."""
+    import matplotlib.pyplot as plt
+
+    out, hooks = tmp_path / "out", tmp_path / "hooks"
+    ds = xr.Dataset({"x": ("i", np.arange(3.0))}, attrs={"note": "previous"})
+    jc.save_dataset(ds, out / "result.nc")
+    write_text(out / "result.json", '{"n_halc": [1]}')
+    with CsvStore(out / "table.csv", ("key", "value")) as table:
+        table.append({"key": "a", "value": 1.5})
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    save_figure(fig, out / "figure.png")
+    before = _snapshot(out)
+    assert sorted(before) == ["figure.png", "result.json", "result.nc", "table.csv"]
+
+    proc = subprocess.Popen([sys.executable, "-c", _REWRITE, str(out)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            env=hold_env(hooks))
+    try:
+        writing = {held(hooks, n, proc)[0] for n in (1, 2, 3, 4)}
+    finally:
+        kill(proc)
+    assert writing == {"write result.nc", "write result.json", "write table.csv",
+                       "write figure.png"}
+    assert len(list(out.glob("*.partial"))) == 4, "each new file was written beside"
+    assert _snapshot(out) == before
+    xr.testing.assert_identical(xr.load_dataset(out / "result.nc"), ds)
+    assert json.loads((out / "result.json").read_text()) == {"n_halc": [1]}
+    with CsvStore(out / "table.csv", ("key", "value")) as table:
+        assert table.row("a") == {"key": "a", "value": "1.5"}
+
+
+def test_a_command_killed_as_it_replaces_its_dataset_leaves_the_previous_one(tmp_path):
+    """`jaxchain localized` in its own process, over the files of an earlier run,
+    killed (SIGKILL) as it holds before renaming its new netCDF file into place:
+    the folder (the .nc and the figure) is byte-identical."""
+    out, hooks = tmp_path / "out", tmp_path / "hooks"
+    jc.save_dataset(xr.Dataset({"energy": ("ic", [1.0, 2.0])}), out / "localized_vd1.5.nc")
+    (out / "localized_vd1.5.png").write_bytes(b"an earlier figure")
+    before = _snapshot(out)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "jaxchain._cli.main", "localized", "--n-osc", "3",
+         "--t-end", "400", "--transient", "200", "--no-progress", "--out", str(out)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=hold_env(hooks))
+    try:
+        assert held(hooks, 1, proc)[0] == "write localized_vd1.5.nc"
+    finally:
+        kill(proc)
+    assert _snapshot(out) == before
+
+
+#: In one process (one program traced): `jaxchain sweep` at v_d = 1.5 with the
+#: hook off, a hold once it is stored, then `jaxchain sweep --overwrite` at 1.6.
+_OVERWRITE = """
+import os, sys
+from jaxchain._atomic import HOLD, hold
+from jaxchain._cli.main import main
+
+hooks = os.environ.pop(HOLD)
+assert main([*sys.argv[2:], "--vd", "1.5", "--out", sys.argv[1]]) == 0
+os.environ[HOLD] = hooks
+hold("old store written")
+main([*sys.argv[2:], "--vd", "1.6", "--overwrite", "--out", sys.argv[1]])
+"""
+
+
+def test_a_sweep_overwrite_killed_at_any_batch_or_before_its_swap_leaves_the_old_store(
+        tmp_path):
+    """`jaxchain sweep --overwrite` with another belt speed builds its store beside
+    the old one: while it holds at each of its batches and before the swap, the
+    old store is byte-identical, and after a kill (SIGKILL) before the swap it
+    still reads back as the old sweep. `resume=True` with the new settings then
+    finishes the overwrite (no batch run again) and swaps it in, leaving no other
+    folder. A kill between the two renames of a swap (the old store at
+    <store>.replaced, the complete new one at <store>.overwrite, nothing at the
+    store) is finished by the next sweep; with no new one beside, the old one is
+    put back."""
+    out, hooks = tmp_path / "out", tmp_path / "hooks"
+    store = out / "sweep.zarr"
+    replaced, pending = out / "sweep.zarr.replaced", out / "sweep.zarr.overwrite"
+    vd = sweep_cli("1.5").index("--vd")
+    cli = [a for i, a in enumerate(sweep_cli("1.5")) if i not in (vd, vd + 1)]
+    proc = subprocess.Popen([sys.executable, "-c", _OVERWRITE, str(out), *cli],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            env=hold_env(hooks))
+    try:
+        assert held(hooks, 1, proc)[0] == "old store written"
+        before, old = _snapshot(store), jc.open_sweep(store).load()
+        release(hooks, 1)
+        for n, what in enumerate(("sweep.zarr.overwrite batch 0",
+                                  "sweep.zarr.overwrite batch 1", "swap sweep.zarr"), 2):
+            assert held(hooks, n, proc)[0] == what
+            assert _snapshot(store) == before, what
+            if what != "swap sweep.zarr":
+                release(hooks, n)
+    finally:
+        kill(proc)  # held before the swap
+    assert _snapshot(store) == before
+    assert old["v_d"].values.tolist() == [1.5]
+    xr.testing.assert_identical(jc.open_sweep(store).load(), old)
+    shutil.copytree(store, tmp_path / "old.zarr")  # for the swaps cut short below
+
+    new = small_sweep("1.6", store=store, resume=True)
+    assert new.attrs["batches_run"] == 0
+    assert new.attrs["batches_done"] == new.attrs["batches_total"] == 2
+    assert new["v_d"].values.tolist() == [1.6]
+    assert sorted(p.name for p in out.iterdir()) == ["sweep.png", "sweep.zarr"]
+
+    os.rename(store, pending)  # a complete overwrite killed in its swap: the new
+    os.rename(tmp_path / "old.zarr", replaced)  # store beside, the old one renamed
+    again = small_sweep("1.6", store=store, resume=True)
+    assert again.attrs["batches_run"] == 0 and again["v_d"].values.tolist() == [1.6]
+    assert sorted(p.name for p in out.iterdir()) == ["sweep.png", "sweep.zarr"]
+    os.rename(store, replaced)  # the same, with no new store beside
+    SweepStore(store).recover()
+    assert sorted(p.name for p in out.iterdir()) == ["sweep.png", "sweep.zarr"]
+    assert jc.open_sweep(store)["v_d"].values.tolist() == [1.6]
+
+
+def test_a_folder_that_is_not_a_sweep_store_is_refused_and_left_untouched(tmp_path,
+                                                                          capsys):
+    """A zarr group of other data, a folder of other files and a file, given as a
+    sweep's store: overwrite, resume and a plain run are each refused with a
+    `ValidationError` naming the path, before anything runs, and the folder is
+    byte-identical; the command exits 2 with one line naming it."""
+    group = tmp_path / "group.zarr"
+    xr.Dataset({"x": ("i", np.arange(5.0))}, attrs={"note": "not a sweep"}).to_zarr(
+        group, consolidated=False)
+    folder = tmp_path / "folder.zarr"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("mine")
+    file = tmp_path / "file.zarr"
+    file.write_text("mine")
+    for path in (group, folder, file):
+        before = _snapshot(path)
+        for kw in ({"overwrite": True}, {"resume": True}, {}):
+            with pytest.raises(jc.ValidationError, match=re.escape(str(path))):
+                small_sweep("1.5", store=path, **kw)
+            assert _snapshot(path) == before, (path, kw)
+    with pytest.raises(jc.ValidationError, match="holds no sweep"):
+        jc.open_sweep(group)
+
+    out = tmp_path / "out"
+    xr.Dataset({"y": ("j", np.ones(2))}).to_zarr(out / "sweep.zarr", consolidated=False)
+    before = _snapshot(out)
+    assert main([*sweep_cli("1.5"), "--overwrite", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(out / "sweep.zarr") in err
+    assert _snapshot(out) == before
+
+
+#: The only calls in jaxchain/ that write a file, by module: each writes to a
+#: temporary path renamed into place (`replacing`), or appends (a CSV store), or
+#: is zarr's (a sweep store, written chunk by chunk), or is the compilation
+#: cache's own temporary file.
+_WRITERS = {
+    "_atomic.py": {"write_text": 2, "savefig": 1},
+    "_results.py": {"to_netcdf": 1},
+    "_store.py": {"open": 2},
+    "_programs.py": {"write_bytes": 1},
+    "_sweep/store.py": {"to_zarr": 3},
+}
+
+
+def test_every_file_written_goes_through_the_writers():
+    """No module of jaxchain writes a file but the writers above: every output of
+    every command (`save_dataset`, `write_text`, `save_figure`) is renamed into
+    place."""
+    root = Path(jc.__file__).parent
+    found = {}
+    for path in sorted(root.rglob("*.py")):
+        calls = {}
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.Call):
+                continue
+            if isinstance(node.func, ast.Name) and node.func.id == "open":
+                name = "open"
+                modes = [a.value for a in node.args[1:2] if isinstance(a, ast.Constant)]
+                if not any(set(m) & set("wax") for m in modes):
+                    continue
+            elif isinstance(node.func, ast.Attribute) and node.func.attr in (
+                    "to_netcdf", "to_zarr", "savefig", "write_text", "write_bytes",
+                    "to_csv", "dump"):
+                name = node.func.attr
+            else:
+                continue
+            calls[name] = calls.get(name, 0) + 1
+        if calls:
+            found[str(path.relative_to(root))] = calls
+    assert found == _WRITERS
