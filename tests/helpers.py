@@ -81,11 +81,11 @@ def assert_within_drift(a, b, options: jc.SimulationOptions, num_steps, what: st
 
 
 #: Options at which two compiled programs of the same stick-slip run can be compared
-#: (`assert_within_drift`): 185k to 225k steps over [0, 300] on rings of 2 to 6,
-#: and a drift bound of 4e-4 to 1e-3, below 0.05 % of the amplitudes and states
-#: compared (1 to 2.3). A run of them costs about a second of integration on top of
-#: its compilation, which is that of any other options.
-TIGHT = jc.SimulationOptions(t_end=300.0, transient=200.0, chunk_length=100.0, rtol=1e-9,
+#: (`assert_within_drift`): 90k to 115k steps over [0, 150] on rings of 2 to 6, a
+#: drift bound of 2e-4 to 5e-4, below 0.03 % of the amplitudes and states compared
+#: (0.8 to 2.2). A run costs about half a second of integration on top of its
+#: compilation, which is that of any other options.
+TIGHT = jc.SimulationOptions(t_end=150.0, transient=100.0, chunk_length=50.0, rtol=1e-9,
                              atol=1e-11)
 
 

@@ -1,8 +1,15 @@
 """Parameter values are traced, not static: five values of eps or xi compile each
-jitted entry point once (`eqx.debug.assert_max_traces` raises on a second trace)."""
+jitted entry point once (`eqx.debug.assert_max_traces` raises on a second trace),
+each traced at all (the patched function is the one the entry point calls), and
+each value is used (the results against an independent reference)."""
+
+import functools
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 import jaxchain._bifurcation.continuation as continuation_module
@@ -10,57 +17,109 @@ import jaxchain._bifurcation.hopf as hopf_module
 import jaxchain._bifurcation.shooting as shooting_module
 import jaxchain._nonsmooth.existence as existence_module
 import jaxchain._simulate as simulate_module
+from helpers import reference_rhs, scipy_slip_arc
 
 FIVE = (0.04, 0.045, 0.05, 0.055, 0.06)
 
 
-def trace_once(monkeypatch, module, name):
+def trace_once(monkeypatch, module, name) -> list:
     """Replace the jitted `module.name` by the same function, jitted anew, that
-    raises if it is traced more than once."""
+    raises if it is traced more than once; return the list to which each trace
+    appends `name`, so that a test can tell that it was traced at all."""
     fn = getattr(module, name).__wrapped__
+    traces = []
+
+    @functools.wraps(fn)
+    def counted(*args, **kwargs):
+        traces.append(name)  # runs only while JAX traces
+        return fn(*args, **kwargs)
+
     monkeypatch.setattr(module, name,
-                        eqx.filter_jit(eqx.debug.assert_max_traces(fn, max_traces=1)))
+                        eqx.filter_jit(eqx.debug.assert_max_traces(counted, max_traces=1)))
+    return traces
 
 
+def _periodicity_error(params, y0, period) -> float:
+    """|phi_T(y0) - y0| over `period`, by scipy (DOP853) on eq. (5) written in NumPy."""
+    y0 = np.ravel(np.asarray(y0))
+    end = solve_ivp(reference_rhs(params), (0.0, float(period)), y0, method="DOP853",
+                    rtol=1e-11, atol=1e-12).y[:, -1]
+    return float(np.max(np.abs(end - y0)))
+
+
+@pytest.mark.numerics
 def test_simulate_compiles_once_for_five_eps(monkeypatch):
-    trace_once(monkeypatch, simulate_module, "_run_jit")
-    options = jc.SimulationOptions(t_end=20.0, transient=10.0, chunk_length=10.0)
+    """The excited oscillator reaches the belt speed (n_HALC = 1), where eps acts:
+    each eps moves the final state by more than 3e-3 and each agrees with scipy
+    (LSODA) to 1e-6."""
+    traces = trace_once(monkeypatch, simulate_module, "_run_jit")
+    options = jc.SimulationOptions(t_end=20.0, transient=10.0, chunk_length=10.0, rtol=1e-10,
+                                   atol=1e-12)
     for eps in (1e-2, 5e-3, 3e-3, 2e-3, 1e-3):
-        obs = jc.simulate(jc.ChainParams(n_osc=2, eps=eps), jnp.ones((2, 2)), options=options)
-        assert int(obs.status) == 0
+        params = jc.ChainParams(n_osc=2, eps=eps)
+        y0 = np.asarray(jc.OutOfPhaseExcitation.eq8([True, False])(params))
+        obs = jc.simulate(params, y0, options=options)
+        assert int(obs.status) == 0 and int(obs.n_halc) == 1
+        ref = solve_ivp(reference_rhs(params), (0.0, options.t_end), y0.ravel(),
+                        method="LSODA", rtol=1e-10, atol=1e-12)
+        assert np.allclose(np.ravel(obs.y_final), ref.y[:, -1], rtol=0, atol=1e-6), eps
+    assert traces == ["_run_jit"]
 
 
+@pytest.mark.numerics
 def test_hopf_point_compiles_once_for_five_xi(monkeypatch):
-    trace_once(monkeypatch, hopf_module, "_hopf_modes")
+    traces = trace_once(monkeypatch, hopf_module, "_hopf_modes")
     for xi in FIVE:
         hopf = jc.hopf_point(jc.ChainParams(n_osc=2, xi=xi))
         assert abs(float(hopf.v_d[0]) - 0.5 * jnp.log(0.5 / xi)) < 1e-9
+    assert traces == ["_hopf_modes"]
 
 
+@pytest.mark.numerics
 def test_shooting_compiles_once_for_five_xi(monkeypatch):
-    trace_once(monkeypatch, shooting_module, "_solve")
+    """Two Newton steps from a rough guess bring each orbit to within 1e-5 of
+    periodic, by scipy's integration over its period."""
+    traces = trace_once(monkeypatch, shooting_module, "_solve")
     options = jc.ShootingOptions(newton_steps=2, rtol=1e-6, atol=1e-8, n_samples=64)
     for xi in FIVE:
-        jc.periodic_orbit(jc.ChainParams(n_osc=1, xi=xi, eps=1e-2), jnp.array([[2.2], [0.0]]),
-                          6.3, options, throw=False)
+        params = jc.ChainParams(n_osc=1, xi=xi, eps=1e-2)
+        orbit = jc.periodic_orbit(params, jnp.array([[2.2], [0.0]]), 6.3, options,
+                                  throw=False)
+        assert _periodicity_error(params, orbit.y0, orbit.period) < 1e-5, xi
+    assert traces == ["_solve"]
 
 
+@pytest.mark.numerics
 def test_continuation_compiles_once_for_five_problems(monkeypatch):
-    # a new `limit_cycle_problem` for each xi: its residual and records are equal
-    # modules, not new lambdas, so the corrector, tangent and records trace once
-    for name in ("_correct", "_tangent", "_describe"):
-        trace_once(monkeypatch, continuation_module, name)
+    """A new `limit_cycle_problem` for each xi: its residual and records are equal
+    modules, not new lambdas, so the corrector, tangent and records trace once.
+    The continued point is a periodic orbit at its belt speed, by scipy."""
+    traces = [trace_once(monkeypatch, continuation_module, name)
+              for name in ("_correct", "_tangent", "_describe")]
     options = jc.ShootingOptions(rtol=1e-6, atol=1e-8, n_samples=64)
     for xi in FIVE:
-        orbit = jc.periodic_orbit(jc.ChainParams(n_osc=1, xi=xi, eps=1e-2),
-                                  jnp.array([[2.2], [0.0]]), 6.3, options)
+        params = jc.ChainParams(n_osc=1, xi=xi, eps=1e-2)
+        orbit = jc.periodic_orbit(params, jnp.array([[2.2], [0.0]]), 6.3, options)
         branch = jc.continuation(jc.limit_cycle_problem(orbit, options),
                                  options=jc.ContinuationOptions(ds=0.01, max_points=2))
         assert bool(branch.converged[-1])
+        u, v_d = np.asarray(branch.u[-1]), float(branch.p[-1])
+        assert v_d != float(params.v_d)  # it moved along the branch
+        moved = jc.with_parameter(params, "v_d", v_d)
+        assert _periodicity_error(moved, u[:-1], u[-1]) < 1e-5, xi
+    assert traces == [["_correct"], ["_tangent"], ["_describe"]]
 
 
+@pytest.mark.numerics
 def test_existence_limit_compiles_once_for_five_xi(monkeypatch):
-    trace_once(monkeypatch, existence_module, "_peak")
+    """Each limit (to 1e-6) against scipy's slip arc: it returns to the belt 1e-5
+    below the limit and not 1e-5 above it."""
+    traces = trace_once(monkeypatch, existence_module, "_peak")
     limits = [jc.stick_slip_existence_limit(jc.ChainParams(n_osc=1, xi=xi), tol=1e-6)
               for xi in FIVE]
     assert all(a > b for a, b in zip(limits, limits[1:]))  # more damping, earlier loss
+    for xi, limit in zip(FIVE, limits):
+        for d, returns in ((-1e-5, True), (1e-5, False)):
+            arc = scipy_slip_arc(jc.ChainParams(n_osc=1, xi=xi, v_d=limit + d))
+            assert (arc.status == 1) == returns, (xi, d)
+    assert traces == ["_peak"]

@@ -12,17 +12,15 @@ import xarray as xr
 import jaxchain as jc
 import jaxchain._crosscheck as xc
 import jaxchain._store as store
+from helpers import scipy_stick_slip_cycle
 from jaxchain._cli.main import main
-
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
 
 SMALL = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=150.0)
 #: Long enough for the localized state of a 4-ring to settle to a periodic orbit.
 SETTLED = jc.SimulationOptions(t_end=1200.0, transient=600.0, chunk_length=150.0)
 
 
+@pytest.mark.numerics
 def test_periodic_states_agree_within_the_smoothing_error(tmp_path, monkeypatch):
     """On a small ring, the default smoothed model gives the reference's n_HALC and
     amplitudes to better than 1 % on periodic states; a second call reads the
@@ -107,6 +105,7 @@ def test_a_stored_result_is_read_back_only_under_its_own_key(tmp_path):
     assert store.read_dataset(path, "test", params=p) is None
 
 
+@pytest.mark.numerics
 def test_smoothed_error_shrinks_with_eps():
     """The amplitude error against the reference falls when eps is divided by 10
     (the smoothed law converges to the non-smooth one)."""
@@ -123,6 +122,7 @@ def test_state_class_names():
     assert jc.state_class(-1, 20, "periodic") == "failed"
 
 
+@pytest.mark.numerics
 def test_the_public_class_tolerances_drive_the_crosscheck():
     """`jc.ClassTolerances` is the cross-check's: with its defaults the single
     oscillator's stick-slip cycle is periodic in both models; with half-window
@@ -144,18 +144,31 @@ def test_the_public_class_tolerances_drive_the_crosscheck():
         jc.ClassTolerances(max_period=0)
 
 
+@pytest.mark.numerics
 def test_crosscheck_command_json_and_files(tmp_path, capsys):
+    """The command on the single oscillator (the window of `SMALL`), against scipy's
+    event-driven stick-slip cycle: the reference amplitude to 1e-6, the smoothed
+    one to 1 %, and the reported amplitude error is the smoothed amplitude's
+    distance from scipy's."""
     out = tmp_path / "out"
-    code = main(["crosscheck", "--n-osc", "3", "--vd", "1.5", "--eq8", "1", "--eq10", "",
-                 "--t-end", "400", "--transient", "200", "--json", "--out", str(out)])
+    code = main(["crosscheck", "--n-osc", "1", "--vd", "1.5", "--eq8", "1", "--eq10", "",
+                 "--t-end", "600", "--transient", "300", "--json", "--out", str(out)])
     assert code == 0
     report = json.loads(capsys.readouterr().out)
-    assert len(report["cases"]) == 1 and report["cases"][0]["ic"] == "eq8 k=1"
-    assert {"amplitude_error", "energy_error", "n_halc_agrees",
-            "class_agrees"} <= set(report["cases"][0])
+    (case,) = report["cases"]
+    assert case["ic"] == "eq8 k=1" and case["v_d"] == 1.5
+    assert case["n_halc_smoothed"] == case["n_halc_reference"] == 1 and case["n_halc_agrees"]
+    assert case["class_reference"] == case["class_smoothed"] == "stick-slip (periodic)"
     assert (out / "crosscheck.png").stat().st_size > 0
-    ds = xr.open_dataset(out / "crosscheck.nc", engine="h5netcdf")
+    ds = xr.load_dataset(out / "crosscheck.nc", engine="h5netcdf")
     assert ds.attrs["reference_rtol"] == 1e-12 and ds.attrs["eps"] == jc.ChainParams().eps
+    expected, _ = scipy_stick_slip_cycle(jc.ChainParams(n_osc=1, v_d=1.5))
+    reference = float(ds["amplitudes_reference"].values[0, 0])
+    smoothed = float(ds["amplitudes_smoothed"].values[0, 0])
+    assert abs(reference / expected - 1) < 1e-6
+    assert abs(smoothed / expected - 1) < 1e-2
+    assert case["amplitude_error"] == pytest.approx(abs(smoothed - expected) / expected,
+                                                    abs=1e-5)
 
 
 @pytest.mark.parametrize("argv, says", [

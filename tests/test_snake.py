@@ -7,14 +7,14 @@ import json
 
 import numpy as np
 import pytest
+import xarray as xr
+from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 from jaxchain._bifurcation.bifurcations import locate_bifurcations
 from jaxchain._snake import localized_branches, start_orbits
 
-from helpers import assert_usage_error
-
-pytestmark = pytest.mark.numerics
+from helpers import assert_usage_error, reference_rhs
 
 RING = jc.ChainParams(n_osc=4, v_d=1.5)
 OPTIONS = jc.ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.2, p_max=1.75, max_points=14)
@@ -27,6 +27,7 @@ def one_site(tmp_path_factory):
     return found, out
 
 
+@pytest.mark.numerics
 def test_shooting_from_simulation_gives_the_simulated_state_and_its_multipliers():
     """The 1-site state of a ring of 4 at v_d = 1.5: the orbit has the simulated
     energy (within 0.5 %) and sites; the trivial multiplier is 1 to 1e-6; each quiet
@@ -44,6 +45,7 @@ def test_shooting_from_simulation_gives_the_simulated_state_and_its_multipliers(
     assert abs(others[0] / quiet - 1) < 0.02  # the largest: a quiet oscillator's pair
 
 
+@pytest.mark.numerics
 def test_bisection_along_the_branch_finds_the_fold_of_the_extended_system():
     """On the single oscillator's branch from the Hopf point, the fold located by
     bisection on dp/ds agrees with the Moore-Spence fold to 1e-6."""
@@ -59,6 +61,7 @@ def test_bisection_along_the_branch_finds_the_fold_of_the_extended_system():
     assert abs(complex(folds[0].multiplier) - 1) < 1e-3
 
 
+@pytest.mark.numerics
 def test_the_one_site_branch_ends_where_simulation_says(one_site):
     """Its low end is a Neimark-Sacker point (a complex pair leaves the unit circle:
     the quiet neighbours start to oscillate), and direct simulation keeps the state
@@ -74,6 +77,7 @@ def test_the_one_site_branch_ends_where_simulation_says(one_site):
     assert branch["largest_trivial_multiplier_error"] < 1e-6
 
 
+@pytest.mark.numerics
 def test_continuation_reproduces_itself_from_a_perturbed_start(one_site):
     """The Neimark-Sacker point again, from the starting orbit perturbed by a
     relative 1e-6: the same belt speed to 1e-6."""
@@ -107,7 +111,11 @@ def test_stored_branches_are_read_back_only_for_equal_settings(one_site):
     assert fresh["datasets"]["k=1"].sizes["point"] <= 7 < a.sizes["point"]  # recomputed
 
 
+@pytest.mark.numerics
 def test_snake_command_json_and_bad_options(tmp_path, capsys):
+    """The command's branch, read back from its file, against scipy: each stored
+    point (the state and period of `u`) is a periodic orbit of eq. (5) at its belt
+    speed, with its n_HALC and amplitudes."""
     from jaxchain._cli.main import main
     # The ring of `RING` (n_osc 4): the programs that `one_site` compiled serve the
     # command too, which still shoots, continues and stores its own branch.
@@ -118,6 +126,19 @@ def test_snake_command_json_and_bad_options(tmp_path, capsys):
     (branch,) = out["branches"]
     assert set(branch) >= {"sites", "stable_ranges", "bifurcations", "connects_to"}
     assert branch["sites"] == 1 and (tmp_path / "snake.png").exists()
-    assert (tmp_path / "snake" / "branch_k1.nc").exists()
+    ds = xr.load_dataset(tmp_path / "snake" / "branch_k1.nc", engine="h5netcdf")
+    assert ds.sizes["point"] >= 2
+    for i in range(ds.sizes["point"]):
+        u = ds["u"].values[i]
+        y0, period = u[:-1], u[-1]
+        params = jc.with_parameter(RING, "v_d", float(ds["v_d"].values[i]))
+        ts = np.linspace(0.0, period, 6001)
+        ref = solve_ivp(reference_rhs(params), (0.0, period), y0, method="LSODA",
+                        rtol=1e-10, atol=1e-12, t_eval=ts)
+        assert np.max(np.abs(ref.y[:, -1] - y0)) < 1e-6, i  # periodic
+        x = ref.y[:4]
+        assert np.allclose(ds["amplitudes"].values[i], 0.5 * (x.max(1) - x.min(1)), rtol=1e-3)
+        sticks = np.min(np.abs(ref.y[4:] - params.v_d), axis=1) < jc.STICK_BAND * params.eps
+        assert int(ds["n_halc"].values[i]) == int(sticks.sum()) == 1, i
     assert_usage_error(["snake", "--sites", "0"], "--sites", capsys)
     assert_usage_error(["snake", "--vd", "3"], "--vd", capsys)
