@@ -14,14 +14,12 @@ from helpers import assert_usage_error
 from jaxchain._cli.main import main
 from jaxchain._sweep.store import SweepStore
 
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
 
 SHORT = jc.SimulationOptions(t_end=300.0, transient=200.0)
 ONE = jc.ChainParams(n_osc=1)
 
 
+@pytest.mark.numerics
 def test_single_oscillator_stick_slip_is_certain_below_hopf_and_absent_above_fold():
     """Below the Hopf point steady sliding is unstable, so every sample ends in
     stick-slip; above the fold (the stick-slip existence limit) none does; between
@@ -58,6 +56,7 @@ def test_wilson_interval_equals_scipys(n):
         assert high[kk] == pytest.approx(ci.high, abs=1e-12)
 
 
+@pytest.mark.numerics
 def test_wilson_intervals_cover_a_known_probability_at_the_nominal_rate():
     """A synthetic classifier with a known probability: a sample is in the class
     when x_1(0) lies in the lowest 30 % of the box. Over 2000 keys of 50 samples
@@ -105,6 +104,7 @@ def test_same_key_same_result_and_a_killed_run_resumes_to_the_same(tmp_path, mon
     assert resumed.attrs["key"] == a.attrs["key"] == np.asarray(jax.random.PRNGKey(3)).tolist()
 
 
+@pytest.mark.numerics
 def test_basin_command_json_and_figures(tmp_path, capsys):
     argv = ["basin", "--n-osc", "1", "--vd", "1.0,2.1", "--samples", "12", "--t-end", "300",
             "--transient", "200", "--out", str(tmp_path), "--json", "--no-progress"]

@@ -2,6 +2,9 @@
 the fold, the fold's extended system and its parameter derivatives, against the
 non-smooth existence limit and finite differences."""
 
+import json
+from pathlib import Path
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -10,10 +13,7 @@ import pytest
 import jaxchain as jc
 from jaxchain._bifurcation.two_parameter import hopf_vd, hopf_vd_and_derivative
 from jaxchain._boundaries import RATIO_VALUES, XI_VALUES
-
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
+from jaxchain._cli.main import main
 
 
 class _Point(eqx.Module):
@@ -29,6 +29,7 @@ def branch():
     return problem, found, jc.fold_point(problem, found)
 
 
+@pytest.mark.numerics
 def test_branch_leaves_the_hopf_point_upwards_and_turns_at_a_fold(branch):
     _, found, _ = branch
     p = np.asarray(found.p)[np.asarray(found.converged)]
@@ -47,6 +48,7 @@ def test_branch_leaves_the_hopf_point_upwards_and_turns_at_a_fold(branch):
     assert np.max(np.abs(trivial - 1)) < 1e-6
 
 
+@pytest.mark.numerics
 def test_fold_is_near_the_nonsmooth_existence_limit(branch):
     _, found, fold = branch
     assert bool(fold.converged)
@@ -57,6 +59,7 @@ def test_fold_is_near_the_nonsmooth_existence_limit(branch):
     assert np.all(np.abs(multipliers[:2] - 1) < 1e-3)  # trivial and critical at +1
 
 
+@pytest.mark.numerics
 @pytest.mark.parametrize("where, value", [("xi", 0.05), ("mu_st", 1.0)])
 def test_fold_derivative_against_finite_differences(branch, where, value):
     problem, _, fold = branch
@@ -83,6 +86,7 @@ def default_curves(branch):
             "mu_st": jc.boundary_curves(problem, start, "mu_st", mu_d * np.asarray(RATIO_VALUES))}
 
 
+@pytest.mark.numerics
 @pytest.mark.slow
 @pytest.mark.parametrize("where", ["xi", "mu_st"])
 def test_every_default_fold_converges_near_the_existence_limit(branch, default_curves, where):
@@ -115,6 +119,7 @@ def test_every_default_fold_converges_near_the_existence_limit(branch, default_c
     assert np.all(fold_vd > np.asarray(curves.hopf_vd))
 
 
+@pytest.mark.numerics
 @pytest.mark.slow
 def test_fold_curve_is_robust_to_a_perturbed_start(branch, default_curves):
     problem, _, fold = branch
@@ -129,6 +134,7 @@ def test_fold_curve_is_robust_to_a_perturbed_start(branch, default_curves):
                                rtol=0, atol=1e-8)
 
 
+@pytest.mark.numerics
 def test_continuation_on_an_analytic_fold_records_failures():
     # u^2 + v_d - 2 = 0: a fold at v_d = 2, u = 0; stable where u > 0
     problem = jc.ContinuationProblem(
@@ -148,7 +154,7 @@ def test_continuation_on_an_analytic_fold_records_failures():
         jc.continuation(eqx.tree_at(lambda pr: pr.u0, problem, jnp.array([3.0])))
 
 
-
+@pytest.mark.numerics
 def test_a_failed_hopf_solve_is_nan_never_a_number():
     """`hopf_vd` (the traced Hopf point of the two-parameter curves) against the
     analytic v0 ln((mu_st - mu_d) / (2 xi v0)) and its derivative -v0/xi in xi; and
@@ -163,3 +169,34 @@ def test_a_failed_hopf_solve_is_nan_never_a_number():
                                                "xi", 0.05)
     assert np.isnan(float(value)) and np.isnan(float(derivative))
     assert np.isnan(float(hopf_vd(one, guess=-50.0)))
+
+
+@pytest.mark.numerics
+def test_boundaries_command_json_and_figures(tmp_path, capsys):
+    """`jaxchain boundaries` end to end on one oscillator (no ring, no simulation
+    dots), on two damping ratios and one friction ratio: the Hopf point against its
+    closed form, every fold beside the non-smooth existence limit there, and the
+    design checked by simulation on both sides of it. It runs here, after the
+    tests above, because it continues the same limit cycles: this process has
+    compiled their programs already."""
+    code = main(["boundaries", "--json", "--no-ring", "--no-simulation", "--xi-values",
+                 "0.05,0.06", "--ratio-values", "2.0", "--no-progress", "--out",
+                 str(tmp_path)])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    assert abs(out["hopf_vd"] - 0.5 * np.log(10)) < 1e-6
+    assert abs(out["fold_vd"] - jc.stick_slip_existence_limit()) < 0.01
+    assert out["subcritical"] is True and out["eps"] == jc.ChainParams().eps
+    # every point of both curves has a fold, beside the non-smooth limit there
+    for curve in (out["xi_curve"], out["ratio_curve"]):
+        fold, limit = np.array(curve["fold_vd"]), np.array(curve["existence_limit_nonsmooth"])
+        assert np.all(np.abs(fold - limit) < 0.01)
+    assert abs(out["xi_curve"]["existence_limit_nonsmooth"][1]
+               - jc.stick_slip_existence_limit(jc.ChainParams(n_osc=1, xi=0.06))) < 1e-9
+    # the design's answer, checked by simulation on both sides of it
+    design = out["design"]
+    assert abs(design["window"] - design["target_window"]) < 1e-6
+    check = design["simulation_check"]
+    assert check["below"]["n_halc"] == 1 and check["above"]["amplitude"] < 1e-3
+    for png in out["figures"]:
+        assert Path(png).stat().st_size > 10_000

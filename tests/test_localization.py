@@ -10,6 +10,7 @@ import jaxchain as jc
 ETA = 0.01
 
 
+@pytest.mark.numerics
 def test_weak_disorder_inside_the_band():
     """Away from the band centre and edges, sigma << eta_c: the transfer-matrix
     exponent agrees with sigma^2 / (8 eta_c^2 sin^2 theta) within 4 standard errors
@@ -23,6 +24,7 @@ def test_weak_disorder_inside_the_band():
         assert abs(g - expected) < 4 * err
 
 
+@pytest.mark.numerics
 def test_band_centre_kappus_wegner_anomaly():
     """At theta = pi/2 the second-order result is off by the Kappus-Wegner factor
     8 Gamma(3/4)^2 / Gamma(1/4)^2 = 0.9139 (Kappus & Wegner, Z. Phys. B 45 (1981)
@@ -36,6 +38,7 @@ def test_band_centre_kappus_wegner_anomaly():
     assert abs(g / jc.weak_disorder_localization(sigma, ETA, np.pi / 2) - 1) > 0.05
 
 
+@pytest.mark.numerics
 def test_outside_the_band_the_exponent_is_the_evanescent_decay():
     """Below the passband (omega^2 < 1) the homogeneous chain's waves decay like
     exp(-kappa n), cosh kappa = 1 + (1 - omega^2) / (2 eta_c); weak disorder
@@ -45,6 +48,7 @@ def test_outside_the_band_the_exponent_is_the_evanescent_decay():
     assert abs(g - np.arccosh(1 + (1 - omega2) / (2 * ETA))) < 1e-4
 
 
+@pytest.mark.numerics
 def test_inverse_participation_ratio_of_the_homogeneous_open_chain():
     """Free ends: modes cos((n + 1/2) k pi / N); the uniform mode and the mode
     k = N/2 (|phi_n| all equal) have IPR 1/N, the others 3 / (2 N). Mistuning of
@@ -69,6 +73,7 @@ def _forced_ring_response(eta_c, omega, damping, n=201):
                                   * np.eye(n), force))
 
 
+@pytest.mark.numerics
 @pytest.mark.parametrize("omega2, damping", [(1.0099, 0.0502), (0.98, 0.0), (1.02, 0.03)])
 def test_damped_decay_is_the_forced_chain_s_envelope(omega2, damping):
     """The decay per cell of the driven damped ring (inside the passband with

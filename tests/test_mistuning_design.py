@@ -25,6 +25,7 @@ def followed():
     return problem, folds, grads, sols, homogeneous
 
 
+@pytest.mark.numerics
 def test_followed_fold_is_the_mistuned_ring_s_own_fold(followed):
     """The fold of the state at oscillator 1 (0-based), followed from the
     homogeneous ring through the pattern and the ring's symmetry, is the fold that
@@ -38,6 +39,7 @@ def test_followed_fold_is_the_mistuned_ring_s_own_fold(followed):
     assert abs(folds[1] - homogeneous) > 1e-5  # the pattern moved it
 
 
+@pytest.mark.numerics
 def test_fold_gradients_match_finite_differences(followed):
     """d fold_j / d theta by implicit differentiation (forward mode through
     optimistix's ImplicitAdjoint) against central differences of the fold solved
@@ -54,6 +56,7 @@ def test_fold_gradients_match_finite_differences(followed):
     assert np.abs(grads).max() > 1e-4  # the folds do move with the stiffness
 
 
+@pytest.mark.numerics
 def test_pattern_keeps_budget_and_mean():
     theta = jnp.array([3.0, -0.5, 0.1, 2.0])
     d = np.asarray(pattern_deviations(theta, 0.05, 8, zero_mean=True))

@@ -8,11 +8,8 @@ import pytest
 import jaxchain as jc
 from helpers import scipy_stick_slip_cycle
 
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
 
-
+@pytest.mark.numerics
 @pytest.mark.slow
 def test_fig4_staircase_at_vd_1_5():
     """N = 20, v_d = 1.5, eq. (8) with k = 1..20 excited, t in [0, 5000], observed
@@ -45,6 +42,7 @@ def test_fig4_staircase_at_vd_1_5():
     assert np.all(np.diff(energy[order][n_halc[order] < 20]) > 0)
 
 
+@pytest.mark.numerics
 def test_a_lone_sliding_oscillator_is_pumped_by_its_in_phase_neighbours():
     """Why eq. (8) with k = 19 of N = 20 ends with 20 on the HALC: physics, not the
     placement of the block. Any 19 excited oscillators leave one at steady sliding

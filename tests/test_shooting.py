@@ -11,10 +11,6 @@ import jaxchain as jc
 from helpers import SHORT, reference_rhs, scipy_stick_slip_cycle
 from jaxchain._bifurcation.shooting import describe_orbit, pack
 
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
-
 
 def scipy_flow(params, y, period):
     sol = solve_ivp(reference_rhs(params), (0.0, period), np.ravel(y), method="DOP853",
@@ -22,6 +18,7 @@ def scipy_flow(params, y, period):
     return sol.y[:, -1]
 
 
+@pytest.mark.numerics
 def test_stable_stick_slip_cycle_agrees_with_long_simulation():
     params = jc.ChainParams(n_osc=1, v_d=1.5)
     obs = jc.simulate(params, jnp.array([[2.0], [0.0]]), options=SHORT)
@@ -38,6 +35,7 @@ def test_stable_stick_slip_cycle_agrees_with_long_simulation():
     assert abs(float(orbit.period) / period - 1) < 1e-3
 
 
+@pytest.mark.numerics
 @pytest.mark.parametrize("state", ["stick-slip", "steady sliding"])
 def test_n_halc_agrees_between_simulation_shooting_and_reference(state):
     """One definition of the HALC (`jc.sticks`) for the smoothed run, shooting and
@@ -64,6 +62,7 @@ def test_n_halc_agrees_between_simulation_shooting_and_reference(state):
         assert float(ref.min_slip_speed[0]) == 0.0
 
 
+@pytest.mark.numerics
 def test_small_hopf_cycle_monodromy_against_finite_differences():
     params = jc.ChainParams(n_osc=1)
     orbit = jc.hopf_cycle(params, offset=0.01)
@@ -81,6 +80,7 @@ def test_small_hopf_cycle_monodromy_against_finite_differences():
     assert abs(complex(orbit.multipliers[orbit.trivial]) - 1) < 1e-6
 
 
+@pytest.mark.numerics
 def test_shooting_jacobian_against_finite_differences():
     params = jc.ChainParams(n_osc=2, v_d=1.5, eta_c=0.1)
     options = jc.ShootingOptions()
@@ -109,6 +109,7 @@ def test_bad_arguments():
                           jc.ShootingOptions(newton_steps=3))
 
 
+@pytest.mark.numerics
 @pytest.mark.parametrize("n_osc", [1, 2])
 def test_deflated_multipliers_obey_liouville(n_osc):
     """The non-trivial multipliers come from the monodromy matrix with the flow

@@ -11,11 +11,8 @@ import jaxchain._work_precision as wp
 from jaxchain._cli.main import main
 from helpers import flat, scipy_stick_slip_cycle
 
-#: Numbers compared with references or across compiled programs: CI runs these
-#: tests again under another rounding (the `numerics` marker, .ci/run).
-pytestmark = pytest.mark.numerics
 
-
+@pytest.mark.numerics
 def test_numpy_field_for_scipy_matches_the_model():
     p = jc.ChainParams(n_osc=5, eps=1e-2)
     y = np.random.default_rng(0).normal(size=(2, 5))
@@ -23,6 +20,7 @@ def test_numpy_field_for_scipy_matches_the_model():
                        flat(jc.vector_field(0.0, y, p)), rtol=1e-13, atol=1e-13)
 
 
+@pytest.mark.numerics
 def test_study_errors_fall_with_eps_and_the_recommendation_holds(tmp_path):
     """For the single oscillator, the amplitude and trajectory errors against the
     reference fall with eps (the smoothed law converges to the non-smooth one).
