@@ -14,22 +14,20 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 #: Per notebook: its first code cell at reduced size, and a text its outputs print.
 #: Where a test elsewhere runs the same scene, the sizes here are that test's, so that
 #: the kernel finds the programs that test compiled in the session's persistent
-#: compilation cache (tests/conftest.py), or leaves its own there for the test:
-#: 01 test_cli.py's `localized` run, 02 the small sweep of tests/helpers.py, 03 the
-#: `figure --quick` scenes (jaxchain/_cli/figure.py: QUICK) of test_dynamics.py, 04
-#: the single oscillator of test_basin.py's `basin` command, 06 test_mistuning.py's
-#: study, 07 test_snake.py's ring and starting simulation.
+#: compilation cache (tests/conftest.py), or leaves its own there for the test: 01
+#: test_cli.py's `localized` run, 03 the `figure --quick` scenes of test_dynamics.py
+#: (jaxchain/_cli/figure.py: QUICK), 06 test_mistuning.py's study.
 SMALL = {
     "01_localized_states.ipynb":
         ("N_OSC = 3\nV_D = 1.5\nT_END = 400.0\nTRANSIENT = 200.0", "E / n_HALC"),
     "02_bifurcation_sweep.ipynb":
-        ("N_OSC = 3\nVD_START, VD_STOP, N_VD = 1.0, 2.0, 3\nT_END = 600.0\n"
-         "TRANSIENT = 300.0\nBATCH_SIZE = 2", "fronts at v_d in"),
+        ("N_OSC = 4\nVD_START, VD_STOP, N_VD = 1.0, 2.0, 3\nT_END = 400.0\n"
+         "TRANSIENT = 200.0\nBATCH_SIZE = 5", "fronts at v_d in"),
     "03_dynamics_of_localized_states.ipynb":
         ("N_OSC = 8\nT_END = 600.0\nTRANSIENT = 400.0\nCHUNK = 50.0\nT_SERIES = 100.0",
          "the two signals agree on"),
     "04_basin_stability.ipynb":
-        ("N_OSC = 3\nSAMPLES = 8\nVD_ONE = (1.0, 2.1, 2)\nSAMPLES_ONE = 12\n"
+        ("N_OSC = 3\nSAMPLES = 8\nVD_ONE = (1.0, 2.1, 2)\nSAMPLES_ONE = 8\n"
          "T_END, TRANSIENT = 300.0, 200.0", "basin stability of stick-slip"),
     "05_any_chain.ipynb":
         ("N_OSC = 4\nSIGMA, SEED = 0.01, 1\nV_D = 1.2\nT_END, TRANSIENT = 300.0, 200.0",
@@ -39,14 +37,22 @@ SMALL = {
          "T_END, TRANSIENT = 300.0, 200.0\nEDGE_T_END = 300.0\nFOLDS = 0\nCELLS = 20_000\n"
          "OUT = 'anderson'", "staircase kept"),
     "07_snaking.ipynb":
-        ("N_OSC = 4\nSITES = (1,)\nMAX_POINTS = 5\nSTART_T_END = 12000.0\nCHECK = False",
+        ("N_OSC = 4\nSITES = (1,)\nMAX_POINTS = 5\nSTART_T_END = 1500.0\nCHECK = False",
          "trivial multiplier error"),
 }
 #: A cell that draws: it calls one of jaxchain's plot functions or plt.show().
 PLOTTING = re.compile(r"\bplt\.show\(|\bjc\.plot_\w+\(")
 
 
-@pytest.mark.parametrize("name", sorted(p.name for p in EXAMPLES.glob("*.ipynb")))
+#: Notebooks that take more than about 30 s even at reduced size, on 2 cores with a
+#: cold compilation cache (each kernel compiles its programs afresh).
+SLOW = {"03_dynamics_of_localized_states.ipynb", "04_basin_stability.ipynb",
+        "06_anderson_meets_friction.ipynb", "07_snaking.ipynb"}
+
+
+@pytest.mark.parametrize("name", [
+    pytest.param(name, marks=pytest.mark.slow) if name in SLOW else name
+    for name in sorted(p.name for p in EXAMPLES.glob("*.ipynb"))])
 def test_notebook_runs_small_and_shows_its_figures(name, tmp_path, monkeypatch):
     nb = nbformat.read(EXAMPLES / name, as_version=4)
     assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code"), \
