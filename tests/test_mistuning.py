@@ -80,8 +80,8 @@ def test_the_json_gives_the_localization_factor_table(study):
     (`_transfer_matrix_exponents`: its own random numbers, 40,000 cells), within
     5 combined standard errors, where each estimate's error is below 2 % of
     gamma; the weak-disorder column against sigma^2 / (8 eta_c^2 sin^2 theta)
-    (Castanier & Pierre 1995), which holds at sigma = eta_c / 4 away from the band
-    centre, within 4 of the table's errors."""
+    (Castanier & Pierre 1995), and the deviation column against it, which holds at
+    sigma = eta_c / 4 away from the band centre, within 4 of the table's errors."""
     s = _summary(study)
     rows = s["localization_factor"]
     assert {(r["sigma_over_eta_c"], round(r["theta"], 6)) for r in rows} == {
@@ -96,6 +96,8 @@ def test_the_json_gives_the_localization_factor_table(study):
     assert np.all(np.abs(gamma - expected) < 5 * np.hypot(error, expected_error))
     formula = (ratio * eta) ** 2 / (8 * eta**2 * np.sin(theta) ** 2)
     np.testing.assert_allclose([r["weak_disorder"] for r in rows], formula, rtol=1e-12)
+    np.testing.assert_allclose([r["deviation_in_errors"] for r in rows],
+                               (gamma - formula) / error, rtol=1e-9)
     weak = (ratio == 0.25) & (theta < 1.1)
     assert np.all(np.abs(gamma[weak] - formula[weak]) < 4 * error[weak])
     assert [r["sigma_over_eta_c"] for r in s["sigmas"]] == [0.0, 2.0]
