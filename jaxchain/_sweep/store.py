@@ -4,14 +4,13 @@ a completion flag per batch, and the key of every setting that made it."""
 import json
 import os
 import shutil
-import uuid
 from pathlib import Path
 
 import dask.array as da
 import numpy as np
 import xarray as xr
 
-from .._atomic import hold
+from .._atomic import hold, partial_path
 from .._errors import ValidationError
 
 #: Unwritten entries of a batch that has not finished, as they are read back.
@@ -165,7 +164,7 @@ class SweepStore:
                           var.attrs)
         data["batch_done"] = ("batch", da.zeros(n_batches, dtype=np.uint8, chunks=1))
         template = xr.Dataset(data, coords=coords, attrs=attrs)
-        partial = self.path.with_name(f"{self.path.name}.{uuid.uuid4().hex}.partial")
+        partial = partial_path(self.path)
         template.to_zarr(partial, mode="w", compute=False, consolidated=False)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
