@@ -21,6 +21,15 @@ os.environ.setdefault("JAXCHAIN_CACHE_DIR", "")
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
+# One CPU device in each test process (jaxchain leaves a count chosen before its
+# import alone). The two pytest-xdist workers already fill the two cores, and XLA
+# compiles a program once per CPU device that runs it: a second device per worker
+# would compile every program of the work queue twice, a quarter of the suite's CPU
+# time (measured). The paths over several devices are tested in fresh processes
+# with the library's own count: `test_lanes.py` (tests/lanes_on_every_device.py),
+# the command-line, sweep, Dask and notebook tests. Set through the configuration,
+# not the environment, so that those processes do not inherit it.
+jax.config.update("jax_num_cpu_devices", 1)
 
 
 def pytest_unconfigure(config):

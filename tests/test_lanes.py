@@ -1,8 +1,8 @@
-import os
 import re
-import threading
+import subprocess
+import sys
+from pathlib import Path
 
-import jax
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -10,15 +10,29 @@ from hypothesis import strategies as st
 
 import jaxchain as jc
 from helpers import TIGHT, assert_within_drift
+from lanes_on_every_device import FIELDS
 from jaxchain._lanes import (_run_block, block_size, expected_cost, lane_order, lane_params,
                              on_devices, run_lanes)
 from jaxchain._solvers import DEFAULT_SOLVER, SOLVERS
 
+HERE = Path(__file__).parent
 
-def test_one_cpu_device_per_core():
-    """jaxchain asks JAX for one CPU device per usable core (nothing in the test
-    environment sets the count)."""
-    assert len(jax.devices("cpu")) == len(os.sched_getaffinity(0))
+
+@pytest.fixture(scope="module")
+def every_device(tmp_path_factory):
+    """`lanes_on_every_device.py` run in a fresh process with the library's own
+    device count (the test processes use one device, `conftest.py`)."""
+    out = tmp_path_factory.mktemp("lanes") / "runs.npz"
+    run = subprocess.run([sys.executable, str(HERE / "lanes_on_every_device.py"), str(out)],
+                         cwd=HERE, capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    return dict(np.load(out))
+
+
+def test_one_cpu_device_per_core(every_device):
+    """jaxchain asks JAX for one CPU device per usable core (nothing in that
+    process's environment sets the count)."""
+    assert every_device["n_devices"] == every_device["cores"]
 
 
 @settings(deadline=None)  # no clock: two workers share two cores
@@ -55,31 +69,25 @@ def test_run_lanes_with_padding_equals_runs_done_one_at_a_time():
 
 
 @pytest.mark.numerics
-@pytest.mark.skipif(len(jax.devices()) < 2, reason="needs two devices (two cores)")
-def test_one_device_two_devices_and_both_engines_give_the_same_results():
-    """5 lanes, with the work queue on one device and on two: every field is
-    bitwise equal (each lane is the same compiled integration, whichever device
-    takes it). Vmapped in lockstep on two devices, the lanes are a different
-    compiled program, whose rounding differs and moves the adaptive steps a
-    little: the same states, to the integration tolerance (`drift_bound`, at
-    `TIGHT`)."""
-    p = jc.ChainParams(n_osc=3)
-    v_d = np.array([1.3, 1.5, 1.7, 1.5, 1.6])
-    y0 = np.stack([jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1 + k % 3))(
-        jc.ChainParams(n_osc=3, v_d=v)) for k, v in enumerate(v_d)])
-    solver = SOLVERS[DEFAULT_SOLVER]()
-    p = lane_params(p, v_d.size, v_d=v_d)
-    one = run_lanes(p, y0, solver, TIGHT, engine="queue", devices=jax.devices()[:1])
-    two = run_lanes(p, y0, solver, TIGHT, engine="queue", devices=jax.devices()[:2])
-    vmapped = run_lanes(p, y0, solver, TIGHT, engine="vmap", devices=jax.devices()[:2])
-    assert np.all(one.n_halc >= 1)  # every lane sticks
-    for field in ("amplitudes", "energy", "n_halc", "y_final", "num_steps", "status"):
-        assert np.array_equal(getattr(one, field), getattr(two, field)), field
+def test_one_device_two_devices_and_both_engines_give_the_same_results(every_device):
+    """5 lanes (`lanes_on_every_device.five_lanes`), with the work queue on one
+    device and on two: every field is bitwise equal (each lane is the same compiled
+    integration, whichever device takes it). Vmapped in lockstep on two devices,
+    the lanes are a different compiled program, whose rounding differs and moves
+    the adaptive steps a little: the same states, to the integration tolerance
+    (`drift_bound`, at `TIGHT`)."""
+    if every_device["n_devices"] < 2:
+        pytest.skip("needs two devices (two cores)")
+    one, two, vmapped = ({f: every_device[f"{run}_{f}"] for f in FIELDS}
+                         for run in ("one", "two", "vmap"))
+    assert np.all(one["n_halc"] >= 1)  # every lane sticks
+    for field in FIELDS:
+        assert np.array_equal(one[field], two[field]), field
     for field in ("n_halc", "status"):
-        assert np.array_equal(getattr(one, field), getattr(vmapped, field)), field
+        assert np.array_equal(one[field], vmapped[field]), field
     for field in ("amplitudes", "y_final"):
-        assert_within_drift(getattr(one, field), getattr(vmapped, field), TIGHT,
-                            [one.num_steps, vmapped.num_steps], field)
+        assert_within_drift(one[field], vmapped[field], TIGHT,
+                            [one["num_steps"], vmapped["num_steps"]], field)
 
 
 def test_compiled_run_holds_no_callback_custom_call_or_scatter():
@@ -116,21 +124,10 @@ def test_block_size_keeps_every_device_busy(n_lanes, n_devices):
     assert size >= 1 and n_blocks >= min(n_lanes, 16 * n_devices)
 
 
-def test_on_devices_keeps_order_and_uses_every_device():
-    """The first tasks meet at a barrier: it opens only if every device runs one of
-    them at the same time."""
-    seen = []
-    n_dev = len(jax.devices())
-    barrier = threading.Barrier(n_dev, timeout=30)
-
-    def task(i, device):
-        if i < n_dev:
-            barrier.wait()
-        seen.append(device)
-        return int(jax.device_put(np.int64(i) ** 2, device))
-
-    assert on_devices(task, 7, "squares") == [i**2 for i in range(7)]
-    assert set(seen) == set(jax.devices())
+def test_on_devices_keeps_order_and_uses_every_device(every_device):
+    """In the fresh process, the first tasks met at a barrier that opens only if
+    every device runs one of them at the same time, and every device ran a task."""
+    assert every_device["used"].tolist() == list(range(every_device["n_devices"]))
 
 
 def test_on_devices_raises_the_first_error():

@@ -1,0 +1,61 @@
+"""Run by `test_lanes.py` in a fresh process, where jaxchain chooses the CPU device
+count itself (one per core; the test processes use one, `conftest.py`): the work
+queue over every device, and the lanes of `FIVE_LANES` on one device, on two, and
+vmapped. Writes `<out>.npz` with the device and core counts, the devices that
+`on_devices` used, and every field of the three runs."""
+
+import os
+import sys
+import threading
+
+import jax
+import numpy as np
+
+import jaxchain as jc
+from helpers import TIGHT
+from jaxchain._lanes import lane_params, on_devices, run_lanes
+from jaxchain._solvers import DEFAULT_SOLVER, SOLVERS
+
+FIELDS = ("amplitudes", "energy", "n_halc", "y_final", "num_steps", "status")
+
+
+def five_lanes():
+    """5 lanes of a ring of 3 at belt speeds 1.3 to 1.7, 1 to 3 oscillators excited."""
+    v_d = np.array([1.3, 1.5, 1.7, 1.5, 1.6])
+    y0 = np.stack([jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1 + k % 3))(
+        jc.ChainParams(n_osc=3, v_d=v)) for k, v in enumerate(v_d)])
+    return lane_params(jc.ChainParams(n_osc=3), v_d.size, v_d=v_d), y0
+
+
+def devices_at_a_barrier() -> list[int]:
+    """The ids of the devices that ran the 7 tasks of `on_devices`: the first tasks
+    meet at a barrier, which opens only if every device runs one of them at once."""
+    n_dev = len(jax.devices())
+    barrier = threading.Barrier(n_dev, timeout=30)
+    seen = []
+
+    def task(i, device):
+        if i < n_dev:
+            barrier.wait()
+        seen.append(device.id)
+        return int(jax.device_put(np.int64(i) ** 2, device))
+
+    assert on_devices(task, 7, "squares") == [i**2 for i in range(7)]
+    return sorted(set(seen))
+
+
+def main(out: str) -> None:
+    params, y0 = five_lanes()
+    solver = SOLVERS[DEFAULT_SOLVER]()
+    devices = jax.devices()
+    runs = {"one": run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:1]),
+            "two": run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:2]),
+            "vmap": run_lanes(params, y0, solver, TIGHT, engine="vmap", devices=devices[:2])}
+    np.savez(out, n_devices=len(jax.devices("cpu")), cores=len(os.sched_getaffinity(0)),
+             used=devices_at_a_barrier(),
+             **{f"{run}_{f}": np.asarray(getattr(obs, f)) for run, obs in runs.items()
+                for f in FIELDS})
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
