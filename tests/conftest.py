@@ -37,6 +37,14 @@ def pytest_unconfigure(config):
         shutil.rmtree(os.environ["JAX_COMPILATION_CACHE_DIR"], ignore_errors=True)
 
 
+def pytest_collection_modifyitems(session, config, items):
+    """The notebooks last: each runs a scene at the size of the test file that runs
+    the same scene (test_examples.py: SMALL), and loads that file's programs from
+    the session's compilation cache instead of compiling them again, once they are
+    there."""
+    items.sort(key=lambda item: item.nodeid.startswith("tests/test_examples.py"))
+
+
 def pytest_xdist_make_scheduler(config, log):
     """pytest-xdist's `--dist loadfile` (pyproject.toml), but each notebook of
     test_examples.py is a scope of its own: a test file stays on one worker, so
