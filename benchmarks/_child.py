@@ -67,6 +67,8 @@ def main() -> None:
 
     import jaxchain as jc
 
+    jc.configure()  # float64, one CPU device per core, the XLA flags
+
     if args.fig4:
         _fig4(args, jc)
         return

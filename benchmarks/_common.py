@@ -15,6 +15,8 @@ import numpy as np
 
 import jaxchain as jc
 
+jc.configure()  # float64, one CPU device per core, the XLA flags
+
 BENCH_DIR = Path(__file__).resolve().parent
 REPO = BENCH_DIR.parent
 

@@ -49,6 +49,8 @@ from jaxchain._rosenbrock import _GAMMA, Ros34PW2
 from jaxchain._solvers import SOLVERS
 from jaxchain._work_precision import work_precision
 
+jc.configure()  # float64, one CPU device per core, the XLA flags
+
 REPO = Path(__file__).resolve().parent.parent
 EXPECTED = list(range(1, 19)) + [20, 20]
 

@@ -14,6 +14,8 @@ import numpy as np
 
 import jaxchain as jc
 
+jc.configure()  # float64, one CPU device per core, the XLA flags
+
 
 def main() -> int:
     start = time.perf_counter()

@@ -33,6 +33,8 @@ import jaxchain as jc
 from jaxchain._physics.stick import STICK_BAND
 from jaxchain._simulate import terms
 
+jc.configure()  # float64, one CPU device per core, the XLA flags
+
 #: Half-width (time units) of the neighbourhood of a switch step.
 NEAR = 0.05
 CLASSES = ("switch", "near switch", "stick", "slip")

@@ -1,53 +1,13 @@
 """jaxchain: a differentiable JAX simulator of chains of friction-excited oscillators.
 
 Implements eq. (5) of *Multiple spatially localized dynamical states in
-friction-excited oscillator chains*. Importing jaxchain turns on float64 in JAX: the
-long stick-slip integrations need it. On a CPU it also asks JAX for one device per
-core, so that ensembles run side by side on all cores (see `_one_device_per_core`),
-and lets XLA compile the step loop into one kernel (see `_compiled_step_loop`).
+friction-excited oscillator chains*. Importing jaxchain changes nothing in JAX:
+call `jaxchain.configure()` once, first, to turn on float64 (which jaxchain needs),
+give JAX one CPU device per core and let XLA compile the step loop into one kernel.
+The `jaxchain` command does it itself.
 """
 
 import importlib
-import os
-
-import jax
-
-jax.config.update("jax_enable_x64", True)
-
-
-def _one_device_per_core() -> None:
-    """Expose one JAX CPU device per usable core. XLA runs one vmapped integration
-    on one core; `ensemble` and `crosscheck` spread their trajectories over the
-    devices. Left alone when the user chose the device count (`jax_num_cpu_devices`
-    or `--xla_force_host_platform_device_count` in XLA_FLAGS) and when JAX's
-    backends are already running (then there is one CPU device)."""
-    if (jax.config.jax_num_cpu_devices != -1
-            or "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", "")):
-        return
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    try:
-        jax.config.update("jax_num_cpu_devices", max(1, cores or 1))
-    except RuntimeError:  # backends already initialised
-        pass
-
-
-#: XLA's CPU backend runs a while loop op by op, through its runtime, unless the
-#: loop's buffers are smaller than this threshold (in bytes). Raised, a diffrax step
-#: loop compiles into one kernel: 0.85 us per step instead of 4.2 on the Fig. 4
-#: chain (benchmarks/run.py).
-XLA_FLAGS = ("--xla_backend_extra_options="
-             "xla_cpu_small_while_loop_byte_threshold=1000000000")
-
-
-def _compiled_step_loop() -> None:
-    """Set `XLA_FLAGS` before JAX's backends start, unless the user set XLA_FLAGS
-    (then theirs are kept as they are). Has no effect once a backend runs."""
-    if "XLA_FLAGS" not in os.environ:
-        os.environ["XLA_FLAGS"] = XLA_FLAGS
-
-
-_one_device_per_core()
-_compiled_step_loop()
 
 #: Public name -> the module that defines it. The names are imported on first use
 #: (PEP 562), so that `import jaxchain` costs JAX alone and a command loads only
@@ -55,6 +15,7 @@ _compiled_step_loop()
 #: that use them).
 _EXPORTS = {
     "ValidationError": "._errors",
+    "configure": "._setup",
     "ensemble": "._ensemble",
     "friction_coefficient": "._physics.friction",
     "slip_friction_force": "._physics.friction",

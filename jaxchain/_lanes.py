@@ -2,7 +2,7 @@
 of separate tasks, one per device at a time (`on_devices`), or as vmapped lanes
 (`jax.vmap` within a device, `jax.shard_map` across devices).
 
-On a CPU, jaxchain exposes one JAX device per core (see `__init__`): XLA runs one
+On a CPU, `jaxchain.configure()` exposes one JAX device per core: XLA runs one
 compiled integration on one core, so two devices run twice the trajectories in the
 same time on 2 cores. The queue suits CPUs: a vmapped lane that finishes early
 waits, masked, for the slowest lane of its batch (44 % of the lane-steps of the
@@ -50,7 +50,7 @@ def _one(params, y0, solver, options, observers):
 def _run_block(params, y0, solver, options, observers=None):
     """A block of trajectories, one after the other (`lax.map`): no lane waits for
     another, and the step loop stays one small while loop, which XLA's CPU backend
-    compiles into one kernel (see `__init__`)."""
+    compiles into one kernel (see `_setup.XLA_FLAGS`)."""
     return jax.lax.map(lambda a: _one(a[0], a[1], solver, options, observers),
                        (params, y0))
 

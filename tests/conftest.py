@@ -12,6 +12,17 @@ if _CACHE_OWNER:
     os.environ["JAX_COMPILATION_CACHE_DIR"] = tempfile.mkdtemp(prefix="jaxchain-tests-xla-")
     os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
 
+# One CPU device in each process of the tests: the two pytest-xdist workers already
+# fill the two cores, and XLA compiles a program once for each CPU device that runs
+# it, so a second device per process would compile every program of the work queue
+# twice (a quarter of the CPU time of the tests that use it, measured). Through the
+# environment, so that the command-line, sweep, writer and notebook processes that
+# the tests start inherit it; `configure` keeps a count chosen before it. The paths
+# over several devices run in fresh processes without it, with the library's own
+# count: `test_lanes.py` (tests/lanes_on_every_device.py) and `test_setup.py`; a
+# Dask worker sets its own (one device per thread).
+os.environ["JAX_NUM_CPU_DEVICES"] = "1"
+
 import jax  # noqa: E402
 
 # The command line's own persistent compilation cache stays off in the tests (one
@@ -19,17 +30,11 @@ import jax  # noqa: E402
 # cache; the session's cache above serves them.
 os.environ.setdefault("JAXCHAIN_CACHE_DIR", "")
 
-jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
-# One CPU device in each test process (jaxchain leaves a count chosen before its
-# import alone). The two pytest-xdist workers already fill the two cores, and XLA
-# compiles a program once per CPU device that runs it: a second device per worker
-# would compile every program of the work queue twice, a quarter of the suite's CPU
-# time (measured). The paths over several devices are tested in fresh processes
-# with the library's own count: `test_lanes.py` (tests/lanes_on_every_device.py),
-# the command-line, sweep, Dask and notebook tests. Set through the configuration,
-# not the environment, so that those processes do not inherit it.
-jax.config.update("jax_num_cpu_devices", 1)
+
+import jaxchain  # noqa: E402
+
+jaxchain.configure()  # float64 and the XLA flags, as a user's first call
 
 
 def pytest_unconfigure(config):

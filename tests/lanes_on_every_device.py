@@ -1,5 +1,5 @@
-"""Run by `test_lanes.py` in a fresh process, where jaxchain chooses the CPU device
-count itself (one per core; the test processes use one, `conftest.py`): the work
+"""Run by `test_lanes.py` in a fresh process, where `jaxchain.configure()` chooses
+the CPU device count (one per core; the test processes use one, `conftest.py`): the work
 queue over every device, and the lanes of `FIVE_LANES` on one device, on two, and
 vmapped. Writes `<out>.npz` with the device and core counts, the devices that
 `on_devices` used, and every field of the three runs."""
@@ -12,9 +12,12 @@ import jax
 import numpy as np
 
 import jaxchain as jc
-from helpers import TIGHT
-from jaxchain._lanes import lane_params, on_devices, run_lanes
-from jaxchain._solvers import DEFAULT_SOLVER, SOLVERS
+
+jc.configure()  # as a user's first call: one device per core, float64, the XLA flags
+
+from helpers import TIGHT  # noqa: E402
+from jaxchain._lanes import lane_params, on_devices, run_lanes  # noqa: E402
+from jaxchain._solvers import DEFAULT_SOLVER, SOLVERS  # noqa: E402
 
 FIELDS = ("amplitudes", "energy", "n_halc", "y_final", "num_steps", "status")
 

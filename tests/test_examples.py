@@ -61,10 +61,6 @@ def test_notebook_runs_small_and_shows_its_figures(name, tmp_path, monkeypatch):
     first = next(c for c in nb.cells if c.cell_type == "code")
     first.source, says = SMALL[name]
     monkeypatch.delenv("MPLBACKEND", raising=False)  # the kernel's own: inline
-    # One CPU device in the kernel, as in the test processes (conftest.py): the
-    # pytest-xdist workers fill the cores, and a second device would compile each
-    # program of the work queue again. The notebooks show the same either way.
-    monkeypatch.setenv("JAX_NUM_CPU_DEVICES", "1")
     NotebookClient(nb, timeout=600, kernel_name="python3",
                    resources={"metadata": {"path": str(tmp_path)}}).execute()
     text = "".join(o.get("text", "") for c in nb.cells for o in c.get("outputs", []))

@@ -1,3 +1,4 @@
+import os
 import re
 import subprocess
 import sys
@@ -23,15 +24,16 @@ def every_device(tmp_path_factory):
     """`lanes_on_every_device.py` run in a fresh process with the library's own
     device count (the test processes use one device, `conftest.py`)."""
     out = tmp_path_factory.mktemp("lanes") / "runs.npz"
+    env = {k: v for k, v in os.environ.items() if k != "JAX_NUM_CPU_DEVICES"}
     run = subprocess.run([sys.executable, str(HERE / "lanes_on_every_device.py"), str(out)],
-                         cwd=HERE, capture_output=True, text=True, timeout=600)
+                         cwd=HERE, capture_output=True, text=True, timeout=600, env=env)
     assert run.returncode == 0, run.stderr
     return dict(np.load(out))
 
 
 def test_one_cpu_device_per_core(every_device):
-    """jaxchain asks JAX for one CPU device per usable core (nothing in that
-    process's environment sets the count)."""
+    """`jaxchain.configure()` asks JAX for one CPU device per usable core (nothing
+    in that process's environment sets the count)."""
     assert every_device["n_devices"] == every_device["cores"]
 
 

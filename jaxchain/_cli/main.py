@@ -10,6 +10,7 @@ import platformdirs
 
 from .._errors import ValidationError
 from .._programs import keep_programs
+from .._setup import configure
 from .common import Parser, RunsFailed, UsageError, one_line, usage_message
 
 #: The subcommands, each a module of this package with `add_parser(sub)`.
@@ -90,9 +91,10 @@ def compilation_cache() -> str | None:
 
 
 def main(argv=None) -> int:
-    """Run the command line. Figures are drawn with matplotlib's Agg backend unless
-    the environment variable MPLBACKEND names another. Compiled programs are kept
-    in a persistent cache (`compilation_cache`).
+    """Run the command line, in a process set up by `jaxchain.configure()` (float64,
+    one CPU device per core, the XLA flags). Figures are drawn with matplotlib's Agg
+    backend unless the environment variable MPLBACKEND names another. Compiled
+    programs are kept in a persistent cache (`compilation_cache`).
 
     **Returns:**
 
@@ -103,6 +105,7 @@ def main(argv=None) -> int:
     one line on stderr, never a traceback (set JAXCHAIN_TRACEBACK=1 to let the
     exception through).
     """
+    configure()  # float64, a device per core, the XLA flags: before anything runs
     argv = sys.argv[1:] if argv is None else list(argv)
     named = [a for a in argv if a in COMMANDS][:1]
     parser = build_parser(named if named and argv[0] == named[0] else COMMANDS)

@@ -12,6 +12,7 @@ from jaxtyping import ArrayLike
 from .chain import BOUNDARIES, Mistuning, n_links
 from .friction import AbstractFrictionLaw, ExponentialDecay, as_parameter, check_values
 from .._errors import ValidationError
+from .._setup import check_float64
 
 #: The fields that hold one value per chain (never per oscillator).
 CHAIN_SCALARS = ("v_d", "eps")
@@ -85,6 +86,7 @@ class ChainParams(eqx.Module):
     `AbstractFrictionLaw`, both `friction` and `mu_st`/`mu_d`/`v0`, or a
     `stiffness` that its `mistuning` record does not give. The friction law
     validates its own parameters.
+    `RuntimeError` when float64 is off in JAX (call `jaxchain.configure()` first).
     """
 
     n_osc: int = eqx.field(static=True)
@@ -102,6 +104,7 @@ class ChainParams(eqx.Module):
                  stiffness=1.0, load=1.0, friction: AbstractFrictionLaw | None = None,
                  boundary: str = "ring", mistuning: Mistuning | None = None, *,
                  mu_st=_ABSENT, mu_d=_ABSENT, v0=_ABSENT):
+        check_float64()  # before the converters make arrays of the wrong precision
         shorthand = {k: v for k, v in (("mu_st", mu_st), ("mu_d", mu_d), ("v0", v0))
                      if v is not _ABSENT}
         if friction is None:

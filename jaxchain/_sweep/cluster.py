@@ -22,6 +22,7 @@ from tqdm.auto import tqdm
 
 from .._programs import keep_programs, program_folder
 from .._errors import ValidationError
+from .._setup import configure
 
 #: The scheduler address that starts a cluster on this machine: "local:N", N
 #: worker processes of one thread (and one JAX device) each.
@@ -135,12 +136,11 @@ class JaxWorker(WorkerPlugin):
                    isinstance(getattr(client, "cluster", None), LocalCluster))
 
     def setup(self, worker):
-        import jaxchain  # noqa: F401  (float64, XLA flags)
-
         if self.pin and isinstance(worker.name, int) and not _worker_devices:
             _pin_to_own_cores(worker.name, max(1, worker.state.nthreads))
-        with contextlib.suppress(RuntimeError):  # backends already started
-            jax.config.update("jax_num_cpu_devices", max(1, worker.state.nthreads))
+        # float64, the XLA flags and one device per thread (once backends run, only
+        # float64 changes)
+        configure(devices=max(1, worker.state.nthreads))
         if self.cache:
             jax.config.update("jax_compilation_cache_dir", self.cache)
             jax.config.update("jax_persistent_cache_min_compile_time_secs",

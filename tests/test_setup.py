@@ -1,0 +1,75 @@
+"""`import jaxchain` changes nothing global; `jaxchain.configure()` makes the set-up
+that jaxchain needs; a chain is refused without it. Each case in a fresh process,
+whose JAX starts with its defaults (no XLA_FLAGS, no device count, no float64)."""
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from jaxchain._setup import XLA_FLAGS, usable_cores
+
+STATE = ("import json, os, jax; "
+         "state = lambda: dict(xla_flags=os.environ.get('XLA_FLAGS'), "
+         "x64=bool(jax.config.jax_enable_x64), count=jax.config.jax_num_cpu_devices); ")
+
+
+def fresh(code: str) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("XLA_FLAGS", "JAX_ENABLE_X64", "JAX_NUM_CPU_DEVICES")}
+    return subprocess.run([sys.executable, "-c", STATE + code], capture_output=True,
+                          text=True, env=env, timeout=300)
+
+
+def test_import_changes_nothing_global():
+    """Before and after `import jaxchain` (and loading its engine): the same
+    XLA_FLAGS, float64 setting and device count; the user's float32 code stays
+    float32, and JAX starts with its one CPU device."""
+    run = fresh("before = state(); import jaxchain as jc; jc.simulate; jc.ensemble; "
+                "jc.continuation; after = state(); "
+                "import jax.numpy as jnp; print(json.dumps([before, after, "
+                "str(jnp.ones(3).dtype), len(jax.devices())]))")
+    assert run.returncode == 0, run.stderr
+    before, after, dtype, n_devices = json.loads(run.stdout)
+    assert before == after == {"xla_flags": None, "x64": False, "count": -1}
+    assert dtype == "float32" and n_devices == 1
+
+
+def test_configure_makes_the_set_up_that_jaxchain_needs():
+    """After `configure()`: float64, jaxchain's XLA flags, one CPU device per usable
+    core; with `devices=`, that count."""
+    for call, count in (("jc.configure()", usable_cores()), ("jc.configure(devices=3)", 3)):
+        run = fresh(f"import jaxchain as jc; {call}; "
+                    "print(json.dumps([state(), len(jax.devices('cpu'))]))")
+        assert run.returncode == 0, run.stderr
+        after, n_devices = json.loads(run.stdout)
+        assert after["xla_flags"] == XLA_FLAGS and after["x64"], call
+        assert n_devices == count, call
+
+
+def test_a_count_or_flags_chosen_before_are_kept():
+    run = fresh("jax.config.update('jax_num_cpu_devices', 2); "
+                "os.environ['XLA_FLAGS'] = '--xla_cpu_enable_fast_math=false'; "
+                "import jaxchain as jc; jc.configure(); "
+                "print(json.dumps([state(), len(jax.devices('cpu'))]))")
+    assert run.returncode == 0, run.stderr
+    after, n_devices = json.loads(run.stdout)
+    assert after["xla_flags"] == "--xla_cpu_enable_fast_math=false" and n_devices == 2
+
+
+def test_a_chain_without_float64_names_the_call():
+    run = fresh("import jaxchain as jc\n"
+                "try:\n    jc.simulate(jc.ChainParams(n_osc=2), [[0.1, 0.0], [0.0, 0.0]])\n"
+                "except RuntimeError as err:\n    print(err)\n")
+    assert run.returncode == 0, run.stderr
+    assert "jaxchain.configure()" in run.stdout and "float64" in run.stdout
+
+
+def test_bad_device_count():
+    import jaxchain as jc
+
+    for bad in (0, -1, 1.5, "2"):
+        with pytest.raises(ValueError, match="devices"):
+            jc.configure(devices=bad)
