@@ -5,189 +5,178 @@ friction-excited oscillator chains*. Importing jaxchain changes nothing in JAX:
 call `jaxchain.configure()` once, first, to turn on float64 (which jaxchain needs),
 give JAX one CPU device per core and let XLA compile the step loop into one kernel.
 The `jaxchain` command does it itself.
+
+The public names, each imported from the module that defines it. The heavy
+libraries (matplotlib, xarray, dask, scipy) are imported inside the functions that
+use them, so that `import jaxchain` costs JAX and diffrax alone.
 """
 
-import importlib
-
-#: Public name -> the module that defines it. The names are imported on first use
-#: (PEP 562), so that `import jaxchain` costs JAX alone and a command loads only
-#: what it needs (diffrax, xarray, matplotlib and scipy are imported by the modules
-#: that use them).
-_EXPORTS = {
-    "ValidationError": "._errors",
-    "configure": "._setup",
-    "ensemble": "._ensemble",
-    "friction_coefficient": "._physics.friction",
-    "slip_friction_force": "._physics.friction",
-    "smoothed_friction_force": "._physics.friction",
-    "AbstractFrictionLaw": "._physics.friction",
-    "ExponentialDecay": "._physics.friction",
-    "Stribeck": "._physics.friction",
-    "Polynomial": "._physics.friction",
-    "Coulomb": "._physics.friction",
-    "FRICTION_LAWS": "._physics.friction",
-    "static_friction": "._physics.friction",
-    "AbstractInitialCondition": "._physics.initial",
-    "GivenState": "._physics.initial",
-    "OutOfPhaseExcitation": "._physics.initial",
-    "excited_block": "._physics.initial",
-    "localized_family": "._physics.initial",
-    "jacobian": "._physics.model",
-    "mechanical_energy": "._physics.model",
-    "stick_force": "._physics.model",
-    "split_vector_field": "._physics.model",
-    "steady_sliding": "._physics.model",
-    "vector_field": "._physics.model",
-    "stick_slip_existence_limit": "._nonsmooth.existence",
-    "NonsmoothOptions": "._nonsmooth.options",
-    "NONSMOOTH_STATUS": "._nonsmooth.solve",
-    "NonsmoothObservables": "._nonsmooth.solve",
-    "simulate_nonsmooth": "._nonsmooth.solve",
-    "SWITCH_KINDS": "._nonsmooth.switching",
-    "SimulationOptions": "._options",
-    "ChainParams": "._physics.params",
-    "mistune": "._physics.params",
-    "single_oscillator": "._physics.params",
-    "stack_chains": "._physics.params",
-    "with_parameter": "._physics.params",
-    "parameter_value": "._physics.params",
-    "parameter_name": "._physics.params",
-    "BOUNDARIES": "._physics.chain",
-    "Mistuning": "._physics.chain",
-    "coupling_force": "._physics.chain",
-    "stiffness_matrix": "._physics.chain",
-    "chain_record": "._physics.record",
-    "chain_from_record": "._physics.record",
-    "lane_params": "._lanes",
-    "plot_localized_states": "._plots.localized",
-    "save_dataset": "._results",
-    "to_dataset": "._results",
-    "STATUS": "._simulate",
-    "Observables": "._simulate",
-    "simulate": "._simulate",
-    "integrate": "._simulate",
-    "observe": "._simulate",
-    "SOLVERS": "._solvers",
-    "DEFAULT_SOLVER": "._solvers",
-    "auto_solver": "._solvers",
-    "STICK_BAND": "._physics.stick",
-    "sticks": "._physics.stick",
-    "crosscheck": "._crosscheck",
-    "HopfPoint": "._bifurcation.hopf",
-    "growth_rates": "._bifurcation.hopf",
-    "hopf_eps_correction": "._bifurcation.hopf",
-    "hopf_point": "._bifurcation.hopf",
-    "hopf_vd_analytic": "._bifurcation.hopf",
-    "mode_eigenvalues": "._bifurcation.hopf",
-    "steady_sliding_eigenvalues": "._bifurcation.hopf",
-    "leading_growth_rate": "._bifurcation.hopf",
-    "first_lyapunov_coefficient": "._bifurcation.lyapunov",
-    "PeriodicOrbit": "._bifurcation.shooting",
-    "ShootingOptions": "._bifurcation.shooting",
-    "floquet_multipliers": "._bifurcation.shooting",
-    "monodromy": "._bifurcation.shooting",
-    "periodic_orbit": "._bifurcation.shooting",
-    "shooting_residual": "._bifurcation.shooting",
-    "Branch": "._bifurcation.continuation",
-    "ContinuationOptions": "._bifurcation.continuation",
-    "ContinuationProblem": "._bifurcation.continuation",
-    "PseudoArclength": "._bifurcation.continuation",
-    "continuation": "._bifurcation.continuation",
-    "hopf_cycle": "._bifurcation.limit_cycles",
-    "BIFURCATION_KINDS": "._bifurcation.bifurcations",
-    "BifurcationPoint": "._bifurcation.bifurcations",
-    "locate_bifurcations": "._bifurcation.bifurcations",
-    "localized_branches": "._snake",
-    "localization_factor": "._physics.localization",
-    "weak_disorder_localization": "._physics.localization",
-    "passband_frequency": "._physics.localization",
-    "inverse_participation_ratio": "._physics.localization",
-    "damped_decay": "._physics.localization",
-    "mistuning_study": "._mistuning.study",
-    "study_chains": "._mistuning.study",
-    "upper_edges": "._mistuning.edges",
-    "localized_fold": "._mistuning.edges",
-    "intentional_mistuning": "._mistuning.design",
-    "MistuningDesign": "._mistuning.design",
-    "pattern_deviations": "._mistuning.design",
-    "plot_snake": "._plots.snake",
-    "plot_mistuning_study": "._plots.mistuning",
-    "plot_site_edges": "._plots.mistuning",
-    "plot_mistuned_states": "._plots.mistuning",
-    "plot_mistuning_design": "._plots.mistuning",
-    "design_study": "._mistuning.design_study",
-    "limit_cycle_problem": "._bifurcation.limit_cycles",
-    "FoldPoint": "._bifurcation.fold",
-    "fold_point": "._bifurcation.fold",
-    "solve_fold": "._bifurcation.fold",
-    "BoundaryCurves": "._bifurcation.two_parameter",
-    "boundary_curves": "._bifurcation.two_parameter",
-    "fold_and_derivative": "._bifurcation.two_parameter",
-    "fold_curve": "._bifurcation.two_parameter",
-    "fold_curve_problem": "._bifurcation.two_parameter",
-    "hopf_vd": "._bifurcation.two_parameter",
-    "DampingDesign": "._bifurcation.design",
-    "smallest_damping": "._bifurcation.design",
-    "work_precision": "._work_precision",
-    "open_sweep": "._sweep.sweep",
-    "sweep": "._sweep.sweep",
-    "front_fractions": "._sweep.fronts",
-    "front_ranges": "._sweep.fronts",
-    "propagating_fronts": "._sweep.fronts",
-    "plot_bifurcation_diagram": "._plots.sweep",
-    "plot_bistable_region": "._plots.bifurcation",
-    "plot_limit_cycle_branch": "._plots.bifurcation",
-    "plot_crosscheck": "._plots.crosscheck",
-    "plot_work_precision": "._plots.work_precision",
-    "AbstractObserver": "._observers.base",
-    "Chunk": "._observers.base",
-    "Extrema": "._observers.extrema",
-    "Energy": "._observers.energy",
-    "PeakTimes": "._observers.crossings",
-    "PoincareSection": "._observers.crossings",
-    "TimeSeries": "._observers.series",
-    "LargestLyapunov": "._observers.lyapunov",
-    "time_delays": "._dynamics.delays",
-    "delay_spread": "._dynamics.delays",
-    "reference_oscillator": "._dynamics.delays",
-    "CLASSES": "._dynamics.classify",
-    "classify": "._dynamics.classify",
-    "ClassTolerances": "._states",
-    "state_class": "._states",
-    "PAPER_SOLUTIONS": "._dynamics.scenes",
-    "observe_solutions": "._dynamics.scenes",
-    "time_series_scene": "._dynamics.scenes",
-    "time_delay_scene": "._dynamics.scenes",
-    "phase_portrait_scene": "._dynamics.scenes",
-    "orbit_diagram_scene": "._dynamics.scenes",
-    "plot_time_series": "._plots.dynamics",
-    "plot_time_delays": "._plots.dynamics",
-    "plot_phase_portraits": "._plots.dynamics",
-    "plot_orbit_diagram": "._plots.dynamics",
-    "plot_states_and_orbits": "._plots.dynamics",
-    "failure_hint": "._hints",
-    "stress_cases": "._stress.cases",
-    "stress": "._stress.run",
-    "Box": "._basin.sampling",
-    "sample_states": "._basin.sampling",
-    "halc_clusters": "._basin.classes",
-    "wilson_interval": "._basin.classes",
-    "basin_stability": "._basin.basin",
-    "plot_basin_stability": "._plots.basin",
-    "plot_halc_histogram": "._plots.basin",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module 'jaxchain' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module, __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_EXPORTS))
+from ._basin.basin import basin_stability as basin_stability
+from ._basin.classes import (
+    halc_clusters as halc_clusters, wilson_interval as wilson_interval,
+)
+from ._basin.sampling import Box as Box, sample_states as sample_states
+from ._bifurcation.bifurcations import (
+    BIFURCATION_KINDS as BIFURCATION_KINDS, BifurcationPoint as BifurcationPoint,
+    locate_bifurcations as locate_bifurcations,
+)
+from ._bifurcation.continuation import (
+    Branch as Branch, continuation as continuation,
+    ContinuationOptions as ContinuationOptions,
+    ContinuationProblem as ContinuationProblem, PseudoArclength as PseudoArclength,
+)
+from ._bifurcation.design import (
+    DampingDesign as DampingDesign, smallest_damping as smallest_damping,
+)
+from ._bifurcation.fold import (
+    fold_point as fold_point, FoldPoint as FoldPoint, solve_fold as solve_fold,
+)
+from ._bifurcation.hopf import (
+    growth_rates as growth_rates, hopf_eps_correction as hopf_eps_correction,
+    hopf_point as hopf_point, hopf_vd_analytic as hopf_vd_analytic,
+    HopfPoint as HopfPoint, leading_growth_rate as leading_growth_rate,
+    mode_eigenvalues as mode_eigenvalues,
+    steady_sliding_eigenvalues as steady_sliding_eigenvalues,
+)
+from ._bifurcation.limit_cycles import (
+    hopf_cycle as hopf_cycle, limit_cycle_problem as limit_cycle_problem,
+)
+from ._bifurcation.lyapunov import (
+    first_lyapunov_coefficient as first_lyapunov_coefficient,
+)
+from ._bifurcation.shooting import (
+    floquet_multipliers as floquet_multipliers, monodromy as monodromy,
+    periodic_orbit as periodic_orbit, PeriodicOrbit as PeriodicOrbit,
+    shooting_residual as shooting_residual, ShootingOptions as ShootingOptions,
+)
+from ._bifurcation.two_parameter import (
+    boundary_curves as boundary_curves, BoundaryCurves as BoundaryCurves,
+    fold_and_derivative as fold_and_derivative, fold_curve as fold_curve,
+    fold_curve_problem as fold_curve_problem, hopf_vd as hopf_vd,
+)
+from ._crosscheck import crosscheck as crosscheck
+from ._dynamics.classify import CLASSES as CLASSES, classify as classify
+from ._dynamics.delays import (
+    delay_spread as delay_spread, reference_oscillator as reference_oscillator,
+    time_delays as time_delays,
+)
+from ._dynamics.scenes import (
+    PAPER_SOLUTIONS as PAPER_SOLUTIONS, observe_solutions as observe_solutions,
+    orbit_diagram_scene as orbit_diagram_scene,
+    phase_portrait_scene as phase_portrait_scene, time_delay_scene as time_delay_scene,
+    time_series_scene as time_series_scene,
+)
+from ._ensemble import ensemble as ensemble
+from ._errors import ValidationError as ValidationError
+from ._hints import failure_hint as failure_hint
+from ._lanes import lane_params as lane_params
+from ._mistuning.design import (
+    intentional_mistuning as intentional_mistuning, MistuningDesign as MistuningDesign,
+    pattern_deviations as pattern_deviations,
+)
+from ._mistuning.design_study import design_study as design_study
+from ._mistuning.edges import (
+    localized_fold as localized_fold, upper_edges as upper_edges,
+)
+from ._mistuning.study import (
+    mistuning_study as mistuning_study, study_chains as study_chains,
+)
+from ._nonsmooth.existence import (
+    stick_slip_existence_limit as stick_slip_existence_limit,
+)
+from ._nonsmooth.options import NonsmoothOptions as NonsmoothOptions
+from ._nonsmooth.solve import (
+    NONSMOOTH_STATUS as NONSMOOTH_STATUS, NonsmoothObservables as NonsmoothObservables,
+    simulate_nonsmooth as simulate_nonsmooth,
+)
+from ._nonsmooth.switching import SWITCH_KINDS as SWITCH_KINDS
+from ._observers.base import AbstractObserver as AbstractObserver, Chunk as Chunk
+from ._observers.crossings import (
+    PeakTimes as PeakTimes, PoincareSection as PoincareSection,
+)
+from ._observers.energy import Energy as Energy
+from ._observers.extrema import Extrema as Extrema
+from ._observers.lyapunov import LargestLyapunov as LargestLyapunov
+from ._observers.series import TimeSeries as TimeSeries
+from ._options import SimulationOptions as SimulationOptions
+from ._physics.chain import (
+    BOUNDARIES as BOUNDARIES, coupling_force as coupling_force, Mistuning as Mistuning,
+    stiffness_matrix as stiffness_matrix,
+)
+from ._physics.friction import (
+    FRICTION_LAWS as FRICTION_LAWS, AbstractFrictionLaw as AbstractFrictionLaw,
+    Coulomb as Coulomb, ExponentialDecay as ExponentialDecay,
+    friction_coefficient as friction_coefficient, Polynomial as Polynomial,
+    slip_friction_force as slip_friction_force,
+    smoothed_friction_force as smoothed_friction_force,
+    static_friction as static_friction, Stribeck as Stribeck,
+)
+from ._physics.initial import (
+    AbstractInitialCondition as AbstractInitialCondition,
+    excited_block as excited_block, GivenState as GivenState,
+    localized_family as localized_family, OutOfPhaseExcitation as OutOfPhaseExcitation,
+)
+from ._physics.localization import (
+    damped_decay as damped_decay,
+    inverse_participation_ratio as inverse_participation_ratio,
+    localization_factor as localization_factor,
+    passband_frequency as passband_frequency,
+    weak_disorder_localization as weak_disorder_localization,
+)
+from ._physics.model import (
+    jacobian as jacobian, mechanical_energy as mechanical_energy,
+    split_vector_field as split_vector_field, steady_sliding as steady_sliding,
+    stick_force as stick_force, vector_field as vector_field,
+)
+from ._physics.params import (
+    ChainParams as ChainParams, mistune as mistune, parameter_name as parameter_name,
+    parameter_value as parameter_value, single_oscillator as single_oscillator,
+    stack_chains as stack_chains, with_parameter as with_parameter,
+)
+from ._physics.record import (
+    chain_from_record as chain_from_record, chain_record as chain_record,
+)
+from ._physics.stick import STICK_BAND as STICK_BAND, sticks as sticks
+from ._plots.basin import (
+    plot_basin_stability as plot_basin_stability,
+    plot_halc_histogram as plot_halc_histogram,
+)
+from ._plots.bifurcation import (
+    plot_bistable_region as plot_bistable_region,
+    plot_limit_cycle_branch as plot_limit_cycle_branch,
+)
+from ._plots.crosscheck import plot_crosscheck as plot_crosscheck
+from ._plots.dynamics import (
+    plot_orbit_diagram as plot_orbit_diagram,
+    plot_phase_portraits as plot_phase_portraits,
+    plot_states_and_orbits as plot_states_and_orbits,
+    plot_time_delays as plot_time_delays, plot_time_series as plot_time_series,
+)
+from ._plots.localized import plot_localized_states as plot_localized_states
+from ._plots.mistuning import (
+    plot_mistuned_states as plot_mistuned_states,
+    plot_mistuning_design as plot_mistuning_design,
+    plot_mistuning_study as plot_mistuning_study, plot_site_edges as plot_site_edges,
+)
+from ._plots.snake import plot_snake as plot_snake
+from ._plots.sweep import plot_bifurcation_diagram as plot_bifurcation_diagram
+from ._plots.work_precision import plot_work_precision as plot_work_precision
+from ._results import save_dataset as save_dataset, to_dataset as to_dataset
+from ._setup import configure as configure
+from ._simulate import (
+    STATUS as STATUS, integrate as integrate, Observables as Observables,
+    observe as observe, simulate as simulate,
+)
+from ._snake import localized_branches as localized_branches
+from ._solvers import (
+    DEFAULT_SOLVER as DEFAULT_SOLVER, SOLVERS as SOLVERS, auto_solver as auto_solver,
+)
+from ._states import ClassTolerances as ClassTolerances, state_class as state_class
+from ._stress.cases import stress_cases as stress_cases
+from ._stress.run import stress as stress
+from ._sweep.fronts import (
+    front_fractions as front_fractions, front_ranges as front_ranges,
+    propagating_fronts as propagating_fronts,
+)
+from ._sweep.sweep import open_sweep as open_sweep, sweep as sweep
+from ._work_precision import work_precision as work_precision

@@ -145,7 +145,7 @@ XI_VALUES = (0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.1)
 RATIO_VALUES = (1.6, 1.8, 2.0, 2.2, 2.4)
 
 
-def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
+def boundaries(params: ChainParams | None = None, *, target: float = 0.5,
                xi_values=XI_VALUES, ratio_values=RATIO_VALUES, ring: bool = True,
                progress: bool = False) -> Boundaries:
     """The Hopf and fold belt speeds of the single oscillator and of the chain.
@@ -181,6 +181,8 @@ def boundaries(params: ChainParams = ChainParams(), *, target: float = 0.5,
 
     `ValidationError` for target <= 0; `RuntimeError` if a computation fails.
     """
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams()
     if not target > 0:
         raise ValidationError(f"target must be > 0, got {target!r}")
     options = ShootingOptions()

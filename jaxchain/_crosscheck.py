@@ -1,6 +1,10 @@
 """The cross-check of the smoothed model against the event-driven non-smooth
 reference, on a grid of belt speeds and initial conditions."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import dataclasses
 import time
 import uuid
@@ -11,7 +15,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import xarray as xr
 from tqdm.auto import tqdm
 
 from ._checks import as_solver, belt_speeds, check_options, check_params
@@ -28,6 +31,9 @@ from ._solvers import DEFAULT_SOLVER, SOLVERS
 from ._states import IRREGULAR, PERIODIC, ClassTolerances, state_class
 from ._store import read_dataset, settings_key, write_dataset
 from ._errors import ValidationError
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 #: The grid of the issue: belt speeds across the bistable range and a set of
 #: eq. (8) and eq. (10) initial conditions, as (family, number excited).
@@ -109,6 +115,8 @@ class _References:
 
     def run(self, i: int, device) -> tuple[dict, float]:
         """Case i on `device`: read back if stored, else computed (and stored)."""
+        import xarray as xr
+
         stored = self.read(i)
         if stored is not None:
             return stored
@@ -155,7 +163,7 @@ def _amplitude_error(smoothed, reference):
     return np.max(np.abs(smoothed - reference), -1) / np.maximum(1.0, reference.max(-1))
 
 
-def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSSCHECK_ICS,
+def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCHECK_ICS,
                solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
                options: SimulationOptions = SimulationOptions(),
                reference_options: NonsmoothOptions | None = None, *,
@@ -214,6 +222,10 @@ def crosscheck(params: ChainParams = ChainParams(), v_d=CROSSCHECK_VD, ics=CROSS
     goes away, or when the runs its workers stored are not in `checkpoint` as this
     process sees it.
     """
+    import xarray as xr
+
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams()
     if client is not None and checkpoint is None:
         raise ValidationError("checkpoint: a cross-check on a Dask cluster needs a checkpoint "
                               "folder its workers can reach")

@@ -1,12 +1,15 @@
 """Ensemble observables as an `xarray.Dataset`, stored with their parameters."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import dataclasses
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import diffrax
 import numpy as np
-import xarray as xr
 from jaxtyping import ArrayLike
 
 from ._atomic import replacing
@@ -16,6 +19,9 @@ from ._physics.params import ChainParams
 from ._physics.record import chain_record
 from ._simulate import STATUS, Observables
 from ._physics.stick import STICK_BAND
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 PAPER = ("Multiple spatially localized dynamical states in friction-excited "
          "oscillator chains")
@@ -43,6 +49,8 @@ def observables_variables(obs: Observables, lead: tuple[str, ...]) -> dict:
     """Every field of `obs` as an `xarray.Variable` whose leading dims are `lead`
     (the batch axes of `obs`), then `osc`, `half` or (`component`, `osc`), with its
     `long_name` and, for `status`, the meaning of each code."""
+    import xarray as xr
+
     trailing = {"n_halc_halves": ("half",), "y_initial": ("component", "osc"),
                 "y_final": ("component", "osc")}
     out = {}
@@ -101,6 +109,8 @@ def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
     (but v_d), of `options`, the solver, the type of initial condition, the
     meaning of the status codes, the jaxchain version and the paper.
     """
+    import xarray as xr
+
     data = observables_variables(obs, ("v_d", "ic"))
     n_vd, n_ic, n_osc = data["amplitudes"].shape
     coords = {"v_d": np.asarray(v_d, dtype=float).reshape(n_vd),

@@ -1,6 +1,10 @@
 """The snake: branches of the chain's localized periodic states over the belt speed,
 with their Floquet stability and bifurcations, started from direct simulation."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import dataclasses
 import json
 from pathlib import Path
@@ -9,7 +13,6 @@ import diffrax
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-import xarray as xr
 from tqdm.auto import tqdm
 
 from ._bifurcation.bifurcations import locate_bifurcations
@@ -25,6 +28,9 @@ from ._physics.record import chain_record
 from ._simulate import simulate
 from ._store import read_dataset, write_dataset
 from ._errors import ValidationError
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 #: The branches of `localized_branches` by default: eq. (8) with 1, 2, 4 and 8
 #: oscillators excited, and the whole chain (the paper's Figs. 4 and 8).
@@ -122,6 +128,8 @@ def start_orbits(params: ChainParams, sites=SITES, *, options: SimulationOptions
 
 
 def _branch_dataset(k: int, problem, branch, bifurcations) -> xr.Dataset:
+    import xarray as xr
+
     ok = np.asarray(branch.converged)
     r = branch.records
     multipliers = np.asarray(r.multipliers)
@@ -160,6 +168,8 @@ def follow_branch(orbit, options: ShootingOptions, continuation_options: Continu
     shooting unknowns u; attributes `bifurcations` (JSON list of type, v_d, energy,
     multiplier, n_halc, and `after`: the index of the point before it) and `stop`.
     """
+    import xarray as xr
+
     problem = limit_cycle_problem(orbit, options)
     halves, found = [], []
     for direction in (-1, 1):
@@ -412,7 +422,7 @@ def multiplier_accuracy(params: ChainParams, branch: xr.Dataset, points,
             "trivial_error": [float(max(e, default=np.nan)) for e in trivial]}
 
 
-def localized_branches(params: ChainParams = ChainParams(), sites=SITES, *,
+def localized_branches(params: ChainParams | None = None, sites=SITES, *,
                        shooting: ShootingOptions = SNAKE_SHOOTING,
                        continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
                        start_options: SimulationOptions = SNAKE_START,
@@ -449,6 +459,8 @@ def localized_branches(params: ChainParams = ChainParams(), sites=SITES, *,
 
     `ValidationError` for bad sites or options.
     """
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams()
     sites = tuple(int(k) for k in sites)
     datasets, starts, failed = {}, {}, {}
     settings = {"chain": chain_record(params), "shooting": shooting,

@@ -1,16 +1,22 @@
 """Stored results keyed by everything that determines them, so that a resumed study
 never reads back a result computed with other settings."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import csv
 from collections.abc import Callable
 from pathlib import Path
 
-import xarray as xr
 
 from ._atomic import replacing
 from ._keys import FORMAT_VERSION, canonical, settings_json, settings_key  # noqa: F401
 from ._results import save_dataset
 from ._errors import ValidationError
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 
 def read_dataset(path: Path, kind: str, **settings) -> xr.Dataset | None:
@@ -22,6 +28,8 @@ def read_dataset(path: Path, kind: str, **settings) -> xr.Dataset | None:
     The Dataset, or None when there is no file, when it cannot be read, or when it
     was stored under another key (a result of other settings, to be recomputed).
     """
+    import xarray as xr
+
     if not Path(path).exists():
         return None
     try:

@@ -13,7 +13,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from ._checks import real_array
 from ._physics.initial import OutOfPhaseExcitation, excited_block
@@ -207,6 +206,8 @@ def scipy_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: flo
     """One smoothed run of `scene` with `scipy.integrate.solve_ivp`, the extrema
     taken from samples spaced `SCIPY_SAMPLE_DT` as in `simulate`. A run longer than
     `budget_s` is stopped and recorded as such."""
+    from scipy.integrate import solve_ivp
+
     p = scene.params(eps)
     rhs = _numpy_field(p)
     y0 = scene.y0().reshape(-1)

@@ -73,3 +73,16 @@ def test_bad_device_count():
     for bad in (0, -1, 1.5, "2"):
         with pytest.raises(ValueError, match="devices"):
             jc.configure(devices=bad)
+
+
+def test_import_loads_no_heavy_library_and_names_every_public_name():
+    """`import jaxchain` imports each public name from its module (explicitly, as
+    type checkers and documentation generators read them) and none of the heavy
+    libraries, which the functions that use them import."""
+    run = fresh("import sys, jaxchain as jc; "
+                "heavy = ('matplotlib', 'xarray', 'scipy', 'dask', 'distributed', 'zarr', "
+                "'pandas'); print(json.dumps([sorted(m for m in heavy if m in sys.modules), "
+                "callable(jc.simulate), callable(jc.plot_localized_states), "
+                "callable(jc.sweep)]))")
+    assert run.returncode == 0, run.stderr
+    assert json.loads(run.stdout) == [[], True, True, True]

@@ -3,13 +3,16 @@ drawn from a stated box, that end in each state (Menck, Heitzig, Marwan & Kurths
 Nature Physics 9, 89-92 (2013); for friction oscillators Stender, Hoffmann &
 Papangelo, Lubricants 8, 105 (2020))."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import dataclasses
 import math
 from pathlib import Path
 
 import jax
 import numpy as np
-import xarray as xr
 from jaxtyping import ArrayLike, Float
 
 from .._checks import as_solver, belt_speeds, check_options, check_params
@@ -26,6 +29,9 @@ from .._sweep.sweep import sweep
 from .classes import class_index, class_names, halc_clusters, wilson_interval
 from .sampling import Box, sample_states
 from .._errors import ValidationError
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 #: The horizon of `basin_stability` by default: t_end = 2000, classified over
 #: [1500, 2000].
@@ -122,6 +128,8 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
     `ValidationError` for n_samples < 1, bad belt speeds or a bad `n_check`, and as
     `sweep`; `TypeError` for a key that is neither a seed nor a PRNG key.
     """
+    import xarray as xr
+
     params = check_params(params)
     solver = as_solver(solver, params=params)
     options = check_options(options)

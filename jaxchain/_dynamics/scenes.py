@@ -2,12 +2,15 @@
 with the observers it needs, and only those, and returns an `xarray.Dataset` from
 which a function of `jaxchain._plots.dynamics` draws the paper's figure."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import dataclasses
 from collections.abc import Sequence
 
 import diffrax
 import numpy as np
-import xarray as xr
 
 from .._checks import as_solver, check_options, check_params
 from .._physics.initial import FAMILIES, initial_states, localized_family
@@ -25,6 +28,9 @@ from .._solvers import DEFAULT_SOLVER, SOLVERS
 from .._states import ClassTolerances
 from .classify import classify
 from .._errors import ValidationError
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 #: The solutions (numbers of excited oscillators) of Figs. 6 and 7 of the paper.
 PAPER_SOLUTIONS = (1, 2, 5, 8, 9, 12, 13, 19, 20)
@@ -80,6 +86,8 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
     `ValidationError` for solutions outside [1, n_osc] or an unknown family;
     `TypeError` or `ValidationError` for bad observers (`check_observers`).
     """
+    import xarray as xr
+
     observers = check_observers(observers)
     params = check_params(params)
     solver = as_solver(solver, params=params)
@@ -124,7 +132,7 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
     return ds
 
 
-def time_series_scene(params: ChainParams = ChainParams(v_d=1.5), n_excited: int = 2,
+def time_series_scene(params: ChainParams | None = None, n_excited: int = 2,
                       ics: str = "eq8", t_end: float = 300.0, dt: float = 0.1,
                       solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](), *,
                       progress: bool = True) -> xr.Dataset:
@@ -141,12 +149,14 @@ def time_series_scene(params: ChainParams = ChainParams(v_d=1.5), n_excited: int
 
     `ValidationError` for t_end <= 0, dt <= 0 or n_excited outside [1, n_osc].
     """
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams(v_d=1.5)
     options = SimulationOptions(t_end=t_end, transient=0.0)
     return observe_solutions(params, [n_excited], (TimeSeries(dt=dt),), ics, solver,
                              options, progress=progress)
 
 
-def time_delay_scene(params: ChainParams = ChainParams(v_d=1.5),
+def time_delay_scene(params: ChainParams | None = None,
                      solutions: Sequence[int] | None = PAPER_SOLUTIONS, ics: str = "eq8",
                      solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
                      options: SimulationOptions = SimulationOptions(), *,
@@ -162,6 +172,8 @@ def time_delay_scene(params: ChainParams = ChainParams(v_d=1.5),
 
     `observe_solutions`'s Dataset, classified.
     """
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams(v_d=1.5)
     start = options.transient
     run_options = dataclasses.replace(options, transient=0.0)
     observers = (Extrema(t_start=start), PeakTimes(t_start=0.0),
@@ -171,7 +183,7 @@ def time_delay_scene(params: ChainParams = ChainParams(v_d=1.5),
                              classify_from=start)
 
 
-def phase_portrait_scene(params: ChainParams = ChainParams(v_d=1.5),
+def phase_portrait_scene(params: ChainParams | None = None,
                          solutions: Sequence[int] | None = PAPER_SOLUTIONS,
                          oscillators: tuple[int, int, int] | None = None, ics: str = "eq8",
                          dt: float = 0.1,
@@ -191,6 +203,8 @@ def phase_portrait_scene(params: ChainParams = ChainParams(v_d=1.5),
 
     `observe_solutions`'s Dataset: `series` (solution, time, component, series_osc).
     """
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams(v_d=1.5)
     n = params.n_osc
     if oscillators is None:
         oscillators = tuple((n // 2 + i) % n for i in range(3))
@@ -201,7 +215,7 @@ def phase_portrait_scene(params: ChainParams = ChainParams(v_d=1.5),
                              progress=progress)
 
 
-def orbit_diagram_scene(params: ChainParams = ChainParams(v_d=1.5),
+def orbit_diagram_scene(params: ChainParams | None = None,
                         solutions: Sequence[int] | None = None, ics: str = "eq8",
                         solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
                         options: SimulationOptions = SimulationOptions(), *,
@@ -218,6 +232,8 @@ def orbit_diagram_scene(params: ChainParams = ChainParams(v_d=1.5),
 
     `observe_solutions`'s Dataset, classified.
     """
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams(v_d=1.5)
     if ics not in FAMILIES:
         raise ValidationError(f"ics must be one of {sorted(FAMILIES)}, got {ics!r}")
     observers = (Extrema(), PeakTimes(), LargestLyapunov())

@@ -161,7 +161,7 @@ def pattern_folds(problem, solutions, theta_from, theta_to, budget, zero_mean):
     return np.array(folds), np.stack(grads), sols, np.array(ok)
 
 
-def intentional_mistuning(params: ChainParams = ChainParams(n_osc=4), *, budget: float = 0.05,
+def intentional_mistuning(params: ChainParams | None = None, *, budget: float = 0.05,
                           sense: str = "lower", zero_mean: bool = True, steps: int = 15,
                           learning_rate: float = 0.2, temperature: float = 2e-3,
                           seed: int = 0, start=None, progress: bool = True) -> MistuningDesign:
@@ -202,6 +202,8 @@ def intentional_mistuning(params: ChainParams = ChainParams(n_osc=4), *, budget:
     `ValidationError` for a chain that is not a homogeneous ring of at least 2, a bad
     budget or sense; `RuntimeError` when a fold cannot be followed.
     """
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams(n_osc=4)
     if sense not in ("lower", "raise"):
         raise ValidationError(f"sense must be 'lower' or 'raise', got {sense!r}")
     sign = 1.0 if sense == "lower" else -1.0

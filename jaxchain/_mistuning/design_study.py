@@ -103,7 +103,7 @@ def _ring_like(params: ChainParams, n_osc: int, stiffness) -> ChainParams:
                        stiffness=stiffness)
 
 
-def design_study(params: ChainParams = ChainParams(n_osc=4), *, budget: float = 0.05,
+def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
                  n_random: int = 8, steps: int = 15, chain_n_osc: int = 20,
                  progress: bool = True) -> dict:
     """Intentional mistuning by gradient (`intentional_mistuning`) on a ring of
@@ -127,6 +127,8 @@ def design_study(params: ChainParams = ChainParams(n_osc=4), *, budget: float = 
 
     As `intentional_mistuning`.
     """
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams(n_osc=4)
     n = params.n_osc
     start = design_problems(params, budget)
     problem, solutions, homogeneous = start

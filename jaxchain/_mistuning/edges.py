@@ -3,12 +3,15 @@ at which the single-site localized state (k = 1 of eq. (8)) at each oscillator
 still vibrates, by bisection of direct simulations, and precisely by shooting as
 the fold of that state's branch of limit cycles."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import dataclasses
 from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
-import xarray as xr
 from tqdm.auto import tqdm
 
 from .._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
@@ -22,6 +25,9 @@ from .._physics.params import ChainParams, stack_chains, with_parameter
 from .._snake import SNAKE_SHOOTING, _turning_point
 from .._store import read_dataset, write_dataset
 from .._errors import ValidationError
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 #: Each simulation of the bisection: long enough for a state just past its fold
 #: to die out (it lingers near the ghost of the fold for a time that grows as the
@@ -89,6 +95,8 @@ def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: fl
 
     `ValidationError` unless 0 < low < high and steps >= 1.
     """
+    import xarray as xr
+
     if not 0 < low < high:
         raise ValidationError(f"low, high: need 0 < low < high, got {low!r}, {high!r}")
     if steps < 1:

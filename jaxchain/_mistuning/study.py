@@ -2,13 +2,16 @@
 by draw: the Fig. 4 staircase, basin stability, where the vibration sits, the
 edges of the bistable range, and the localization lengths against Anderson's."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import concurrent.futures
 import dataclasses
 import math
 from pathlib import Path
 
 import numpy as np
-import xarray as xr
 from tqdm.auto import tqdm
 
 from .._basin.basin import _key, _key_data
@@ -27,6 +30,9 @@ from .._sweep.sweep import sweep
 from .edges import EDGE_OPTIONS, localized_fold, localized_orbit, upper_edges
 from .summary import envelope_decay
 from .._errors import ValidationError
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 #: Mistuning strengths sigma / eta_c of the study by default.
 STUDY_SIGMAS = (0.0, 0.5, 1.0, 2.0, 4.0)
@@ -60,7 +66,7 @@ def study_chains(params: ChainParams, sigmas, n_draws: int) -> list[tuple[int, i
     return out
 
 
-def mistuning_study(params: ChainParams = ChainParams(), sigmas=STUDY_SIGMAS,
+def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
                     n_draws: int = 8, *, v_d=STUDY_VD, n_samples: int = 8, box: Box = Box(),
                     key=0, n_folds: int = 1, solver=DEFAULT_SOLVER,
                     options: SimulationOptions = STUDY_OPTIONS,
@@ -125,6 +131,10 @@ def mistuning_study(params: ChainParams = ChainParams(), sigmas=STUDY_SIGMAS,
 
     `ValidationError` for a bad count, sigma or belt speed, and as `sweep`.
     """
+    import xarray as xr
+
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams()
     params = check_params(params)
     solver = as_solver(solver, params=params)
     options = check_options(options)

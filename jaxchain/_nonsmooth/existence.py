@@ -44,7 +44,7 @@ _peak = eqx.filter_jit(_slip_arc_peak)
 BISECTION_STEPS = 80
 
 
-def stick_slip_existence_limit(params: ChainParams = ChainParams(n_osc=1),
+def stick_slip_existence_limit(params: ChainParams | None = None,
                                lower: float | None = None, upper: float = 3.0, *,
                                tol: float = 1e-10, rtol: float = 1e-12) -> float:
     """Largest belt speed at which the single oscillator's stick-slip cycle of the
@@ -81,6 +81,8 @@ def stick_slip_existence_limit(params: ChainParams = ChainParams(n_osc=1),
     `ValidationError`) when steady sliding has no Hopf point to start from and
     `lower` is not given, or when the bracket does not contain the limit.
     """
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams(n_osc=1)
     if params.n_osc != 1:
         raise ValidationError(f"the existence limit is that of one oscillator (n_osc = 1), got "
                               f"n_osc = {params.n_osc}; see single_oscillator")

@@ -1,9 +1,14 @@
 """Basin stability: the probability of each state against the belt speed, and the
 distribution of n_HALC at one belt speed, with their 95 % intervals."""
 
-import matplotlib.pyplot as plt
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
-import xarray as xr
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 
 def _shown(ds: xr.Dataset) -> list[int]:
@@ -24,6 +29,8 @@ def plot_basin_stability(ds: xr.Dataset):
 
     The matplotlib `Figure`.
     """
+    import matplotlib.pyplot as plt
+
     v_d, fraction = ds["v_d"].values, ds["fraction"].values
     classes = _shown(ds)
     fig, ax = plt.subplots(figsize=(7, 4.2), layout="constrained")
@@ -56,6 +63,8 @@ def plot_halc_histogram(ds: xr.Dataset, v_d: float):
 
     The matplotlib `Figure`.
     """
+    import matplotlib.pyplot as plt
+
     i = int(np.argmin(np.abs(ds["v_d"].values - v_d)))
     row = ds.isel(v_d=i)
     k = np.arange(ds.sizes["class"])

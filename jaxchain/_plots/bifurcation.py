@@ -1,7 +1,6 @@
 """The single oscillator's bifurcation diagram (Fig. 3(a) of the paper) and the
 bistable region against a design parameter."""
 
-import matplotlib.pyplot as plt
 import numpy as np
 
 
@@ -34,6 +33,8 @@ def plot_limit_cycle_branch(branch, hopf_vd: float, fold_vd: float, fold_energy:
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     fig, ax = plt.subplots(figsize=(7, 4.5))
     ax.plot([v_range[0], hopf_vd], [0, 0], "k--", lw=1.5)
     ax.plot([hopf_vd, v_range[1]], [0, 0], "k-", lw=1.5, label="steady sliding")
@@ -80,6 +81,8 @@ def plot_bistable_region(curves_xi, curves_ratio, mu_d: float | None, design=Non
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     panels = [(curves_xi, 1.0, "damping ratio xi")]
     if curves_ratio is not None:
         panels.append((curves_ratio, 1 / mu_d, "mu_st / mu_d"))

@@ -1,8 +1,13 @@
 """The cross-check of smoothed against non-smooth, as a figure."""
 
-import matplotlib.pyplot as plt
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
-import xarray as xr
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 
 def plot_crosscheck(ds: xr.Dataset):
@@ -20,6 +25,8 @@ def plot_crosscheck(ds: xr.Dataset):
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.5))
     a_r = ds["amplitudes_reference"].values.ravel()
     a_s = ds["amplitudes_smoothed"].values.ravel()

@@ -2,12 +2,17 @@
 diagrams of the localized states, drawn from the Datasets of
 `jaxchain._dynamics.scenes`."""
 
-import matplotlib.pyplot as plt
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
-import xarray as xr
 
 from .._dynamics.delays import reference_oscillator, time_delays
 from .localized import plot_localized_states
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 #: Marker colour of each class in the orbit diagrams.
 CLASS_COLOURS = {"periodic": "tab:blue", "irregular": "tab:red", "undecided": "tab:orange",
@@ -45,6 +50,8 @@ def plot_time_series(ds: xr.Dataset):
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     row = ds.isel(solution=0)
     t, series = ds["time"].values, np.asarray(row["series"])
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
@@ -67,6 +74,8 @@ def plot_time_series(ds: xr.Dataset):
 
 
 def _grid(n: int):
+    import matplotlib.pyplot as plt
+
     cols = min(3, n)
     rows = -(-n // cols)
     return plt.subplots(rows, cols, figsize=(4.2 * cols, 2.9 * rows), squeeze=False)
@@ -108,6 +117,8 @@ def plot_phase_portraits(ds: xr.Dataset):
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     n = ds.sizes["solution"]
     cols = min(3, n)
     rows = -(-n // cols)
@@ -144,6 +155,8 @@ def plot_orbit_diagram(ds: xr.Dataset, ax=None):
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     if ax is None:
         _, ax = plt.subplots(figsize=(8, 4))
     start = float(ds.attrs.get("classify_from", ds.attrs["transient"]))
@@ -176,6 +189,8 @@ def plot_states_and_orbits(ds: xr.Dataset):
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     n_sol, n_osc = ds.sizes["solution"], ds.sizes["osc"]
     fig, (ax_a, ax_b) = plt.subplots(
         1, 2, figsize=(0.45 * n_osc + 10, max(4.0, 0.4 * n_sol + 1.2)),

@@ -1,10 +1,13 @@
 """Fig. 4 of the paper: localized states as rows of circles."""
 
-import matplotlib.pyplot as plt
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
-import xarray as xr
-from matplotlib.collections import PatchCollection
-from matplotlib.patches import Circle
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 
 def plot_localized_states(ds: xr.Dataset, v_d: float | None = None, ax=None):
@@ -23,6 +26,10 @@ def plot_localized_states(ds: xr.Dataset, v_d: float | None = None, ax=None):
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PatchCollection
+    from matplotlib.patches import Circle
+
     row = ds.isel(v_d=0) if v_d is None else ds.sel(v_d=v_d, method="nearest")
     amps = np.nan_to_num(np.asarray(row["amplitudes"]), nan=0.0)
     n_ic, n_osc = amps.shape

@@ -2,13 +2,18 @@
 (staircase, basin stability, the edges of the bistable range, localization
 lengths), and Fig. 4 for one mistuned draw beside its stiffness deviations."""
 
-import matplotlib.pyplot as plt
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
-import xarray as xr
 
 from .._mistuning.summary import (edge_correlations, localized_fraction,
                                   neighbour_detuning, staircase_fraction)
 from .localized import plot_localized_states
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 
 def _errorbars(ax, x, share, labels):
@@ -35,6 +40,8 @@ def plot_mistuning_study(study: xr.Dataset):
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     s = study["sigma"].values
     labels = [f"v_d = {v:g}" for v in study["v_d"].values]
     fig, axes = plt.subplots(2, 2, figsize=(10, 7.5))
@@ -94,6 +101,8 @@ def plot_site_edges(study: xr.Dataset):
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     fig, ax = plt.subplots(figsize=(6, 4.2))
     eta_c = float(study.attrs["eta_c"])
     detuning = neighbour_detuning(study["deviations"].values,
@@ -131,6 +140,9 @@ def plot_mistuned_states(study: xr.Dataset, sigma: float, draw: int = 0, v_d: fl
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+    import xarray as xr
+
     row = study.sel(sigma=sigma, v_d=v_d, method="nearest").isel(draw=draw)
     amps = row["staircase_amplitudes"].values
     ds = xr.Dataset({"amplitudes": (("v_d", "ic", "osc"), amps[None]),
@@ -166,6 +178,8 @@ def plot_mistuning_design(result: dict):
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4.2), sharey=True)
     hom = result["homogeneous_fold"]
     names = ["homogeneous"] + list(result["designs"]) + ["ab"]

@@ -3,7 +3,6 @@ the belt speed, over the points of the Fig. 3(b) sweep."""
 
 import json
 
-import matplotlib.pyplot as plt
 import numpy as np
 
 from .bifurcation import _segments
@@ -26,6 +25,8 @@ def plot_snake(datasets: dict, sweep=None, title: str = ""):
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     fig, ax = plt.subplots(figsize=(8, 5.5))
     if sweep is not None:
         v = np.broadcast_to(sweep["v_d"].values[:, None], sweep["energy"].shape)

@@ -1,16 +1,19 @@
 """Fig. 3(b) of the paper: the energy of every state found, against the swept
 parameter, with the ranges of propagating fronts shaded."""
 
-import matplotlib.pyplot as plt
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
-import xarray as xr
-from matplotlib.colors import BoundaryNorm
-from matplotlib.patches import Patch
 
 from .._bifurcation.hopf import hopf_vd_analytic
 from .._bifurcation.two_parameter import hopf_vd
 from .._physics.record import chain_from_record, chain_settings
 from .._sweep.fronts import front_fractions, front_ranges
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 #: Colours of invading (+1) and receding (-1) fronts.
 FRONT_COLOURS = {1: "tab:red", -1: "tab:blue"}
@@ -43,6 +46,10 @@ def plot_bifurcation_diagram(ds: xr.Dataset):
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import BoundaryNorm
+    from matplotlib.patches import Patch
+
     name = ds.attrs.get("swept", "v_d")
     ds = ds.sortby(name).transpose(name, "ic", ...)
     values = np.asarray(ds[name], dtype=float)

@@ -1,6 +1,5 @@
 """Work-precision diagrams: error against wall time, log-log."""
 
-import matplotlib.pyplot as plt
 import numpy as np
 
 _MARKERS = {"scipy LSODA": "s", "scipy Radau": "D", "reference": "*"}
@@ -22,6 +21,8 @@ def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_er
 
     The matplotlib Figure.
     """
+    import matplotlib.pyplot as plt
+
     rows = [r for r in rows if r["scene"] == scene]
     eps_values = sorted({float(r["eps"]) for r in rows if float(r["eps"]) > 0}, reverse=True)
     fig, axes = plt.subplots(1, max(1, len(eps_values)), figsize=(3.6 * len(eps_values), 4),

@@ -2,8 +2,14 @@
 or recedes from them, instead of staying localized (Section 3.2 of the paper, the
 red dashed lines of Fig. 3(b))."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
-import xarray as xr
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 
 def propagating_fronts(ds: xr.Dataset) -> xr.DataArray:
@@ -26,6 +32,8 @@ def propagating_fronts(ds: xr.Dataset) -> xr.DataArray:
 
     An int8 DataArray with the dims of `ds["n_halc"]`.
     """
+    import xarray as xr
+
     early, late = ds["n_halc_halves"].isel(half=0), ds["n_halc_halves"].isel(half=1)
     within = np.sign(late - early)
     if "n_excited" in ds.coords:
@@ -81,6 +89,8 @@ def front_fractions(ds: xr.Dataset) -> xr.DataArray:
     A DataArray of dims (name, direction), direction = [1, -1]; 0 where every run
     failed.
     """
+    import xarray as xr
+
     ok = ds["status"] == 0
     count = ok.sum("ic")
     out = [((ds["front"] == sign) & ok).sum("ic") / count.where(count > 0)

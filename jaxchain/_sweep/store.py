@@ -1,17 +1,22 @@
 """The zarr store of a sweep: one flat `trajectory` axis cut in chunks of one batch,
 a completion flag per batch, and the key of every setting that made it."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import json
 import os
 import shutil
 from pathlib import Path
 
-import dask.array as da
 import numpy as np
-import xarray as xr
 
 from .._atomic import hold, partial_path
 from .._errors import ValidationError
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 #: Unwritten entries of a batch that has not finished, as they are read back.
 _MISSING = {"f": np.nan, "i": -1, "u": 0, "b": False}
@@ -123,6 +128,8 @@ class SweepStore:
 
     def settings(self) -> tuple[str, dict]:
         """The key and the settings (as JSON data) that made the store."""
+        import xarray as xr
+
         attrs = xr.open_zarr(self.path, consolidated=False).attrs
         return attrs["settings_key"], json.loads(attrs["settings"])
 
@@ -154,6 +161,9 @@ class SweepStore:
         unless the store exists already (another host made it). Nothing is
         computed or held for the whole grid: the variables are lazy dask arrays of
         which only the metadata is written."""
+        import dask.array as da
+        import xarray as xr
+
         n_batches = -(-n_trajectories // batch_size)
         data = {}
         for name, var in batch.data_vars.items():
@@ -178,12 +188,16 @@ class SweepStore:
         """Whether each batch has finished, shape (n_batches,). Read here, without
         Dask: with a `distributed.Client` active, a Dask array would be read by
         the cluster's workers, a task per flag."""
+        import xarray as xr
+
         flags = xr.open_zarr(self.path, consolidated=False, chunks=None)["batch_done"]
         return flags.values == 1
 
     def write(self, index: int, start: int, batch: xr.Dataset) -> None:
         """Write `batch` (trajectories start, start + 1, ...) into its region, then
         flag batch `index` done."""
+        import xarray as xr
+
         hold(f"{self.path.name} batch {index}")
         region = {"trajectory": slice(start, start + batch.sizes["trajectory"])}
         batch.to_zarr(self.path, region=region, consolidated=False)
@@ -194,6 +208,8 @@ class SweepStore:
     def open(self) -> xr.Dataset:
         """The stored Dataset, lazily (dask arrays), with the entries of unfinished
         batches replaced by NaN, -1 or False."""
+        import xarray as xr
+
         ds = xr.open_zarr(self.path, consolidated=False)
         done = self.done()
         ds["batch_done"] = ("batch", done.astype(np.uint8))

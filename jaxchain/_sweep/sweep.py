@@ -2,6 +2,10 @@
 batch by batch, each batch stored as it finishes; a killed sweep resumes where it
 stopped."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import dataclasses
 import uuid
 from collections.abc import Callable, Mapping
@@ -10,7 +14,6 @@ from pathlib import Path
 import diffrax
 import jax
 import numpy as np
-import xarray as xr
 from jaxtyping import ArrayLike, Float
 from tqdm.auto import tqdm
 
@@ -26,6 +29,9 @@ from .fronts import propagating_fronts
 from .grid import SweepGrid
 from .store import SweepStore
 from .._errors import ValidationError
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 #: The kind of result in the key of a sweep's store (`settings_key`).
 KIND = "sweep"
@@ -119,6 +125,8 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     batches the cluster ran are not in the store (the workers do not share its
     file system).
     """
+    import xarray as xr
+
     params = check_params(params)
     solver = as_solver(solver, params=params)
     options = check_options(options)
@@ -263,6 +271,8 @@ class _Batches:
     def run(self, b: int, progress: bool | tqdm = False, devices=None) -> xr.Dataset:
         """Batch b's observables, dims (trajectory, ...), on `devices` (all of this
         process's by default)."""
+        import xarray as xr
+
         lane_params, y0 = self.lanes(b)
         obs = run_lanes(lane_params, y0, self.solver, self.options, engine=self.engine,
                         block=self.block, progress=progress, devices=devices)
@@ -314,6 +324,8 @@ def open_sweep(store: str | Path) -> xr.Dataset:
 def _on_grid(flat: xr.Dataset, name: str, n_values: int, n_ics: int) -> xr.Dataset:
     """The flat `trajectory` axis of a stored sweep as the grid (name, ic), with
     the propagating fronts flagged."""
+    import xarray as xr
+
     data = {}
     for k, var in flat.data_vars.items():
         if "trajectory" in var.dims:
