@@ -1,7 +1,5 @@
 """Integration of one trajectory of eq. (5) with diffrax, observing while integrating."""
 
-import contextlib
-import threading
 from collections.abc import Sequence
 
 import diffrax
@@ -12,6 +10,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int, PyTree
 
 from ._checks import as_solver, check_options, check_params
+from ._compat import errors_as_nan
 from ._controller import step_size_controller
 from ._custom_types import State
 from ._hints import failure_hint
@@ -105,27 +104,6 @@ def terms(solver: diffrax.AbstractSolver):
     return diffrax.ODETerm(vector_field)
 
 
-_checks_lock = threading.Lock()
-
-
-@contextlib.contextmanager
-def _checks_as_nan():
-    """Trace diffrax's run-time checks of its arguments (that SaveAt's ts increase
-    and lie in [t0, t1], true here by construction) as NaN substitution rather than
-    as equinox's default, a host callback that raises. A host callback would keep
-    XLA from compiling the loop into one kernel and JAX from keeping the program in
-    its persistent compilation cache. Only the tracing of `_advance` is affected:
-    equinox reads its `EQX_ON_ERROR` setting at trace time, and it is restored at
-    once (under a lock, as devices may trace in parallel threads)."""
-    with _checks_lock:
-        before = eqx._errors.EQX_ON_ERROR
-        eqx._errors.EQX_ON_ERROR = "nan"
-        try:
-            yield
-        finally:
-            eqx._errors.EQX_ON_ERROR = before
-
-
 def _advance(terms_, solver, args, options, observers, progress, tangent, carry, t0, t1,
              n_samples):
     """Integrate one chunk [t0, t1] and hand it to the observers: its `n_samples`
@@ -144,7 +122,7 @@ def _advance(terms_, solver, args, options, observers, progress, tangent, carry,
         # The solver state holds f of the state, stale once the tangent is rescaled:
         # it starts afresh each chunk (one more evaluation of f per chunk).
         solver_state = None
-    with _checks_as_nan():
+    with errors_as_nan():  # diffrax's checks of its arguments: no host callback
         sol = diffrax.diffeqsolve(
             terms_, solver, t0, t1, None, y, args,
             saveat=diffrax.SaveAt(subs=subs, solver_state=True, controller_state=True,

@@ -467,19 +467,6 @@ def _ok(rows, scene):
             and r["amplitude_error"] != ""]
 
 
-def pareto_front(rows: list[dict], scene: str) -> list[dict]:
-    """The successful diffrax runs of `scene` that no other run beats in both wall
-    time and amplitude error, fastest first."""
-    pts = [r for r in _ok(rows, scene) if r["method"] in SOLVERS]
-    pts.sort(key=lambda r: (float(r["wall_s"]), float(r["amplitude_error"])))
-    front, best = [], np.inf
-    for r in pts:
-        if float(r["amplitude_error"]) < best:
-            front.append(r)
-            best = float(r["amplitude_error"])
-    return front
-
-
 def _confirmed(run: dict, rows: list[dict], target: float) -> bool:
     """Whether the run at rtol/10 (same scene, solver and eps) succeeded and moves
     the largest amplitude by less than a tenth of the target, relative:
