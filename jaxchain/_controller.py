@@ -81,7 +81,7 @@ class PIController(diffrax.PIDController):
 
 #: Step-size controllers by name (`SimulationOptions.controller`): the package's
 #: `PIController`, and diffrax's `PIDController` as an integral controller (its
-#: defaults; jaxchain's controller before issue 24).
+#: defaults; jaxchain's earlier controller).
 CONTROLLERS = {"pi": PIController, "diffrax": diffrax.PIDController}
 
 

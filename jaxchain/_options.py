@@ -30,7 +30,7 @@ class SimulationOptions(eqx.Module):
         error of the smoothing at the default eps = 1e-3 (README, "Speed").
     - `controller`: the step-size controller, "pi" (`PIController`, the default)
         or "diffrax" (diffrax's `PIDController` as an integral controller, the
-        controller before issue 24); see `CONTROLLERS`.
+        controller jaxchain used first); see `CONTROLLERS`.
     - `sample_dt`: spacing of the dense-output samples from which the extrema are
         taken. An extremum of a smooth slip phase is missed by at most
         |x''| sample_dt^2 / 8 ~ A sample_dt^2 / 8, a relative 3e-4 for the default

@@ -136,7 +136,7 @@ def add_tolerance_options(g) -> None:
                    help=f"step-size controller (default {DEFAULTS.controller}: a PI "
                         "controller that may shrink after an accepted step and, after "
                         "two rejections, uses the order the error showed; diffrax: "
-                        "diffrax's integral controller, the default before issue 24)")
+                        "diffrax's integral controller, the one jaxchain used first)")
 
 
 def add_output_options(p: argparse.ArgumentParser) -> None:

@@ -99,7 +99,7 @@ def add_parser(sub):
                    metavar="T", help="final time of each simulation of the bisection of "
                    f"the upper edges (default {EDGE_OPTIONS.t_end:g}; the state is judged "
                    "over the last fifth)")
-    g = p.add_argument_group("design (item 3 of issue 26)")
+    g = p.add_argument_group("intentional mistuning by gradient (--design)")
     g.add_argument("--design", action="store_true",
                    help="instead of the study: intentional mistuning by gradient on a "
                         "ring of --period oscillators within --budget, lowering and "

@@ -43,7 +43,7 @@ STUDY_VD = (1.3, 1.5, 1.7)
 STUDY_OPTIONS = SimulationOptions(t_end=2000.0, transient=1500.0)
 #: Phases per cell of the localization factor table: the band centre and pi/3.
 THETAS = (math.pi / 2, math.pi / 3)
-#: sigma / eta_c of the localization factor table (acceptance of issue 26).
+#: sigma / eta_c of the localization factor table.
 TABLE_SIGMAS = (0.25, 0.5, 1.0, 2.0, 4.0)
 
 
