@@ -112,7 +112,7 @@ def compare_sizes(settings: Settings, start: float) -> tuple[list[Row], dict]:
         walls = []
         for _ in range(2):
             t0 = time.perf_counter()
-            obs = run_lanes(jc.with_parameter(params, "v_d", vd), y0, solver, options,
+            obs = run_lanes(jc.lane_params(params, size, v_d=vd), y0, solver, options,
                             engine="queue")
             walls.append(time.perf_counter() - t0)
         failed = int(np.sum(np.asarray(obs.status) != 0))
