@@ -82,3 +82,17 @@ def belt_speeds(v_d, name: str = "v_d") -> np.ndarray:
     if not np.all(np.isfinite(v) & (v > 0)):
         raise ValidationError(f"{name} must hold finite belt speeds > 0, got {v.tolist()}")
     return v
+
+
+def check_run(params, solver, options, v_d) -> tuple:
+    """The arguments that open every batched run (`ensemble`, `crosscheck`,
+    `basin_stability`, `mistuning_study`), checked: (params, solver, options, v_d)
+    as `check_params`, `as_solver`, `check_options` and `belt_speeds` return them.
+
+    **Raises:**
+
+    `ValidationError` (or `TypeError` for an argument of the wrong type) from those
+    checks, naming the argument.
+    """
+    params = check_params(params)
+    return params, as_solver(solver, params=params), check_options(options), belt_speeds(v_d)

@@ -17,7 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 from tqdm.auto import tqdm
 
-from ._checks import as_solver, belt_speeds, check_options, check_params
+from ._checks import check_options, check_run
 from ._physics.initial import FAMILIES, excited_block
 from ._nonsmooth.options import NonsmoothOptions
 from ._nonsmooth.solve import NONSMOOTH_STATUS, run_nonsmooth
@@ -229,10 +229,7 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
     if client is not None and checkpoint is None:
         raise ValidationError("checkpoint: a cross-check on a Dask cluster needs a checkpoint "
                               "folder its workers can reach")
-    params = check_params(params)
-    solver = as_solver(solver, params=params)
-    options = check_options(options)
-    v_d = belt_speeds(v_d)
+    params, solver, options, v_d = check_run(params, solver, options, v_d)
     ics = list(ics)
     if not ics:
         raise ValidationError("ics must list at least one (family, n_excited) pair, got none")

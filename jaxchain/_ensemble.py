@@ -8,7 +8,7 @@ import jax
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from ._checks import as_solver, belt_speeds, check_options, check_params
+from ._checks import check_run
 from ._physics.initial import AbstractInitialCondition, batch_length, initial_states
 from ._lanes import lane_params, run_lanes, take_lanes
 from ._options import SimulationOptions
@@ -61,10 +61,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     speeds that are not finite and > 0, initial conditions of the wrong shape, an
     unknown solver name or engine; `TypeError` for arguments of the wrong type.
     """
-    params = check_params(params)
-    solver = as_solver(solver, params=params)
-    options = check_options(options)
-    v_d = belt_speeds(v_d)
+    params, solver, options, v_d = check_run(params, solver, options, v_d)
     if not isinstance(ics, AbstractInitialCondition):
         raise TypeError(f"ics must be initial conditions (jaxchain.localized_family, "
                         f"GivenState, ...), got {type(ics).__name__}")

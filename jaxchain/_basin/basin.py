@@ -15,7 +15,7 @@ import jax
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
-from .._checks import as_solver, belt_speeds, check_options, check_params
+from .._checks import check_run
 from .._dynamics.classify import classify
 from .._physics.initial import GivenState
 from .._lanes import lane_params, run_lanes
@@ -130,10 +130,7 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
     """
     import xarray as xr
 
-    params = check_params(params)
-    solver = as_solver(solver, params=params)
-    options = check_options(options)
-    v = belt_speeds(v_d)
+    params, solver, options, v = check_run(params, solver, options, v_d)
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) \
             or n_samples < 1:
         raise ValidationError(f"n_samples must be an integer >= 1, got {n_samples!r}")

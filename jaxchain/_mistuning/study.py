@@ -17,7 +17,7 @@ from tqdm.auto import tqdm
 from .._basin.basin import _key, _key_data
 from .._basin.sampling import Box, sample_states
 from .._bifurcation.hopf import hopf_point
-from .._checks import as_solver, belt_speeds, check_options, check_params
+from .._checks import check_options, check_run
 from .._options import SimulationOptions
 from .._physics.initial import GivenState, excited_block, localized_family
 from .._physics.localization import damped_decay, localization_factor, passband_frequency
@@ -135,10 +135,7 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
 
     if params is None:  # built on call: a chain needs `configure` first
         params = ChainParams()
-    params = check_params(params)
-    solver = as_solver(solver, params=params)
-    options = check_options(options)
-    v = belt_speeds(v_d)
+    params, solver, options, v = check_run(params, solver, options, v_d)
     sigmas = np.atleast_1d(np.asarray(sigmas, dtype=float))
     if sigmas.ndim != 1 or sigmas.size == 0 or not np.all(np.isfinite(sigmas)) \
             or np.any(sigmas < 0):
