@@ -7,7 +7,7 @@ import time
 import numpy as np
 
 import jaxchain as jc
-from jaxchain._lanes import run_lanes
+from jaxchain._engine.lanes import run_lanes
 
 from _common import (N_OSC, PAPER_T_END, PAPER_TRANSIENT, SWEEP_VDS, V_D, Row, Settings, cores,
                      fmt_ratio, fmt_time, progress)

@@ -5,7 +5,7 @@ step loop. They answer "what would a careful hand-written loop cost per step?".
 
 What is mirrored from jaxchain / diffrax 0.7 (read from their sources):
 
-- the tableau: ROS34PW2 in the transformed variables u_i of `jaxchain._rosenbrock`
+- the tableau: ROS34PW2 in the transformed variables u_i of `jaxchain._engine.solver.rosenbrock`
   (`_GAMMA`, `_A`, `_C`, `_M`, `_M_ERROR`, with W = diag(1/(h gamma) - min(d, 0))
   from the friction Jacobian's diagonal d at the step's start, f and d at the step's
   end reused by the next step), or diffrax's Bosh3 tableau (FSAL);
@@ -31,7 +31,7 @@ import math
 import numpy as np
 from numba import njit
 
-from jaxchain._rosenbrock import _A, _C, _GAMMA, _M, _M_ERROR
+from jaxchain._engine.solver.rosenbrock import _A, _C, _GAMMA, _M, _M_ERROR
 
 # Bosh3 as in diffrax/_solver/bosh3.py.
 _B3_A10, _B3_A21 = 1 / 2, 3 / 4

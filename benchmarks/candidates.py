@@ -44,10 +44,10 @@ import jax
 import jax.numpy as jnp
 
 import jaxchain as jc
-from jaxchain._controller import CONTROLLERS, PIController
-from jaxchain._rosenbrock import _GAMMA, Ros34PW2
-from jaxchain._solvers import SOLVERS
-from jaxchain._work_precision import work_precision
+from jaxchain._engine.solver.controller import CONTROLLERS, PIController
+from jaxchain._engine.solver.rosenbrock import _GAMMA, Ros34PW2
+from jaxchain._engine.solver.registry import SOLVERS
+from jaxchain._studies.work_precision import work_precision
 
 jc.configure()  # float64, one CPU device per core, the XLA flags
 

@@ -11,11 +11,11 @@ libraries (matplotlib, xarray, dask, scipy) are imported inside the functions th
 use them, so that `import jaxchain` costs JAX and diffrax alone.
 """
 
-from ._basin.basin import basin_stability as basin_stability
-from ._basin.classes import (
+from ._studies.basin.basin import basin_stability as basin_stability
+from ._studies.basin.classes import (
     halc_clusters as halc_clusters, wilson_interval as wilson_interval,
 )
-from ._basin.sampling import Box as Box, sample_states as sample_states
+from ._studies.basin.sampling import Box as Box, sample_states as sample_states
 from ._bifurcation.bifurcations import (
     BIFURCATION_KINDS as BIFURCATION_KINDS, BifurcationPoint as BifurcationPoint,
     locate_bifurcations as locate_bifurcations,
@@ -25,7 +25,7 @@ from ._bifurcation.continuation import (
     ContinuationOptions as ContinuationOptions,
     ContinuationProblem as ContinuationProblem, PseudoArclength as PseudoArclength,
 )
-from ._bifurcation.design import (
+from ._bifurcation.damping_design import (
     DampingDesign as DampingDesign, smallest_damping as smallest_damping,
 )
 from ._bifurcation.fold import (
@@ -41,7 +41,7 @@ from ._bifurcation.hopf import (
 from ._bifurcation.limit_cycles import (
     hopf_cycle as hopf_cycle, limit_cycle_problem as limit_cycle_problem,
 )
-from ._bifurcation.lyapunov import (
+from ._bifurcation.lyapunov_coefficient import (
     first_lyapunov_coefficient as first_lyapunov_coefficient,
 )
 from ._bifurcation.shooting import (
@@ -54,31 +54,31 @@ from ._bifurcation.two_parameter import (
     fold_and_derivative as fold_and_derivative, fold_curve as fold_curve,
     fold_curve_problem as fold_curve_problem, hopf_vd as hopf_vd,
 )
-from ._crosscheck import crosscheck as crosscheck
-from ._dynamics.classify import CLASSES as CLASSES, classify as classify
-from ._dynamics.delays import (
+from ._studies.crosscheck import crosscheck as crosscheck
+from ._analysis.classify import CLASSES as CLASSES, classify as classify
+from ._analysis.delays import (
     delay_spread as delay_spread, reference_oscillator as reference_oscillator,
     time_delays as time_delays,
 )
-from ._dynamics.scenes import (
+from ._studies.scenes import (
     PAPER_SOLUTIONS as PAPER_SOLUTIONS, observe_solutions as observe_solutions,
     orbit_diagram_scene as orbit_diagram_scene,
     phase_portrait_scene as phase_portrait_scene, time_delay_scene as time_delay_scene,
     time_series_scene as time_series_scene,
 )
-from ._ensemble import ensemble as ensemble
+from ._sweeps.ensemble import ensemble as ensemble
 from ._errors import ValidationError as ValidationError
-from ._hints import failure_hint as failure_hint
-from ._lanes import lane_params as lane_params
-from ._mistuning.design import (
+from ._engine.status import failure_hint as failure_hint
+from ._engine.lanes import lane_params as lane_params
+from ._studies.mistuning.pattern_design import (
     intentional_mistuning as intentional_mistuning, MistuningDesign as MistuningDesign,
     pattern_deviations as pattern_deviations,
 )
-from ._mistuning.design_study import design_study as design_study
-from ._mistuning.edges import (
+from ._studies.mistuning.design_study import design_study as design_study
+from ._studies.mistuning.edges import (
     localized_fold as localized_fold, upper_edges as upper_edges,
 )
-from ._mistuning.study import (
+from ._studies.mistuning.study import (
     mistuning_study as mistuning_study, study_chains as study_chains,
 )
 from ._nonsmooth.existence import (
@@ -90,15 +90,15 @@ from ._nonsmooth.solve import (
     simulate_nonsmooth as simulate_nonsmooth,
 )
 from ._nonsmooth.switching import SWITCH_KINDS as SWITCH_KINDS
-from ._observers.base import AbstractObserver as AbstractObserver, Chunk as Chunk
-from ._observers.crossings import (
+from ._engine.observers.base import AbstractObserver as AbstractObserver, Chunk as Chunk
+from ._engine.observers.crossings import (
     PeakTimes as PeakTimes, PoincareSection as PoincareSection,
 )
-from ._observers.energy import Energy as Energy
-from ._observers.extrema import Extrema as Extrema
-from ._observers.lyapunov import LargestLyapunov as LargestLyapunov
-from ._observers.series import TimeSeries as TimeSeries
-from ._options import SimulationOptions as SimulationOptions
+from ._engine.observers.energy import Energy as Energy
+from ._engine.observers.extrema import Extrema as Extrema
+from ._engine.observers.lyapunov_exponent import LargestLyapunov as LargestLyapunov
+from ._engine.observers.series import TimeSeries as TimeSeries
+from ._engine.options import SimulationOptions as SimulationOptions
 from ._physics.chain import (
     BOUNDARIES as BOUNDARIES, coupling_force as coupling_force, Mistuning as Mistuning,
     stiffness_matrix as stiffness_matrix,
@@ -116,7 +116,7 @@ from ._physics.initial import (
     excited_block as excited_block, GivenState as GivenState,
     localized_family as localized_family, OutOfPhaseExcitation as OutOfPhaseExcitation,
 )
-from ._physics.localization import (
+from ._analysis.localization import (
     damped_decay as damped_decay,
     inverse_participation_ratio as inverse_participation_ratio,
     localization_factor as localization_factor,
@@ -161,22 +161,22 @@ from ._plots.mistuning import (
 from ._plots.snake import plot_snake as plot_snake
 from ._plots.sweep import plot_bifurcation_diagram as plot_bifurcation_diagram
 from ._plots.work_precision import plot_work_precision as plot_work_precision
-from ._results import save_dataset as save_dataset, to_dataset as to_dataset
+from ._sweeps.datasets import save_dataset as save_dataset, to_dataset as to_dataset
 from ._setup import configure as configure
-from ._simulate import (
+from ._engine.simulate import (
     STATUS as STATUS, integrate as integrate, Observables as Observables,
     observe as observe, simulate as simulate,
 )
-from ._snake import localized_branches as localized_branches
-from ._solvers import (
+from ._studies.snake import localized_branches as localized_branches
+from ._engine.solver.registry import (
     DEFAULT_SOLVER as DEFAULT_SOLVER, SOLVERS as SOLVERS, auto_solver as auto_solver,
 )
-from ._states import ClassTolerances as ClassTolerances, state_class as state_class
-from ._stress.cases import stress_cases as stress_cases
-from ._stress.run import stress as stress
-from ._sweep.fronts import (
+from ._analysis.states import ClassTolerances as ClassTolerances, state_class as state_class
+from ._studies.stress.cases import stress_cases as stress_cases
+from ._studies.stress.run import stress as stress
+from ._analysis.fronts import (
     front_fractions as front_fractions, front_ranges as front_ranges,
     propagating_fronts as propagating_fronts,
 )
-from ._sweep.sweep import open_sweep as open_sweep, sweep as sweep
-from ._work_precision import work_precision as work_precision
+from ._sweeps.sweep import open_sweep as open_sweep, sweep as sweep
+from ._studies.work_precision import work_precision as work_precision

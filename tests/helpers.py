@@ -184,11 +184,11 @@ def small_sweep(vd: str, **kw):
 
 def hold_env(folder) -> dict:
     """This process's environment with the writers' test hook on (`HOLD` of
-    jaxchain._atomic, see `hold` there): a process started with it holds before
+    jaxchain._sweeps.atomic, see `hold` there): a process started with it holds before
     each write it commits (a file renamed into place, a sweep batch, the swap of
     an overwritten sweep store) until the test releases it (`release`) or kills
     it."""
-    from jaxchain._atomic import HOLD
+    from jaxchain._sweeps.atomic import HOLD
 
     Path(folder).mkdir(parents=True, exist_ok=True)
     return os.environ | {HOLD: str(folder)}

@@ -16,8 +16,8 @@ import jaxchain as jc
 jc.configure()  # as a user's first call: one device per core, float64, the XLA flags
 
 from helpers import TIGHT  # noqa: E402
-from jaxchain._lanes import lane_params, on_devices, run_lanes  # noqa: E402
-from jaxchain._solvers import DEFAULT_SOLVER, SOLVERS  # noqa: E402
+from jaxchain._engine.lanes import lane_params, on_devices, run_lanes  # noqa: E402
+from jaxchain._engine.solver.registry import DEFAULT_SOLVER, SOLVERS  # noqa: E402
 
 FIELDS = ("amplitudes", "energy", "n_halc", "y_final", "num_steps", "status")
 

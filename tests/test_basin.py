@@ -12,7 +12,7 @@ from scipy.stats import binomtest
 import jaxchain as jc
 from helpers import assert_usage_error
 from jaxchain._cli.main import main
-from jaxchain._sweep.store import SweepStore
+from jaxchain._sweeps.zarr_store import SweepStore
 
 
 SHORT = jc.SimulationOptions(t_end=300.0, transient=200.0)

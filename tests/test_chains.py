@@ -209,7 +209,7 @@ def test_per_oscillator_arrays_are_never_read_as_lanes():
     assert np.array_equal(lanes.stiffness[1], chains[0].stiffness)
     with pytest.raises(ValueError, match="ChainParams.v_d must have shape"):
         jc.with_parameter(chains[0], "v_d", np.array([1.3, 1.5, 1.7]))
-    from jaxchain._lanes import run_lanes
+    from jaxchain._engine.lanes import run_lanes
     y0 = np.stack([np.asarray(jc.OutOfPhaseExcitation.eq8([False, True, False])(c))
                    for c in chains])
     batch = run_lanes(jc.stack_chains(chains), y0, jc.SOLVERS["ros34pw2"](), TIGHT)

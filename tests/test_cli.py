@@ -17,7 +17,7 @@ import xarray as xr
 import jaxchain as jc
 import jaxchain._cli.boundaries as cli_boundaries
 import jaxchain._cli.work_precision as cli_work_precision
-import jaxchain._work_precision as wp
+import jaxchain._studies.work_precision as wp
 from helpers import assert_usage_error
 from jaxchain._cli.main import main
 

@@ -1,4 +1,4 @@
-"""The private parts of diffrax and equinox that jaxchain uses (`jaxchain._compat`,
+"""The private parts of diffrax and equinox that jaxchain uses (`jaxchain._engine.compat`,
 the one module that touches them) are still there, with the layout it expects; a
 change is reported with its name, not as a wrong step size deep in a run."""
 
@@ -6,7 +6,7 @@ import diffrax
 import equinox as eqx
 import pytest
 
-from jaxchain import _compat
+from jaxchain._engine import compat as _compat
 
 
 def test_the_installed_diffrax_and_equinox_match():

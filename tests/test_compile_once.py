@@ -16,7 +16,7 @@ import jaxchain._bifurcation.continuation as continuation_module
 import jaxchain._bifurcation.hopf as hopf_module
 import jaxchain._bifurcation.shooting as shooting_module
 import jaxchain._nonsmooth.existence as existence_module
-import jaxchain._simulate as simulate_module
+import jaxchain._engine.simulate as simulate_module
 from helpers import reference_rhs, scipy_slip_arc
 
 FIVE = (0.04, 0.045, 0.05, 0.055, 0.06)

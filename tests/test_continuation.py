@@ -12,7 +12,7 @@ import pytest
 
 import jaxchain as jc
 from jaxchain._bifurcation.two_parameter import hopf_vd, hopf_vd_and_derivative
-from jaxchain._boundaries import RATIO_VALUES, XI_VALUES
+from jaxchain._studies.bistable_range import RATIO_VALUES, XI_VALUES
 from jaxchain._cli.main import main
 
 

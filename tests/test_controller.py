@@ -9,7 +9,7 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 from helpers import flat, reference_rhs
-from jaxchain._controller import CONTROLLERS, PIController
+from jaxchain._engine.solver.controller import CONTROLLERS, PIController
 
 
 RTOL, ATOL = 1e-4, 1e-6

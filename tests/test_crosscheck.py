@@ -10,8 +10,8 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-import jaxchain._crosscheck as xc
-import jaxchain._store as store
+import jaxchain._studies.crosscheck as xc
+import jaxchain._sweeps.result_store as store
 from helpers import scipy_stick_slip_cycle
 from jaxchain._cli.main import main
 

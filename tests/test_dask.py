@@ -19,10 +19,10 @@ from distributed.diagnostics.plugin import SchedulerPlugin
 
 import jaxchain as jc
 from helpers import SWEEP_RESULTS, held, hold_env, kill, release, small_sweep, sweep_cli
-from jaxchain._atomic import HOLD
+from jaxchain._sweeps.atomic import HOLD
 from jaxchain._cli.main import main
-from jaxchain._sweep.cluster import connect, local_workers
-from jaxchain._sweep.store import SweepStore
+from jaxchain._engine.cluster import connect, local_workers
+from jaxchain._sweeps.zarr_store import SweepStore
 
 #: A ring of 3 at 4 belt speeds x eq. (8) with k = 1..3 (`small_sweep`): 12
 #: trajectories in 6 batches of 2; a worker or the scheduler is killed in the

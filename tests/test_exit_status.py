@@ -23,20 +23,20 @@ from jaxchain._cli.main import COMMANDS, build_parser, exit_status, main
 #: Dask's `connect` is there for --scheduler, which a command reaches before its
 #: study when given.
 STUDIES = {
-    "localized": [("jaxchain._ensemble", "lane_params")],
-    "sweep": [("jaxchain._sweep.sweep", "SweepStore")],
+    "localized": [("jaxchain._sweeps.ensemble", "lane_params")],
+    "sweep": [("jaxchain._sweeps.sweep", "SweepStore")],
     "figure": [("jaxchain._cli.figure", "_scene")],
-    "crosscheck": [("jaxchain._crosscheck", "excited_block")],  # the initial states
-    "work-precision": [("jaxchain._work_precision", "CsvStore")],
+    "crosscheck": [("jaxchain._studies.crosscheck", "excited_block")],  # the initial states
+    "work-precision": [("jaxchain._studies.work_precision", "CsvStore")],
     "boundaries": [("jaxchain._cli.boundaries", "boundaries")],
     "stress": [("jaxchain._cli.stress", "stress_cases")],  # builds every case
-    "basin": [("jaxchain._basin.basin", "sample_states")],
+    "basin": [("jaxchain._studies.basin.basin", "sample_states")],
     "snake": [("jaxchain._cli.snake", "localized_branches")],
-    "mistuning": [("jaxchain._mistuning.study", "sample_states"),
-                  ("jaxchain._mistuning.study", "study_chains"),
-                  ("jaxchain._mistuning.design_study", "design_study")],
+    "mistuning": [("jaxchain._studies.mistuning.study", "sample_states"),
+                  ("jaxchain._studies.mistuning.study", "study_chains"),
+                  ("jaxchain._studies.mistuning.design_study", "design_study")],
 }
-CLUSTER = ("jaxchain._sweep.cluster", "connect")
+CLUSTER = ("jaxchain._engine.cluster", "connect")
 
 #: The smallest command line of each command (beside --out): its defaults.
 ARGV = {command: [command] for command in COMMANDS} | {"figure": ["figure", "4"]}

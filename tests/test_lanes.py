@@ -12,9 +12,9 @@ from hypothesis import strategies as st
 import jaxchain as jc
 from helpers import TIGHT, assert_within_drift
 from lanes_on_every_device import FIELDS
-from jaxchain._lanes import (_run_block, block_size, expected_cost, lane_order, lane_params,
+from jaxchain._engine.lanes import (_run_block, block_size, expected_cost, lane_order, lane_params,
                              on_devices, run_lanes)
-from jaxchain._solvers import DEFAULT_SOLVER, SOLVERS
+from jaxchain._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
 
 HERE = Path(__file__).parent
 

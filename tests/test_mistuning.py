@@ -11,7 +11,7 @@ import xarray as xr
 
 import jaxchain as jc
 from jaxchain._cli.main import main
-from jaxchain._mistuning.summary import envelope_decay, halc_correlation
+from jaxchain._studies.mistuning.summary import envelope_decay, halc_correlation
 
 from helpers import assert_usage_error, scipy_stick_slip_cycle
 

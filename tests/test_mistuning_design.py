@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-from jaxchain._mistuning.design import design_problems, pattern_deviations, pattern_folds
+from jaxchain._studies.mistuning.pattern_design import (design_problems, pattern_deviations,
+                                                         pattern_folds)
 
 RING = jc.ChainParams(n_osc=4, v_d=1.5)
 BUDGET = 0.004

@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 from helpers import SHORT, reference_rhs
-from jaxchain._lanes import _run_block, lane_params
+from jaxchain._engine.lanes import _run_block, lane_params
 
 
 def lorenz(t, y, args):

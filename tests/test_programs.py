@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-from jaxchain import _programs
-from jaxchain._programs import keep_programs, kept_program, program_key
+from jaxchain._engine import programs as _programs
+from jaxchain._engine.programs import keep_programs, kept_program, program_key
 
 
 @eqx.filter_jit

@@ -9,8 +9,8 @@ import pytest
 
 import jaxchain as jc
 from helpers import SHORT, scipy_stick_slip_cycle
-from jaxchain._rosenbrock import Ros34PW2
-from jaxchain._simulate import terms
+from jaxchain._engine.solver.rosenbrock import Ros34PW2
+from jaxchain._engine.simulate import terms
 
 
 def _fixed_step_error(split, y0, t1, exact, n_steps):

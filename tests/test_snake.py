@@ -12,7 +12,7 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 from jaxchain._bifurcation.bifurcations import locate_bifurcations
-from jaxchain._snake import localized_branches, start_orbits
+from jaxchain._studies.snake import localized_branches, start_orbits
 
 from helpers import assert_usage_error, reference_rhs
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-import jaxchain._sweep.sweep as sweep_module
-from jaxchain._store import canonical, settings_key
+import jaxchain._sweeps.sweep as sweep_module
+from jaxchain._sweeps.result_store import canonical, settings_key
 from helpers import SWEEP_BATCH, SWEEP_N_OSC, SWEEP_T_END, SWEEP_TRANSIENT
 
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-import jaxchain._stress.run as stress_run
-from jaxchain._stress.cases import QUICK_MATRIX, QUICK_OPTIONS, make_case
-from jaxchain._stress.checks import balance_run, linear_rate
-from jaxchain._stress.run import run_case
+import jaxchain._studies.stress.run as stress_run
+from jaxchain._studies.stress.cases import QUICK_MATRIX, QUICK_OPTIONS, make_case
+from jaxchain._studies.stress.physics_checks import balance_run, linear_rate
+from jaxchain._studies.stress.run import run_case
 from helpers import assert_usage_error, scipy_slip_arc
 from jaxchain._cli.main import main
 

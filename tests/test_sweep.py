@@ -11,11 +11,11 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-import jaxchain._sweep.sweep as sweep_module
+import jaxchain._sweeps.sweep as sweep_module
 from helpers import (SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, held, hold_env, kill, release,
                      small_sweep, sweep_cli)
 from jaxchain._cli.main import main
-from jaxchain._sweep.store import SweepStore
+from jaxchain._sweeps.zarr_store import SweepStore
 
 #: The grid of the kill-and-resume tests: 2 belt speeds x eq. (8) with k = 1..3 on
 #: a ring of 3, in 3 batches of 2 (`small_sweep`).

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-import jaxchain._work_precision as wp
+import jaxchain._studies.work_precision as wp
 from jaxchain._cli.main import main
 from helpers import flat, scipy_stick_slip_cycle
 

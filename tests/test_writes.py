@@ -21,10 +21,10 @@ import xarray as xr
 
 import jaxchain as jc
 from helpers import held, hold_env, kill, release, small_sweep, sweep_cli
-from jaxchain._atomic import save_figure, write_text
+from jaxchain._sweeps.atomic import save_figure, write_text
 from jaxchain._cli.main import main
-from jaxchain._store import CsvStore
-from jaxchain._sweep.store import SweepStore
+from jaxchain._sweeps.result_store import CsvStore
+from jaxchain._sweeps.zarr_store import SweepStore
 
 
 def _snapshot(folder: Path) -> dict:
@@ -49,9 +49,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 import xarray as xr
-from jaxchain._atomic import save_figure, write_text
-from jaxchain._results import save_dataset
-from jaxchain._store import CsvStore
+from jaxchain._sweeps.atomic import save_figure, write_text
+from jaxchain._sweeps.datasets import save_dataset
+from jaxchain._sweeps.result_store import CsvStore
 
 out = Path(sys.argv[1])
 fig, ax = plt.subplots()
@@ -129,7 +129,7 @@ def test_a_command_killed_as_it_replaces_its_dataset_leaves_the_previous_one(tmp
 #: hook off, a hold once it is stored, then `jaxchain sweep --overwrite` at 1.6.
 _OVERWRITE = """
 import os, sys
-from jaxchain._atomic import HOLD, hold
+from jaxchain._sweeps.atomic import HOLD, hold
 from jaxchain._cli.main import main
 
 hooks = os.environ.pop(HOLD)
@@ -230,11 +230,11 @@ def test_a_folder_that_is_not_a_sweep_store_is_refused_and_left_untouched(tmp_pa
 #: is zarr's (a sweep store, written chunk by chunk), or is the compilation
 #: cache's own temporary file.
 _WRITERS = {
-    "_atomic.py": {"write_text": 2, "savefig": 1},
-    "_results.py": {"to_netcdf": 1},
-    "_store.py": {"open": 2},
-    "_programs.py": {"write_bytes": 1},
-    "_sweep/store.py": {"to_zarr": 3},
+    "_sweeps/atomic.py": {"write_text": 2, "savefig": 1},
+    "_sweeps/datasets.py": {"to_netcdf": 1},
+    "_sweeps/result_store.py": {"open": 2},
+    "_engine/programs.py": {"write_bytes": 1},
+    "_sweeps/zarr_store.py": {"to_zarr": 3},
 }
 
 

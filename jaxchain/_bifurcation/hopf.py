@@ -9,7 +9,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Complex, Float
 
-from .._checks import check_params, real_array
+from .._engine.checks import check_params, real_array
 from .._physics.chain import is_homogeneous_ring
 from .._physics.friction import ExponentialDecay, friction_coefficient
 from .._physics.model import jacobian

@@ -9,7 +9,7 @@ from .._physics.model import steady_sliding
 from .._physics.params import ChainParams, with_parameter
 from .continuation import ContinuationProblem
 from .hopf import critical_mode, hopf_point
-from .lyapunov import first_lyapunov_coefficient
+from .lyapunov_coefficient import first_lyapunov_coefficient
 from .shooting import (PeriodicOrbit, ShootingOptions, describe_orbit, pack,
                        periodic_orbit, shooting_residual)
 from .._errors import ValidationError

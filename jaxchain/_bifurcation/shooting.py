@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Complex, Float
 
-from .._custom_types import State
+from .._physics.custom_types import State
 from .._physics.model import vector_field
 from .._physics.params import ChainParams
 from .._physics.stick import min_slip_speed, sticks

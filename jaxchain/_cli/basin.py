@@ -7,13 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .._basin.basin import BASIN_OPTIONS, basin_stability
-from .._basin.sampling import Box
-from .._options import SimulationOptions
+from .._studies.basin.basin import BASIN_OPTIONS, basin_stability
+from .._studies.basin.sampling import Box
+from .._engine.options import SimulationOptions
 from .._plots.basin import plot_basin_stability, plot_halc_histogram
 from .._physics.record import chain_record
-from .._atomic import save_figure
-from .._results import save_dataset
+from .._sweeps.atomic import save_figure
+from .._sweeps.datasets import save_dataset
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_scheduler_option, cluster_client,
                      json_ready, positive_float, positive_int, show_progress, writable_folder)

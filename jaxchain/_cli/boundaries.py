@@ -5,9 +5,9 @@ import argparse
 import json
 import time
 
-from .._boundaries import RATIO_VALUES, XI_VALUES, boundaries, fig3a_simulations
+from .._studies.bistable_range import RATIO_VALUES, XI_VALUES, boundaries, fig3a_simulations
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
-from .._atomic import save_figure, write_text
+from .._sweeps.atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
                      comma_list, json_ready, param_default, positive_float,

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .._controller import CONTROLLERS
-from .._options import SimulationOptions
+from .._engine.solver.controller import CONTROLLERS
+from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams
-from .._solvers import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
+from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
 
 
 #: Field names in error messages, as the options a user typed.
@@ -152,7 +152,7 @@ def add_output_options(p: argparse.ArgumentParser) -> None:
 
 def scheduler(text: str) -> str:
     """An argparse type: a Dask scheduler's address, or local:N."""
-    from .._sweep.cluster import local_workers  # imports Dask only when asked
+    from .._engine.cluster import local_workers  # imports Dask only when asked
 
     try:
         local_workers(text)
@@ -180,7 +180,7 @@ def cluster_client(args):
     if getattr(args, "scheduler", None) is None:
         yield None
         return
-    from .._sweep.cluster import connect
+    from .._engine.cluster import connect
 
     for name in ["distributed", "tornado", "asyncio", *logging.root.manager.loggerDict]:
         if name.split(".")[0] in ("distributed", "tornado", "asyncio"):

@@ -5,14 +5,14 @@ import argparse
 import json
 import time
 
-from .._crosscheck import CROSSCHECK_ICS, CROSSCHECK_VD, crosscheck
+from .._studies.crosscheck import CROSSCHECK_ICS, CROSSCHECK_VD, crosscheck
 from .._nonsmooth.options import NonsmoothOptions
-from .._options import SimulationOptions
+from .._engine.options import SimulationOptions
 from .._physics.params import with_parameter
 from .._plots.crosscheck import plot_crosscheck
-from .._results import save_dataset
+from .._sweeps.datasets import save_dataset
 from .._physics.record import chain_record
-from .._atomic import save_figure
+from .._sweeps.atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_run_options, add_scheduler_option, cluster_client, comma_list,

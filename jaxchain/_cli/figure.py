@@ -7,19 +7,19 @@ import time
 
 import numpy as np
 
-from .._dynamics.scenes import (PAPER_SOLUTIONS, orbit_diagram_scene, phase_portrait_scene,
+from .._studies.scenes import (PAPER_SOLUTIONS, orbit_diagram_scene, phase_portrait_scene,
                                 time_delay_scene, time_series_scene)
-from .._ensemble import ensemble
+from .._sweeps.ensemble import ensemble
 from .._physics.initial import localized_family
-from .._options import SimulationOptions
+from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams
 from .._plots.dynamics import (plot_orbit_diagram, plot_phase_portraits,
                                plot_states_and_orbits, plot_time_delays, plot_time_series)
 from .._plots.localized import plot_localized_states
-from .._results import save_dataset
-from .._simulate import STATUS
+from .._sweeps.datasets import save_dataset
+from .._engine.simulate import STATUS
 from .._physics.record import chain_record
-from .._atomic import save_figure
+from .._sweeps.atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (DEFAULT_SOLVER, SOLVERS, RunsFailed, add_output_options,
                      add_tolerance_options, json_ready, param_default, positive_float,

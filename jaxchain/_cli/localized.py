@@ -7,12 +7,12 @@ import time
 
 import numpy as np
 
-from .._ensemble import ensemble
+from .._sweeps.ensemble import ensemble
 from .._physics.initial import FAMILIES, localized_family
-from .._options import SimulationOptions
-from .._simulate import STATUS
+from .._engine.options import SimulationOptions
+from .._engine.simulate import STATUS
 from .._physics.record import chain_record
-from .._atomic import save_figure
+from .._sweeps.atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, add_model_options, add_output_options,
                      add_run_options, json_ready, prefetch, show_progress, writable_folder)
@@ -61,7 +61,7 @@ def run(args) -> None:
     wall = time.perf_counter() - start
 
     from .._plots.localized import plot_localized_states
-    from .._results import save_dataset
+    from .._sweeps.datasets import save_dataset
 
     ds.attrs["ics_family"] = args.ics
     ds.attrs["wall_time_s"] = wall

@@ -9,7 +9,7 @@ import jax
 import platformdirs
 
 from .._errors import ValidationError
-from .._programs import keep_programs
+from .._engine.programs import keep_programs
 from .._setup import configure
 from .common import Parser, RunsFailed, UsageError, one_line, usage_message
 

@@ -7,16 +7,16 @@ import time
 
 import numpy as np
 
-from .._mistuning.edges import EDGE_OPTIONS
-from .._mistuning.study import (STUDY_OPTIONS, STUDY_SIGMAS, STUDY_VD, TABLE_SIGMAS, THETAS,
+from .._studies.mistuning.edges import EDGE_OPTIONS
+from .._studies.mistuning.study import (STUDY_OPTIONS, STUDY_SIGMAS, STUDY_VD, TABLE_SIGMAS, THETAS,
                                 mistuning_study)
-from .._mistuning.summary import (edge_correlations, halc_correlation, localization_table,
+from .._studies.mistuning.summary import (edge_correlations, halc_correlation, localization_table,
                                   localized_fraction, staircase_fraction,
                                   vibrating_fraction)
-from .._options import SimulationOptions
+from .._engine.options import SimulationOptions
 from .._physics.record import chain_record
 from .._plots.mistuning import plot_mistuned_states, plot_mistuning_study, plot_site_edges
-from .._atomic import save_figure, write_text
+from .._sweeps.atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_scheduler_option, cluster_client, comma_list, json_ready,
@@ -239,7 +239,7 @@ def _print_summary(s: dict) -> None:
 
 def run_design(args) -> None:
     """`--design`: `design_study`, its JSON and figure."""
-    from .._mistuning.design_study import design_study
+    from .._studies.mistuning.design_study import design_study
     from .._plots.mistuning import plot_mistuning_design
 
     if not 0 < args.budget < 1:

@@ -7,9 +7,9 @@ import json
 import time
 from pathlib import Path
 
-from .._snake import SITES, SNAKE_CONTINUATION, localized_branches
+from .._studies.snake import SITES, SNAKE_CONTINUATION, localized_branches
 from .._plots.snake import plot_snake
-from .._atomic import save_figure, write_text
+from .._sweeps.atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
                      comma_list, json_ready, positive_float, positive_int, show_progress,
@@ -80,7 +80,7 @@ def run(args) -> None:
                          f"{args.vd}, {args.vd_max}")
     sweep = None
     if args.sweep is not None:
-        from .._sweep.sweep import open_sweep
+        from .._sweeps.sweep import open_sweep
         sweep = open_sweep(args.sweep)
     writable_folder(args.out)
     start = time.perf_counter()

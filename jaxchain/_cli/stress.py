@@ -6,11 +6,11 @@ import json
 import time
 from pathlib import Path
 
-from .._solvers import SOLVERS
-from .._stress.cases import MATRIX, QUICK_MATRIX, stress_cases
-from .._stress.report import counts, markdown
-from .._stress.run import PATHS, stress
-from .._atomic import write_text
+from .._engine.solver.registry import SOLVERS
+from .._studies.stress.cases import MATRIX, QUICK_MATRIX, stress_cases
+from .._studies.stress.report import counts, markdown
+from .._studies.stress.run import PATHS, stress
+from .._sweeps.atomic import write_text
 from .common import RunsFailed, UsageError, comma_list, json_ready, show_progress, writable_folder
 
 HELP = "numerical stability on stiff and extreme cases (the stress matrix)"

@@ -9,13 +9,13 @@ import time
 import numpy as np
 
 from .._physics.initial import FAMILIES, localized_family
-from .._options import SimulationOptions
+from .._engine.options import SimulationOptions
 from .._plots.sweep import plot_bifurcation_diagram
-from .._simulate import STATUS
-from .._sweep.fronts import front_fractions, front_ranges
-from .._sweep.sweep import sweep
+from .._engine.simulate import STATUS
+from .._analysis.fronts import front_fractions, front_ranges
+from .._sweeps.sweep import sweep
 from .._physics.record import chain_record
-from .._atomic import save_figure
+from .._sweeps.atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options, add_run_options,
                      add_scheduler_option, cluster_client, json_ready, positive_int,

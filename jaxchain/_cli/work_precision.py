@@ -6,12 +6,12 @@ import json
 import time
 from pathlib import Path
 
-from .._controller import CONTROLLERS
+from .._engine.solver.controller import CONTROLLERS
 from .._plots.work_precision import plot_work_precision
-from .._solvers import SOLVERS
-from .._work_precision import (SCENES, WP_EPS, WP_RTOLS, WP_SOLVERS, recommend,
+from .._engine.solver.registry import SOLVERS
+from .._studies.work_precision import (SCENES, WP_EPS, WP_RTOLS, WP_SOLVERS, recommend,
                                split_method, work_precision)
-from .._atomic import save_figure
+from .._sweeps.atomic import save_figure
 from .common import (RunsFailed, UsageError, comma_list, json_ready, positive_int,
                      writable_folder)
 

@@ -7,11 +7,11 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from .._custom_types import State
+from .._physics.custom_types import State
 from .._physics.initial import AbstractInitialCondition, GivenState
 from .._physics.params import ChainParams
-from .._progress import progress_bar, tick
-from .._simulate import STATUS
+from .._engine.progress import progress_bar, tick
+from .._engine.simulate import STATUS
 from .._physics.stick import sticks
 from .options import NonsmoothOptions
 from .switching import guard, initial_modes, mode_field, switch, turning_directions

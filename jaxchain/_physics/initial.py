@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
-from .._custom_types import State
+from .custom_types import State
 from .chain import BOUNDARIES
 from .model import steady_sliding
 from .params import ChainParams

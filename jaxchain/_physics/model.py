@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import lineax as lx
 from jaxtyping import Array, Float
 
-from .._custom_types import State
+from .custom_types import State
 from .chain import coupling_energy, coupling_force, is_homogeneous_ring, stiffness_matrix
 from .friction import smoothed_friction_force
 from .params import ChainParams

@@ -1,6 +1,6 @@
 """Figs. 5-10 of the paper: time series, time delays, 3-D phase plots and orbit
 diagrams of the localized states, drawn from the Datasets of
-`jaxchain._dynamics.scenes`."""
+`jaxchain._studies.scenes`."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .._dynamics.delays import reference_oscillator, time_delays
+from .._analysis.delays import reference_oscillator, time_delays
 from .localized import plot_localized_states
 
 if TYPE_CHECKING:  # heavy: imported where they are used

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .._mistuning.summary import (edge_correlations, localized_fraction,
+from .._studies.mistuning.summary import (edge_correlations, localized_fraction,
                                   neighbour_detuning, staircase_fraction)
 from .localized import plot_localized_states
 

@@ -10,7 +10,7 @@ import numpy as np
 from .._bifurcation.hopf import hopf_vd_analytic
 from .._bifurcation.two_parameter import hopf_vd
 from .._physics.record import chain_from_record, chain_settings
-from .._sweep.fronts import front_fractions, front_ranges
+from .._analysis.fronts import front_fractions, front_ranges
 
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr

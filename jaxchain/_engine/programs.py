@@ -1,0 +1,139 @@
+"""Traced programs kept on disk beside JAX's compiled ones, so that a warm start does
+not trace diffrax's loop again (`jax.export`)."""
+
+import functools
+import hashlib
+import importlib.metadata
+import json
+import os
+import pickle
+from collections.abc import Callable
+from pathlib import Path
+
+import equinox as eqx
+import jax
+
+from .hashes import canonical
+
+#: The packages whose code is part of a traced program, besides jaxchain's own.
+PACKAGES = ("jax", "jaxlib", "diffrax", "equinox", "lineax", "optimistix")
+
+
+@functools.cache
+def code_identity() -> dict:
+    """The SHA-256 of jaxchain's source files and the versions of `PACKAGES`: a kept
+    program is reused only by the code that traced it."""
+    root = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(str(path.relative_to(root)).encode())
+        digest.update(path.read_bytes())
+    return {"jaxchain": digest.hexdigest()} | {
+        name: importlib.metadata.version(name) for name in PACKAGES}
+
+
+_folder: list[Path | None] = [None]
+
+
+def keep_programs(folder: Path | str | None) -> None:
+    """Keep traced programs in `folder` from now on (None: stop). The command line
+    keeps them in the folder `traced` of its persistent compilation cache
+    (`jaxchain._cli.main.compilation_cache`); the library keeps none unless asked,
+    as the key names a user's own friction law or observer by its class, not by its
+    code."""
+    _folder[0] = None if folder is None else Path(folder)
+
+
+def program_folder() -> Path | None:
+    """Where traced programs are kept (`keep_programs`), or None."""
+    return _folder[0]
+
+
+def program_key(fn: Callable, static, treedef, leaves) -> str:
+    """The key of the program of `fn` for arguments with this static part (every
+    value that is not an array), this tree of arrays and these shapes and dtypes,
+    on this backend, with this code (`code_identity`) and these XLA flags."""
+    data = {"function": f"{fn.__module__}.{fn.__qualname__}", "static": canonical(static),
+            "tree": str(treedef), "arrays": [f"{x.dtype}{list(x.shape)}" for x in leaves],
+            "backend": jax.default_backend(), "x64": bool(jax.config.jax_enable_x64),
+            "xla_flags": os.environ.get("XLA_FLAGS", ""), "code": code_identity()}
+    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()
+
+
+def _write(path: Path, data: bytes) -> None:
+    """Write atomically: another process never reads half a file."""
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def kept_program(fn: Callable, *example) -> Callable | None:
+    """`fn` as a program traced once and kept on disk: a function of arguments like
+    `example` (the same static values, the same tree, shapes and dtypes of arrays)
+    that calls the exported program of `fn` (`jax.export`) under `jax.jit`, so that
+    only its compilation remains, which the persistent cache holds too.
+
+    The first call for a key traces `fn` and writes `<key>.jaxexport` (the
+    serialised program) and `<key>.tree` (a pickled template of its output) in
+    `program_folder()`; later processes read them back. A program is never reused
+    across other settings, code or package versions (`program_key`).
+
+    **Returns:**
+
+    The function, or None when no folder is set (the cache is off), or when `example`
+    holds a value that cannot be keyed (`canonical` raises `TypeError`) or a
+    program that cannot be exported: then call `fn` itself.
+    """
+    folder = program_folder()
+    if folder is None:
+        return None
+    dynamic, static = eqx.partition(example, eqx.is_array)
+    leaves, treedef = jax.tree_util.tree_flatten(dynamic)
+    try:
+        key = program_key(fn, static, treedef, leaves)
+    except TypeError:
+        return None
+    program, tree = folder / f"{key}.jaxexport", folder / f"{key}.tree"
+    try:
+        exported = jax.export.deserialize(bytearray(program.read_bytes()))
+        out_tree = jax.tree_util.tree_structure(pickle.loads(tree.read_bytes()))
+    except Exception:  # missing, partial or unreadable: trace it again
+        exported, template = _export(fn, static, treedef, leaves)
+        if exported is None:
+            return None
+        out_tree = jax.tree_util.tree_structure(template)
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            _write(tree, pickle.dumps(template))
+            _write(program, exported.serialize())
+        except OSError:
+            pass  # a read-only cache: the program still serves this process
+    call = jax.jit(exported.call)
+
+    def run(*args):
+        return jax.tree_util.tree_unflatten(
+            out_tree, call(*jax.tree_util.tree_leaves(eqx.filter(args, eqx.is_array))))
+
+    return run
+
+
+def _export(fn, static, treedef, leaves):
+    """The exported program of `fn` over the arrays `leaves`, and a template of its
+    output (the output with each array replaced by 0), from which a later process
+    rebuilds the output's tree: a tree structure itself does not survive pickling
+    (equinox's static fields). (None, None) when it cannot be exported or the
+    template cannot be pickled."""
+    templates = []
+
+    def flat(*arrays):
+        out = fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, arrays), static))
+        templates.append(jax.tree_util.tree_map(lambda _: 0, out))
+        return jax.tree_util.tree_leaves(out)
+
+    shapes = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
+    try:
+        exported = jax.export.export(jax.jit(flat))(*shapes)
+        pickle.dumps(templates[0])
+    except Exception:
+        return None, None
+    return exported, templates[0]

@@ -1,0 +1,404 @@
+"""Integration of one trajectory of eq. (5) with diffrax, observing while integrating."""
+
+from collections.abc import Sequence
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int, PyTree
+
+from .checks import as_solver, check_options, check_params
+from .compat import errors_as_nan
+from .solver.controller import step_size_controller
+from .._physics.custom_types import State
+from .status import failure_hint
+from .._physics.initial import AbstractInitialCondition, GivenState
+from .._physics.model import split_vector_field, vector_field
+from .observers.base import AbstractObserver, Chunk
+from .observers.extrema import Extrema
+from .options import SimulationOptions
+from .._physics.params import ChainParams
+from .progress import progress_bar, tick
+from .solver.rosenbrock import Ros34PW2
+from .solver.registry import DEFAULT_SOLVER, SOLVERS
+from .._errors import ValidationError
+
+#: Status codes of a trajectory, with what to do about each.
+STATUS = (
+    "ok",
+    "max_steps reached: raise max_steps or use a larger eps",
+    "solver failed (for example a failed implicit solve): tighten the tolerances, "
+    "use another solver or a larger eps",
+    "non-finite state: the initial state or the trajectory is not finite; check them",
+    "step size collapsed: max_steps spent on steps shorter than options.dtmin on "
+    "average; use a larger eps, looser tolerances or another solver",
+)
+
+
+class Observables(eqx.Module):
+    """What one run observes over [transient, t_end]. Under `ensemble` every field
+    gains the leading batch axes (n_vd, n_ic).
+
+    **Fields:**
+
+    - `amplitudes`: half of peak-to-peak of each x_n, shape (n_osc,).
+    - `energy`: E = 1/2 sum_n A_n^2, eq. (9) of the paper, shape ().
+    - `on_halc`: whether each oscillator is on the high-amplitude limit cycle: it
+        sticks, `min_slip_speed` <= 3 eps (`sticks`), shape (n_osc,).
+    - `n_halc`: number of oscillators on the HALC, shape ().
+    - `min_slip_speed`: smallest |x_n' - v_d| over the samples, shape (n_osc,).
+    - `n_halc_halves`: n_halc over the first and over the second half of the
+        observed window, shape (2,): they differ when stick-slip invades the
+        sliding oscillators, or recedes from them, during the window (a
+        propagating front).
+    - `x_max`, `x_min`, `v_max`: extrema of x_n and x_n', shape (n_osc,).
+    - `y_initial`, `y_final`: state at t = 0 and at t_end (where the run stopped, if
+        it failed), shape (2, n_osc).
+    - `num_steps`: accepted plus rejected steps of the whole run, shape ().
+    - `status`: index into `STATUS` (0 is success), shape ().
+
+    A failed run (status != 0) gives no partial answers: amplitudes, energy and the
+    extrema are NaN, `on_halc` is False and `n_halc` is -1.
+
+    All quantities are dimensionless (eqs. (4)-(6)).
+    """
+
+    amplitudes: Float[Array, "*batch n_osc"]
+    energy: Float[Array, "*batch"]
+    on_halc: Bool[Array, "*batch n_osc"]
+    n_halc: Int[Array, "*batch"]
+    n_halc_halves: Int[Array, "*batch 2"]
+    min_slip_speed: Float[Array, "*batch n_osc"]
+    x_max: Float[Array, "*batch n_osc"]
+    x_min: Float[Array, "*batch n_osc"]
+    v_max: Float[Array, "*batch n_osc"]
+    y_initial: Float[Array, "*batch 2 n_osc"]
+    y_final: Float[Array, "*batch 2 n_osc"]
+    num_steps: Int[Array, "*batch"]
+    status: Int[Array, "*batch"]
+
+
+def _status_code(result, collapsed) -> Int[Array, ""]:
+    """The `STATUS` code of one chunk's diffrax result; a chunk out of steps whose
+    steps had `collapsed` (shorter than `options.dtmin` on average) is code 4."""
+    return jnp.where(result == diffrax.RESULTS.successful, 0,
+                     jnp.where(result == diffrax.RESULTS.max_steps_reached,
+                               jnp.where(collapsed, 4, 1), 2))
+
+
+#: Solvers that take eq. (5) split in two: IMEX solvers treat the friction force
+#: implicitly, `Ros34PW2` builds its W matrix from the friction's diagonal Jacobian.
+SPLIT_SOLVERS = (diffrax.KenCarp3, diffrax.KenCarp4, diffrax.KenCarp5, Ros34PW2)
+
+
+def terms(solver: diffrax.AbstractSolver):
+    """The diffrax terms of eq. (5) for `solver`: one `ODETerm`, or for a solver of
+    `SPLIT_SOLVERS` a `MultiTerm` of the non-stiff elastic part and the stiff
+    friction part (`split_vector_field`)."""
+    if isinstance(solver, SPLIT_SOLVERS):
+        return diffrax.MultiTerm(
+            diffrax.ODETerm(lambda t, y, p: split_vector_field(t, y, p)[0]),
+            diffrax.ODETerm(lambda t, y, p: split_vector_field(t, y, p)[1]))
+    return diffrax.ODETerm(vector_field)
+
+
+def _advance(terms_, solver, args, options, observers, progress, tangent, carry, t0, t1,
+             n_samples):
+    """Integrate one chunk [t0, t1] and hand it to the observers: its `n_samples`
+    dense samples (if any) and, with a `tangent` (static) carried beside the state,
+    the log of its growth (it is then renormalised)."""
+    y, solver_state, controller_state, made_jump, states, steps, status = carry
+    # Once a chunk has failed the rest of the run is skipped (a zero-length solve),
+    # so a failed lane does not hold up the others under vmap.
+    t1 = jnp.where(status == 0, t1, t0)
+    subs = [diffrax.SubSaveAt(t1=True)]
+    ts = None
+    if n_samples:
+        ts = t0 + (t1 - t0) * jnp.linspace(0.0, 1.0, n_samples)
+        subs.append(diffrax.SubSaveAt(ts=ts))
+    if tangent:
+        # The solver state holds f of the state, stale once the tangent is rescaled:
+        # it starts afresh each chunk (one more evaluation of f per chunk).
+        solver_state = None
+    with errors_as_nan():  # diffrax's checks of its arguments: no host callback
+        sol = diffrax.diffeqsolve(
+            terms_, solver, t0, t1, None, y, args,
+            saveat=diffrax.SaveAt(subs=subs, solver_state=True, controller_state=True,
+                                  made_jump=True),
+            stepsize_controller=step_size_controller(options),
+            max_steps=options.max_steps, throw=False,
+            solver_state=solver_state, controller_state=controller_state,
+            made_jump=made_jump,
+        )
+    y_end = sol.ys[0][-1]
+    samples = None if ts is None else sol.ys[1]
+    log_growth = None
+    if tangent:
+        norm = jnp.sqrt(jnp.sum(y_end[1] ** 2))
+        log_growth = jnp.log(norm)
+        y_end = jnp.stack([y_end[0], y_end[1] / norm])
+        samples = None if ts is None else samples[:, 0]
+    chunk = Chunk(t0=t0, t1=t1, ts=ts, ys=samples, log_growth=log_growth)
+    states = tuple(o.update(s, chunk, args, options) for o, s in zip(observers, states))
+    state_end = y_end[0] if tangent else y_end
+    # Where a failed solve stopped: its t1 save holds the time it reached.
+    mean_step = (sol.ts[0][-1] - t0) / jnp.maximum(sol.stats["num_steps"], 1)
+    code = jnp.where(jnp.all(jnp.isfinite(state_end)),
+                     _status_code(sol.result, mean_step < options.dtmin), 3)
+    status = jnp.where(status == 0, code, status)
+    if progress:
+        tick(jnp.ravel(y_end)[0])
+    return (y_end, sol.solver_state, sol.controller_state, sol.made_jump, states,
+            steps + sol.stats["num_steps"], status)
+
+
+def _with_tangent(terms_):
+    """The terms of the state and a tangent vector, stacked on a new leading axis:
+    each `ODETerm` f becomes (f(y), J(y) u) with J u by `jax.jvp` (the variational
+    equation). The state under the Jacobian is held constant
+    (`lax.stop_gradient`): derivatives of the stacked field, as a solver takes
+    them for its implicit or W matrix, then see J on both blocks and not the
+    second derivative of f, which such matrices may leave out. Elementwise solvers
+    (`Ros34PW2`) get their diagonal right on both blocks."""
+    if isinstance(terms_, diffrax.MultiTerm):
+        return diffrax.MultiTerm(*(_with_tangent(t) for t in terms_.terms))
+    vf = terms_.vector_field
+
+    def field(t, yu, args):
+        y, u = yu[0], yu[1]
+        _, ju = jax.jvp(lambda z: vf(t, z, args), (jax.lax.stop_gradient(y),), (u,))
+        return jnp.stack([vf(t, y, args), ju])
+
+    return diffrax.ODETerm(field)
+
+
+def _spans(options: SimulationOptions) -> list[tuple[float, float, int, int]]:
+    """The phases of a run as (start, chunk length, number of chunks, samples per
+    chunk): the transient (not sampled), then the observed window."""
+    n_tr, len_tr = options.chunks(0.0, options.transient)
+    n_obs, len_obs = options.chunks(options.transient, options.t_end)
+    n_samples = int(np.ceil(len_obs / options.sample_dt)) + 1
+    spans = [(0.0, len_tr, n_tr, 0)] if options.transient > 0 else []
+    return spans + [(options.transient, len_obs, n_obs, n_samples)]
+
+
+def _no_partial_answers(value, ok):
+    if jnp.issubdtype(value.dtype, jnp.bool_):
+        return value & ok
+    if jnp.issubdtype(value.dtype, jnp.integer):
+        return jnp.where(ok, value, -1)
+    return jnp.where(ok, value, jnp.nan)
+
+
+def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
+              options: SimulationOptions, observers: Sequence[AbstractObserver],
+              progress: bool = False) -> tuple[tuple[dict, ...], PyTree, Array, Array]:
+    """Integrate any ODE in chunks, observing while integrating: the pure,
+    traceable engine under `run` and `observe`, not specific to the chain.
+
+    The run is integrated with `diffrax.diffeqsolve` in chunks (see
+    `SimulationOptions.chunks`), carrying the solver and step-size-controller
+    states across chunks. After each chunk, outside the step loop, every observer
+    gets the chunk's dense samples (every `sample_dt` after `options.transient`)
+    and reduces them into its state of fixed size: memory never grows with
+    `t_end`. If an observer `needs_tangent`, a tangent vector u is integrated
+    beside the state by the variational equation u' = J(y) u (`jax.jvp` of the
+    vector field; `_with_tangent`), under the same error control, and
+    renormalised after each chunk.
+
+    **Arguments:**
+
+    - `terms_`: diffrax terms of the ODE; `args` is passed to them.
+    - `solver`, `options`: the diffrax solver and `SimulationOptions`.
+    - `y0`: the initial state (an array).
+    - `observers`: the observers (`AbstractObserver`).
+    - `progress` (static): tick the active progress bar once per chunk.
+
+    **Returns:**
+
+    (results, y_final, num_steps, status): one dict per observer (NaN, -1 or False
+    where the run failed), the state at t_end (or where it stopped), the steps
+    taken and the status code (`STATUS`).
+    """
+    status = jnp.where(jnp.all(jnp.isfinite(y0)), 0, 3)
+    states = tuple(o.init(y0, args, options) for o in observers)
+    lyapunov = [o for o in observers if o.needs_tangent]
+    tangent = bool(lyapunov)
+    y = y0
+    if tangent:
+        y = jnp.stack([y0, lyapunov[0].initial_tangent(y0)])
+        terms_ = _with_tangent(terms_)
+    carry = (y, None, None, None, states, jnp.array(0), status)
+    for start, length, count, samples in _spans(options):
+        # The first chunk runs outside the scan: it creates the solver and controller
+        # states that the scan then carries from chunk to chunk.
+        if carry[1] is None:
+            carry = _advance(terms_, solver, args, options, observers, progress, tangent,
+                             carry, start, start + length, samples)
+            start, count = start + length, count - 1
+        if count:
+            t0s = start + length * jnp.arange(count)
+
+            def body(c, t0, length=length, samples=samples):
+                return _advance(terms_, solver, args, options, observers, progress,
+                                tangent, c, t0, t0 + length, samples), None
+
+            carry, _ = jax.lax.scan(body, carry, t0s)
+    y_final, _, _, _, states, steps, status = carry
+    if tangent:
+        y_final = y_final[0]
+    ok = status == 0
+    results = tuple(
+        {k: _no_partial_answers(jnp.asarray(v), ok)
+         for k, v in o.result(s, args, options).items()}
+        for o, s in zip(observers, states))
+    return results, y_final, steps, status
+
+
+def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
+        options: SimulationOptions, progress: bool = False) -> Observables:
+    """Pure, traceable core of `simulate` for one trajectory: the `Extrema` of eq.
+    (5) by `integrate`; no checks, no exceptions. `run_lanes` maps it over lanes.
+    With `progress` (static), each chunk ticks the active progress bar through a
+    host callback."""
+    (extrema,), y_final, steps, status = integrate(
+        terms(solver), solver, y0, params, options, (Extrema(),), progress)
+    return Observables(**extrema, y_initial=y0, y_final=y_final, num_steps=steps,
+                       status=status)
+
+
+def run_observers(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
+                  options: SimulationOptions, observers: Sequence[AbstractObserver],
+                  progress: bool = False) -> dict[str, Array]:
+    """Pure, traceable core of `observe`: one trajectory of eq. (5) with the given
+    observers only; `run_lanes` maps it over lanes.
+
+    **Returns:**
+
+    Every observer's results by name, with `y_initial`, `y_final`, `num_steps` and
+    `status` (see `Observables`).
+    """
+    results, y_final, steps, status = integrate(terms(solver), solver, y0, params,
+                                                options, observers, progress)
+    merged = {"y_initial": y0, "y_final": y_final, "num_steps": steps, "status": status}
+    for r in results:
+        merged |= r
+    return merged
+
+
+def check_observers(observers: Sequence[AbstractObserver]) -> tuple:
+    """`observers` as a tuple, checked.
+
+    **Raises:**
+
+    `TypeError` for an entry that is not an `AbstractObserver`; `ValidationError` when
+    two observers give a result of the same name (observe each thing once).
+    """
+    observers = tuple(observers)
+    for o in observers:
+        if not isinstance(o, AbstractObserver):
+            raise TypeError(f"observers must be AbstractObserver instances, got {o!r}")
+    names = [type(o).__name__ for o in observers]
+    if len(set(names)) != len(names):
+        raise ValidationError(f"observers must be of distinct kinds, got {names}")
+    return observers
+
+
+def n_ticks(options: SimulationOptions) -> int:
+    """Number of progress ticks (chunks) of one trajectory."""
+    return sum(count for _, _, count, _ in _spans(options))
+
+
+_run_jit = eqx.filter_jit(run)
+
+
+def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
+             solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
+             options: SimulationOptions = SimulationOptions(), *, throw: bool = True,
+             progress: bool = False) -> Observables:
+    """Integrate eq. (5) of the paper for one trajectory and return its observables.
+
+    The run is integrated with `diffrax.diffeqsolve` in chunks of
+    `options.chunk_length`, carrying the solver and step-size-controller states
+    across chunks; only the step size is guessed anew at each chunk (about 0.1 %
+    more steps than one solve). Dense-output
+    samples of each chunk after `options.transient` are reduced to running extrema
+    at once: memory does not grow with `options.t_end`, and no trajectory is stored.
+    An oscillator is on the HALC when it sticks (`sticks`): its smallest sampled
+    slip speed |x_n' - v_d| lies within 3 eps of zero.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (`ChainParams`).
+    - `y0`: an initial condition (`OutOfPhaseExcitation`, `GivenState`, ...) or a
+        state array of shape (2, n_osc) or (2 n_osc,).
+    - `solver`: a diffrax solver, the name of one (`SOLVERS`), or "auto" (chosen
+        from eps by `auto_solver`); `Ros34PW2()` by default (`DEFAULT_SOLVER`). A
+        solver of `SPLIT_SOLVERS` gets the friction force as its stiff term.
+    - `options`: `SimulationOptions` (horizon, tolerances, sampling).
+    - `throw`: raise on failure (default) or return the status.
+    - `progress`: show a tqdm bar, one tick per chunk.
+
+    **Returns:**
+
+    `Observables` with per-oscillator fields of shape (n_osc,).
+
+    **Raises:**
+
+    `ValidationError` for a state of the wrong shape or an unknown solver name;
+    `TypeError` for arguments of the wrong type; `RuntimeError` with advice when
+    the run fails and `throw=True`.
+    """
+    return _single(_run_jit, "simulate", params, y0, solver, options, (), throw, progress)
+
+
+def _single(fn, name, params, y0, solver, options, extra, throw, progress):
+    """One checked run of `fn(params, y, solver, options, *extra, progress)` under a
+    progress bar, raising on failure when `throw`."""
+    params = check_params(params)
+    solver = as_solver(solver, params=params)
+    options = check_options(options)
+    if not isinstance(y0, AbstractInitialCondition):
+        y0 = GivenState(y0)
+    y = y0(params)
+    with progress_bar(n_ticks(options), name, progress):
+        out = fn(params, y, solver, options, *extra, progress)
+    status = int(out["status"] if isinstance(out, dict) else out.status)
+    if throw and status != 0:
+        raise RuntimeError(f"{STATUS[status].split(':')[0]}: "
+                           f"{failure_hint(status, params, solver, options)}")
+    return out
+
+
+_observe_jit = eqx.filter_jit(run_observers)
+
+
+def observe(params: ChainParams, y0: AbstractInitialCondition | State,
+            observers: Sequence[AbstractObserver],
+            solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
+            options: SimulationOptions = SimulationOptions(), *, throw: bool = True,
+            progress: bool = False) -> dict[str, Array]:
+    """Integrate eq. (5) of the paper for one trajectory and return what the given
+    observers saw, and nothing else (`integrate`).
+
+    **Arguments:**
+
+    - `params`, `y0`, `solver`, `options`, `throw`, `progress`: as for `simulate`.
+    - `observers`: `Extrema`, `PeakTimes`, `TimeSeries`, `PoincareSection`,
+        `LargestLyapunov`, ... (one of each kind at most).
+
+    **Returns:**
+
+    dict of every observer's results by name (shapes in each observer's
+    docstring), with `y_initial`, `y_final` (2, n_osc), `num_steps` and `status`.
+
+    **Raises:**
+
+    `ValidationError` for a state of the wrong shape or observers of the same kind,
+    `TypeError` for an object that is not an observer; `RuntimeError` with advice
+    when the run fails and `throw=True`.
+    """
+    return _single(_observe_jit, "observe", params, y0, solver, options,
+                   (check_observers(observers),), throw, progress)

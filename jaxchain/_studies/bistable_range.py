@@ -1,0 +1,280 @@
+"""The edges of the bistable range of belt speeds: the Hopf point of steady sliding
+and the fold of the stick-slip limit cycle, for one oscillator and for the ring,
+their sensitivities, and one design question."""
+
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._bifurcation.continuation import Branch, ContinuationOptions, continuation
+from .._bifurcation.damping_design import DampingDesign, smallest_damping
+from .._bifurcation.fold import FoldPoint, fold_point
+from .._bifurcation.hopf import HopfPoint, hopf_eps_correction, hopf_point, hopf_vd_analytic
+from .._bifurcation.limit_cycles import hopf_cycle, limit_cycle_problem
+from .._bifurcation.lyapunov_coefficient import first_lyapunov_coefficient
+from .._bifurcation.shooting import ShootingOptions, flow, periodic_orbit, unpack
+from .._bifurcation.two_parameter import BoundaryCurves, boundary_curves, hopf_vd
+from .._physics.initial import GivenState
+from .._nonsmooth.existence import stick_slip_existence_limit
+from .._engine.options import SimulationOptions
+from .._physics.chain import is_homogeneous_ring
+from .._physics.friction import ExponentialDecay
+from .._physics.params import ChainParams, single_oscillator, with_parameter
+from .._physics.record import chain_record
+from .._engine.simulate import simulate
+from .._errors import ValidationError
+
+
+@dataclasses.dataclass
+class Boundaries:
+    """What `boundaries` found; `summary` is JSON-ready."""
+
+    summary: dict
+    branch: Branch
+    fold: FoldPoint
+    hopf: HopfPoint
+    curves_xi: BoundaryCurves
+    curves_ratio: BoundaryCurves | None
+    design: DampingDesign
+    ring_branches: dict
+
+
+def _multipliers(orbit) -> list[float]:
+    """The two largest Floquet multipliers in modulus."""
+    return [float(m) for m in np.sort(np.abs(np.asarray(orbit.multipliers)))[::-1][:2]]
+
+
+def design_check(params: ChainParams, design: DampingDesign, target: float,
+                 margin: float = 0.05) -> dict:
+    """Direct simulation on both sides of the design: at v_d = v_d,H(xi) + target
+    the stick-slip cycle must survive for xi = (1 - margin) xi* (window wider than
+    the target) and die for (1 + margin) xi* (narrower). Starts far outside the
+    cycle (x = 3 above steady sliding) and integrates 4000 time units."""
+    out = {}
+    for side, factor in (("below", 1 - margin), ("above", 1 + margin)):
+        p = with_parameter(params, "xi", design.xi * factor)
+        v = _hopf_speed(p) + target
+        p = with_parameter(p, "v_d", v)
+        obs = simulate(p, GivenState(jnp.array([[3.5], [0.0]])),
+                       options=SimulationOptions(t_end=4000.0, transient=3500.0))
+        out[side] = {"xi": design.xi * factor, "v_d": v,
+                     "amplitude": float(obs.amplitudes[0]), "n_halc": int(obs.n_halc)}
+    out["holds"] = out["below"]["n_halc"] == 1 and out["above"]["amplitude"] < 1e-3
+    return out
+
+
+def _hopf_speed(params: ChainParams) -> float:
+    """The Hopf belt speed: the closed form of eq. (1) where it applies, else
+    Newton's method on the Jacobian's eigenvalues (`hopf_vd`)."""
+    try:
+        return float(hopf_vd_analytic(params))
+    except ValueError:
+        return float(hopf_vd(params))
+
+
+def _stick_slip_cycle(single: ChainParams, branch: Branch, hopf_vd: float, fold_vd: float,
+                      options: ShootingOptions):
+    """The single oscillator's stable cycle inside its bistable window, at v_d = 1.5
+    (the paper's scene) when the window holds it, else at the window's middle:
+    shooting from the stable point of the continued branch nearest to that v_d."""
+    v_d = 1.5 if hopf_vd < 1.5 < fold_vd else 0.5 * (hopf_vd + fold_vd)
+    p = np.asarray(branch.p)[np.asarray(branch.converged)]
+    stable = np.flatnonzero(np.asarray(branch.stable))
+    if stable.size == 0:
+        raise RuntimeError("no stable cycle on the single oscillator's branch to start the "
+                           "chain's stick-slip states from")
+    nearest = stable[np.argmin(np.abs(p[stable] - v_d))]
+    y0, period = unpack(np.asarray(branch.u)[np.asarray(branch.converged)][nearest])
+    return periodic_orbit(with_parameter(single, "v_d", v_d), y0, float(period), options)
+
+
+def _ring_state(params: ChainParams, single, kind: str, options, progress):
+    """Continue the ring's fully stick-slipping state `kind` (in-phase or
+    anti-phase: neighbours half a period apart) from the single oscillator's cycle
+    at `single.params.v_d` towards its fold."""
+    n = params.n_osc
+    if kind == "in-phase":
+        y0 = jnp.tile(single.y0, (1, n))
+    else:
+        half = flow(single.params, single.y0, single.period / 2, options).ys[-1]
+        y0 = jnp.tile(jnp.concatenate([single.y0, half], axis=1), (1, n // 2))
+    orbit = periodic_orbit(with_parameter(params, "v_d", single.params.v_d), y0,
+                           float(single.period), options, throw=False)
+    out = {"at_vd": float(single.params.v_d), "converged": bool(orbit.converged),
+           "stable": bool(orbit.stable), "multipliers": _multipliers(orbit)}
+    if not orbit.converged:
+        return out, None
+    problem = limit_cycle_problem(orbit, options)
+    branch = continuation(problem, options=ContinuationOptions(
+        ds=0.05, ds_max=0.1, p_max=2.5, max_points=60), progress=progress)
+    out["branch_points"] = int(np.sum(np.asarray(branch.converged)))
+    out["max_vd_on_branch"] = float(np.max(np.asarray(branch.p)[np.asarray(branch.converged)]))
+    # Near the fold, every oscillator of the weakly coupled ring has a multiplier
+    # near +1 (split by eta_c only), so the extended system may be too ill-posed to
+    # converge; then the branch's largest belt speed brackets the fold to within
+    # one continuation step.
+    out |= {"fold_detected": bool(branch.folds), "fold_vd": None, "fold_converged": False}
+    if branch.folds:
+        fold = fold_point(problem, branch, throw=False)
+        if bool(fold.converged):
+            out |= {"fold_vd": float(fold.p), "fold_converged": True,
+                    "fold_multipliers": _multipliers(fold.record)}
+    return out, branch
+
+
+def _curve_summary(single: ChainParams, where: str, curves: BoundaryCurves) -> dict:
+    """A two-parameter curve as JSON-ready lists, with the non-smooth existence
+    limit at each value beside the fold (an independent reference: the smoothed
+    fold lies within about eps of it)."""
+    values = np.asarray(curves.values)
+    fold = [float(f) if ok else None
+            for f, ok in zip(np.asarray(curves.fold_vd), np.asarray(curves.converged))]
+    limit = [stick_slip_existence_limit(with_parameter(single, where, v)) for v in values]
+    return {"hopf_vd": np.asarray(curves.hopf_vd).tolist(), "fold_vd": fold,
+            "existence_limit_nonsmooth": limit,
+            "fold_minus_existence_limit": [None if f is None else f - e
+                                           for f, e in zip(fold, limit)],
+            "d_hopf_vd": np.asarray(curves.d_hopf).tolist(),
+            "d_fold_vd": [None if f is None else float(d)
+                          for f, d in zip(fold, np.asarray(curves.d_fold))]}
+
+
+#: The default grids of the two-parameter curves: xi, and mu_st/mu_d.
+XI_VALUES = (0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.1)
+RATIO_VALUES = (1.6, 1.8, 2.0, 2.2, 2.4)
+
+
+def boundaries(params: ChainParams | None = None, *, target: float = 0.5,
+               xi_values=XI_VALUES, ratio_values=RATIO_VALUES, ring: bool = True,
+               progress: bool = False) -> Boundaries:
+    """The Hopf and fold belt speeds of the single oscillator and of the chain.
+
+    1. Single oscillator (the chain's first, `single_oscillator`, with its friction
+       law): the Hopf point (Newton on the growth rate), its first Lyapunov
+       coefficient, the limit-cycle branch from the Hopf point by shooting and
+       pseudo-arclength continuation, the fold by its extended system, and the
+       non-smooth existence limit to compare.
+    2. The fold and Hopf belt speeds against xi, and for eq. (1) against
+       mu_st/mu_d, with their derivatives by implicit differentiation.
+    3. The design: the smallest xi whose bistable window is narrower than
+       `target`, by optax, checked by simulation on both sides.
+    4. The chain (`params`): the Hopf point of every Fourier mode on the
+       homogeneous ring (of the leading eigenvalue on any other chain), and on the
+       homogeneous ring of even N the folds of the fully stick-slipping in-phase
+       and anti-phase states. `summary["chain"]` records the chain.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (eq. (7), eta_c, N, eps).
+    - `target`: the design's window width, > 0.
+    - `xi_values`, `ratio_values`: grids of xi and of mu_st/mu_d.
+    - `ring`: also analyse the ring.
+    - `progress`: show tqdm bars.
+
+    **Returns:**
+
+    `Boundaries`; `summary` holds `hopf_vd`, `fold_vd`, `eps`, `subcritical` and
+    the rest as plain numbers.
+
+    **Raises:**
+
+    `ValidationError` for target <= 0; `RuntimeError` if a computation fails.
+    """
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams()
+    if not target > 0:
+        raise ValidationError(f"target must be > 0, got {target!r}")
+    options = ShootingOptions()
+    single = single_oscillator(params)
+    exponential = isinstance(single.friction, ExponentialDecay)
+    hopf = hopf_point(single)
+    l1 = float(first_lyapunov_coefficient(with_parameter(single, "v_d", hopf.v_d[0])))
+    start = hopf_cycle(single, options=options)
+    problem = limit_cycle_problem(start, options)
+    branch = continuation(problem, options=ContinuationOptions(
+        ds=0.01, ds_max=0.1, p_min=0.5, p_max=2.5, max_points=90), progress=progress)
+    fold = fold_point(problem, branch)
+    limit = stick_slip_existence_limit(single)
+    solution = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
+    fold_problem = problem.with_params(fold.record.params)
+    curves_xi = boundary_curves(fold_problem, solution, "xi", xi_values, progress=progress)
+    curves_ratio = None
+    if exponential:
+        mu_d = float(single.friction.mu_d)
+        mu_values = mu_d * np.asarray(ratio_values)
+        curves_ratio = boundary_curves(fold_problem, solution, "mu_st", mu_values,
+                                       progress=progress)
+        at_r = int(np.argmin(np.abs(mu_values - float(single.friction.mu_st))))
+    design = smallest_damping(fold_problem, solution, target)
+    at = int(np.argmin(np.abs(np.asarray(curves_xi.values) - float(single.xi))))
+    p_ok = np.asarray(branch.converged)
+    summary = {
+        "hopf_vd": float(hopf.v_d[0]),
+        "fold_vd": float(fold.p),
+        "eps": float(params.eps),
+        "subcritical": l1 > 0 and float(branch.p[p_ok][1]) > float(hopf.v_d[0]),
+        "hopf_vd_analytic": float(hopf_vd_analytic(single)) if exponential else None,
+        "hopf_eps_correction": float(hopf_eps_correction(single)) if exponential else None,
+        "hopf_newton_steps": int(hopf.newton_steps[0]),
+        "hopf_omega": float(hopf.omega[0]),
+        "hopf_growth_slope": float(hopf.slope[0]),
+        "lyapunov_coefficient": l1,
+        "existence_limit_nonsmooth": limit,
+        "fold_minus_existence_limit": float(fold.p) - limit,
+        "fold_multipliers": _multipliers(fold.record),
+        "fold_amplitude": float(fold.record.amplitudes[0]),
+        "fold_period": float(fold.record.period),
+        "branch_points": int(p_ok.sum()), "branch_failed_points": int((~p_ok).sum()),
+        "branch_stop": branch.stop,
+        "d_hopf_vd_d_xi": float(curves_xi.d_hopf[at]),
+        "d_fold_vd_d_xi": float(curves_xi.d_fold[at]),
+        "xi_curve": {"xi": np.asarray(curves_xi.values).tolist(),
+                     **_curve_summary(single, "xi", curves_xi)},
+        "design": {"target_window": target, "xi": design.xi, "window": design.window,
+                   "hopf_vd": design.hopf_vd, "fold_vd": design.fold_vd,
+                   "d_window_d_xi": design.d_window, "optax_iterations": len(design.history),
+                   "converged": design.converged,
+                   "simulation_check": design_check(single, design, target)},
+    }
+    if exponential:
+        summary |= {
+            "d_hopf_vd_d_ratio": float(mu_d * curves_ratio.d_hopf[at_r]),
+            "d_fold_vd_d_ratio": float(mu_d * curves_ratio.d_fold[at_r]),
+            "ratio_curve": {"mu_st/mu_d": (np.asarray(curves_ratio.values) / mu_d).tolist(),
+                            **_curve_summary(single, "mu_st", curves_ratio)}}
+    summary["chain"] = chain_record(params)
+    ring_branches = {}
+    if ring:
+        ring_hopf = hopf_point(params)
+        summary["ring"] = {
+            "n_osc": params.n_osc, "boundary": params.boundary,
+            "hopf_vd": float(np.max(ring_hopf.v_d)),
+            "hopf_vd_spread_over_modes": float(np.ptp(np.asarray(ring_hopf.v_d))),
+            "hopf_omega_range": [float(np.min(ring_hopf.omega)), float(np.max(ring_hopf.omega))],
+        }
+        if params.n_osc % 2 == 0 and is_homogeneous_ring(params):
+            cycle = _stick_slip_cycle(single, branch, float(hopf.v_d[0]), float(fold.p),
+                                      options)
+            for kind in ("in-phase", "anti-phase"):
+                summary["ring"][kind], ring_branches[kind] = _ring_state(
+                    params, cycle, kind, options, progress)
+    return Boundaries(summary=summary, branch=branch, fold=fold, hopf=hopf,
+                      curves_xi=curves_xi, curves_ratio=curves_ratio, design=design,
+                      ring_branches=ring_branches)
+
+
+def fig3a_simulations(params: ChainParams, v_d=np.round(np.arange(0.6, 2.21, 0.1), 2),
+                      progress: bool = False):
+    """The simulation dots of Fig. 3(a): the single oscillator at each belt speed
+    from a small and a large initial displacement (x = 0.6 and 3.5, x' = 0),
+    t_end = 3000, observed after 2500. Returns (v_d, energy) with energy of shape
+    (n_vd, 2)."""
+    from .._sweeps.ensemble import ensemble
+
+    single = single_oscillator(params)
+    ds = ensemble(single, jnp.asarray(v_d), GivenState(jnp.array([[[0.6], [0.0]],
+                                                                  [[3.5], [0.0]]])),
+                  options=SimulationOptions(t_end=3000.0, transient=2500.0),
+                  progress=progress)
+    return np.asarray(v_d), ds["energy"].values

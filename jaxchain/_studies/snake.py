@@ -1,0 +1,529 @@
+"""The snake: branches of the chain's localized periodic states over the belt speed,
+with their Floquet stability and bifurcations, started from direct simulation."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import dataclasses
+import json
+from pathlib import Path
+
+import diffrax
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from tqdm.auto import tqdm
+
+from .._bifurcation.bifurcations import locate_bifurcations
+from .._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
+from .._bifurcation.limit_cycles import limit_cycle_problem
+from .._bifurcation.shooting import (ShootingOptions, floquet_multipliers, flow, periodic_orbit,
+                                    unpack)
+from .._sweeps.ensemble import ensemble
+from .._engine.options import SimulationOptions
+from .._physics.initial import GivenState, OutOfPhaseExcitation, excited_block
+from .._physics.params import ChainParams, with_parameter
+from .._physics.record import chain_record
+from .._engine.simulate import simulate
+from .._sweeps.result_store import read_dataset, write_dataset
+from .._errors import ValidationError
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
+
+#: The branches of `localized_branches` by default: eq. (8) with 1, 2, 4 and 8
+#: oscillators excited, and the whole chain (the paper's Figs. 4 and 8).
+SITES = (1, 2, 4, 8, 20)
+
+#: Shooting on a chain: Levenberg-Marquardt converges from a simulated state.
+SNAKE_SHOOTING = ShootingOptions(root_finder="levenberg-marquardt")
+
+#: The starting simulations: a chain of 20 settles slowly (the paper removes
+#: 10^4 time units of transient); after 2500 the four- and eight-site states of
+#: eq. (8) at v_d = 1.5 are not yet periodic to the shooting tolerance.
+SNAKE_START = SimulationOptions(t_end=12_000.0, transient=11_500.0)
+
+#: Continuation of each branch: far enough each way (150 points) to pass its folds.
+SNAKE_CONTINUATION = ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.0, p_max=2.2,
+                                         max_points=150)
+
+
+def _downward_crossings(params: ChainParams, y, options: ShootingOptions,
+                        horizon: float = 40.0) -> tuple[np.ndarray, np.ndarray, list]:
+    """The flow from `y` sampled every 1e-3 over `horizon`: (times, states, and for
+    each oscillator the sample indices where x_n' passes from + to -)."""
+    ts = np.linspace(0.0, horizon, int(round(horizon * 1000)) + 1)
+    ys = np.asarray(flow(params, jnp.asarray(y), horizon, options,
+                         diffrax.SaveAt(ts=jnp.asarray(ts))).ys)
+    v = ys[:, 1]
+    down = [np.flatnonzero((v[:-1, n] > 0) & (v[1:, n] <= 0)) for n in range(v.shape[1])]
+    return ts, ys, down
+
+
+def _turning_point(params: ChainParams, y: np.ndarray, oscillator: int,
+                   options: ShootingOptions) -> tuple[np.ndarray, float] | None:
+    """A state where x_n' passes from + to - (n = `oscillator`), and the time to the
+    next such crossing (`_downward_crossings`)."""
+    ts, ys, down = _downward_crossings(params, y, options)
+    down = down[oscillator]
+    if down.size < 2:
+        return None
+    return ys[down[0]], float(ts[down[1]] - ts[down[0]])
+
+
+def start_orbits(params: ChainParams, sites=SITES, *, options: SimulationOptions = SNAKE_START,
+                 shooting: ShootingOptions = SNAKE_SHOOTING, progress: bool = False):
+    """Periodic localized states of the chain at `params.v_d`, refined by shooting
+    from direct simulation: eq. (8) with k oscillators excited (`excited_block`),
+    integrated over `options`, then a turning point of the oscillator of largest
+    amplitude (the phase condition's oscillator) and the time to the next one as the
+    guesses of `periodic_orbit`.
+
+    **Arguments:**
+
+    - `params`: the chain; `params.v_d` is the belt speed of the start.
+    - `sites`: the numbers of excited oscillators, each in 1..n_osc.
+    - `options`: `SimulationOptions` of the simulations.
+    - `shooting`: `ShootingOptions` (its `phase_oscillator` is replaced).
+    - `progress`: progress bars.
+
+    **Returns:**
+
+    A dict k -> (`PeriodicOrbit` or None, the simulation's n_HALC and energy, why
+    it failed or None). A start fails when the simulated state is not periodic
+    (irregular: shooting does not converge) or never turns.
+
+    **Raises:**
+
+    `ValidationError` for a k outside 1..n_osc.
+    """
+    sites = tuple(int(k) for k in sites)
+    if not sites or min(sites) < 1 or max(sites) > params.n_osc:
+        raise ValidationError(f"sites must be in 1..n_osc = {params.n_osc}, got {sites}")
+    masks = np.stack([excited_block(params.n_osc, k, params.boundary) for k in sites])
+    ics = OutOfPhaseExcitation(excited=jnp.asarray(masks),
+                               velocity=jnp.zeros(len(sites)), base_sign=-1.0)
+    ds = ensemble(params, [float(params.v_d)], ics, options=options, progress=progress)
+    out = {}
+    for i, k in enumerate(sites):
+        amplitudes = ds["amplitudes"].values[0, i]
+        sim = {"n_halc": int(ds["n_halc"].values[0, i]),
+               "energy": float(ds["energy"].values[0, i])}
+        if int(ds["status"].values[0, i]) != 0:
+            out[k] = (None, sim, "the simulation failed")
+            continue
+        n = int(np.argmax(amplitudes))
+        opts = dataclasses.replace(shooting, phase_oscillator=n)
+        guess = _turning_point(params, ds["y_final"].values[0, i], n, opts)
+        if guess is None:
+            out[k] = (None, sim, "no turning point: steady sliding")
+            continue
+        orbit = periodic_orbit(params, guess[0], guess[1], opts, throw=False)
+        reason = None if bool(orbit.converged) else (
+            f"shooting did not converge (residual {float(orbit.residual):.2g}): the "
+            f"simulated state is not periodic")
+        out[k] = (orbit if reason is None else None, sim, reason)
+    return out
+
+
+def _branch_dataset(k: int, problem, branch, bifurcations) -> xr.Dataset:
+    import xarray as xr
+
+    ok = np.asarray(branch.converged)
+    r = branch.records
+    multipliers = np.asarray(r.multipliers)
+    return xr.Dataset(
+        {"energy": ("point", np.asarray(r.energy)),
+         "period": ("point", np.asarray(r.period)),
+         "n_halc": ("point", np.asarray(r.n_halc)),
+         "stable": ("point", np.asarray(branch.stable)),
+         "critical_multiplier_abs": ("point", np.abs(np.asarray(r.critical_multiplier))),
+         "trivial_multiplier_error": ("point", np.abs(
+             np.take_along_axis(multipliers, np.asarray(r.trivial)[:, None], 1)[:, 0] - 1)),
+         "amplitudes": (("point", "osc"), np.asarray(r.amplitudes)),
+         "u": (("point", "unknown"), np.asarray(branch.u)[ok])},
+        coords={"v_d": ("point", np.asarray(branch.p)[ok])},
+        attrs={"excited": k, "phase_oscillator": problem.residual.options.phase_oscillator,
+               "stop": branch.stop,
+               "bifurcations": json.dumps([
+                   {"type": b.kind, "v_d": float(b.p), "energy": float(b.record.energy),
+                    "multiplier": [float(np.real(b.multiplier)), float(np.imag(b.multiplier))],
+                    "n_halc": int(b.record.n_halc), "after": b.after, "width": b.width}
+                   for b in bifurcations])})
+
+
+def follow_branch(orbit, options: ShootingOptions, continuation_options: ContinuationOptions,
+                  algorithm: PseudoArclength = PseudoArclength(), *, k: int = 0,
+                  progress: bool = False) -> xr.Dataset:
+    """Continue the branch of periodic orbits through `orbit` over v_d both ways
+    (pseudo-arclength, `continuation`), join the two halves in the order of the
+    branch, and locate its bifurcations (`locate_bifurcations`).
+
+    **Returns:**
+
+    An `xarray.Dataset` over the converged points (dim `point`, coordinate `v_d`):
+    energy (eq. (9)), period, n_halc, stable, the largest non-trivial |multiplier|,
+    the trivial multiplier's distance from 1, amplitudes (point, osc) and the
+    shooting unknowns u; attributes `bifurcations` (JSON list of type, v_d, energy,
+    multiplier, n_halc, and `after`: the index of the point before it) and `stop`.
+    """
+    import xarray as xr
+
+    problem = limit_cycle_problem(orbit, options)
+    halves, found = [], []
+    for direction in (-1, 1):
+        opts = dataclasses.replace(continuation_options, direction=direction)
+        branch = continuation(problem, algorithm, opts, progress=progress)
+        bifs = locate_bifurcations(problem, branch, algorithm)
+        halves.append(_branch_dataset(k, problem, branch, bifs))
+        found.append(bifs)
+    down, up = halves
+    joined = xr.concat([down.isel(point=slice(None, None, -1)), up.isel(point=slice(1, None))],
+                       dim="point", data_vars="all")
+    # "after": the first of the two joined points that the bifurcation lies between
+    last = down.sizes["point"] - 1
+    bifs = ([b | {"after": last - b["after"] - 1} for b in json.loads(down.attrs["bifurcations"])]
+            [::-1] + [b | {"after": last + b["after"]} for b in
+                      json.loads(up.attrs["bifurcations"])])
+    return joined.assign_attrs(down.attrs | {
+        "bifurcations": json.dumps(bifs),
+        "stop": json.dumps({"low": down.attrs["stop"], "high": up.attrs["stop"]})})
+
+
+def stable_ranges(branch: xr.Dataset) -> list[dict]:
+    """The stable segments of a joined branch: their v_d ranges, each end the
+    bifurcation located there (or the end of the computed branch), and for each
+    end the index of its last stable point and of the first point beyond it
+    (None at the end of the branch)."""
+    stable = branch["stable"].values
+    v = branch["v_d"].values
+    bifs = json.loads(branch.attrs["bifurcations"])
+    out = []
+    i = 0
+    while i < stable.size:
+        if not stable[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < stable.size and stable[j + 1]:
+            j += 1
+        ends = []
+        for idx, other in ((i, i - 1), (j, j + 1)):
+            if not 0 <= other < stable.size:
+                ends.append(({"type": "end of branch", "v_d": float(v[idx])}, idx, None))
+                continue
+            # the bifurcation located between the two points, else an unlocated change
+            between = [b for b in bifs if b["after"] == min(idx, other)]
+            ends.append((between[0] if between else
+                         {"type": "stability change", "v_d": float(0.5 * (v[idx] + v[other]))},
+                         idx, other))
+        ends.sort(key=lambda e: e[0]["v_d"])
+        out.append({"v_d": [ends[0][0]["v_d"], ends[1][0]["v_d"]],
+                    "ends": [e[0] for e in ends],
+                    "points": [(e[1], e[2]) for e in ends],
+                    "n_halc": int(np.bincount(branch["n_halc"].values[i:j + 1]).argmax())})
+        i = j + 1
+    return out
+
+
+def connections(branches: dict, tol: float = 1e-3) -> dict:
+    """Which branches meet: two branches connect when a point of one matches a point
+    of the other at the same belt speed (within `tol`), with the same period (within
+    `tol`, relative) and the same amplitudes sorted by size (within 10 `tol`): a
+    signature that no rotation or reflection of the chain changes. A branch whose
+    energy falls below 1e-4 ends on steady sliding (a Hopf point)."""
+    out = {k: [] for k in branches}
+    keys = list(branches)
+    for a in keys:
+        if float(branches[a]["energy"].min()) < 1e-4:
+            out[a].append("steady sliding")
+        for b in keys:
+            if b == a:
+                continue
+            A, B = branches[a], branches[b]
+            va, vb = A["v_d"].values, B["v_d"].values
+            close = np.abs(va[:, None] - vb[None, :]) < tol
+            period = np.abs(A["period"].values[:, None] / B["period"].values[None, :] - 1) < tol
+            sa = np.sort(A["amplitudes"].values, axis=1)
+            sb = np.sort(B["amplitudes"].values, axis=1)
+            cand = np.argwhere(close & period)
+            if any(np.max(np.abs(sa[i] - sb[j])) < 10 * tol for i, j in cand):
+                out[a].append(b)
+    return out
+
+
+def _phase_lags(params: ChainParams, y, sites, options: ShootingOptions) -> np.ndarray | None:
+    """The phase of each oscillator of `sites` relative to the first, in periods
+    (0 to 1): from the first turning point (x_n' from + to -) of each
+    (`_downward_crossings`)."""
+    ts, _, down = _downward_crossings(params, y, options)
+    if any(down[n].size < 2 for n in sites):
+        return None
+    first = np.asarray([ts[down[n][0]] for n in sites])
+    period = float(ts[down[sites[0]][1]] - ts[down[sites[0]][0]])
+    return np.mod((first - first[0]) / period, 1.0)
+
+
+def check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, *,
+                        delta: float = 0.03, perturbation: float = 1e-3, seed: int = 0,
+                        shooting: ShootingOptions = SNAKE_SHOOTING,
+                        options: SimulationOptions = SimulationOptions(t_end=5000.0,
+                                                                       transient=4500.0)
+                        ) -> list[dict]:
+    """Direct simulation just inside and just outside each end of a stable segment
+    that a bifurcation ends, each from an orbit of the branch with its positions
+    perturbed by `perturbation`:
+
+    - inside: at v_d = end -+ `delta`, from the segment's orbit nearest there;
+    - outside a fold (the state ceases to exist): at end +- `delta`, from the
+      orbit nearest the fold;
+    - outside a change of stability: on the unstable sheet beyond it, from its
+      orbit where the perturbation grows to 100 within the horizon
+      (`_unstable_point`; a weak instability needs |mu| to grow).
+
+    The state persists when the simulation ends with the oscillators of the
+    starting orbit on the HALC (amplitude above half the largest) and, among them,
+    the same phase lags within 0.05 of a period (a symmetry-breaking instability
+    keeps the sites and changes their phases); it is lost otherwise.
+
+    **Returns:**
+
+    One dict per end and side: v_d, start_v_d (the orbit started from), side
+    ("inside"/"outside"), the sites of the orbit and of the simulation, the largest
+    phase-lag difference, `persists`, `expected_growth` (outside a change of
+    stability: |mu|^(t_end / T) of the starting orbit) and `agrees` (persists
+    inside, lost outside), None where the perturbation times the expected growth
+    stays below 1, too weak an instability for the horizon to decide.
+    """
+    rng = np.random.default_rng(seed)
+    v = branch["v_d"].values
+    stable = branch["stable"].values
+    growth = (branch["critical_multiplier_abs"].values
+              ** (options.t_end / branch["period"].values))
+    out = []
+    for end, (last, beyond) in zip(segment["ends"], segment["points"]):
+        if end["type"] == "end of branch":
+            continue
+        outward = np.sign(end["v_d"] - v[last]) or 1.0
+        inside = _segment_point(v, stable, last, end["v_d"] - outward * delta)
+        sides = [("inside", end["v_d"] - outward * delta, inside, None)]
+        if end["type"] == "fold":  # beyond a fold the state does not exist
+            sides.append(("outside", end["v_d"] + outward * delta, last, None))
+        else:
+            sides.append(("outside",) + _unstable_point(v, stable, growth, beyond, last, end,
+                                                        delta, perturbation))
+        for side, vd, start, expected in sides:
+            y_orbit, _ = unpack(jnp.asarray(branch["u"].values[start]))
+            a = branch["amplitudes"].values[start]
+            sites = np.flatnonzero(a > 0.5 * a.max())
+            lags = _phase_lags(with_parameter(params, "v_d", float(v[start])), y_orbit, sites,
+                               shooting)
+            y0 = np.asarray(y_orbit).copy()
+            y0[0] += perturbation * rng.standard_normal(y0.shape[1])
+            p = with_parameter(params, "v_d", float(vd))
+            obs = simulate(p, GivenState(jnp.asarray(y0)), options=options)
+            amp = np.asarray(obs.amplitudes)
+            sim_sites = np.flatnonzero(amp > 0.5 * amp.max())
+            lag_difference = None
+            if np.array_equal(sites, sim_sites) and lags is not None:
+                sim_lags = _phase_lags(p, obs.y_final, sites, shooting)
+                if sim_lags is not None:
+                    d = np.mod(sim_lags - lags, 1.0)
+                    lag_difference = float(np.max(np.minimum(d, 1 - d)))
+            persists = lag_difference is not None and lag_difference < 0.05
+            resolved = expected is None or perturbation * expected > 1.0
+            out.append({"end": end["type"], "end_v_d": end["v_d"], "side": side,
+                        "v_d": float(vd), "start_v_d": float(v[start]),
+                        "sites_orbit": sites.tolist(), "sites_simulation": sim_sites.tolist(),
+                        "phase_lag_difference": lag_difference, "persists": persists,
+                        "expected_growth": expected,
+                        "agrees": (persists == (side == "inside")) if resolved else None})
+    return out
+
+
+def _segment_point(v, stable, last, target) -> int:
+    """The stable point of the segment that ends at `last` nearest to v_d = `target`."""
+    same = [last]
+    for step in (-1, 1):
+        k = last + step
+        while 0 <= k < v.size and stable[k]:
+            same.append(k)
+            k += step
+    return min(same, key=lambda k: abs(v[k] - target))
+
+
+def _unstable_point(v, stable, growth, beyond, last, end, delta, perturbation
+                    ) -> tuple[float, int, float | None]:
+    """(v_d, starting point, expected growth) of the simulation outside a change of
+    stability. Its sheet is the unstable part of the branch beyond the change, as
+    far as it runs on in v_d (up to a fold). On it: the first point at least
+    `delta` from the end where a perturbation of size `perturbation` grows to 100
+    within the horizon, else the farthest such point; the simulation starts from
+    that orbit. If none grows enough and the sheet turns at a fold within `delta`,
+    v_d = end + `delta` outward, past the fold, where the state does not exist
+    (expected growth None); otherwise the point of largest growth (undecided)."""
+    step = beyond - last
+    outward = np.sign(v[beyond] - v[last]) or 1.0
+    sheet = []
+    k = beyond
+    while 0 <= k < v.size and not stable[k] and (
+            not sheet or (v[k] - v[sheet[-1]]) * outward > 0):
+        sheet.append(k)
+        k += step
+    strong = [k for k in sheet if perturbation * growth[k] >= 100.0]
+    far = [k for k in strong if abs(v[k] - end["v_d"]) >= delta]
+    if far or strong:
+        k = (far or strong[::-1])[0]
+        return float(v[k]), k, float(growth[k])
+    turns = 0 <= k < v.size and not stable[k]
+    if turns and abs(v[sheet[-1]] - end["v_d"]) < delta:
+        return float(end["v_d"] + outward * delta), last, None
+    k = max(sheet, key=lambda k: growth[k])
+    return float(v[k]), k, float(growth[k])
+
+
+_multipliers = eqx.filter_jit(floquet_multipliers)
+
+
+def multiplier_accuracy(params: ChainParams, branch: xr.Dataset, points,
+                        shooting: ShootingOptions = SNAKE_SHOOTING, factor: float = 100.0
+                        ) -> dict:
+    """How accurate the branch's Floquet multipliers are: at the given points, the
+    multipliers again from the same orbits with the flow's tolerances divided by
+    `factor`; the difference estimates the error at the branch's tolerances.
+
+    **Returns:**
+
+    A dict: `points`, `rtol` (the two), the largest difference of the critical
+    multiplier (`critical_difference`) and of its modulus (`modulus_difference`),
+    and the largest |trivial multiplier - 1| at each tolerance.
+    """
+    tight = dataclasses.replace(shooting, rtol=shooting.rtol / factor,
+                                atol=shooting.atol / factor)
+    v = branch["v_d"].values
+    critical, modulus, trivial = [], [], ([], [])
+    for i in sorted(set(int(i) for i in points)):
+        y0, period = unpack(jnp.asarray(branch["u"].values[i]))
+        p = with_parameter(params, "v_d", float(v[i]))
+        got = []
+        for options, errors in zip((shooting, tight), trivial):
+            values, index = _multipliers(p, y0, period, options)
+            values = np.asarray(values)
+            errors.append(abs(values[int(index)] - 1))
+            got.append(np.delete(values, int(index)))
+        first = got[0][0]  # the critical multiplier, and its match at the tight tolerance
+        second = got[1][np.argmin(np.abs(got[1] - first))]
+        critical.append(abs(first - second))
+        modulus.append(abs(abs(first) - abs(second)))
+    return {"points": len(critical), "rtol": [shooting.rtol, tight.rtol],
+            "critical_difference": float(max(critical, default=np.nan)),
+            "modulus_difference": float(max(modulus, default=np.nan)),
+            "trivial_error": [float(max(e, default=np.nan)) for e in trivial]}
+
+
+def localized_branches(params: ChainParams | None = None, sites=SITES, *,
+                       shooting: ShootingOptions = SNAKE_SHOOTING,
+                       continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
+                       start_options: SimulationOptions = SNAKE_START,
+                       simulation_check: bool = True, out: Path | None = None,
+                       progress: bool = False) -> dict:
+    """The snake: each localized periodic state that simulation finds at
+    `params.v_d` (eq. (8) with k excited, for k in `sites`), refined by shooting,
+    continued over v_d both ways by pseudo-arclength through its folds, with its
+    Floquet multipliers, bifurcations (`locate_bifurcations`), stable ranges, the
+    branches it meets (`connections`) and, optionally, direct simulation just inside
+    and outside each end of each stable range (`check_by_simulation`).
+
+    **Arguments:**
+
+    - `params`: the chain (any chain of `ChainParams`); `params.v_d` is where the
+        states are found (1.5 by default, inside the paper's bistable range).
+    - `sites`: excited oscillators of each start.
+    - `shooting`: `ShootingOptions` of every orbit.
+    - `continuation_options`: `ContinuationOptions` (direction is set both ways).
+    - `start_options`: `SimulationOptions` of the starting simulations.
+    - `simulation_check`: run `check_by_simulation` on every stable range.
+    - `out`: a folder: each branch is stored there as `branch_k<k>.nc` with the key
+        of its settings (`write_dataset`) as it finishes, and read back on a later
+        call with equal settings (resume).
+    - `progress`: progress bars.
+
+    **Returns:**
+
+    A dict with `summary` (JSON-ready: `branches`, a list of objects with `label`,
+    `excited`, `sites`, `stable_ranges`, `bifurcations`, `connects_to`, ...) and
+    `datasets` (label -> the branch's `xarray.Dataset`).
+
+    **Raises:**
+
+    `ValidationError` for bad sites or options.
+    """
+    if params is None:  # built on call: a chain needs `configure` first
+        params = ChainParams()
+    sites = tuple(int(k) for k in sites)
+    datasets, starts, failed = {}, {}, {}
+    settings = {"chain": chain_record(params), "shooting": shooting,
+                "continuation": continuation_options, "start": start_options}
+    paths = {k: None if out is None else Path(out) / f"branch_k{k}.nc" for k in sites}
+    todo = []
+    for k in sites:
+        stored = None if out is None else read_dataset(paths[k], "snake branch", k=k,
+                                                       **settings)
+        if stored is not None:
+            datasets[f"k={k}"] = stored
+        else:
+            todo.append(k)
+    if todo:
+        for k, (orbit, sim, reason) in start_orbits(params, todo, options=start_options,
+                                                    shooting=shooting,
+                                                    progress=progress).items():
+            starts[k] = sim
+            if orbit is None:
+                failed[k] = reason
+                continue
+            opts = dataclasses.replace(
+                shooting, phase_oscillator=int(np.argmax(np.asarray(orbit.amplitudes))))
+            ds = follow_branch(orbit, opts, continuation_options, k=k, progress=progress)
+            ds = ds.assign_attrs(start_vd=float(params.v_d),
+                                 start_energy=float(orbit.energy),
+                                 start_n_halc=int(orbit.n_halc))
+            if out is not None:
+                Path(out).mkdir(parents=True, exist_ok=True)
+                write_dataset(ds, paths[k], "snake branch", k=k, **settings)
+            datasets[f"k={k}"] = ds
+    links = connections(datasets)
+    branches = []
+    bar = tqdm(total=len(datasets), desc="simulation check", disable=not (progress and
+                                                                           simulation_check))
+    for label, ds in datasets.items():
+        ranges = stable_ranges(ds)
+        entry = {"label": label, "excited": int(ds.attrs["excited"]),
+                 "sites": (int(np.bincount(ds["n_halc"].values[ds["stable"].values]).argmax())
+                           if ds["stable"].values.any() else None),
+                 "stable_ranges": [r["v_d"] for r in ranges],
+                 "stable_range_ends": [r["ends"] for r in ranges],
+                 "bifurcations": json.loads(ds.attrs["bifurcations"]),
+                 "connects_to": links[label],
+                 "v_d_computed": [float(ds["v_d"].min()), float(ds["v_d"].max())],
+                 "points": int(ds.sizes["point"]),
+                 "stop": json.loads(ds.attrs["stop"]),
+                 "start": {"v_d": ds.attrs["start_vd"], "energy": ds.attrs["start_energy"],
+                           "n_halc": ds.attrs["start_n_halc"]},
+                 "largest_trivial_multiplier_error": float(
+                     ds["trivial_multiplier_error"].max())}
+        ends = [i for r in ranges for pair in r["points"] for i in pair if i is not None]
+        start = int(np.argmin(np.abs(ds["v_d"].values - ds.attrs["start_vd"])))
+        entry["multiplier_accuracy"] = multiplier_accuracy(params, ds, ends + [start],
+                                                           shooting)
+        if simulation_check:
+            entry["simulation_check"] = [c for r in ranges for c in
+                                         check_by_simulation(params, ds, r, shooting=shooting)]
+        branches.append(entry)
+        bar.update()
+    bar.close()
+    summary = {"branches": branches,
+               "not_periodic": [{"excited": k, "reason": r, "simulation": starts[k]}
+                                for k, r in failed.items()]}
+    return {"summary": summary, "datasets": datasets}
+

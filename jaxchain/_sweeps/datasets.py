@@ -1,0 +1,138 @@
+"""Ensemble observables as an `xarray.Dataset`, stored with their parameters."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import dataclasses
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+import diffrax
+import numpy as np
+from jaxtyping import ArrayLike
+
+from .atomic import replacing
+from .._physics.initial import AbstractInitialCondition, OutOfPhaseExcitation
+from .._engine.options import SimulationOptions
+from .._physics.params import ChainParams
+from .._physics.record import chain_record
+from .._engine.simulate import STATUS, Observables
+from .._physics.stick import STICK_BAND
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
+
+PAPER = ("Multiple spatially localized dynamical states in friction-excited "
+         "oscillator chains")
+
+
+def _package_version() -> str:
+    try:
+        return version("jaxchain")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+#: Descriptions of the observables, as the `long_name` of their variables.
+LONG_NAMES = {
+    "amplitudes": "half of peak-to-peak of x_n after the transient",
+    "energy": "E = 1/2 sum A_n^2, eq. (9)",
+    "on_halc": ("oscillator on the high-amplitude limit cycle: it sticks, "
+                f"min_slip_speed <= {STICK_BAND:g} eps"),
+    "n_halc_halves": "n_halc over the first and over the second half of the window",
+    "min_slip_speed": "smallest |x_n' - v_d| after the transient",
+}
+
+
+def observables_variables(obs: Observables, lead: tuple[str, ...]) -> dict:
+    """Every field of `obs` as an `xarray.Variable` whose leading dims are `lead`
+    (the batch axes of `obs`), then `osc`, `half` or (`component`, `osc`), with its
+    `long_name` and, for `status`, the meaning of each code."""
+    import xarray as xr
+
+    trailing = {"n_halc_halves": ("half",), "y_initial": ("component", "osc"),
+                "y_final": ("component", "osc")}
+    out = {}
+    for f in dataclasses.fields(obs):
+        value = np.asarray(getattr(obs, f.name))
+        dims = lead + trailing.get(f.name, ("osc",) if value.ndim > len(lead) else ())
+        attrs = {"long_name": LONG_NAMES[f.name]} if f.name in LONG_NAMES else {}
+        if f.name == "status":
+            attrs["flag_meanings"] = " | ".join(f"{i}: {s}" for i, s in enumerate(STATUS))
+        out[f.name] = xr.Variable(dims, value, attrs)
+    return out
+
+
+def field_values(obj, prefix: str = "") -> dict:
+    """The fields of a dataclass (options) by name, with `prefix`, leaving out those
+    that are None (netCDF attributes have no None)."""
+    return {prefix + f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)
+            if getattr(obj, f.name) is not None}
+
+
+def run_attributes(params: ChainParams, solver: diffrax.AbstractSolver,
+                   options: SimulationOptions, ics: str, varying: str) -> dict:
+    """The attributes of a Dataset of runs: the whole chain (`chain_record`: the
+    boundary, the friction law and its parameters, per-oscillator arrays as lists,
+    the mistuning record) but `varying` (the parameter along a dim of the
+    Dataset), the fields of `options`, the solver, the initial conditions, the
+    jaxchain version and the paper, as plain numbers, lists and strings (netCDF and
+    zarr keep them)."""
+    attrs = {k: v for k, v in chain_record(params).items() if k != varying}
+    attrs |= {k: (v if isinstance(v, (str, int)) else float(v))
+              for k, v in field_values(options).items()}
+    attrs |= {"solver": type(solver).__name__, "ics": ics,
+              "jaxchain_version": _package_version(), "paper": PAPER,
+              "units": "dimensionless, eqs. (4)-(6) of the paper"}
+    return attrs
+
+
+def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
+               ics: AbstractInitialCondition, solver: diffrax.AbstractSolver,
+               options: SimulationOptions) -> xr.Dataset:
+    """Turn batched `Observables` into a self-describing `xarray.Dataset`.
+
+    **Arguments:**
+
+    - `obs`: `Observables` with leading axes (n_vd, n_ic).
+    - `params`, `v_d`, `ics`, `solver`, `options`: what produced `obs`.
+
+    **Returns:**
+
+    A Dataset with dims (v_d, ic, osc), `half` and `component` (x, v); `osc` counts
+    1..N as in the paper. Data variables: amplitudes, on_halc, min_slip_speed,
+    x_max, x_min, v_max (v_d, ic, osc); n_halc_halves (v_d, ic, half); y_initial,
+    y_final (v_d, ic, component, osc); energy, n_halc, num_steps, status (v_d, ic).
+    When the initial conditions excite oscillators (`OutOfPhaseExcitation`),
+    `n_excited` is a coordinate along `ic`. Attributes: every field of `params`
+    (but v_d), of `options`, the solver, the type of initial condition, the
+    meaning of the status codes, the jaxchain version and the paper.
+    """
+    import xarray as xr
+
+    data = observables_variables(obs, ("v_d", "ic"))
+    n_vd, n_ic, n_osc = data["amplitudes"].shape
+    coords = {"v_d": np.asarray(v_d, dtype=float).reshape(n_vd),
+              "ic": np.arange(n_ic), "osc": np.arange(1, n_osc + 1),
+              "component": ["x", "v"]}
+    if isinstance(ics, OutOfPhaseExcitation):
+        excited = np.broadcast_to(np.asarray(ics.excited), (n_ic, n_osc))
+        coords["n_excited"] = ("ic", excited.sum(-1))
+    attrs = run_attributes(params, solver, options, type(ics).__name__, "v_d")
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+def save_dataset(ds: xr.Dataset, path: str | Path) -> Path:
+    """Write `ds` to netCDF (h5netcdf engine), creating the parent folder. The file
+    is written whole or not at all: to a temporary file beside `path`, renamed
+    into place, so that a run killed while it writes leaves the previous file
+    intact.
+
+    **Returns:**
+
+    The path written.
+    """
+    with replacing(path) as partial:
+        ds.to_netcdf(partial, engine="h5netcdf")
+    return Path(path)

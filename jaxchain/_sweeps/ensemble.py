@@ -1,0 +1,83 @@
+"""Ensembles: the single-trajectory run over a grid of belt speeds and initial
+conditions, vmapped and spread over the devices (`run_lanes`)."""
+
+from typing import TYPE_CHECKING
+
+import diffrax
+import jax
+import numpy as np
+from jaxtyping import ArrayLike, Float
+
+from .._engine.checks import check_run
+from .._physics.initial import AbstractInitialCondition, batch_length, initial_states
+from .._engine.lanes import lane_params, run_lanes, take_lanes
+from .._engine.options import SimulationOptions
+from .._physics.params import ChainParams, with_parameter
+from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
+from .._errors import ValidationError
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+
+def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
+             ics: AbstractInitialCondition,
+             solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
+             options: SimulationOptions = SimulationOptions(), *,
+             engine: str | None = None, progress: bool = True) -> "xr.Dataset":
+    """Run every (belt speed, initial condition) pair of a grid, spread over the
+    devices (on a CPU, one per core) by `run_lanes`. Trajectories never raise: each
+    has a `status` (0 = ok, see `STATUS`), so one failing lane never discards the
+    others.
+
+    On a CPU each core integrates one trajectory at a time and takes the next when
+    it finishes (a work queue), so an ensemble costs about (total steps) / (cores).
+    On a GPU the trajectories are vmapped lanes.
+
+    **Arguments:**
+
+    - `params`: the chain parameters; its `v_d` is replaced by each entry of `v_d`.
+    - `v_d`: belt speeds, shape (n_vd,), dimensionless.
+    - `ics`: initial conditions batched along the leading axis of their array
+        fields, n_ic of them (for example `localized_family(n_osc)` or
+        `GivenState(y0)` with y0 of shape (n_ic, 2, n_osc)). They are evaluated at
+        each belt speed, so that eq. (8) starts from that speed's steady sliding.
+    - `solver`: a diffrax solver, `Ros34PW2()` by default (`DEFAULT_SOLVER`; a
+        solver of `SPLIT_SOLVERS` gets the friction force as its stiff term).
+    - `options`: `SimulationOptions`.
+    - `engine`: "queue" or "vmap" (see `run_lanes`); by default the queue on a CPU
+        and vmap elsewhere. The result does not depend on it.
+    - `progress`: show a tqdm bar over the trajectories.
+
+    **Returns:**
+
+    An `xarray.Dataset` (see `to_dataset`) with dims (v_d, ic, osc): amplitudes
+    has shape (n_vd, n_ic, n_osc), energy (n_vd, n_ic), and so on, with the
+    parameters, options and solver as attributes.
+
+    **Raises:**
+
+    `ValidationError` for an empty list of belt speeds or of initial conditions, belt
+    speeds that are not finite and > 0, initial conditions of the wrong shape, an
+    unknown solver name or engine; `TypeError` for arguments of the wrong type.
+    """
+    params, solver, options, v_d = check_run(params, solver, options, v_d)
+    if not isinstance(ics, AbstractInitialCondition):
+        raise TypeError(f"ics must be initial conditions (jaxchain.localized_family, "
+                        f"GivenState, ...), got {type(ics).__name__}")
+    n_ic = batch_length(ics)
+    if n_ic == 0:
+        raise ValidationError("ics must hold at least one initial condition, got 0")
+    ics_first = take_lanes(ics, 0)
+    ics_first(with_parameter(params, "v_d", v_d[0]))  # shape check, may raise
+    lanes_vd, lanes_ic = np.repeat(v_d, n_ic), np.tile(np.arange(n_ic), v_d.size)
+    lanes = lane_params(params, lanes_vd.size, v_d=lanes_vd)
+    y0 = initial_states(lanes, take_lanes(ics, lanes_ic))
+    obs = run_lanes(lanes, y0, solver, options, engine=engine, progress=progress)
+    obs = jax.tree_util.tree_map(lambda x: x.reshape(v_d.size, n_ic, *x.shape[1:]), obs)
+    from .datasets import to_dataset  # xarray, imported once the run is done
+
+    return to_dataset(obs, params, v_d, ics, solver, options)
+
+
+

@@ -1,0 +1,337 @@
+"""`sweep`: a grid of parameter values x initial conditions through the engine,
+batch by batch, each batch stored as it finishes; a killed sweep resumes where it
+stopped."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import dataclasses
+import uuid
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import diffrax
+import jax
+import numpy as np
+from jaxtyping import ArrayLike, Float
+from tqdm.auto import tqdm
+
+from .._engine.checks import as_solver, check_options, check_params
+from .._physics.initial import AbstractInitialCondition
+from .._engine.lanes import block_size, expected_cost, run_lanes
+from .._engine.options import SimulationOptions
+from .._physics.params import ChainParams
+from .datasets import observables_variables, run_attributes
+from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
+from .result_store import settings_json, settings_key
+from .._analysis.fronts import propagating_fronts
+from .grid import SweepGrid
+from .zarr_store import SweepStore
+from .._errors import ValidationError
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
+
+#: The kind of result in the key of a sweep's store (`settings_key`).
+KIND = "sweep"
+
+
+def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
+          ics: AbstractInitialCondition | Mapping[str, AbstractInitialCondition],
+          solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
+          options: SimulationOptions = SimulationOptions(), *,
+          where: Callable | str = "v_d", batch_size: int = 64,
+          store: str | Path | None = None, resume: bool = False, overwrite: bool = False,
+          engine: str | None = None, client=None, progress: bool = True) -> xr.Dataset:
+    """Run every (value, initial condition) pair of a grid, batch by batch, and
+    write each batch to a zarr store as it finishes: the bifurcation diagram of
+    Fig. 3(b) of the paper when `where` is the belt speed.
+
+    The trajectories are laid out value by value and cut into batches of
+    `batch_size`; each batch runs through `run_lanes` (all cores), so memory is set
+    by the batch size, never by the size of the grid. With a `store`, a finished
+    batch is written into its own zarr chunks and then flagged done; a batch cut
+    short by a crash or a kill is not flagged, and `resume=True` redoes it while
+    skipping every flagged one. The store is keyed by a hash of every setting that
+    determines the result (`settings_key`: the parameters, the swept values, the
+    initial conditions, the solver, the options and the batch size), and is never
+    resumed with other settings.
+
+    With a Dask `client`, each batch is one task on its cluster (`run_tasks`):
+    the worker that takes it integrates its trajectories with the usual engine, on
+    its own devices, writes them into their region of the store and flags the
+    batch done. The cluster computes the same programs as this process (the same
+    block of the queue engine, chosen here), so on the same kind of device (and
+    XLA_FLAGS) its result equals the in-process sweep to the last bit. A lost
+    worker's batches are run again by Dask; a batch written twice is written
+    identically. If the scheduler goes away, the flagged
+    batches stay in the store, and `resume=True` (in process or on any cluster)
+    runs the others.
+
+    **Arguments:**
+
+    - `params`: the chain parameters; the field `where` is replaced by each value.
+    - `values`: the values of the swept parameter, shape (n_values,),
+        dimensionless.
+    - `ics`: initial conditions, batched along the leading axis of their array
+        fields (for example `localized_family(N, "eq8")`, or `GivenState(y0)` with
+        y0 of shape (n, 2, N)), or a dict of such families by name, for example
+        `{"eq8": localized_family(N, "eq8"), "eq10": localized_family(N, "eq10")}`.
+        They are evaluated with each value, so that eq. (8) starts from that belt
+        speed's steady sliding.
+    - `solver`, `options`: as for `simulate`.
+    - `where`: the swept parameter: a name (`"v_d"`, `"eta_c"`, `"xi"`, `"eps"`,
+        ...) or a lens such as `lambda p: p.eta_c` (see `parameter_name`).
+    - `batch_size`: trajectories per batch (>= 1): the unit of storing and of
+        resuming.
+    - `store`: a folder for the zarr store (conventionally `*.zarr`), or None to
+        keep the results in memory only.
+    - `resume`: continue the sweep in `store`, skipping its finished batches, or
+        an overwrite of `store` with these settings that was cut short.
+    - `overwrite`: replace the sweep that `store` holds by a new one, built
+        beside it (`<store>.overwrite`) and swapped in once every batch is
+        stored: until then the old one stays whole and readable (a killed
+        overwrite is finished by `resume=True` with the same settings, or started
+        again by `overwrite=True`).
+    - `engine`: "queue" or "vmap" (see `run_lanes`); on a cluster, each worker's
+        default by default (the queue on CPUs, vmap on GPUs).
+    - `client`: a `distributed.Client` to run the batches on its cluster (needs
+        a `store` on a file system that this process and every worker share);
+        None to run them in this process.
+    - `progress`: a tqdm bar over the trajectories (over the batches on a
+        cluster), with an ETA.
+
+    **Returns:**
+
+    An `xarray.Dataset` with dims (name, ic, osc), where name is the swept field
+    (`v_d` by default): every observable of `simulate` (amplitudes and the other
+    per-oscillator fields (name, ic, osc); energy, n_halc, num_steps, status
+    (name, ic); n_halc_halves (name, ic, half); y_initial, y_final (name, ic,
+    component, osc)) and `front` (`propagating_fronts`). Along `ic`, the
+    coordinates `family` and `n_excited`. Attributes: every parameter and option,
+    the solver, the settings and their key, and `batches_total`, `batches_done`
+    and `batches_run` (by this call). With a store the variables are read from it
+    lazily (dask arrays; `.load()` reads them all).
+
+    **Raises:**
+
+    `ValidationError` for a bad value (naming the parameter), an empty grid, initial
+    conditions of the wrong shape, batch_size < 1, an existing store without
+    `resume` or `overwrite`, or a store made with other settings (naming the
+    settings that differ), a `store` holding something other than a jaxchain
+    sweep (naming its path; it is left untouched), or a `client` without a
+    `store`. `RuntimeError` when the scheduler of `client` goes away, or when
+    batches the cluster ran are not in the store (the workers do not share its
+    file system).
+    """
+    import xarray as xr
+
+    params = check_params(params)
+    solver = as_solver(solver, params=params)
+    options = check_options(options)
+    grid = SweepGrid.build(params, where, values, ics)
+    if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) \
+            or batch_size < 1:
+        raise ValidationError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+    if resume and overwrite:
+        raise ValidationError("resume and overwrite exclude each other")
+    n, name = grid.n_trajectories, grid.name
+    n_batches = -(-n // batch_size)
+    settings = dict(
+        params={f.name: getattr(params, f.name) for f in dataclasses.fields(params)
+                if f.name != name},
+        where=name, values=grid.values, ics=grid.families, solver=solver,
+        options=options, batch_size=batch_size)
+    key, text = settings_key(KIND, **settings), settings_json(KIND, **settings)
+
+    if client is not None and store is None:
+        raise ValidationError("store: a sweep on a Dask cluster needs a store its workers "
+                              "can reach")
+    st = SweepStore(store) if store is not None else None
+    target = None if st is None else _target(st, key, text, resume, overwrite)
+    done = target.done() if target is not None and target.exists() \
+        else np.zeros(n_batches, dtype=bool)
+    todo = [b for b in range(n_batches) if not done[b]]
+
+    coords = {name: grid.values, "ic": np.arange(grid.n_ics), **grid.ic_coords(),
+              "osc": np.arange(1, params.n_osc + 1),
+              "component": np.array(["x", "v"], dtype=object)}
+    attrs = run_attributes(params, solver, options, ",".join(grid.families), name)
+    attrs |= {"swept": name, "batch_size": batch_size, "settings_key": key,
+              "settings": text}
+    work = _Batches(grid, batch_size, solver, options, engine,
+                    block_size(batch_size, len(jax.local_devices())), coords, attrs)
+    parts = []
+    if client is not None:
+        from .._engine.cluster import run_tasks
+
+        with tqdm(total=n_batches, initial=n_batches - len(todo), desc="sweep",
+                  unit="batch", disable=not progress) as bar:
+            run_tasks(client, _Batches.store, work,
+                      [(target.path.resolve(), b) for b in todo],
+                      [f"sweep-{key[:12]}-batch-{b}-{uuid.uuid4().hex[:8]}" for b in todo],
+                      bar, costs=[work.cost(b) for b in todo])
+        missing = [b for b in todo if not (target.exists() and target.done()[b])]
+        if missing:
+            raise RuntimeError(f"the cluster ran {len(todo)} batches but {len(missing)} "
+                               f"are not in {target.path.resolve()}: its workers write to "
+                               "a file system this process does not see; give a store on "
+                               "a shared one")
+    else:
+        initial = sum(work.size(b) for b in np.flatnonzero(done))
+        with tqdm(total=n, initial=initial, desc="sweep", unit="trajectory",
+                  disable=not progress, smoothing=0.1) as bar:
+            for b in todo:
+                if st is None:
+                    parts.append(work.run(b, bar))
+                else:
+                    work.store(target.path, b, bar)
+    if st is not None and target.path != st.path:  # an overwrite, now complete
+        st.swap_in(target)
+
+    if st is None:
+        flat = xr.concat(parts, "trajectory").assign_coords(coords).assign_attrs(attrs)
+        n_done = n_batches
+    else:
+        flat = st.open()
+        n_done = int(np.sum(flat["batch_done"].values == 1))
+    ds = _on_grid(flat, name, grid.values.size, grid.n_ics)
+    ds.attrs |= {"batches_total": n_batches, "batches_done": n_done,
+                 "batches_run": len(todo), "store": str(st.path) if st else ""}
+    return ds
+
+
+def _target(st: SweepStore, key: str, text: str, resume: bool,
+            overwrite: bool) -> SweepStore:
+    """The store that the batches of the sweep of `key` go to, for the store `st`
+    asked for:
+
+    - nothing at `st`: `st` itself, a new store.
+    - `overwrite`: `st` itself if it holds nothing, else a new store beside it
+        (`st.pending()`, replacing any earlier unfinished overwrite), swapped in
+        when complete; the old one stays whole until then.
+    - `resume`: `st` if it holds this sweep; else the unfinished overwrite of
+        this sweep beside it (`pending`), if there is one, to finish and swap in.
+
+    A swap cut short by a kill is finished first (`recover`).
+
+    **Raises:**
+
+    `ValidationError` naming the path when something other than a jaxchain sweep
+    store is at `st` (or at `st.pending()` on overwrite), which is left untouched;
+    when `st` holds a sweep of other settings on `resume` (naming them); when it
+    holds a sweep and neither `resume` nor `overwrite` is given.
+    """
+    st.recover()
+    st.require_sweep("overwrite" if overwrite else "resume" if resume else "write into")
+    if not st.is_sweep():
+        return st
+    pending = st.pending()
+    if overwrite:
+        pending.require_sweep("overwrite")
+        if pending.occupied():
+            pending.remove()
+        return pending
+    if not resume:
+        raise ValidationError(f"store {st.path} exists: resume it or overwrite it")
+    if st.key() != key and pending.key() == key:
+        return pending
+    st.check(key, text)
+    return st
+
+
+@dataclasses.dataclass(frozen=True)
+class _Batches:
+    """The batches of a sweep: batch b holds the trajectories [b B, (b + 1) B) of
+    the grid, B the batch size, run through `run_lanes` with a fixed `block`
+    (chosen by the process that plans the sweep, so that a batch is the same
+    compiled program wherever it runs)."""
+
+    grid: SweepGrid
+    batch_size: int
+    solver: diffrax.AbstractSolver
+    options: SimulationOptions
+    engine: str | None
+    block: int
+    coords: dict
+    attrs: dict
+
+    def size(self, b: int) -> int:
+        return min(self.grid.n_trajectories, (b + 1) * self.batch_size) - b * self.batch_size
+
+    def lanes(self, b: int):
+        start = b * self.batch_size
+        return self.grid.lanes(start, start + self.size(b))
+
+    def cost(self, b: int) -> float:
+        """A proxy of batch b's cost: the sum of its lanes' `expected_cost`."""
+        return float(np.sum(expected_cost(*self.lanes(b))))
+
+    def run(self, b: int, progress: bool | tqdm = False, devices=None) -> xr.Dataset:
+        """Batch b's observables, dims (trajectory, ...), on `devices` (all of this
+        process's by default)."""
+        import xarray as xr
+
+        lane_params, y0 = self.lanes(b)
+        obs = run_lanes(lane_params, y0, self.solver, self.options, engine=self.engine,
+                        block=self.block, progress=progress, devices=devices)
+        return xr.Dataset(observables_variables(obs, ("trajectory",)))
+
+    def store(self, path: Path, b: int, progress: bool | tqdm = False,
+              devices=None) -> None:
+        """Run batch b and write it into its region of the store at `path`
+        (creating the store's layout if no batch made it yet), then flag it done:
+        the task of the Dask route.
+
+        **Raises:**
+
+        `RuntimeError` when the store at `path` holds another sweep (it was
+        overwritten with other settings while this batch ran), before and after
+        making the layout: a batch of a cancelled run never lands in another."""
+        batch = self.run(b, progress, devices)
+        st = SweepStore(path)
+        if not st.exists():
+            st.create(batch, self.grid.n_trajectories, self.batch_size, self.coords,
+                      self.attrs)
+        if st.settings()[0] != self.attrs["settings_key"]:
+            raise RuntimeError(f"{path} now holds another sweep: batch {b} of this one "
+                               "is not written")
+        st.write(b, b * self.batch_size, batch)
+
+
+def open_sweep(store: str | Path) -> xr.Dataset:
+    """The sweep stored in `store`, read lazily (dask arrays), as `sweep` returns
+    it. Batches that have not finished read as NaN (floats), -1 (status, n_halc)
+    or False, and `batches_done` < `batches_total`.
+
+    **Raises:**
+
+    `ValidationError` when `store` holds no sweep.
+    """
+    st = SweepStore(store)
+    if not st.is_sweep():
+        raise ValidationError(f"store {store} holds no sweep")
+    flat = st.open()
+    name = flat.attrs["swept"]
+    ds = _on_grid(flat, name, flat.sizes[name], flat.sizes["ic"])
+    done = flat["batch_done"].values == 1
+    ds.attrs |= {"batches_total": done.size, "batches_done": int(done.sum()),
+                 "store": str(st.path)}
+    return ds
+
+
+def _on_grid(flat: xr.Dataset, name: str, n_values: int, n_ics: int) -> xr.Dataset:
+    """The flat `trajectory` axis of a stored sweep as the grid (name, ic), with
+    the propagating fronts flagged."""
+    import xarray as xr
+
+    data = {}
+    for k, var in flat.data_vars.items():
+        if "trajectory" in var.dims:
+            data[k] = ((name, "ic", *var.dims[1:]),
+                       var.data.reshape(n_values, n_ics, *var.shape[1:]), var.attrs)
+    coords = {c: v for c, v in flat.coords.items() if "trajectory" not in v.dims}
+    ds = xr.Dataset(data, coords=coords, attrs=dict(flat.attrs))
+    ds["front"] = propagating_fronts(ds)
+    return ds
