@@ -58,7 +58,7 @@ def compare_n_osc(settings: Settings, env: dict, start: float) -> tuple[list[Row
     base = results[0]
     rows = []
     for r in results:
-        fails = "" if r["status"] == 0 else f"; STATUS {r['status']}"
+        fails = "" if r["status"] == jc.Status.ok else f"; {jc.Status(r['status'])}"
         rows.append(Row(
             f"4. n_osc = {r['n_osc']}: µs per step",
             f"{base['us_per_step']:.2f} µs (n_osc = {base['n_osc']})",

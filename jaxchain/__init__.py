@@ -68,7 +68,9 @@ from ._studies.scenes import (
 )
 from ._sweeps.ensemble import ensemble as ensemble
 from ._errors import ValidationError as ValidationError
-from ._engine.status import failure_hint as failure_hint
+from ._engine.status import (
+    Status as Status, failure_hint as failure_hint, flag_attributes as flag_attributes,
+)
 from ._engine.lanes import lane_params as lane_params
 from ._studies.mistuning.pattern_design import (
     intentional_mistuning as intentional_mistuning, MistuningDesign as MistuningDesign,
@@ -86,7 +88,7 @@ from ._nonsmooth.existence import (
 )
 from ._nonsmooth.options import NonsmoothOptions as NonsmoothOptions
 from ._nonsmooth.solve import (
-    NONSMOOTH_STATUS as NONSMOOTH_STATUS, NonsmoothObservables as NonsmoothObservables,
+    NonsmoothObservables as NonsmoothObservables,
     simulate_nonsmooth as simulate_nonsmooth,
 )
 from ._nonsmooth.switching import SWITCH_KINDS as SWITCH_KINDS
@@ -164,7 +166,7 @@ from ._plots.work_precision import plot_work_precision as plot_work_precision
 from ._sweeps.datasets import save_dataset as save_dataset, to_dataset as to_dataset
 from ._setup import configure as configure
 from ._engine.simulate import (
-    STATUS as STATUS, integrate as integrate, Observables as Observables,
+    integrate as integrate, Observables as Observables,
     observe as observe, simulate as simulate,
 )
 from ._studies.snake import localized_branches as localized_branches

@@ -115,8 +115,8 @@ def test_work_precision_failed_runs_exit_1(tmp_path, monkeypatch, capsys):
     rows = [row | {"rtol": "1e-06", "status": "ok", "wall_s": "0.1", "num_steps": "90",
                    "amplitude_error": "1e-3", "energy_error": "1e-3",
                    "trajectory_error": "1e-3", "amplitude_max": "1.7"},
-            row | {"rtol": "1e-08", "status": "max_steps reached", "wall_s": "0.3"},
-            row | {"rtol": "1e-10", "status": "skipped: max_steps at rtol 1e-08"}]
+            row | {"rtol": "1e-08", "status": "max_steps_reached", "wall_s": "0.3"},
+            row | {"rtol": "1e-10", "status": "not_run: max_steps at rtol 1e-08"}]
     monkeypatch.setattr(cli_work_precision, "work_precision", lambda *a, **k: rows)
     code = main(["work-precision", "--scenes", "single", "--solvers", "tsit5", "--rtols",
                  "1e-6,1e-8,1e-10", "--eps", "1e-2", "--no-scipy", "--json",
@@ -213,7 +213,7 @@ def test_failed_runs_give_valid_json_with_nulls_and_exit_1(tmp_path, capsys):
     res = json.loads(captured.out)  # strict JSON: NaN would not parse here
     err = captured.err.strip()
     assert len(err.splitlines()) == 1 and "2 of 2 trajectories failed" in err
-    assert res["status"][0].startswith("max_steps")
+    assert res["status"] == [jc.Status.max_steps_reached.name] * 2
     assert res["energy"] == [None, None] and res["n_halc"] == [-1, -1]
 
 

@@ -59,7 +59,7 @@ def test_simulate_compiles_once_for_five_eps(monkeypatch):
         params = jc.ChainParams(n_osc=2, eps=eps)
         y0 = np.asarray(jc.OutOfPhaseExcitation.eq8([True, False])(params))
         obs = jc.simulate(params, y0, options=options)
-        assert int(obs.status) == 0 and int(obs.n_halc) == 1
+        assert obs.status == jc.Status.ok and int(obs.n_halc) == 1
         ref = solve_ivp(reference_rhs(params), (0.0, options.t_end), y0.ravel(),
                         method="LSODA", rtol=1e-10, atol=1e-12)
         assert np.allclose(np.ravel(obs.y_final), ref.y[:, -1], rtol=0, atol=1e-6), eps

@@ -81,7 +81,7 @@ def test_solution_matches_scipy_within_the_tolerance(controller):
     obs = jc.simulate(p, y0, options=opts)
     ref = solve_ivp(reference_rhs(p), (0.0, 60.0), np.asarray(flat(y0)), method="DOP853",
                     rtol=1e-12, atol=1e-13)
-    assert int(obs.status) == 0
+    assert obs.status == jc.Status.ok
     assert np.allclose(flat(obs.y_final), ref.y[:, -1], atol=1e-7 * 1e3)
 
 

@@ -67,7 +67,8 @@ def test_good_lanes_are_kept_beside_failing_ones(engine):
     options = GOOD_AND_FAILING
     ds = jc.ensemble(p, [1.5], jc.GivenState(lanes), options=options, engine=engine,
                      progress=False).isel(v_d=0)
-    assert ds["status"].values.tolist() == [0, 3, 1, 0]  # ok, non-finite, max_steps, ok
+    s = jc.Status
+    assert ds["status"].values.tolist() == [s.ok, s.non_finite_state, s.max_steps_reached, s.ok]
     for bad in (1, 2):
         assert np.all(np.isnan(ds["amplitudes"][bad])) and int(ds["n_halc"][bad]) == -1
         assert not ds["on_halc"][bad].any() and np.isnan(float(ds["energy"][bad]))

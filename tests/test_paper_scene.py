@@ -32,7 +32,7 @@ def test_fig4_staircase_at_vd_1_5():
     ds = jc.ensemble(jc.ChainParams(), [1.5], jc.localized_family(20), options=settled,
                      progress=False)
     n_halc, energy = ds["n_halc"].values[0], ds["energy"].values[0]
-    assert np.all(ds["status"].values == 0)
+    assert np.all(ds["status"].values == jc.Status.ok)
     assert n_halc[:18].tolist() == list(range(1, 19))
     assert n_halc[18:].tolist() == [20, 20]
     assert abs(energy[18] / energy[19] - 1) < 1e-3

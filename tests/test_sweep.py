@@ -93,7 +93,7 @@ def test_a_half_written_batch_is_redone(tmp_path, uninterrupted, monkeypatch):
     assert SweepStore(store).done().tolist() == [True, False, False]
     partial = jc.open_sweep(store)
     assert partial.attrs["batches_done"] == 1
-    assert np.all(partial["status"].values.ravel()[BATCH:] == -1)  # not read as valid
+    assert np.all(partial["status"].values.ravel()[BATCH:] == jc.Status.not_run)
 
     resumed = _api_sweep(store=store, resume=True)
     assert resumed.attrs["batches_run"] == 2

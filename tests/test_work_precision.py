@@ -118,8 +118,8 @@ def test_resume_reads_back_only_rows_of_equal_settings(tmp_path, monkeypatch):
 def test_max_steps_is_recorded_and_tighter_rtols_skipped(tmp_path):
     rows = wp.work_precision(tmp_path / "wp.csv", ["single"], ["tsit5"], [1e-4, 1e-6],
                              [1e-4], scipy=False, reference_points=False, max_steps=50)
-    assert rows[0]["status"] == "max_steps reached"
-    assert rows[1]["status"].startswith("skipped")
+    assert rows[0]["status"] == jc.Status.max_steps_reached.name
+    assert rows[1]["status"] == f"{jc.Status.not_run}: max_steps at eps 0.0001"
 
 
 def test_work_precision_command(tmp_path, capsys, monkeypatch):

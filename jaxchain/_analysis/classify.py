@@ -8,6 +8,7 @@ import numpy as np
 from .states import (FAILED, IRREGULAR, PERIODIC, STEADY_SLIDING, UNDECIDED,
                        ClassTolerances)
 from .delays import delay_spread, reference_oscillator, time_delays
+from .._engine.status import Status
 
 #: The classes of a state in the scenes: its regularity, or steady sliding, or failed
 #: (the vocabulary of `jaxchain._analysis.states`).
@@ -55,7 +56,7 @@ def classify(peak_times, on_halc, n_halc: int, status: int, lyapunov: float,
     """
     out = {"class_delays": FAILED, "class_lyapunov": FAILED,
            "delay_spread": math.nan, "delay_period": 0, "ref": -1}
-    if status != 0:
+    if status != Status.ok:
         return out | {"class": FAILED}
     on_halc = np.asarray(on_halc, dtype=bool)
     ref = reference_oscillator(on_halc, boundary)

@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._engine.status import Status
+
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr
 
@@ -42,7 +44,7 @@ def propagating_fronts(ds: xr.Dataset) -> xr.DataArray:
     else:
         since_start = xr.zeros_like(within)
     front = xr.where(within != 0, within, since_start)
-    front = xr.where(ds["status"] == 0, front, 0).astype(np.int8)
+    front = xr.where(ds["status"] == Status.ok, front, 0).astype(np.int8)
     front.attrs = {"long_name": "propagating front: +1 stick-slip invades the sliding "
                                 "oscillators, -1 it recedes, 0 localized",
                    "flag_values": [-1, 0, 1]}
@@ -91,7 +93,7 @@ def front_fractions(ds: xr.Dataset) -> xr.DataArray:
     """
     import xarray as xr
 
-    ok = ds["status"] == 0
+    ok = ds["status"] == Status.ok
     count = ok.sum("ic")
     out = [((ds["front"] == sign) & ok).sum("ic") / count.where(count > 0)
            for sign in (1, -1)]

@@ -14,6 +14,7 @@ from tqdm.auto import tqdm
 
 from .._physics.params import ChainParams, parameter_value, with_parameter
 from .._errors import ValidationError
+from .._engine.status import Status
 
 
 class ContinuationProblem(eqx.Module):
@@ -139,7 +140,8 @@ class Branch(eqx.Module):
     - `folds`: indices into the converged points after which dp/ds changes sign.
     - `stability_changes`: indices into the converged points after which `stable`
         changes.
-    - `stop`: why the run ended.
+    - `stop`: why the run ended, a `Status`: `max_points_reached`,
+        `left_parameter_range` or `newton_failed`.
     """
 
     p: Float[Array, " n_points"]
@@ -150,7 +152,7 @@ class Branch(eqx.Module):
     stable: Bool[Array, " n_converged"]
     folds: tuple[int, ...] = eqx.field(static=True)
     stability_changes: tuple[int, ...] = eqx.field(static=True)
-    stop: str = eqx.field(static=True)
+    stop: Status = eqx.field(static=True)
 
     @property
     def tangent_p(self) -> Float[Array, " n_points"]:
@@ -232,7 +234,7 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
     start = jnp.zeros(z.size).at[-1].set(float(options.direction))
     tangent = _tangent(problem, z, start)
     zs, tangents, converged, records = [z], [tangent], [True], [_record(problem, z)]
-    ds, stop = options.ds, f"max_points = {options.max_points} reached"
+    ds, stop = options.ds, Status.max_points_reached
     bar = tqdm(total=options.max_points, desc="continuation", unit="point",
                disable=not progress, leave=False)
     for _ in range(options.max_points - 1):
@@ -245,7 +247,7 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
             converged.append(False)
             ds /= 2
             if ds < options.ds_min:
-                stop = f"Newton's method failed with ds < ds_min = {options.ds_min}"
+                stop = Status.newton_failed
                 break
             continue
         z, tangent = new, _tangent(problem, new, tangent)
@@ -256,7 +258,7 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
         if int(steps) <= options.fast_steps:
             ds = min(1.5 * ds, options.ds_max)
         if not options.p_min <= float(z[-1]) <= options.p_max:
-            stop = "p left [p_min, p_max]"
+            stop = Status.left_parameter_range
             break
     bar.close()
     zs, tangents = jnp.stack(zs), jnp.stack(tangents)

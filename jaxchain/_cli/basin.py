@@ -10,6 +10,7 @@ import numpy as np
 from .._studies.basin.basin import BASIN_OPTIONS, basin_stability
 from .._studies.basin.sampling import Box
 from .._engine.options import SimulationOptions
+from .._engine.status import Status
 from .._plots.basin import plot_basin_stability, plot_halc_histogram
 from .._physics.record import chain_record
 from .._sweeps.atomic import save_figure
@@ -149,7 +150,7 @@ def run(args) -> None:
             print(f"v_d = {v:g}: " + "; ".join(parts)
                   + f" (class changed at 2 t_end: {ds['changed_fraction'].values[i]:.0%})")
         print(f"{wall:.1f} s; wrote {args.out / 'basin.nc'}, basin.png, basin_halc.png")
-    failed = int((ds["status"].values != 0).sum())
+    failed = int((ds["status"].values != Status.ok).sum())
     if failed:
         raise RunsFailed(f"{failed} of {ds['status'].size} runs failed; they are counted "
                          "in the class 'failed'")

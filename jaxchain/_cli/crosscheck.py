@@ -8,6 +8,7 @@ import time
 from .._studies.crosscheck import CROSSCHECK_ICS, CROSSCHECK_VD, crosscheck
 from .._nonsmooth.options import NonsmoothOptions
 from .._engine.options import SimulationOptions
+from .._engine.status import Status
 from .._physics.params import with_parameter
 from .._plots.crosscheck import plot_crosscheck
 from .._sweeps.datasets import save_dataset
@@ -97,7 +98,8 @@ def run(args) -> None:
     png = args.out / "crosscheck.png"
     save_figure(plot_crosscheck(ds), png)
 
-    failed = int(((ds["status_smoothed"] != 0) | (ds["status_reference"] != 0)).sum())
+    failed = int(((ds["status_smoothed"] != Status.ok)
+                  | (ds["status_reference"] != Status.ok)).sum())
     rows = []
     for i in range(ds.sizes["case"]):
         c = ds.isel(case=i)

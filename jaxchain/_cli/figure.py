@@ -17,7 +17,7 @@ from .._plots.dynamics import (plot_orbit_diagram, plot_phase_portraits,
                                plot_states_and_orbits, plot_time_delays, plot_time_series)
 from .._plots.localized import plot_localized_states
 from .._sweeps.datasets import save_dataset
-from .._engine.simulate import STATUS
+from .._engine.status import status_names
 from .._physics.record import chain_record
 from .._sweeps.atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
@@ -125,7 +125,7 @@ def run(args) -> None:
     png = args.out / f"figure{args.name}.png"
     save_figure(fig, png)
 
-    status = [STATUS[int(s)].split(":")[0] for s in np.ravel(ds["status"].values)]
+    status = status_names(np.ravel(ds["status"].values)).tolist()
     report = {"figure": args.name, "v_d": v_d, "ics": ics, "n_osc": params.n_osc,
               "chain": chain_record(params),
               "eps": args.eps, "solver": args.solver, "quick": args.quick,

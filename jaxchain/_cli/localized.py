@@ -10,7 +10,7 @@ import numpy as np
 from .._sweeps.ensemble import ensemble
 from .._physics.initial import FAMILIES, localized_family
 from .._engine.options import SimulationOptions
-from .._engine.simulate import STATUS
+from .._engine.status import status_names
 from .._physics.record import chain_record
 from .._sweeps.atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
@@ -71,7 +71,7 @@ def run(args) -> None:
     save_figure(plot_localized_states(ds), png)
 
     row = ds.isel(v_d=0)
-    status = [STATUS[int(s)].split(":")[0] for s in row["status"].values]
+    status = status_names(row["status"].values).tolist()
     if args.json:
         print(json.dumps(json_ready({
             "v_d": args.vd,

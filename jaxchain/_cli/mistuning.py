@@ -14,6 +14,7 @@ from .._studies.mistuning.summary import (edge_correlations, halc_correlation, l
                                   localized_fraction, staircase_fraction,
                                   vibrating_fraction)
 from .._engine.options import SimulationOptions
+from .._engine.status import Status
 from .._physics.record import chain_record
 from .._plots.mistuning import plot_mistuned_states, plot_mistuning_study, plot_site_edges
 from .._sweeps.atomic import save_figure, write_text
@@ -154,8 +155,9 @@ def run(args) -> None:
         print(text)
     else:
         _print_summary(s)
-    failed = int((study["staircase_status"].values > 0).sum()
-                 + (study["basin_status"].values > 0).sum())
+    ran = (Status.ok, Status.not_run)
+    failed = int(np.isin(study["staircase_status"].values, ran, invert=True).sum()
+                 + np.isin(study["basin_status"].values, ran, invert=True).sum())
     if failed:
         raise RunsFailed(f"{failed} runs failed; they are left out of the shares "
                          f"(status in {args.out / 'mistuning.nc'})")
@@ -177,7 +179,8 @@ def summary(study) -> dict:
     stair, basin, corr = staircase_fraction(study), vibrating_fraction(study), \
         halc_correlation(study)
     local = localized_fraction(study)
-    n_halc = np.where(study["basin_status"].values == 0, study["basin_n_halc"].values, np.nan)
+    n_halc = np.where(study["basin_status"].values == Status.ok,
+                      study["basin_n_halc"].values, np.nan)
     rows = []
     for i, sigma in enumerate(study["sigma"].values):
         rows.append({

@@ -11,7 +11,7 @@ import numpy as np
 from .._physics.initial import FAMILIES, localized_family
 from .._engine.options import SimulationOptions
 from .._plots.sweep import plot_bifurcation_diagram
-from .._engine.simulate import STATUS
+from .._engine.status import Status, status_names
 from .._analysis.fronts import front_fractions, front_ranges
 from .._sweeps.sweep import sweep
 from .._physics.record import chain_record
@@ -136,9 +136,8 @@ def run(args) -> None:
     save_figure(plot_bifurcation_diagram(ds), png)
 
     v_d = ds["v_d"].values
-    status = np.array([[STATUS[s].split(":")[0] if s >= 0 else "not run" for s in row]
-                       for row in ds["status"].values])
-    ok = ds["status"].values == 0
+    status = status_names(ds["status"].values)
+    ok = ds["status"].values == Status.ok
     n_halc = ds["n_halc"].values
     states = [sorted(set(n_halc[i][ok[i]].tolist())) for i in range(v_d.size)]
     fractions = front_fractions(ds)

@@ -14,6 +14,7 @@ from .._studies.work_precision import (SCENES, WP_EPS, WP_RTOLS, WP_SOLVERS, rec
 from .._sweeps.atomic import save_figure
 from .common import (RunsFailed, UsageError, comma_list, json_ready, positive_int,
                      writable_folder)
+from .._engine.status import Status
 
 HELP = "error against run time of every solver and eps (work-precision diagram)"
 DESCRIPTION = f"""\
@@ -99,7 +100,7 @@ def run(args) -> None:
                 "rtol": float(best["rtol"]), "atol": float(best["atol"]),
                 "wall_s": float(best["wall_s"]),
                 "amplitude_error": float(best["amplitude_error"])}
-    failed = sum(r["status"] not in ("ok",) and not r["status"].startswith("skipped")
+    failed = sum(r["status"].split(":")[0] not in (Status.ok.name, Status.not_run.name)
                  for r in rows)
     if args.json:
         print(json.dumps(json_ready({"csv": str(csv_path), "figures": figures,

@@ -12,7 +12,7 @@ import numpy as np
 
 #: Part of every key. Raise it whenever what a stored result holds, or how it is
 #: computed, changes: every result stored before is then recomputed.
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 
 
 def canonical(obj):

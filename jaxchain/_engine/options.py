@@ -40,8 +40,8 @@ class SimulationOptions(eqx.Module):
         by `chunk_length / sample_dt`, never by `t_end`.
     - `max_steps`: step budget of one chunk.
     - `dtmin`: a run that spends a chunk's `max_steps` on steps shorter than this
-        on average fails with the status "step size collapsed" (`STATUS`) rather
-        than "max_steps reached": its steps have stopped advancing t (at t = 15000
+        on average fails with `Status.step_size_collapsed` rather than
+        `Status.max_steps_reached`: its steps have stopped advancing t (at t = 15000
         a float64 resolves 2e-12). It does not limit the step-size controller,
         whose steps are those of diffrax's `PIDController` alone.
 

@@ -13,7 +13,7 @@ from .checks import as_solver, check_options, check_params
 from .compat import errors_as_nan
 from .solver.controller import step_size_controller
 from .._physics.custom_types import State
-from .status import failure_hint
+from .status import Status, failure_hint
 from .._physics.initial import AbstractInitialCondition, GivenState
 from .._physics.model import split_vector_field, vector_field
 from .observers.base import AbstractObserver, Chunk
@@ -24,18 +24,6 @@ from .progress import progress_bar, tick
 from .solver.rosenbrock import Ros34PW2
 from .solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._errors import ValidationError
-
-#: Status codes of a trajectory, with what to do about each.
-STATUS = (
-    "ok",
-    "max_steps reached: raise max_steps or use a larger eps",
-    "solver failed (for example a failed implicit solve): tighten the tolerances, "
-    "use another solver or a larger eps",
-    "non-finite state: the initial state or the trajectory is not finite; check them",
-    "step size collapsed: max_steps spent on steps shorter than options.dtmin on "
-    "average; use a larger eps, looser tolerances or another solver",
-)
-
 
 class Observables(eqx.Module):
     """What one run observes over [transient, t_end]. Under `ensemble` every field
@@ -57,9 +45,10 @@ class Observables(eqx.Module):
     - `y_initial`, `y_final`: state at t = 0 and at t_end (where the run stopped, if
         it failed), shape (2, n_osc).
     - `num_steps`: accepted plus rejected steps of the whole run, shape ().
-    - `status`: index into `STATUS` (0 is success), shape ().
+    - `status`: the `Status` of the run (its integer value; `Status.ok` is
+        success), shape ().
 
-    A failed run (status != 0) gives no partial answers: amplitudes, energy and the
+    A failed run (status not `Status.ok`) gives no partial answers: amplitudes, energy and the
     extrema are NaN, `on_halc` is False and `n_halc` is -1.
 
     All quantities are dimensionless (eqs. (4)-(6)).
@@ -81,11 +70,14 @@ class Observables(eqx.Module):
 
 
 def _status_code(result, collapsed) -> Int[Array, ""]:
-    """The `STATUS` code of one chunk's diffrax result; a chunk out of steps whose
-    steps had `collapsed` (shorter than `options.dtmin` on average) is code 4."""
-    return jnp.where(result == diffrax.RESULTS.successful, 0,
+    """The `Status` of one chunk's diffrax result; a chunk out of steps whose steps
+    had `collapsed` (shorter than `options.dtmin` on average) is
+    `Status.step_size_collapsed`."""
+    out_of_steps = jnp.where(collapsed, Status.step_size_collapsed,
+                             Status.max_steps_reached)
+    return jnp.where(result == diffrax.RESULTS.successful, Status.ok,
                      jnp.where(result == diffrax.RESULTS.max_steps_reached,
-                               jnp.where(collapsed, 4, 1), 2))
+                               out_of_steps, Status.solver_failed))
 
 
 #: Solvers that take eq. (5) split in two: IMEX solvers treat the friction force
@@ -112,7 +104,7 @@ def _advance(terms_, solver, args, options, observers, progress, tangent, carry,
     y, solver_state, controller_state, made_jump, states, steps, status = carry
     # Once a chunk has failed the rest of the run is skipped (a zero-length solve),
     # so a failed lane does not hold up the others under vmap.
-    t1 = jnp.where(status == 0, t1, t0)
+    t1 = jnp.where(status == Status.ok, t1, t0)
     subs = [diffrax.SubSaveAt(t1=True)]
     ts = None
     if n_samples:
@@ -146,8 +138,9 @@ def _advance(terms_, solver, args, options, observers, progress, tangent, carry,
     # Where a failed solve stopped: its t1 save holds the time it reached.
     mean_step = (sol.ts[0][-1] - t0) / jnp.maximum(sol.stats["num_steps"], 1)
     code = jnp.where(jnp.all(jnp.isfinite(state_end)),
-                     _status_code(sol.result, mean_step < options.dtmin), 3)
-    status = jnp.where(status == 0, code, status)
+                     _status_code(sol.result, mean_step < options.dtmin),
+                     Status.non_finite_state)
+    status = jnp.where(status == Status.ok, code, status)
     if progress:
         tick(jnp.ravel(y_end)[0])
     return (y_end, sol.solver_state, sol.controller_state, sol.made_jump, states,
@@ -220,9 +213,9 @@ def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
 
     (results, y_final, num_steps, status): one dict per observer (NaN, -1 or False
     where the run failed), the state at t_end (or where it stopped), the steps
-    taken and the status code (`STATUS`).
+    taken and the `Status` (its integer value).
     """
-    status = jnp.where(jnp.all(jnp.isfinite(y0)), 0, 3)
+    status = jnp.where(jnp.all(jnp.isfinite(y0)), Status.ok, Status.non_finite_state)
     states = tuple(o.init(y0, args, options) for o in observers)
     lyapunov = [o for o in observers if o.needs_tangent]
     tangent = bool(lyapunov)
@@ -249,7 +242,7 @@ def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
     y_final, _, _, _, states, steps, status = carry
     if tangent:
         y_final = y_final[0]
-    ok = status == 0
+    ok = status == Status.ok
     results = tuple(
         {k: _no_partial_answers(jnp.asarray(v), ok)
          for k, v in o.result(s, args, options).items()}
@@ -366,8 +359,8 @@ def _single(fn, name, params, y0, solver, options, extra, throw, progress):
     with progress_bar(n_ticks(options), name, progress):
         out = fn(params, y, solver, options, *extra, progress)
     status = int(out["status"] if isinstance(out, dict) else out.status)
-    if throw and status != 0:
-        raise RuntimeError(f"{STATUS[status].split(':')[0]}: "
+    if throw and status != Status.ok:
+        raise RuntimeError(f"{Status(status)}: "
                            f"{failure_hint(status, params, solver, options)}")
     return out
 

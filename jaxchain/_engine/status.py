@@ -1,5 +1,10 @@
-"""What to do about a failed trajectory: a hint specific to its status, its
-parameters, its solver and its options."""
+"""The one vocabulary of how a run ended: `Status`, an enumeration with a message
+per member, in the style of diffrax's, lineax's and optimistix's `RESULTS`, and
+beside it the hint for each failure (`failure_hint`). Statuses are stored as their
+integer values (in the arrays of a run, under vmap, in zarr and netCDF files, with
+CF flag attributes: `flag_attributes`)."""
+
+import enum
 
 import diffrax
 import numpy as np
@@ -7,6 +12,76 @@ import numpy as np
 from .options import SimulationOptions
 from .._physics.params import ChainParams
 from .solver.registry import DEFAULT_SOLVER, SOLVERS, stick_stiffness
+
+
+class Status(enum.IntEnum):
+    """How a run ended. An `int` (an `enum.IntEnum`): a status lives in integer
+    arrays (one per trajectory under `vmap`, in zarr stores and netCDF files), and a
+    member compares with them inside and outside `jax.jit`
+    (`status == Status.ok`). Each member carries its `message`.
+
+    - For a trajectory of the smoothed engine (`simulate`, `ensemble`, `sweep`) and
+        of the non-smooth reference (`simulate_nonsmooth`): `ok`,
+        `max_steps_reached`, `solver_failed`, `non_finite_state`,
+        `step_size_collapsed`, and for the reference `event_not_resolved`; a cell of
+        a sweep that has not run yet is `not_run`.
+    - For a continuation (`Branch.stop`): `max_points_reached` and
+        `left_parameter_range` end a branch as asked, `newton_failed` ends it early.
+
+    `failure_hint` says what to do about a failed trajectory, for its parameters,
+    solver and options.
+    """
+
+    message: str
+
+    def __new__(cls, value: int, message: str):
+        member = int.__new__(cls, value)
+        member._value_ = value
+        member.message = message
+        return member
+
+    not_run = -1, "not run yet (a sweep's cell whose batch has not finished)"
+    ok = 0, "ok"
+    max_steps_reached = 1, ("max_steps reached in one chunk: raise max_steps or use a "
+                            "larger eps")
+    solver_failed = 2, ("solver failed (for example a failed implicit solve): tighten "
+                        "the tolerances, use another solver or a larger eps")
+    non_finite_state = 3, ("non-finite state: the initial state or the trajectory is "
+                           "not finite; check them")
+    step_size_collapsed = 4, ("step size collapsed: max_steps spent on steps shorter "
+                              "than options.dtmin on average; use a larger eps, looser "
+                              "tolerances or another solver")
+    event_not_resolved = 5, ("event not resolved: max_events reached in one chunk "
+                             "(chattering), or an event located where no guard is "
+                             "within switch_tol; raise max_events or switch_tol")
+    max_points_reached = 6, "max_points reached"
+    newton_failed = 7, "Newton's method failed with ds < ds_min"
+    left_parameter_range = 8, "the parameter left [p_min, p_max]"
+
+    def __str__(self) -> str:
+        return self.name
+
+
+#: The statuses of a trajectory, as its arrays and files hold them.
+RUN_STATUSES = (Status.not_run, Status.ok, Status.max_steps_reached,
+                Status.solver_failed, Status.non_finite_state,
+                Status.step_size_collapsed, Status.event_not_resolved)
+
+
+def status_names(codes) -> np.ndarray:
+    """The member names of integer status codes, elementwise (for tables)."""
+    codes = np.asarray(codes)
+    return np.vectorize(lambda c: Status(int(c)).name, otypes=[object])(codes)
+
+
+def flag_attributes(statuses=RUN_STATUSES) -> dict:
+    """CF attributes of a status variable (CF conventions, section 3.5, flags):
+    `flag_values`, `flag_meanings` (the member names, blank-separated) and a
+    `comment` with each member's message."""
+    return {"flag_values": np.array([int(s) for s in statuses], dtype=np.int64),
+            "flag_meanings": " ".join(s.name for s in statuses),
+            "comment": "; ".join(f"{s.name}: {s.message}" for s in statuses)}
+
 
 #: Stability bound of an explicit Runge-Kutta step on a decaying mode, h |lambda| <~
 #: 3 (Tsit5, Dopri5: 3.3 and 3.3 on the negative real axis; Hairer & Wanner,
@@ -29,24 +104,26 @@ def _explicit(solver) -> bool:
 
 def failure_hint(status: int, params: ChainParams, solver: diffrax.AbstractSolver,
                  options: SimulationOptions) -> str:
-    """A hint for a trajectory of `status` (`STATUS`), naming the setting to change.
+    """A hint for a trajectory of `status`, naming the setting to change.
 
     **Arguments:**
 
-    - `status`: the status code of the run, 1-4 (0 gives "").
+    - `status`: the `Status` of the run (or its integer value).
     - `params`, `solver`, `options`: those of the run.
 
     **Returns:**
 
-    One sentence, or "" for status 0.
+    One sentence; "" for `Status.ok`, and the member's message for a status that
+    has no hint of its own.
     """
+    status = Status(int(status))
     eps = float(np.max(np.asarray(params.eps)))
     name = _name(solver)
     stiff = (f"eps = {eps:g} makes the stick phase stiff (stiffness mu_st/eps = "
              f"{stick_stiffness(params):.3g})")
-    if status == 0:
+    if status is Status.ok:
         return ""
-    if status == 1:
+    if status is Status.max_steps_reached:
         if _explicit(solver):
             step = EXPLICIT_STABILITY / stick_stiffness(params)
             return (f"{stiff}: an explicit solver ({name}) may need steps as small as "
@@ -55,14 +132,17 @@ def failure_hint(status: int, params: ChainParams, solver: diffrax.AbstractSolve
         return (f"{name} ran out of its {options.max_steps} steps in one chunk of "
                 f"length {options.chunk_length:g} ({stiff}); raise max_steps, shorten "
                 f"chunk_length or use eps >= {10 * eps:g}")
-    if status == 2:
+    if status is Status.solver_failed:
         return (f"{name}'s implicit stage solve failed ({stiff}); use "
                 f"solver='{DEFAULT_SOLVER}', whose linearly implicit steps need no "
                 f"Newton iteration, or tighter tolerances")
-    if status == 3:
+    if status is Status.non_finite_state:
         return ("the state became non-finite: check that the initial state is finite, "
                 "and that the parameters are within the ranges of ChainParams")
-    other = "" if name == DEFAULT_SOLVER else f"solver='{DEFAULT_SOLVER}', "
-    return (f"{stiff}, and the steps fell below dtmin = {options.dtmin:g} on average "
-            f"until max_steps ran out; use {other}eps >= {10 * eps:g}, looser rtol (now "
-            f"{float(np.max(np.asarray(options.rtol))):g}) or a smaller dtmin")
+    if status is Status.step_size_collapsed:
+        other = "" if name == DEFAULT_SOLVER else f"solver='{DEFAULT_SOLVER}', "
+        return (f"{stiff}, and the steps fell below dtmin = {options.dtmin:g} on "
+                f"average until max_steps ran out; use {other}eps >= {10 * eps:g}, "
+                f"looser rtol (now {float(np.max(np.asarray(options.rtol))):g}) or a "
+                f"smaller dtmin")
+    return status.message

@@ -11,17 +11,11 @@ from .._physics.custom_types import State
 from .._physics.initial import AbstractInitialCondition, GivenState
 from .._physics.params import ChainParams
 from .._engine.progress import progress_bar, tick
-from .._engine.simulate import STATUS
+from .._engine.status import Status
 from .._physics.stick import sticks
 from .options import NonsmoothOptions
 from .switching import guard, initial_modes, mode_field, switch, turning_directions
 
-#: Status codes of a reference run: those of `simulate`, and one more.
-NONSMOOTH_STATUS = STATUS + (
-    "event not resolved: max_events reached in one chunk (chattering), or an event "
-    "located where no guard is within switch_tol; raise max_events or switch_tol",
-)
-UNRESOLVED = len(STATUS)
 
 
 class NonsmoothObservables(eqx.Module):
@@ -59,7 +53,8 @@ class NonsmoothObservables(eqx.Module):
         (log_size,); unused entries have time NaN and oscillator and kind -1.
     - `num_events`, `num_steps`: segments ended by an event and integration steps
         of the whole run, shape ().
-    - `status`: index into `NONSMOOTH_STATUS` (0 is success), shape ().
+    - `status`: the `Status` of the run (its integer value; `Status.ok` is
+        success, `Status.event_not_resolved` its own failure), shape ().
 
     A failed run gives NaN observables and `n_halc` = -1. All quantities are
     dimensionless (eqs. (4)-(6)).
@@ -123,8 +118,10 @@ def _segment(params, options, observe, half, t_stop, c: _Carry) -> _Carry:
     y, work = sol.ys[0][-1], sol.ys[1][-1]
     event = sol.event_mask
     ok = diffrax.is_okay(sol.result)
-    code = jnp.where(sol.result == diffrax.RESULTS.max_steps_reached, 1, 2)
-    code = jnp.where(ok, jnp.where(jnp.all(jnp.isfinite(y)), 0, 3), code)
+    code = jnp.where(sol.result == diffrax.RESULTS.max_steps_reached,
+                     Status.max_steps_reached, Status.solver_failed)
+    finite = jnp.where(jnp.all(jnp.isfinite(y)), Status.ok, Status.non_finite_state)
+    code = jnp.where(ok, finite, code)
 
     stick_time = c.stick_time + jnp.where(observe & (c.modes == 0), tau, 0.0)
     y_new, modes, kind, turned, resolved = switch(params, y, c.modes, sigma, observe,
@@ -135,7 +132,8 @@ def _segment(params, options, observe, half, t_stop, c: _Carry) -> _Carry:
                       jnp.where(event & (kind >= 0), jnp.inf, jnp.abs(y[1] - params.v_d)))
     slip_speed = jnp.where(observe, jnp.minimum(c.slip_speed, speed), c.slip_speed)
     # An event that no guard accounts for would repeat forever: stop the run.
-    code = jnp.where((code == 0) & event & ~resolved, UNRESOLVED, code)
+    code = jnp.where((code == Status.ok) & event & ~resolved, Status.event_not_resolved,
+                     code)
     modes = jnp.where(event, modes, c.modes)
     y = jnp.where(event, y_new, y)
     turned = event & turned & observe
@@ -158,7 +156,7 @@ def _segment(params, options, observe, half, t_stop, c: _Carry) -> _Carry:
         log_kind=c.log_kind.at[slot].set(kind, mode="drop"),
         log_count=c.log_count + jnp.sum(logged), events=c.events + event,
         chunk_events=c.chunk_events + event, steps=c.steps + sol.stats["num_steps"],
-        status=jnp.where(c.status == 0, code, c.status),
+        status=jnp.where(c.status == Status.ok, code, c.status),
     )
 
 
@@ -177,11 +175,12 @@ def _chunk(params, options, progress, half, c: _Carry, t_stop) -> _Carry:
     c = eqx.tree_at(lambda d: d.chunk_events, c, jnp.array(0))
 
     def cond(d):
-        return (d.t < t_stop) & (d.status == 0) & (d.chunk_events < options.max_events)
+        return (d.t < t_stop) & (d.status == Status.ok) & (d.chunk_events < options.max_events)
 
     c = jax.lax.while_loop(cond, lambda d: _segment(params, options, observe, half,
                                                     t_stop, d), c)
-    status = jnp.where((c.status == 0) & (c.t < t_stop), UNRESOLVED, c.status)
+    status = jnp.where((c.status == Status.ok) & (c.t < t_stop),
+                       Status.event_not_resolved, c.status)
     c = _observe_point(eqx.tree_at(lambda d: d.status, c, status), half)
     if progress:
         tick(c.t)
@@ -203,7 +202,7 @@ def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
         log_time=jnp.full(size, jnp.nan),
         log_osc=jnp.full(size, -1), log_kind=jnp.full(size, -1), log_count=jnp.array(0),
         events=jnp.array(0), chunk_events=jnp.array(0), steps=jnp.array(0),
-        status=jnp.where(jnp.all(jnp.isfinite(y0)), 0, 3),
+        status=jnp.where(jnp.all(jnp.isfinite(y0)), Status.ok, Status.non_finite_state),
     )
     for start, length, count, half in options.phases():
         c = _observe_point(c, half)
@@ -213,7 +212,7 @@ def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
 
         c, _ = jax.lax.scan(body, c, start + length * jnp.arange(1, count + 1))
 
-    ok = c.status == 0
+    ok = c.status == Status.ok
     x_max, x_min = (jnp.where(ok, e, jnp.nan) for e in (c.x_max, c.x_min))
     amplitudes = 0.5 * (x_max.max(0) - x_min.min(0))
     scale = jnp.maximum(1.0, jnp.max(amplitudes))
@@ -292,6 +291,7 @@ def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State
     y = y0(params)
     with progress_bar(n_ticks_nonsmooth(options), "non-smooth reference", progress):
         obs = _run_jit(params, y, options, progress)
-    if throw and int(obs.status) != 0:
-        raise RuntimeError(NONSMOOTH_STATUS[int(obs.status)])
+    status = Status(int(obs.status))
+    if throw and status is not Status.ok:
+        raise RuntimeError(f"{status}: {status.message}")
     return obs

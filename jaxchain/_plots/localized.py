@@ -6,6 +6,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .._engine.status import Status
+
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr
 
@@ -45,7 +47,7 @@ def plot_localized_states(ds: xr.Dataset, v_d: float | None = None, ax=None):
     for i in range(n_ic):
         status = int(row["status"][i])
         note = (f"{int(row['n_halc'][i])} on HALC, E={float(row['energy'][i]):.1f}"
-                if status == 0 else "failed")
+                if status == Status.ok else str(Status(status)))
         ax.text(n_osc + 0.8, -i, note, va="center", fontsize=7)
     ax.set_xlim(0.3, n_osc + 4.5)
     ax.set_ylim(-n_ic + 0.4, 0.6)

@@ -11,6 +11,7 @@ from .._bifurcation.hopf import hopf_vd_analytic
 from .._bifurcation.two_parameter import hopf_vd
 from .._physics.record import chain_from_record, chain_settings
 from .._analysis.fronts import front_fractions, front_ranges
+from .._engine.status import Status
 
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr
@@ -55,7 +56,7 @@ def plot_bifurcation_diagram(ds: xr.Dataset):
     values = np.asarray(ds[name], dtype=float)
     energy = np.asarray(ds["energy"], dtype=float)
     n_halc = np.asarray(ds["n_halc"])
-    ok = np.asarray(ds["status"]) == 0
+    ok = np.asarray(ds["status"]) == Status.ok
     front = np.where(ok, np.asarray(ds["front"]), 0)
     n_osc = int(ds.sizes["osc"])
     fractions = front_fractions(ds)

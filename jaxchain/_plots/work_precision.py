@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from .._engine.status import Status
+
 _MARKERS = {"scipy LSODA": "s", "scipy Radau": "D", "reference": "*"}
 
 
@@ -29,7 +31,7 @@ def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_er
                              sharex=True, sharey=True, squeeze=False)
     solvers = sorted({r["method"] for r in rows} - set(_MARKERS))
     colors = {s: f"C{i}" for i, s in enumerate(solvers)}
-    ok = [r for r in rows if r["status"] == "ok" and r[error] != ""]
+    ok = [r for r in rows if r["status"] == Status.ok.name and r[error] != ""]
     values = [float(r[error]) for r in ok]
     top = 10 ** np.ceil(np.log10(max(values + [1e-1])))
     for ax, eps in zip(axes[0], eps_values):
@@ -41,7 +43,7 @@ def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_er
                 ax.plot([float(r["wall_s"]) for r in good],
                         [max(float(r[error]), 1e-16) for r in good], "o-", ms=3,
                         color=colors[solver], label=solver)
-            bad = [r for r in mine if r["status"] != "ok" and r["wall_s"] != ""]
+            bad = [r for r in mine if r["status"] != Status.ok.name and r["wall_s"] != ""]
             if bad:
                 ax.plot([float(r["wall_s"]) for r in bad], [top] * len(bad), "x",
                         color=colors[solver])

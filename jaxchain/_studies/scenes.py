@@ -23,7 +23,8 @@ from .._engine.observers.series import TimeSeries
 from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams
 from .._sweeps.datasets import run_attributes
-from .._engine.simulate import STATUS, check_observers
+from .._engine.simulate import check_observers
+from .._engine.status import flag_attributes
 from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._analysis.states import ClassTolerances
 from .._analysis.classify import classify
@@ -114,7 +115,7 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
         else:
             data[name] = (("solution",) + dims[name], np.asarray(value))
     ds = xr.Dataset(data, coords=coords)
-    ds["status"].attrs["flag_meanings"] = " | ".join(f"{i}: {s}" for i, s in enumerate(STATUS))
+    ds["status"].attrs.update(flag_attributes())
     ds.attrs = run_attributes(params, solver, options, ics, "") | {"ics_family": ics}
     kinds = {type(o) for o in observers}
     peaks = [o for o in observers if isinstance(o, PeakTimes)]

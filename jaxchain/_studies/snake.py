@@ -28,6 +28,7 @@ from .._physics.record import chain_record
 from .._engine.simulate import simulate
 from .._sweeps.result_store import read_dataset, write_dataset
 from .._errors import ValidationError
+from .._engine.status import Status
 
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr
@@ -110,7 +111,7 @@ def start_orbits(params: ChainParams, sites=SITES, *, options: SimulationOptions
         amplitudes = ds["amplitudes"].values[0, i]
         sim = {"n_halc": int(ds["n_halc"].values[0, i]),
                "energy": float(ds["energy"].values[0, i])}
-        if int(ds["status"].values[0, i]) != 0:
+        if int(ds["status"].values[0, i]) != Status.ok:
             out[k] = (None, sim, "the simulation failed")
             continue
         n = int(np.argmax(amplitudes))
@@ -145,7 +146,7 @@ def _branch_dataset(k: int, problem, branch, bifurcations) -> xr.Dataset:
          "u": (("point", "unknown"), np.asarray(branch.u)[ok])},
         coords={"v_d": ("point", np.asarray(branch.p)[ok])},
         attrs={"excited": k, "phase_oscillator": problem.residual.options.phase_oscillator,
-               "stop": branch.stop,
+               "stop": branch.stop.name,
                "bifurcations": json.dumps([
                    {"type": b.kind, "v_d": float(b.p), "energy": float(b.record.energy),
                     "multiplier": [float(np.real(b.multiplier)), float(np.imag(b.multiplier))],

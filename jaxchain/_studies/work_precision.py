@@ -22,7 +22,8 @@ from .._engine.solver.controller import CONTROLLERS
 from .._engine.options import SimulationOptions
 from .._physics.model import vector_field
 from .._physics.params import ChainParams
-from .._engine.simulate import STATUS, run
+from .._engine.simulate import run
+from .._engine.status import Status
 from .._engine.solver.registry import SOLVERS
 from .._sweeps.result_store import CsvStore, settings_key
 from .._errors import ValidationError
@@ -176,9 +177,9 @@ def diffrax_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: f
     obs, wall = _timed(lambda: _diffrax_run(p, y0, solver, observe))
     end, _ = _timed(lambda: _diffrax_run(p, y0, solver, short))
     status = max(int(obs.status), int(end.status))
-    row = {"status": STATUS[status].split(":")[0], "wall_s": wall, "compile_s": compile_s,
+    row = {"status": Status(status).name, "wall_s": wall, "compile_s": compile_s,
            "num_steps": int(obs.num_steps)}
-    if status == 0:
+    if status == Status.ok:
         row |= errors(ref, obs.amplitudes, end.y_final)
     return row
 
@@ -228,14 +229,16 @@ def scipy_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: flo
         end = solve_ivp(rhs, (0.0, scene.window), y0, method=method, rtol=rtol,
                         atol=rtol / 100, events=clock)
     except _OutOfTime:
-        return {"status": f"time budget of {budget_s:g} s exceeded",
+        return {"status": f"{Status.solver_failed}: time budget of {budget_s:g} s exceeded",
                 "wall_s": time.perf_counter() - start, "compile_s": 0.0}
     if not (sol.success and end.success):
-        return {"status": f"scipy failed: {sol.message}", "wall_s": wall, "compile_s": 0.0}
+        return {"status": f"{Status.solver_failed}: scipy: {sol.message}", "wall_s": wall,
+                "compile_s": 0.0}
     n = scene.n_osc
     x = sol.y[:n]
     amplitudes = 0.5 * (x.max(1) - x.min(1))
-    row = {"status": "ok", "wall_s": wall, "compile_s": 0.0, "num_steps": int(sol.nfev)}
+    row = {"status": Status.ok.name, "wall_s": wall, "compile_s": 0.0,
+           "num_steps": int(sol.nfev)}
     return row | errors(ref, amplitudes, end.y[:, -1].reshape(2, n))
 
 
@@ -431,7 +434,7 @@ def _scene(store: CsvStore, rows: list[dict], scene: Scene, solvers, rtols, eps,
 
     def reference_point(r):
         coarse, wall = reference(scene, r, timed=True)
-        return ({"status": "ok", "wall_s": wall, "compile_s": 0.0}
+        return ({"status": Status.ok.name, "wall_s": wall, "compile_s": 0.0}
                 | errors(ref(), coarse.amplitudes, coarse.y_window))
 
     if reference_points:
@@ -445,12 +448,12 @@ def _scene(store: CsvStore, rows: list[dict], scene: Scene, solvers, rtols, eps,
                 if failed_eps is not None or failed_rtol is not None:
                     why = (f"eps {failed_eps:g}" if failed_eps is not None
                            else f"rtol {failed_rtol:g}")
-                    status = f"skipped: max_steps at {why}"
+                    status = f"{Status.not_run}: max_steps at {why}"
                     point(solver, e, r, r / 100, lambda: {"status": status}, skipped=why)
                     continue
                 result = point(solver, e, r, r / 100,
                                lambda: diffrax_point(scene, ref(), solver, e, r, max_steps))
-                if result["status"].startswith("max_steps"):
+                if result["status"] == Status.max_steps_reached.name:
                     failed_rtol = r
                     if r == rtols[0]:
                         failed_eps = e
@@ -463,7 +466,7 @@ def _scene(store: CsvStore, rows: list[dict], scene: Scene, solvers, rtols, eps,
 
 
 def _ok(rows, scene):
-    return [r for r in rows if r["scene"] == scene and r["status"] == "ok"
+    return [r for r in rows if r["scene"] == scene and r["status"] == Status.ok.name
             and r["amplitude_error"] != ""]
 
 

@@ -17,7 +17,8 @@ from .._physics.initial import AbstractInitialCondition, OutOfPhaseExcitation
 from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams
 from .._physics.record import chain_record
-from .._engine.simulate import STATUS, Observables
+from .._engine.simulate import Observables
+from .._engine.status import flag_attributes
 from .._physics.stick import STICK_BAND
 
 if TYPE_CHECKING:  # heavy: imported where they are used
@@ -48,7 +49,7 @@ LONG_NAMES = {
 def observables_variables(obs: Observables, lead: tuple[str, ...]) -> dict:
     """Every field of `obs` as an `xarray.Variable` whose leading dims are `lead`
     (the batch axes of `obs`), then `osc`, `half` or (`component`, `osc`), with its
-    `long_name` and, for `status`, the meaning of each code."""
+    `long_name` and, for `status`, its CF flag values and meanings (`Status`)."""
     import xarray as xr
 
     trailing = {"n_halc_halves": ("half",), "y_initial": ("component", "osc"),
@@ -59,7 +60,7 @@ def observables_variables(obs: Observables, lead: tuple[str, ...]) -> dict:
         dims = lead + trailing.get(f.name, ("osc",) if value.ndim > len(lead) else ())
         attrs = {"long_name": LONG_NAMES[f.name]} if f.name in LONG_NAMES else {}
         if f.name == "status":
-            attrs["flag_meanings"] = " | ".join(f"{i}: {s}" for i, s in enumerate(STATUS))
+            attrs |= flag_attributes()
         out[f.name] = xr.Variable(dims, value, attrs)
     return out
 

@@ -27,7 +27,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
              engine: str | None = None, progress: bool = True) -> "xr.Dataset":
     """Run every (belt speed, initial condition) pair of a grid, spread over the
     devices (on a CPU, one per core) by `run_lanes`. Trajectories never raise: each
-    has a `status` (0 = ok, see `STATUS`), so one failing lane never discards the
+    has a `status` (`Status`), so one failing lane never discards the
     others.
 
     On a CPU each core integrates one trajectory at a time and takes the next when

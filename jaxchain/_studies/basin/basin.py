@@ -29,6 +29,7 @@ from ..._sweeps.sweep import sweep
 from .classes import class_index, class_names, halc_clusters, wilson_interval
 from .sampling import Box, sample_states
 from ..._errors import ValidationError
+from ..._engine.status import Status
 
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr
@@ -148,7 +149,8 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
                store=store, resume=resume, client=client, progress=progress).load()
     status = ds["status"].values
     index = class_index(ds["n_halc"].values, status, n_osc)
-    clusters = np.where(status == 0, halc_clusters(ds["on_halc"].values, params.boundary), -1)
+    clusters = np.where(status == Status.ok,
+                        halc_clusters(ds["on_halc"].values, params.boundary), -1)
     names = class_names(n_osc)
     counts = np.stack([(index == c).sum(-1) for c in range(len(names))], axis=-1)
     low, high = wilson_interval(counts, n_samples)
@@ -195,7 +197,7 @@ def _convergence(params, v, states, index, solver, options, progress) -> dict:
     periodic, moving = np.zeros(v.size, int), np.zeros(v.size, int)
     for i in range(v.size):
         for j in range(states.shape[0]):
-            if run["status"][i, j] != 0 or run["n_halc"][i, j] == 0:
+            if run["status"][i, j] != Status.ok or run["n_halc"][i, j] == 0:
                 continue
             verdict = classify(run["peak_times"][i, j], run["on_halc"][i, j],
                                int(run["n_halc"][i, j]), 0, math.nan, math.nan,

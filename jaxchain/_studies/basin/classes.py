@@ -9,6 +9,7 @@ from jaxtyping import Bool, Float, Int
 from ..._engine.checks import real_array
 from ..._errors import ValidationError
 from ..._analysis.states import FAILED, STEADY_SLIDING, STICK_SLIP
+from ..._engine.status import Status
 
 #: The 97.5 % quantile of the standard normal: a 95 % two-sided interval.
 Z95 = 1.959963984540054
@@ -55,7 +56,7 @@ def class_index(n_halc: Int[np.ndarray, "*batch"], status: Int[np.ndarray, "*bat
     """The index into `class_names(n_osc)` of each run: n_HALC, or the last
     ("failed") where the status is not 0."""
     n_halc = np.asarray(n_halc)
-    return np.where(np.asarray(status) == 0, n_halc, n_osc + 1)
+    return np.where(np.asarray(status) == Status.ok, n_halc, n_osc + 1)
 
 
 def wilson_interval(k: Int[np.ndarray, "*shape"], n: int | Int[np.ndarray, "*shape"],

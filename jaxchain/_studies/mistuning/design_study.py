@@ -13,6 +13,7 @@ from ..._engine.simulate import simulate
 from ..._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
 from .pattern_design import design_problems, intentional_mistuning, pattern_folds
 from .edges import upper_edges
+from ..._engine.status import Status
 
 #: The simulations that check a fold, 5e-4 from it: tight tolerances, because the
 #: basin of the stable cycle is thin there (the unstable cycle is near) and the
@@ -52,7 +53,8 @@ def _vibrates(obs, threshold: float = 0.1) -> bool:
     """Whether a run ended vibrating: some amplitude above `threshold` (steady
     sliding has none; near its fold the cycle's stick phase is too short for the
     HALC criterion, so n_HALC would not tell)."""
-    return bool(int(obs.status) == 0 and float(np.max(np.asarray(obs.amplitudes))) > threshold)
+    return bool(int(obs.status) == Status.ok
+                and float(np.max(np.asarray(obs.amplitudes))) > threshold)
 
 
 def fold_by_simulation(problem, solution, delta: np.ndarray, site: int, *,

@@ -25,6 +25,7 @@ from ..._physics.params import ChainParams, stack_chains, with_parameter
 from ..snake import SNAKE_SHOOTING, _turning_point
 from ..._sweeps.result_store import read_dataset, write_dataset
 from ..._errors import ValidationError
+from ..._engine.status import Status
 
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr
@@ -58,7 +59,7 @@ def _vibrates(chains, v, solver, options, bar) -> np.ndarray:
     out = run_lanes(lanes, np.asarray(y0), solver, options, progress=bar)
     status = np.asarray(out.status).reshape(n_chains, n_osc)
     n_halc = np.asarray(out.n_halc).reshape(n_chains, n_osc)
-    return np.where(status == 0, n_halc > 0, np.nan)
+    return np.where(status == Status.ok, n_halc > 0, np.nan)
 
 
 def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: float = 1.9,
@@ -164,7 +165,7 @@ def localized_orbit(params: ChainParams, site: int, *,
     mask = np.arange(params.n_osc) == site
     y0 = OutOfPhaseExcitation(excited=jnp.asarray(mask), velocity=0.0, base_sign=-1.0)(params)
     obs = simulate(params, y0, options=options)
-    if int(obs.status) != 0 or int(obs.n_halc) == 0:
+    if int(obs.status) != Status.ok or int(obs.n_halc) == 0:
         return None, None
     opts = dataclasses.replace(shooting, phase_oscillator=int(site))
     guess = _turning_point(params, np.asarray(obs.y_final), int(site), opts)

@@ -19,6 +19,7 @@ from ..basin.sampling import Box, sample_states
 from ..._bifurcation.hopf import hopf_point
 from ..._engine.checks import check_options, check_run
 from ..._engine.options import SimulationOptions
+from ..._engine.status import Status
 from ..._physics.initial import GivenState, excited_block, localized_family
 from ..._analysis.localization import damped_decay, localization_factor, passband_frequency
 from ..._physics.model import jacobian, steady_sliding
@@ -157,11 +158,11 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
 
     shape = (sigmas.size, n_draws, v.size)
     data = {"staircase_n_halc": np.full(shape + (n,), -1),
-            "staircase_status": np.full(shape + (n,), -1),
+            "staircase_status": np.full(shape + (n,), Status.not_run),
             "staircase_amplitudes": np.full(shape + (n, n), np.nan),
             "staircase_on_halc": np.zeros(shape + (n, n), dtype=bool),
             "basin_n_halc": np.full(shape + (n_samples,), -1),
-            "basin_status": np.full(shape + (n_samples,), -1),
+            "basin_status": np.full(shape + (n_samples,), Status.not_run),
             "basin_on_halc": np.zeros(shape + (n_samples, n), dtype=bool)}
     deviations = np.full((sigmas.size, n_draws, n), np.nan)
     def chain_sweep(i, d, chain):

@@ -4,6 +4,7 @@ stability, where the vibration sits, and the fitted localization of the states."
 import numpy as np
 
 from ..basin.classes import wilson_interval
+from ..._engine.status import Status
 
 
 def envelope_decay(amplitudes: np.ndarray, n_halc: np.ndarray, boundary: str = "ring",
@@ -49,7 +50,7 @@ def staircase_fraction(study) -> dict:
     draws and k, per (sigma, v_d), with 95 % Wilson intervals (runs that failed
     left out): arrays of shape (n_sigma, n_vd) under `fraction`, `low`, `high`,
     `count`, `total`."""
-    ok = study["staircase_status"].values == 0
+    ok = study["staircase_status"].values == Status.ok
     hit = ok & (study["staircase_n_halc"].values == study["k"].values)
     return _share(hit.sum((1, 3)), ok.sum((1, 3)))
 
@@ -57,7 +58,7 @@ def staircase_fraction(study) -> dict:
 def vibrating_fraction(study) -> dict:
     """Basin stability of the vibrating states: the share of random initial
     states that end with n_HALC >= 1, per (sigma, v_d), with Wilson intervals."""
-    ok = study["basin_status"].values == 0
+    ok = study["basin_status"].values == Status.ok
     hit = ok & (study["basin_n_halc"].values > 0)
     return _share(hit.sum((1, 3)), ok.sum((1, 3)))
 
@@ -66,7 +67,7 @@ def localized_fraction(study) -> dict:
     """Basin stability of the localized states: the share of random initial states
     that end with 0 < n_HALC < N (neither steady sliding nor the whole chain in
     stick-slip), per (sigma, v_d), with Wilson intervals."""
-    ok = study["basin_status"].values == 0
+    ok = study["basin_status"].values == Status.ok
     n_halc = study["basin_n_halc"].values
     hit = ok & (n_halc > 0) & (n_halc < study.sizes["osc"])
     return _share(hit.sum((1, 3)), ok.sum((1, 3)))
@@ -100,7 +101,7 @@ def halc_correlation(study) -> dict:
         if sigmas[i] == 0:
             continue
         for j in range(r.shape[1]):
-            keep = (study["basin_status"].values[i, :, j] == 0) & (n_halc[i, :, j] > 0) \
+            keep = (study["basin_status"].values[i, :, j] == Status.ok) & (n_halc[i, :, j] > 0) \
                 & (n_halc[i, :, j] < n)  # (draw, sample)
             if not keep.any():
                 continue

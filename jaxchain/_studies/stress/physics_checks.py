@@ -17,6 +17,7 @@ from ..._physics.params import single_oscillator
 from ..._nonsmooth.existence import stick_slip_existence_limit
 from ..._engine.observers.base import AbstractObserver
 from ..._engine.simulate import SPLIT_SOLVERS, integrate
+from ..._engine.status import Status
 
 #: Largest |E(t_end) - E(0) - W| allowed, relative to the energy that went through
 #: the ring (E(0) + E(t_end) + the integral of |power|): 100 rtol. The local error
@@ -150,7 +151,7 @@ def balance_run(params, y0, solver, options) -> dict:
     dict of `residual` (the relative energy-balance error), `energy_start`,
     `energy_end`, `work`, `decay_rate`, `rate_samples`, `deviation_start`,
     `deviation_end` (of `SlidingDeviation`, sampled from t = 0) and `status`
-    (`STATUS`).
+    (`Status`).
     """
     z0 = jnp.concatenate([y0, jnp.zeros_like(y0)])
     from_start = dataclasses.replace(options, transient=0.0)  # same steps, sampled
@@ -217,7 +218,7 @@ def physics_checks(params, y0, solver, options, observed, exactly_sliding: bool
     the Hopf point, from a start `NUDGE` away from steady sliding.
     """
     balance = balance_run(params, y0, solver, options)
-    if balance["status"] != 0:
+    if balance["status"] != Status.ok:
         return [(False, f"the energy-balance run failed with status {balance['status']}")]
     tol = BALANCE_RTOLS * float(np.max(np.asarray(options.rtol)))
     checks = [(balance["residual"] <= tol,
@@ -246,7 +247,7 @@ def physics_checks(params, y0, solver, options, observed, exactly_sliding: bool
         nudge = steady_sliding(params).at[0].add(
             size * (-1.0) ** np.arange(1, params.n_osc + 1))
         near = balance_run(params, nudge, solver, options)
-        checks.append((near["status"] == 0 and size < float(linear_regime(params))
+        checks.append((near["status"] == Status.ok and size < float(linear_regime(params))
                        and abs(near["decay_rate"] - rate_ref) <= RATE_ATOL,
                        f"Hopf point: growth rate {near['decay_rate']:.2e} from steady "
                        f"sliding + {size:.1e} vs linear {rate_ref:.2e}"))

@@ -5,7 +5,7 @@ from collections import Counter
 
 
 def counts(rows: list[dict]) -> dict[str, int]:
-    """Runs tried, verified, failed with a specific status (the run's own `STATUS`,
+    """Runs tried, verified, failed with a specific status (the run's own `Status`,
     a hint attached) and failed otherwise (a physics check that did not hold, or
     a non-finite result reported as ok: defects)."""
     status = Counter(r["status"] for r in rows if r["outcome"] == "failed")

@@ -12,7 +12,8 @@ from ..._engine.checks import as_solver
 from ..._engine.status import failure_hint
 from ..._engine.progress import progress_bar
 from ..._engine.solver.rosenbrock import Ros34PW2
-from ..._engine.simulate import SPLIT_SOLVERS, STATUS, simulate
+from ..._engine.simulate import SPLIT_SOLVERS, simulate
+from ..._engine.status import Status
 from ..._sweeps.result_store import CsvStore, settings_key
 from .cases import StressCase, stress_cases
 from .physics_checks import physics_checks
@@ -57,7 +58,7 @@ def run_case(case: StressCase, solver: str) -> dict:
     **Returns:**
 
     dict with `what`, `value`, `solver`, `outcome` ("verified" or "failed"),
-    `status` (the `STATUS` of the run, "non-finite result" or "check failed"),
+    `status` (the `Status` name of the run, or "check failed"),
     `check` (what was checked, and the numbers), `hint` (what to do about a
     failure, "" otherwise), `num_steps` and `wall_s`.
     """
@@ -66,24 +67,25 @@ def run_case(case: StressCase, solver: str) -> dict:
     reason = too_costly(case, solve)
     if reason:
         return {"what": case.what, "value": case.value, "solver": solver, "num_steps": 0,
-                "outcome": "failed", "status": "not run: too costly", "check": "",
+                "outcome": "failed", "status": f"{Status.not_run}: too costly", "check": "",
                 "hint": reason, "wall_s": 0.0}
     observed = simulate(case.params, case.y0, solve, case.options, throw=False)
-    code = int(observed.status)
+    code = Status(int(observed.status))
     row = {"what": case.what, "value": case.value, "solver": solver,
            "num_steps": int(observed.num_steps)}
-    if code != 0:
-        row |= {"outcome": "failed", "status": STATUS[code].split(":")[0], "check": "",
+    if code is not Status.ok:
+        row |= {"outcome": "failed", "status": code.name, "check": "",
                 "hint": failure_hint(code, case.params, solve, case.options)}
     elif not _finite(observed):
-        row |= {"outcome": "failed", "status": "non-finite result", "check": "",
-                "hint": failure_hint(3, case.params, solve, case.options)}
+        row |= {"outcome": "failed", "status": Status.non_finite_state.name, "check": "",
+                "hint": failure_hint(Status.non_finite_state, case.params, solve,
+                                     case.options)}
     else:
         exactly = case.what == "ics" and case.value == "steady sliding"
         checks = physics_checks(case.params, case.y0, solve, case.options, observed, exactly)
         held = all(ok for ok, _ in checks)
         row |= {"outcome": "verified" if held else "failed",
-                "status": "ok" if held else "check failed",
+                "status": Status.ok.name if held else "check failed",
                 "check": "; ".join(("" if ok else "FAILED: ") + text for ok, text in checks),
                 "hint": "" if held else "a physics check failed: tighten rtol, or report "
                                         "this case as a bug"}
