@@ -182,3 +182,20 @@ from ._analysis.fronts import (
 )
 from ._sweeps.sweep import open_sweep as open_sweep, sweep as sweep
 from ._studies.work_precision import work_precision as work_precision
+from ._cli.main import main as main
+from ._engine.lanes import run_lanes as run_lanes
+from ._physics.record import read_chain_file as read_chain_file
+from ._physics.stick import min_slip_speed as min_slip_speed
+from ._bifurcation.two_parameter import hopf_vd_and_derivative as hopf_vd_and_derivative
+from ._studies.bistable_range import (
+    BISTABLE_RATIO_VALUES as BISTABLE_RATIO_VALUES,
+    BISTABLE_XI_VALUES as BISTABLE_XI_VALUES, bistable_range as bistable_range,
+)
+from ._studies.scenes import PAPER_FIGURES as PAPER_FIGURES
+from ._studies.mistuning.summary import (
+    edge_correlations as edge_correlations, envelope_decay as envelope_decay,
+    halc_correlation as halc_correlation, localization_table as localization_table,
+    localized_fraction as localized_fraction, staircase_fraction as staircase_fraction,
+    vibrating_fraction as vibrating_fraction,
+)
+from ._setup import XLA_FLAGS as XLA_FLAGS

@@ -1,5 +1,6 @@
 """Small shared systems and references for the tests."""
 
+import contextlib
 import os
 import signal
 import sys
@@ -12,6 +13,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
+from jaxchain._sweeps.atomic import HOLD  # the writers' test hook (see `hold_env`)
 
 #: A short horizon that still reaches the stick-slip cycle of one oscillator.
 SHORT = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=100.0)
@@ -145,9 +147,8 @@ def scipy_stick_slip_cycle(params: jc.ChainParams, mu=None) -> tuple[float, floa
 
 def assert_usage_error(argv: list[str], says: str, capsys) -> None:
     """`jaxchain ARGV` exits with status 2 and one line on stderr naming `says`."""
-    from jaxchain._cli.main import main
     with pytest.raises(SystemExit) as exc:
-        sys.exit(main(argv))
+        sys.exit(jc.main(argv))
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and says in err
@@ -188,8 +189,6 @@ def hold_env(folder) -> dict:
     each write it commits (a file renamed into place, a sweep batch, the swap of
     an overwritten sweep store) until the test releases it (`release`) or kills
     it."""
-    from jaxchain._sweeps.atomic import HOLD
-
     Path(folder).mkdir(parents=True, exist_ok=True)
     return os.environ | {HOLD: str(folder)}
 
@@ -226,3 +225,92 @@ def kill(proc) -> None:
     ended."""
     proc.send_signal(signal.SIGKILL)
     proc.wait()
+
+
+# --- Internals that the tests reach into, in one place ------------------------------
+# Each test of an internal (a sweep store's batch flags, a kill between two batch
+# writes, a study that must read a stored result back instead of computing it)
+# reaches jaxchain's private modules through these few lines only: a module that
+# moves changes them, and no test.
+
+#: The command line in a process of its own (`jaxchain.main`).
+JAXCHAIN = [sys.executable, "-c", "import sys, jaxchain; sys.exit(jaxchain.main())"]
+
+
+def batches_done(store) -> list[bool]:
+    """The batch flags of a sweep store (a sweep's, or basin stability's)."""
+    from jaxchain._sweeps.zarr_store import SweepStore
+
+    return SweepStore(store).done().tolist()
+
+
+@contextlib.contextmanager
+def batch_writes(wrapper):
+    """Within the block, each batch a sweep store writes goes through
+    `wrapper(write, store, index, start, batch)`, `write` being the store's own: a
+    test kills the run (raises) before or after a chosen batch."""
+    from jaxchain._sweeps.zarr_store import SweepStore
+
+    write = SweepStore.write
+    SweepStore.write = lambda self, *args: wrapper(write, self, *args)
+    try:
+        yield
+    finally:
+        SweepStore.write = write
+
+
+def dask_client(scheduler: str, **kwargs):
+    """The Dask client of a command's --scheduler (a context manager)."""
+    from jaxchain._engine.cluster import connect
+
+    return connect(scheduler, **kwargs)
+
+
+def scheduler_workers(scheduler: str) -> int | None:
+    """The workers a --scheduler "local:N" asks for (None for an address)."""
+    from jaxchain._engine.cluster import local_workers
+
+    return local_workers(scheduler)
+
+
+#: Functions of jaxchain's internals that tests replace or call, by what they do:
+#: (module, name). A resumed study must read back instead of computing again.
+_COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_reference_run"),
+             "stress case": ("jaxchain._studies.stress.run", "run_case"),
+             "work-precision reference": ("jaxchain._studies.work_precision", "reference"),
+             "sweep batch": ("jaxchain._sweeps.sweep", "run_lanes"),
+             # building blocks of public studies, tested on their own
+             "stress case of the matrix": ("jaxchain._studies.stress.cases", "make_case"),
+             "stress energy balance": ("jaxchain._studies.stress.physics_checks", "balance_run"),
+             "linear decay rate": ("jaxchain._studies.stress.physics_checks", "linear_rate"),
+             "snake start orbits": ("jaxchain._studies.snake", "start_orbits"),
+             "orbit description": ("jaxchain._bifurcation.shooting", "describe_orbit"),
+             "mistuning design problems": ("jaxchain._studies.mistuning.pattern_design",
+                                           "design_problems"),
+             "pattern folds": ("jaxchain._studies.mistuning.pattern_design", "pattern_folds"),
+             "tasks on devices": ("jaxchain._engine.lanes", "on_devices")}
+
+
+def internal_module(what: str):
+    """The module of the function that computes `what` (a key of `_COMPUTES`), for
+    a test of its internals (its tables and helpers)."""
+    import importlib
+
+    return importlib.import_module(_COMPUTES[what][0])
+
+
+def internal(what: str):
+    """The function that computes `what` (a key of `_COMPUTES`)."""
+    import importlib
+
+    module, name = _COMPUTES[what]
+    return getattr(importlib.import_module(module), name)
+
+
+def replace_internal(monkeypatch, what: str, replacement) -> None:
+    """Replace the function that computes `what` (a key of `_COMPUTES`) for the
+    rest of the test: with one that raises, to prove a result was read back."""
+    import importlib
+
+    module, name = _COMPUTES[what]
+    monkeypatch.setattr(importlib.import_module(module), name, replacement)

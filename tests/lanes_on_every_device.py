@@ -15,9 +15,9 @@ import jaxchain as jc
 
 jc.configure()  # as a user's first call: one device per core, float64, the XLA flags
 
-from helpers import TIGHT  # noqa: E402
-from jaxchain._engine.lanes import lane_params, on_devices, run_lanes  # noqa: E402
-from jaxchain._engine.solver.registry import DEFAULT_SOLVER, SOLVERS  # noqa: E402
+from helpers import TIGHT, internal  # noqa: E402
+
+on_devices = internal("tasks on devices")
 
 FIELDS = ("amplitudes", "energy", "n_halc", "y_final", "num_steps", "status")
 
@@ -27,7 +27,7 @@ def five_lanes():
     v_d = np.array([1.3, 1.5, 1.7, 1.5, 1.6])
     y0 = np.stack([jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1 + k % 3))(
         jc.ChainParams(n_osc=3, v_d=v)) for k, v in enumerate(v_d)])
-    return lane_params(jc.ChainParams(n_osc=3), v_d.size, v_d=v_d), y0
+    return jc.lane_params(jc.ChainParams(n_osc=3), v_d.size, v_d=v_d), y0
 
 
 def devices_at_a_barrier() -> list[int]:
@@ -49,11 +49,11 @@ def devices_at_a_barrier() -> list[int]:
 
 def main(out: str) -> None:
     params, y0 = five_lanes()
-    solver = SOLVERS[DEFAULT_SOLVER]()
+    solver = jc.SOLVERS[jc.DEFAULT_SOLVER]()
     devices = jax.devices()
-    runs = {"one": run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:1]),
-            "two": run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:2]),
-            "vmap": run_lanes(params, y0, solver, TIGHT, engine="vmap", devices=devices[:2])}
+    runs = {"one": jc.run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:1]),
+            "two": jc.run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:2]),
+            "vmap": jc.run_lanes(params, y0, solver, TIGHT, engine="vmap", devices=devices[:2])}
     np.savez(out, n_devices=len(jax.devices("cpu")), cores=len(os.sched_getaffinity(0)),
              used=devices_at_a_barrier(),
              **{f"{run}_{f}": np.asarray(getattr(obs, f)) for run, obs in runs.items()

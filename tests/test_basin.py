@@ -10,9 +10,7 @@ import xarray as xr
 from scipy.stats import binomtest
 
 import jaxchain as jc
-from helpers import assert_usage_error
-from jaxchain._cli.main import main
-from jaxchain._sweeps.zarr_store import SweepStore
+from helpers import assert_usage_error, batch_writes, batches_done
 
 
 SHORT = jc.SimulationOptions(t_end=300.0, transient=200.0)
@@ -87,18 +85,15 @@ def test_same_key_same_result_and_a_killed_run_resumes_to_the_same(tmp_path, mon
     assert not np.array_equal(other["y0"].values, a["y0"].values)
 
     store = tmp_path / "basin.zarr"
-    write = SweepStore.write
 
-    def killed_after_batch_0(self, index, start, batch):
-        write(self, index, start, batch)
+    def killed_after_batch_0(write, sweep_store, index, start, batch):
+        write(sweep_store, index, start, batch)
         if index == 0:
             raise KeyboardInterrupt("killed after batch 0")
 
-    monkeypatch.setattr(SweepStore, "write", killed_after_batch_0)
-    with pytest.raises(KeyboardInterrupt):
+    with batch_writes(killed_after_batch_0), pytest.raises(KeyboardInterrupt):
         jc.basin_stability(params, [1.5], 10, key=3, store=store, **kwargs)
-    monkeypatch.setattr(SweepStore, "write", write)
-    assert SweepStore(store).done().tolist() == [True, False, False]
+    assert batches_done(store) == [True, False, False]
     resumed = jc.basin_stability(params, [1.5], 10, key=3, store=store, resume=True, **kwargs)
     xr.testing.assert_equal(resumed.drop_attrs(), a.drop_attrs())
     assert resumed.attrs["key"] == a.attrs["key"] == np.asarray(jax.random.PRNGKey(3)).tolist()
@@ -108,7 +103,7 @@ def test_same_key_same_result_and_a_killed_run_resumes_to_the_same(tmp_path, mon
 def test_basin_command_json_and_figures(tmp_path, capsys):
     argv = ["basin", "--n-osc", "1", "--vd", "1.0,2.1", "--samples", "12", "--t-end", "300",
             "--transient", "200", "--out", str(tmp_path), "--json", "--no-progress"]
-    assert main(argv) == 0
+    assert jc.main(argv) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["classes"] == ["steady sliding", "stick-slip", "failed"]
     assert np.array(out["fractions"]).shape == (2, 3) and out["n_samples"] == 12

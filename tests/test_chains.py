@@ -209,10 +209,9 @@ def test_per_oscillator_arrays_are_never_read_as_lanes():
     assert np.array_equal(lanes.stiffness[1], chains[0].stiffness)
     with pytest.raises(ValueError, match="ChainParams.v_d must have shape"):
         jc.with_parameter(chains[0], "v_d", np.array([1.3, 1.5, 1.7]))
-    from jaxchain._engine.lanes import run_lanes
     y0 = np.stack([np.asarray(jc.OutOfPhaseExcitation.eq8([False, True, False])(c))
                    for c in chains])
-    batch = run_lanes(jc.stack_chains(chains), y0, jc.SOLVERS["ros34pw2"](), TIGHT)
+    batch = jc.run_lanes(jc.stack_chains(chains), y0, jc.SOLVERS["ros34pw2"](), TIGHT)
     assert np.all(batch.n_halc >= 1)  # the excited oscillator sticks
     for i, c in enumerate(chains):
         one = jc.simulate(c, y0[i], options=TIGHT)
@@ -254,13 +253,12 @@ def test_bad_chain_options_exit_2_in_one_line(argv, says, capsys, tmp_path):
 
 
 def test_a_chain_file_gives_per_oscillator_arrays(tmp_path):
-    from jaxchain._cli.chain import read_chain_file
     path = tmp_path / "chain.toml"
     path.write_text('n_osc = 3\nboundary = "fixed"\neta_c = [0.01, 0.02, 0.03, 0.04]\n'
                     'load = [1.0, 0.9, 1.1]\nfriction = "polynomial"\nc1 = -0.4\n')
-    p = jc.chain_from_record(read_chain_file(path))
+    p = jc.chain_from_record(jc.read_chain_file(path))
     assert p.boundary == "fixed" and np.array_equal(p.eta_c, [0.01, 0.02, 0.03, 0.04])
     assert isinstance(p.friction, jc.Polynomial) and float(p.friction.c1) == -0.4
     path.write_text("n_osc = 3\nstiffness = [1.0, 1.0]\n")
     with pytest.raises(ValueError, match="ChainParams.stiffness"):
-        jc.chain_from_record(read_chain_file(path))
+        jc.chain_from_record(jc.read_chain_file(path))

@@ -7,19 +7,13 @@ import subprocess
 import sys
 from pathlib import Path
 
-import equinox as eqx
-import jax.numpy as jnp
 import matplotlib
 import numpy as np
 import pytest
 import xarray as xr
 
 import jaxchain as jc
-import jaxchain._cli.boundaries as cli_boundaries
-import jaxchain._cli.work_precision as cli_work_precision
-import jaxchain._studies.work_precision as wp
 from helpers import assert_usage_error
-from jaxchain._cli.main import main
 
 SMALL = ["--n-osc", "3", "--t-end", "400", "--transient", "200"]
 #: The installed console script: beside this interpreter (a venv) or on PATH.
@@ -47,7 +41,7 @@ SCRIPT = next((p for p in (Path(sys.executable).parent / "jaxchain",
 ])
 def test_bad_option_exits_2_with_one_line(argv, says, capsys):
     with pytest.raises(SystemExit) as exc:
-        sys.exit(main(["localized", *argv]))
+        sys.exit(jc.main(["localized", *argv]))
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and says in err and "error" in err
@@ -74,59 +68,10 @@ def test_bad_option_exits_2_with_one_line(argv, says, capsys):
 ])
 def test_every_command_bad_value_exits_2_with_one_line(argv, says, capsys):
     with pytest.raises(SystemExit) as exc:
-        sys.exit(main(argv))
+        sys.exit(jc.main(argv))
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and says in err and "error" in err
-
-
-def _compiled_error():
-    """A failure inside compiled code, as the library's solvers raise it."""
-    fail = eqx.filter_jit(lambda x: eqx.error_if(x, x > 0, "max_steps reached: raise "
-                                                           "max_steps"))
-    fail(jnp.array(1.0))
-
-
-def _raise(err):
-    raise err
-
-
-@pytest.mark.parametrize("fail, says", [
-    (lambda: _raise(RuntimeError("the fold was lost at xi = 0.05: lower learning_rate"
-                                 "\n  more detail on a second line")), "fold was lost"),
-    (_compiled_error, "max_steps reached: raise max_steps"),
-    (lambda: _raise(KeyError("hopf_vd")), "KeyError: 'hopf_vd'"),
-])
-def test_boundaries_failure_exits_1_with_one_line(fail, says, monkeypatch, tmp_path, capsys):
-    monkeypatch.delenv("JAXCHAIN_TRACEBACK", raising=False)
-    monkeypatch.setattr(cli_boundaries, "boundaries", lambda *a, **k: fail())
-    assert main(["boundaries", "--no-progress", "--out", str(tmp_path)]) == 1
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1 and err.startswith("jaxchain boundaries: error: ")
-    assert says in err
-
-
-def test_work_precision_failed_runs_exit_1(tmp_path, monkeypatch, capsys):
-    """A study with a failed run (recorded with its status; the skipped runs after it
-    are not failures) reports it, and the status is 1. The study itself is replaced
-    by its rows: test_work_precision.py checks that max_steps is recorded."""
-    row = dict.fromkeys(wp.COLUMNS, "") | {"scene": "single", "method": "tsit5",
-                                            "eps": "0.01", "atol": "1e-08"}
-    rows = [row | {"rtol": "1e-06", "status": "ok", "wall_s": "0.1", "num_steps": "90",
-                   "amplitude_error": "1e-3", "energy_error": "1e-3",
-                   "trajectory_error": "1e-3", "amplitude_max": "1.7"},
-            row | {"rtol": "1e-08", "status": "max_steps_reached", "wall_s": "0.3"},
-            row | {"rtol": "1e-10", "status": "not_run: max_steps at rtol 1e-08"}]
-    monkeypatch.setattr(cli_work_precision, "work_precision", lambda *a, **k: rows)
-    code = main(["work-precision", "--scenes", "single", "--solvers", "tsit5", "--rtols",
-                 "1e-6,1e-8,1e-10", "--eps", "1e-2", "--no-scipy", "--json",
-                 "--no-progress", "--out", str(tmp_path)])
-    assert code == 1
-    captured = capsys.readouterr()
-    assert json.loads(captured.out)["failed_runs"] == 1
-    err = captured.err.strip()
-    assert len(err.splitlines()) == 1 and "1 of 3 runs failed" in err
-    assert (tmp_path / "work_precision_single.png").stat().st_size > 0
 
 
 def test_command_draws_with_agg_unless_mplbackend_is_set(monkeypatch):
@@ -134,10 +79,10 @@ def test_command_draws_with_agg_unless_mplbackend_is_set(monkeypatch):
     try:
         matplotlib.use("svg")
         monkeypatch.setenv("MPLBACKEND", "svg")
-        assert main(["work-precision", "--rtols", "2"]) == 2
+        assert jc.main(["work-precision", "--rtols", "2"]) == 2
         assert matplotlib.get_backend() == "svg"
         monkeypatch.delenv("MPLBACKEND")
-        main(["work-precision", "--rtols", "2"])
+        jc.main(["work-precision", "--rtols", "2"])
         assert matplotlib.get_backend().lower() == "agg"
     finally:
         matplotlib.use(before)
@@ -146,7 +91,7 @@ def test_command_draws_with_agg_unless_mplbackend_is_set(monkeypatch):
 def test_the_library_leaves_the_backend_alone():
     """Importing jaxchain and drawing keeps the user's backend (Jupyter's inline one
     in a notebook; tests/test_examples.py checks that the figures appear)."""
-    code = ("import matplotlib, jaxchain._plots.localized as p, jaxchain; "
+    code = ("import matplotlib, jaxchain; jaxchain.plot_localized_states; "
             "print(matplotlib.get_backend())")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env=os.environ | {"MPLBACKEND": "svg"})
@@ -156,7 +101,7 @@ def test_the_library_leaves_the_backend_alone():
 
 def test_no_command_exits_2_with_one_line(capsys):
     with pytest.raises(SystemExit) as exc:
-        main([])
+        jc.main([])
     assert exc.value.code == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1
 
@@ -169,7 +114,7 @@ def localized_small(tmp_path_factory):
     out = tmp_path_factory.mktemp("localized")
     printed = io.StringIO()
     with contextlib.redirect_stdout(printed):
-        code = main(["localized", *SMALL, "--json", "--out", str(out)])
+        code = jc.main(["localized", *SMALL, "--json", "--out", str(out)])
     assert code == 0
     return json.loads(printed.getvalue()), out
 
@@ -208,7 +153,7 @@ def test_localized_json_and_files(localized_small):
 def test_failed_runs_give_valid_json_with_nulls_and_exit_1(tmp_path, capsys):
     argv = ["localized", "--n-osc", "2", "--t-end", "300", "--transient", "200",
             "--max-steps", "5", "--json", "--out", str(tmp_path)]
-    assert main(argv) == 1
+    assert jc.main(argv) == 1
     captured = capsys.readouterr()
     res = json.loads(captured.out)  # strict JSON: NaN would not parse here
     err = captured.err.strip()

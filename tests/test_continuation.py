@@ -11,9 +11,6 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-from jaxchain._bifurcation.two_parameter import hopf_vd, hopf_vd_and_derivative
-from jaxchain._studies.bistable_range import RATIO_VALUES, XI_VALUES
-from jaxchain._cli.main import main
 
 
 class _Point(eqx.Module):
@@ -82,8 +79,9 @@ def default_curves(branch):
     problem, _, fold = branch
     start = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
     mu_d = float(problem.params.friction.mu_d)
-    return {"xi": jc.boundary_curves(problem, start, "xi", XI_VALUES),
-            "mu_st": jc.boundary_curves(problem, start, "mu_st", mu_d * np.asarray(RATIO_VALUES))}
+    return {"xi": jc.boundary_curves(problem, start, "xi", jc.BISTABLE_XI_VALUES),
+            "mu_st": jc.boundary_curves(problem, start, "mu_st",
+                                        mu_d * np.asarray(jc.BISTABLE_RATIO_VALUES))}
 
 
 @pytest.mark.numerics
@@ -162,13 +160,13 @@ def test_a_failed_hopf_solve_is_nan_never_a_number():
     mu_st = mu_d the growth rate is -xi at every belt speed (there is no root), and
     from a guess of v_d = -50 the exponential law's slope vanishes in float64."""
     one = jc.ChainParams(n_osc=1)
-    hopf, d_xi = hopf_vd_and_derivative(one, "xi", 0.05)
+    hopf, d_xi = jc.hopf_vd_and_derivative(one, "xi", 0.05)
     assert abs(float(hopf) - 0.5 * np.log(10)) < 1e-10
     assert abs(float(d_xi) + 0.5 / 0.05) < 1e-8
-    value, derivative = hopf_vd_and_derivative(jc.ChainParams(n_osc=1, mu_st=0.5),
+    value, derivative = jc.hopf_vd_and_derivative(jc.ChainParams(n_osc=1, mu_st=0.5),
                                                "xi", 0.05)
     assert np.isnan(float(value)) and np.isnan(float(derivative))
-    assert np.isnan(float(hopf_vd(one, guess=-50.0)))
+    assert np.isnan(float(jc.hopf_vd(one, guess=-50.0)))
 
 
 @pytest.mark.numerics
@@ -179,7 +177,7 @@ def test_boundaries_command_json_and_figures(tmp_path, capsys):
     design checked by simulation on both sides of it. It runs here, after the
     tests above, because it continues the same limit cycles: this process has
     compiled their programs already."""
-    code = main(["boundaries", "--json", "--no-ring", "--no-simulation", "--xi-values",
+    code = jc.main(["boundaries", "--json", "--no-ring", "--no-simulation", "--xi-values",
                  "0.05,0.06", "--ratio-values", "2.0", "--no-progress", "--out",
                  str(tmp_path)])
     assert code == 0

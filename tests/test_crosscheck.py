@@ -3,17 +3,12 @@
 import json
 import sys
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 import xarray as xr
 
 import jaxchain as jc
-import jaxchain._studies.crosscheck as xc
-import jaxchain._sweeps.result_store as store
-from helpers import scipy_stick_slip_cycle
-from jaxchain._cli.main import main
+from helpers import replace_internal, scipy_stick_slip_cycle
 
 SMALL = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=150.0)
 #: Long enough for the localized state of a 4-ring to settle to a periodic orbit.
@@ -27,7 +22,7 @@ def test_periodic_states_agree_within_the_smoothing_error(tmp_path, monkeypatch)
     stored reference runs back instead of recomputing them."""
     p = jc.ChainParams(n_osc=4)
     ics = (("eq8", 1), ("eq8", 4))
-    ds = xc.crosscheck(p, (1.5,), ics, options=SETTLED, checkpoint=tmp_path)
+    ds = jc.crosscheck(p, (1.5,), ics, options=SETTLED, checkpoint=tmp_path)
     assert ds.sizes == {"case": 2, "osc": 4}
     periodic = np.array(["periodic" in c for c in ds["state_class_reference"].values])
     assert periodic.any()
@@ -37,8 +32,8 @@ def test_periodic_states_agree_within_the_smoothing_error(tmp_path, monkeypatch)
 
     def no_reference(*args, **kwargs):
         raise AssertionError("the stored reference runs should have been read")
-    monkeypatch.setattr(xc, "_reference_run", no_reference)
-    again = xc.crosscheck(p, (1.5,), ics, options=SETTLED, checkpoint=tmp_path)
+    replace_internal(monkeypatch, "crosscheck reference", no_reference)
+    again = jc.crosscheck(p, (1.5,), ics, options=SETTLED, checkpoint=tmp_path)
     assert np.array_equal(again["amplitudes_reference"], ds["amplitudes_reference"])
 
 
@@ -64,10 +59,10 @@ def test_stored_reference_runs_are_read_back_only_for_equal_settings(tmp_path, m
     settings gives what a fresh one gives, case by case; a run of equal settings
     is read back, its file untouched."""
     stored = tmp_path / "stored"
-    first = xc.crosscheck(**TINY, checkpoint=stored)
+    first = jc.crosscheck(**TINY, checkpoint=stored)
     for name, change in OTHER_SETTINGS.items():
-        resumed = xc.crosscheck(**TINY | change, checkpoint=stored)
-        fresh = xc.crosscheck(**TINY | change, checkpoint=tmp_path / name)
+        resumed = jc.crosscheck(**TINY | change, checkpoint=stored)
+        fresh = jc.crosscheck(**TINY | change, checkpoint=tmp_path / name)
         xr.testing.assert_equal(_without_wall_times(resumed), _without_wall_times(fresh))
         # The change matters, so reading back `first`'s run would have shown.
         assert not np.array_equal(resumed["amplitudes_reference"],
@@ -78,38 +73,17 @@ def test_stored_reference_runs_are_read_back_only_for_equal_settings(tmp_path, m
 
     def no_reference(*args, **kwargs):
         raise AssertionError("the stored reference run should have been read")
-    monkeypatch.setattr(xc, "_reference_run", no_reference)
-    again = xc.crosscheck(**TINY, checkpoint=stored)
+    replace_internal(monkeypatch, "crosscheck reference", no_reference)
+    again = jc.crosscheck(**TINY, checkpoint=stored)
     xr.testing.assert_equal(again, first)  # the stored wall time included
     assert {f: f.stat().st_mtime_ns for f in sorted(stored.iterdir())} == written
-
-
-def test_a_stored_result_is_read_back_only_under_its_own_key(tmp_path):
-    """Keys depend on values only (a float and a 0-d array of it agree) and change
-    with any field; a file stored under another key, or unreadable, is not read."""
-    p = jc.ChainParams(n_osc=2)
-    key = store.settings_key("test", params=p, options=SMALL)
-    assert key == store.settings_key("test", params=jc.ChainParams(n_osc=2, xi=jnp.asarray(0.05)),
-                                     options=SMALL)
-    for other in ({"params": jc.ChainParams(n_osc=3)}, {"params": jc.ChainParams(n_osc=2, v0=0.6)},
-                  {"options": jc.SimulationOptions(t_end=600.0, transient=300.0)}):
-        assert store.settings_key("test", **{"params": p, "options": SMALL} | other) != key
-    with pytest.raises(TypeError, match="traced"):
-        jax.jit(lambda xi: store.settings_key("test", xi=xi))(0.1)
-    path = tmp_path / "run.nc"
-    store.write_dataset(xr.Dataset({"a": ("x", [1.0, 2.0])}), path, "test", params=p)
-    assert store.read_dataset(path, "test", params=p)["a"].values.tolist() == [1.0, 2.0]
-    assert store.read_dataset(path, "test", params=jc.ChainParams(n_osc=2, xi=0.1)) is None
-    assert store.read_dataset(path, "other kind", params=p) is None
-    path.write_bytes(b"not netCDF")
-    assert store.read_dataset(path, "test", params=p) is None
 
 
 @pytest.mark.numerics
 def test_smoothed_error_shrinks_with_eps():
     """The amplitude error against the reference falls when eps is divided by 10
     (the smoothed law converges to the non-smooth one)."""
-    errs = [float(xc.crosscheck(jc.ChainParams(n_osc=1, eps=eps), (1.5,), (("eq8", 1),),
+    errs = [float(jc.crosscheck(jc.ChainParams(n_osc=1, eps=eps), (1.5,), (("eq8", 1),),
                                 options=SMALL)["amplitude_error"][0]) for eps in (1e-2, 1e-3)]
     assert errs[1] < 0.5 * errs[0]
 
@@ -130,11 +104,11 @@ def test_the_public_class_tolerances_drive_the_crosscheck():
     sampled every sample_dt, move by ~1e-4 between the two halves), so the
     fields are read."""
     kwargs = {k: TINY[k] for k in ("v_d", "ics", "options")}
-    ds = xc.crosscheck(TINY["params"], tolerances=jc.ClassTolerances(), **kwargs)
+    ds = jc.crosscheck(TINY["params"], tolerances=jc.ClassTolerances(), **kwargs)
     assert ds["state_class_smoothed"].values.tolist() == ["stick-slip (periodic)"]
     assert ds["state_class_reference"].values.tolist() == ["stick-slip (periodic)"]
     strict = jc.ClassTolerances(halves=1e-300, halves_reference=1e-300)
-    ds = xc.crosscheck(TINY["params"], tolerances=strict, **kwargs)
+    ds = jc.crosscheck(TINY["params"], tolerances=strict, **kwargs)
     assert ds["state_class_smoothed"].values.tolist() == ["stick-slip (irregular)"]
     assert ds.attrs["periodic_tol_smoothed"] == ds.attrs["periodic_tol_reference"] == 1e-300
     for field in ("delay", "halves", "halves_reference"):
@@ -151,7 +125,7 @@ def test_crosscheck_command_json_and_files(tmp_path, capsys):
     one to 1 %, and the reported amplitude error is the smoothed amplitude's
     distance from scipy's."""
     out = tmp_path / "out"
-    code = main(["crosscheck", "--n-osc", "1", "--vd", "1.5", "--eq8", "1", "--eq10", "",
+    code = jc.main(["crosscheck", "--n-osc", "1", "--vd", "1.5", "--eq8", "1", "--eq10", "",
                  "--t-end", "600", "--transient", "300", "--json", "--out", str(out)])
     assert code == 0
     report = json.loads(capsys.readouterr().out)
@@ -180,7 +154,7 @@ def test_crosscheck_command_json_and_files(tmp_path, capsys):
 ])
 def test_crosscheck_bad_options_exit_2(argv, says, capsys, tmp_path):
     with pytest.raises(SystemExit) as exc:
-        sys.exit(main(["crosscheck", *argv, "--out", str(tmp_path)]))
+        sys.exit(jc.main(["crosscheck", *argv, "--out", str(tmp_path)]))
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and says in err

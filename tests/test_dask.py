@@ -18,11 +18,8 @@ import xarray as xr
 from distributed.diagnostics.plugin import SchedulerPlugin
 
 import jaxchain as jc
-from helpers import SWEEP_RESULTS, held, hold_env, kill, release, small_sweep, sweep_cli
-from jaxchain._sweeps.atomic import HOLD
-from jaxchain._cli.main import main
-from jaxchain._engine.cluster import connect, local_workers
-from jaxchain._sweeps.zarr_store import SweepStore
+from helpers import (HOLD, JAXCHAIN, SWEEP_RESULTS, batches_done, dask_client, held, hold_env,
+                     kill, release, scheduler_workers, small_sweep, sweep_cli)
 
 #: A ring of 3 at 4 belt speeds x eq. (8) with k = 1..3 (`small_sweep`): 12
 #: trajectories in 6 batches of 2; a worker or the scheduler is killed in the
@@ -44,7 +41,7 @@ def in_process():
 
 @pytest.fixture(scope="module")
 def client():
-    with connect("local:2") as c:
+    with dask_client("local:2") as c:
         yield c
 
 
@@ -147,7 +144,7 @@ def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_pro
               str(file), "--nthreads", "1", "--no-dashboard", "--death-timeout", "5",
               env=hold_env(hooks))
         proc = subprocess.Popen(
-            [sys.executable, "-m", "jaxchain._cli.main", *CLI, "--out", str(out),
+            [*JAXCHAIN, *CLI, "--out", str(out),
              "--scheduler", address], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
             text=True)
         started.append(proc)
@@ -162,10 +159,10 @@ def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_pro
     assert proc.returncode == 1, err
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "scheduler" in lines[0], err
-    done = SweepStore(out / "sweep.zarr").done()
+    done = np.array(batches_done(out / "sweep.zarr"))
     assert np.flatnonzero(done).tolist() == [int(first.split()[-1])]
 
-    assert main([*CLI, "--out", str(out), "--resume"]) == 0
+    assert jc.main([*CLI, "--out", str(out), "--resume"]) == 0
     xr.testing.assert_equal(jc.open_sweep(out / "sweep.zarr").load()[RESULTS],
                             in_process[RESULTS])
 
@@ -175,8 +172,8 @@ def test_basin_on_a_local_cluster_equals_basin_in_process(tmp_path):
     command, to the last bit."""
     args = ["basin", "--n-osc", "2", "--vd", "1.5", "--samples", "8", "--t-end", "400",
             "--transient", "300", "--check", "2", "--no-progress", "--json"]
-    assert main([*args, "--out", str(tmp_path / "here")]) == 0
-    assert main([*args, "--out", str(tmp_path / "dask"), "--scheduler", "local:2"]) == 0
+    assert jc.main([*args, "--out", str(tmp_path / "here")]) == 0
+    assert jc.main([*args, "--out", str(tmp_path / "dask"), "--scheduler", "local:2"]) == 0
     here = xr.open_dataset(tmp_path / "here" / "basin.nc").load()
     there = xr.open_dataset(tmp_path / "dask" / "basin.nc").load()
     xr.testing.assert_identical(here.drop_attrs(), there.drop_attrs())
@@ -203,19 +200,19 @@ def test_a_crosscheck_on_a_local_cluster_equals_the_in_process_one(tmp_path, cli
 def test_bad_scheduler_addresses_are_refused():
     for bad in ("local:0", "local:x", "", "local:"):
         with pytest.raises(ValueError, match="scheduler"):
-            local_workers(bad)
-    assert local_workers("local:3") == 3 and local_workers("tcp://h:8786") is None
+            scheduler_workers(bad)
+    assert scheduler_workers("local:3") == 3 and scheduler_workers("tcp://h:8786") is None
     with pytest.raises(ValueError, match="store"):
         _api_sweep(client=object())
     with pytest.raises(ValueError, match="checkpoint"):
         jc.crosscheck(jc.ChainParams(n_osc=1), client=object())
     with pytest.raises(RuntimeError, match="no Dask scheduler answers"), \
-            connect("tcp://127.0.0.1:9", timeout=1):  # the discard port: nobody listens
+            dask_client("tcp://127.0.0.1:9", timeout=1):  # the discard port: nobody listens
         pass
 
 
 def test_bad_scheduler_option_exits_2_in_one_line(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
-        main([*CLI, "--out", str(tmp_path), "--scheduler", "local:0"])
+        jc.main([*CLI, "--out", str(tmp_path), "--scheduler", "local:0"])
     assert exc.value.code == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1

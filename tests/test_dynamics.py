@@ -10,8 +10,6 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from jaxchain._cli.figure import FIGURES
-from jaxchain._cli.main import main
 
 
 def synthetic_peaks(n_peaks, period, delays, jitter=0.0, seed=0):
@@ -75,7 +73,7 @@ def test_reference_is_the_11th_or_the_nearest_halc_oscillator():
 def run_figure(name, tmp_path, capsys):
     argv = ["figure", name, "--quick", "--json", "--no-progress", "--out", str(tmp_path)]
     with pytest.raises(SystemExit) as exc:
-        sys.exit(main(argv))
+        sys.exit(jc.main(argv))
     assert exc.value.code == 0, capsys.readouterr().err
     report = json.loads(capsys.readouterr().out)
     assert (tmp_path / f"figure{name}.png").stat().st_size > 10_000
@@ -89,7 +87,7 @@ def test_figure_command_quick_runs_every_scene_and_keeps_only_what_it_shows(tmp_
     Fig. 8 are those of Fig. 4's plain run, and its Lyapunov exponents are those
     of regular states."""
     reports, data = {}, {}
-    for name in FIGURES:
+    for name in jc.PAPER_FIGURES:
         reports[name], data[name] = run_figure(name, tmp_path, capsys)
     shown = {"5": {"series"}, "7": {"series"}, "6": {"peak_times", "lyapunov", "amplitudes"},
              "8": {"peak_times", "lyapunov", "amplitudes"}}
@@ -138,6 +136,6 @@ def test_figure_command_quick_runs_every_scene_and_keeps_only_what_it_shows(tmp_
 
 def test_figure_command_rejects_unknown_figures(capsys):
     with pytest.raises(SystemExit) as exc:
-        sys.exit(main(["figure", "3"]))
+        sys.exit(jc.main(["figure", "3"]))
     assert exc.value.code == 2
     assert len(capsys.readouterr().err.strip().splitlines()) == 1

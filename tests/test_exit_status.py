@@ -4,16 +4,22 @@ one line for a run that fails, whatever it raises. Nothing heavy runs here: each
 command's first heavy step is replaced by one that raises."""
 
 import contextlib
+import json
 import importlib
 import io
 import re
 import tempfile
 
+import equinox as eqx
+import jax.numpy as jnp
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import jaxchain as jc
+import jaxchain._cli.boundaries as cli_boundaries
+import jaxchain._cli.work_precision as cli_work_precision
+import jaxchain._studies.work_precision as wp
 from jaxchain._cli.common import RunsFailed, UsageError
 from jaxchain._cli.main import COMMANDS, build_parser, exit_status, main
 
@@ -28,7 +34,7 @@ STUDIES = {
     "figure": [("jaxchain._cli.figure", "_scene")],
     "crosscheck": [("jaxchain._studies.crosscheck", "excited_block")],  # the initial states
     "work-precision": [("jaxchain._studies.work_precision", "CsvStore")],
-    "boundaries": [("jaxchain._cli.boundaries", "boundaries")],
+    "boundaries": [("jaxchain._cli.boundaries", "bistable_range")],
     "stress": [("jaxchain._cli.stress", "stress_cases")],  # builds every case
     "basin": [("jaxchain._studies.basin.basin", "sample_states")],
     "snake": [("jaxchain._cli.snake", "localized_branches")],
@@ -233,3 +239,52 @@ def test_fuzzed_command_lines_exit_2_in_one_line_or_reach_the_study(command, dat
     if status != "reached":
         assert status == 2 and len(err) == 1, (argv, status, err)
         assert re.match(rf"jaxchain( {command})?: error: ", err[0]), (argv, err)
+
+
+def _compiled_error():
+    """A failure inside compiled code, as the library's solvers raise it."""
+    fail = eqx.filter_jit(lambda x: eqx.error_if(x, x > 0, "max_steps reached: raise "
+                                                           "max_steps"))
+    fail(jnp.array(1.0))
+
+
+def _raise_now(err):
+    raise err
+
+
+@pytest.mark.parametrize("fail, says", [
+    (lambda: _raise_now(RuntimeError("the fold was lost at xi = 0.05: lower learning_rate"
+                                 "\n  more detail on a second line")), "fold was lost"),
+    (_compiled_error, "max_steps reached: raise max_steps"),
+    (lambda: _raise_now(KeyError("hopf_vd")), "KeyError: 'hopf_vd'"),
+])
+def test_boundaries_failure_exits_1_with_one_line(fail, says, monkeypatch, tmp_path, capsys):
+    monkeypatch.delenv("JAXCHAIN_TRACEBACK", raising=False)
+    monkeypatch.setattr(cli_boundaries, "bistable_range", lambda *a, **k: fail())
+    assert jc.main(["boundaries", "--no-progress", "--out", str(tmp_path)]) == 1
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("jaxchain boundaries: error: ")
+    assert says in err
+
+
+def test_work_precision_failed_runs_exit_1(tmp_path, monkeypatch, capsys):
+    """A study with a failed run (recorded with its status; the skipped runs after it
+    are not failures) reports it, and the status is 1. The study itself is replaced
+    by its rows: test_work_precision.py checks that max_steps is recorded."""
+    row = dict.fromkeys(wp.COLUMNS, "") | {"scene": "single", "method": "tsit5",
+                                            "eps": "0.01", "atol": "1e-08"}
+    rows = [row | {"rtol": "1e-06", "status": "ok", "wall_s": "0.1", "num_steps": "90",
+                   "amplitude_error": "1e-3", "energy_error": "1e-3",
+                   "trajectory_error": "1e-3", "amplitude_max": "1.7"},
+            row | {"rtol": "1e-08", "status": "max_steps_reached", "wall_s": "0.3"},
+            row | {"rtol": "1e-10", "status": "not_run: max_steps at rtol 1e-08"}]
+    monkeypatch.setattr(cli_work_precision, "work_precision", lambda *a, **k: rows)
+    code = jc.main(["work-precision", "--scenes", "single", "--solvers", "tsit5", "--rtols",
+                 "1e-6,1e-8,1e-10", "--eps", "1e-2", "--no-scipy", "--json",
+                 "--no-progress", "--out", str(tmp_path)])
+    assert code == 1
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["failed_runs"] == 1
+    err = captured.err.strip()
+    assert len(err.splitlines()) == 1 and "1 of 3 runs failed" in err
+    assert (tmp_path / "work_precision_single.png").stat().st_size > 0

@@ -10,8 +10,6 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from jaxchain._cli.main import main
-from jaxchain._studies.mistuning.summary import envelope_decay, halc_correlation
 
 from helpers import assert_usage_error, scipy_stick_slip_cycle
 
@@ -23,7 +21,7 @@ ARGS = ["mistuning", "--n-osc", "4", "--sigmas", "0,2", "--draws", "2", "--vd", 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
     out = tmp_path_factory.mktemp("mistuning")
-    assert main(ARGS + ["--out", str(out)]) in (0, None)
+    assert jc.main(ARGS + ["--out", str(out)]) in (0, None)
     return out
 
 
@@ -159,7 +157,7 @@ def test_resume_after_a_lost_chain_gives_the_same_study(study, tmp_path, capsys)
     (copy / "mistuning.nc").unlink()
     assert_usage_error(ARGS + ["--out", str(copy)], "--resume", capsys)
     # the lost chain on a cluster of two spawned workers (issue 27): the same bits
-    assert main(ARGS + ["--out", str(copy), "--resume", "--scheduler", "local:2"]) in (0, None)
+    assert jc.main(ARGS + ["--out", str(copy), "--resume", "--scheduler", "local:2"]) in (0, None)
     again = _summary(copy)
     first.pop("figures"), again.pop("figures")
     assert again == first
@@ -169,8 +167,8 @@ def test_envelope_decay_recovers_an_exponential_profile():
     n, kappa = 20, 1.7
     m = np.minimum(np.arange(n), n - np.arange(n))
     profile = np.roll(2.0 * np.exp(-kappa * m), 7)
-    assert abs(envelope_decay(profile[None], np.array([1]))[0] - kappa) < 1e-12
-    assert np.isnan(envelope_decay(profile[None], np.array([2]))[0])
+    assert abs(jc.envelope_decay(profile[None], np.array([1]))[0] - kappa) < 1e-12
+    assert np.isnan(jc.envelope_decay(profile[None], np.array([2]))[0])
 
 
 def test_halc_correlation_sees_which_oscillators_vibrate():
@@ -188,7 +186,7 @@ def test_halc_correlation_sees_which_oscillators_vibrate():
                      "basin_status": (("sigma", "draw", "v_d", "sample"),
                                       np.zeros_like(n_halc))},
                     coords={"sigma": [0.0, 2.0], "v_d": [1.5]}, attrs={"eta_c": 0.01})
-    out = halc_correlation(ds)
+    out = jc.halc_correlation(ds)
     assert np.isnan(out["correlation"][0, 0])
     assert out["correlation"][1, 0] > 0.5
     keep = (n_halc[1, :, 0, 0] > 0) & (n_halc[1, :, 0, 0] < 6)

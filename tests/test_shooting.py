@@ -8,8 +8,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
-from helpers import SHORT, reference_rhs, scipy_stick_slip_cycle
-from jaxchain._bifurcation.shooting import describe_orbit, pack
+from helpers import SHORT, internal, reference_rhs, scipy_stick_slip_cycle
 
 
 def scipy_flow(params, y, period):
@@ -50,7 +49,8 @@ def test_n_halc_agrees_between_simulation_shooting_and_reference(state):
     ref = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions(
         t_end=SHORT.t_end, transient=SHORT.transient))
     if sliding:
-        orbit = describe_orbit(params, pack(y0, 2 * np.pi), jc.ShootingOptions())
+        shooting_unknowns = jnp.concatenate([jnp.ravel(y0), jnp.array([2 * np.pi])])
+        orbit = internal("orbit description")(params, shooting_unknowns, jc.ShootingOptions())
     else:
         orbit = jc.periodic_orbit(params, obs.y_final, 6.3)
     expected = 0 if sliding else 1

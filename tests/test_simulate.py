@@ -7,7 +7,6 @@ from scipy.integrate import solve_ivp
 import jaxchain as jc
 from helpers import (SHORT, TIGHT, assert_within_drift, flat, reference_rhs, scipy_slip_arc,
                      scipy_stick_slip_cycle)
-from jaxchain._physics.stick import min_slip_speed
 
 
 def _near_steady_sliding(p):
@@ -127,7 +126,7 @@ def test_sticks_on_constructed_velocity_signals():
     stick = eps * np.arctanh(np.linspace(0.25, 0.999, t.size))
     signals = np.stack([v_d - stick, v_d + stick, 0.1 * np.sin(t),
                         np.full(t.size, v_d - 2.99 * eps), np.full(t.size, v_d + 3.01 * eps)], 1)
-    speed = min_slip_speed(signals, v_d)
+    speed = jc.min_slip_speed(signals, v_d)
     expected = [eps * np.arctanh(0.25)] * 2 + [v_d - 0.1, 2.99 * eps, 3.01 * eps]
     np.testing.assert_allclose(speed, expected, rtol=1e-12)
     assert np.asarray(jc.sticks(speed, eps)).tolist() == [True, True, False, True, False]

@@ -11,10 +11,8 @@ import xarray as xr
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
-from jaxchain._bifurcation.bifurcations import locate_bifurcations
-from jaxchain._studies.snake import localized_branches, start_orbits
 
-from helpers import assert_usage_error, reference_rhs
+from helpers import assert_usage_error, internal, reference_rhs
 
 RING = jc.ChainParams(n_osc=4, v_d=1.5)
 OPTIONS = jc.ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.2, p_max=1.75, max_points=14)
@@ -23,7 +21,7 @@ OPTIONS = jc.ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.2, p_max=1.75, max
 @pytest.fixture(scope="module")
 def one_site(tmp_path_factory):
     out = tmp_path_factory.mktemp("snake")
-    found = localized_branches(RING, (1,), continuation_options=OPTIONS, out=out)
+    found = jc.localized_branches(RING, (1,), continuation_options=OPTIONS, out=out)
     return found, out
 
 
@@ -32,7 +30,7 @@ def test_shooting_from_simulation_gives_the_simulated_state_and_its_multipliers(
     """The 1-site state of a ring of 4 at v_d = 1.5: the orbit has the simulated
     energy (within 0.5 %) and sites; the trivial multiplier is 1 to 1e-6; each quiet
     oscillator contributes a pair of modulus about exp(-(2 xi - |mu'(v_d)|) T / 2)."""
-    orbit, sim, reason = start_orbits(RING, (1,))[1]
+    orbit, sim, reason = internal("snake start orbits")(RING, (1,))[1]
     assert reason is None and bool(orbit.converged)
     assert int(orbit.n_halc) == sim["n_halc"] == 1
     assert abs(float(orbit.energy) / sim["energy"] - 1) < 5e-3
@@ -53,7 +51,7 @@ def test_bisection_along_the_branch_finds_the_fold_of_the_extended_system():
     problem = jc.limit_cycle_problem(orbit)
     branch = jc.continuation(problem, options=jc.ContinuationOptions(
         ds=0.01, ds_max=0.1, p_min=1.0, p_max=2.5, max_points=50))
-    found = locate_bifurcations(problem, branch)
+    found = jc.locate_bifurcations(problem, branch)
     folds = [b for b in found if b.kind == "fold"]
     assert len(folds) == 1
     reference = jc.fold_point(problem, branch)
@@ -93,20 +91,20 @@ def test_continuation_reproduces_itself_from_a_perturbed_start(one_site):
     problem = jc.limit_cycle_problem(orbit, options)
     branch = jc.continuation(problem, options=jc.ContinuationOptions(
         ds=0.02, ds_max=0.1, p_min=1.2, p_max=1.75, max_points=14, direction=-1))
-    ns = [b for b in locate_bifurcations(problem, branch) if b.kind == "Neimark-Sacker"]
+    ns = [b for b in jc.locate_bifurcations(problem, branch) if b.kind == "Neimark-Sacker"]
     assert len(ns) == 1 and abs(float(ns[0].p) - low) < 1e-6
 
 
 def test_stored_branches_are_read_back_only_for_equal_settings(one_site):
     found, out = one_site
-    again = localized_branches(RING, (1,), continuation_options=OPTIONS, out=out,
+    again = jc.localized_branches(RING, (1,), continuation_options=OPTIONS, out=out,
                                simulation_check=False)
     a, b = found["datasets"]["k=1"], again["datasets"]["k=1"]
     np.testing.assert_array_equal(a["energy"].values, b["energy"].values)
     assert again["summary"]["branches"][0]["bifurcations"] == \
         found["summary"]["branches"][0]["bifurcations"]
     other = jc.ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.3, p_max=1.75, max_points=4)
-    fresh = localized_branches(RING, (1,), continuation_options=other, out=out,
+    fresh = jc.localized_branches(RING, (1,), continuation_options=other, out=out,
                                simulation_check=False)
     assert fresh["datasets"]["k=1"].sizes["point"] <= 7 < a.sizes["point"]  # recomputed
 
@@ -116,11 +114,10 @@ def test_snake_command_json_and_bad_options(tmp_path, capsys):
     """The command's branch, read back from its file, against scipy: each stored
     point (the state and period of `u`) is a periodic orbit of eq. (5) at its belt
     speed, with its n_HALC and amplitudes."""
-    from jaxchain._cli.main import main
     # The ring of `RING` (n_osc 4): the programs that `one_site` compiled serve the
     # command too, which still shoots, continues and stores its own branch.
-    code = main(["snake", "--n-osc", "4", "--sites", "1", "--max-points", "4",
-                 "--no-simulation", "--out", str(tmp_path), "--json", "--no-progress"])
+    code = jc.main(["snake", "--n-osc", "4", "--sites", "1", "--max-points", "4",
+                    "--no-simulation", "--out", str(tmp_path), "--json", "--no-progress"])
     assert code == 0
     out = json.loads(capsys.readouterr().out)
     (branch,) = out["branches"]

@@ -9,12 +9,9 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-import jaxchain._studies.stress.run as stress_run
-from jaxchain._studies.stress.cases import QUICK_MATRIX, QUICK_OPTIONS, make_case
-from jaxchain._studies.stress.physics_checks import balance_run, linear_rate
-from jaxchain._studies.stress.run import run_case
-from helpers import assert_usage_error, scipy_slip_arc
-from jaxchain._cli.main import main
+from helpers import assert_usage_error, internal, replace_internal, scipy_slip_arc
+
+QUICK = jc.stress_cases(quick=True)
 
 
 @pytest.mark.numerics
@@ -27,11 +24,10 @@ def test_quick_matrix_verifies_every_case_on_the_default_solver(tmp_path, capsys
     with the same --out reads every row back and runs no case."""
     argv = ["stress", "--quick", "--solvers", "ros34pw2", "--out", str(tmp_path), "--json",
             "--no-progress"]
-    assert main(argv) == 0
+    assert jc.main(argv) == 0
     out = json.loads(capsys.readouterr().out)
     cases = out["cases"]
-    assert [(c["what"], c["value"]) for c in cases] == [
-        (what, value) for what, values in QUICK_MATRIX.items() for value in values]
+    assert [(c["what"], c["value"]) for c in cases] == [(c.what, c.value) for c in QUICK]
     assert set(cases[0]) == {"what", "value", "solver", "outcome", "status", "check", "hint"}
     for case in cases:
         assert case["outcome"] == "verified" and case["status"] == "ok", case
@@ -42,12 +38,13 @@ def test_quick_matrix_verifies_every_case_on_the_default_solver(tmp_path, capsys
     assert "slides to steady sliding" in by["v_d", 10.0]["check"]
     assert "Hopf point" in by["v_d", 1.1513]["check"]
     assert "stays at steady sliding" in by["ics", "steady sliding"]["check"]
-    assert (tmp_path / "stress.md").read_text().count("| eps |") == len(QUICK_MATRIX["eps"])
+    assert (tmp_path / "stress.md").read_text().count("| eps |") == sum(
+        c.what == "eps" for c in QUICK)
     # Resumed: the same rows, read back, and no case run again.
     def no_case(*args, **kwargs):
         raise AssertionError("a stored row should have been read back")
-    monkeypatch.setattr(stress_run, "run_case", no_case)
-    assert main(argv) == 0
+    replace_internal(monkeypatch, "stress case", no_case)
+    assert jc.main(argv) == 0
     again = json.loads(capsys.readouterr().out)
     assert again["cases"] == cases and again["defects"] == 0
 
@@ -55,8 +52,8 @@ def test_quick_matrix_verifies_every_case_on_the_default_solver(tmp_path, capsys
 def test_an_explicit_solver_at_tiny_eps_fails_with_a_specific_hint():
     """Tsit5 with a step budget far below mu_st/eps fails with max_steps, and the hint
     names the stiffness and the solver that copes."""
-    options = dataclasses.replace(QUICK_OPTIONS, max_steps=2000)
-    row = run_case(make_case("eps", 1e-6, options), "tsit5")
+    options = dataclasses.replace(QUICK[0].options, max_steps=2000)
+    row, = jc.stress([internal("stress case of the matrix")("eps", 1e-6, options)], ["tsit5"])
     assert row["outcome"] == "failed" and row["status"] == jc.Status.max_steps_reached.name
     assert "eps = 1e-06 makes the stick phase stiff" in row["hint"]
     assert "solver='ros34pw2'" in row["hint"]
@@ -91,7 +88,7 @@ def test_energy_balance_and_decay_rate_of_the_damped_linear_oscillator():
     y0 = jnp.array([[0.5 + x0], [0.0]])
     options = jc.SimulationOptions(t_end=60.0, transient=20.0, chunk_length=10.0,
                                    rtol=1e-9, atol=1e-11)
-    out = balance_run(params, y0, jc.SOLVERS["tsit5"](), options)
+    out = internal("stress energy balance")(params, y0, jc.SOLVERS["tsit5"](), options)
     wd = np.sqrt(1 - xi**2)
     t = options.t_end
     u = x0 * np.exp(-xi * t) * (np.cos(wd * t) + xi / wd * np.sin(wd * t))
@@ -100,7 +97,7 @@ def test_energy_balance_and_decay_rate_of_the_damped_linear_oscillator():
     assert out["energy_end"] == pytest.approx(energy_end, rel=1e-7)
     assert out["residual"] < 1e-7
     assert out["decay_rate"] == pytest.approx(-xi, abs=2e-3)
-    assert linear_rate(params) == pytest.approx(-xi, abs=1e-12)
+    assert internal("linear decay rate")(params) == pytest.approx(-xi, abs=1e-12)
 
 
 @pytest.mark.numerics

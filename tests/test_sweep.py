@@ -4,18 +4,15 @@ gives the runs made one by one; propagating fronts are flagged."""
 
 import signal
 import subprocess
-import sys
 
 import numpy as np
 import pytest
 import xarray as xr
 
 import jaxchain as jc
-import jaxchain._sweeps.sweep as sweep_module
-from helpers import (SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, held, hold_env, kill, release,
+from helpers import (JAXCHAIN, SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, batch_writes,
+                     batches_done, held, hold_env, internal, kill, release, replace_internal,
                      small_sweep, sweep_cli)
-from jaxchain._cli.main import main
-from jaxchain._sweeps.zarr_store import SweepStore
 
 #: The grid of the kill-and-resume tests: 2 belt speeds x eq. (8) with k = 1..3 on
 #: a ring of 3, in 3 batches of 2 (`small_sweep`).
@@ -48,7 +45,7 @@ def test_sweep_killed_then_resumed_equals_an_uninterrupted_run(tmp_path, uninter
     kill are computed again (their count, and the stored chunks of the others left
     untouched)."""
     out, store, hooks = tmp_path / "out", tmp_path / "out" / "sweep.zarr", tmp_path / "hooks"
-    cmd = [sys.executable, "-m", "jaxchain._cli.main", *CLI, "--out", str(out)]
+    cmd = [*JAXCHAIN, *CLI, "--out", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             text=True, env=hold_env(hooks))
     try:
@@ -58,7 +55,7 @@ def test_sweep_killed_then_resumed_equals_an_uninterrupted_run(tmp_path, uninter
     finally:
         kill(proc)
     assert proc.returncode == -signal.SIGKILL
-    done = SweepStore(store).done()
+    done = np.array(batches_done(store))
     assert done.tolist() == [True, False, False], "killed with batch 0 alone stored"
     before = _chunk_times(store, np.flatnonzero(done))
 
@@ -75,22 +72,19 @@ def test_a_half_written_batch_is_redone(tmp_path, uninterrupted, monkeypatch):
     store, its flag is not. The resumed sweep redoes it (and it alone with the
     batches after it), and equals the uninterrupted run."""
     store = tmp_path / "sweep.zarr"
-    write = SweepStore.write
 
-    def dies_in_batch_1(self, index, start, batch):
+    def dies_in_batch_1(write, sweep_store, index, start, batch):
         if index == 1:
             half = list(batch.data_vars)[: len(batch.data_vars) // 2]
             garbage = batch[half].map(lambda v: v * 0 + 7)
-            garbage.to_zarr(self.path, region={"trajectory": slice(start, start + BATCH)},
+            garbage.to_zarr(store, region={"trajectory": slice(start, start + BATCH)},
                             consolidated=False)
             raise KeyboardInterrupt("killed while writing batch 1")
-        write(self, index, start, batch)
+        write(sweep_store, index, start, batch)
 
-    monkeypatch.setattr(SweepStore, "write", dies_in_batch_1)
-    with pytest.raises(KeyboardInterrupt):
+    with batch_writes(dies_in_batch_1), pytest.raises(KeyboardInterrupt):
         _api_sweep(store=store)
-    monkeypatch.setattr(SweepStore, "write", write)
-    assert SweepStore(store).done().tolist() == [True, False, False]
+    assert batches_done(store) == [True, False, False]
     partial = jc.open_sweep(store)
     assert partial.attrs["batches_done"] == 1
     assert np.all(partial["status"].values.ravel()[BATCH:] == jc.Status.not_run)
@@ -105,10 +99,10 @@ def test_a_store_of_other_settings_is_refused_with_status_2(tmp_path, capsys):
     _api_sweep(store=out / "sweep.zarr", overwrite=True)
     before = _chunk_times(out / "sweep.zarr", range(3))
     argv = [*CLI, "--eps", "2e-3", "--resume", "--out", str(out)]
-    assert main(argv) == 2
+    assert jc.main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "other settings" in err and "eps" in err
-    assert main([*CLI, "--out", str(out)]) == 2  # exists: neither --resume nor --overwrite
+    assert jc.main([*CLI, "--out", str(out)]) == 2  # exists: neither --resume nor --overwrite
     assert "exists" in capsys.readouterr().err
     assert _chunk_times(out / "sweep.zarr", range(3)) == before  # nothing lost
 
@@ -119,9 +113,9 @@ def test_sweeping_eta_c_through_a_lens_equals_separate_runs(monkeypatch):
     same compiled run per trajectory: equal to the last bit). The engine never gets
     more trajectories than a batch."""
     sizes = []
-    run_lanes = sweep_module.run_lanes
-    monkeypatch.setattr(sweep_module, "run_lanes",
-                        lambda p, y0, *a, **k: sizes.append(len(y0)) or run_lanes(p, y0, *a, **k))
+    run_lanes = internal("sweep batch")
+    replace_internal(monkeypatch, "sweep batch",
+                     lambda p, y0, *a, **k: sizes.append(len(y0)) or run_lanes(p, y0, *a, **k))
     params, ics = jc.ChainParams(n_osc=3, v_d=1.5), jc.localized_family(3)
     eta_c = [0.0, 0.01, 0.2]
     ds = jc.sweep(params, eta_c, ics, options=SHORT, where=lambda p: p.eta_c,

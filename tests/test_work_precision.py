@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-import jaxchain._studies.work_precision as wp
-from jaxchain._cli.main import main
-from helpers import flat, scipy_stick_slip_cycle
+from helpers import flat, internal_module, scipy_stick_slip_cycle
+
+#: The study's module: its scenes, columns and helpers are tested here.
+wp = internal_module("work-precision reference")
 
 
 @pytest.mark.numerics
@@ -128,7 +129,7 @@ def test_work_precision_command(tmp_path, capsys, monkeypatch):
     the study while running the same code), its CSV and its figure."""
     monkeypatch.setattr(wp, "REFERENCE_RTOLS", wp.REFERENCE_RTOLS[:1])
     out = tmp_path / "out"
-    code = main(["work-precision", "--scenes", "single", "--solvers", "tsit5",
+    code = jc.main(["work-precision", "--scenes", "single", "--solvers", "tsit5",
                  "--rtols", "1e-6", "--eps", "1e-2", "--no-scipy", "--json",
                  "--no-progress", "--out", str(out)])
     assert code == 0

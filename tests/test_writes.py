@@ -20,9 +20,8 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from helpers import held, hold_env, kill, release, small_sweep, sweep_cli
+from helpers import JAXCHAIN, held, hold_env, kill, release, small_sweep, sweep_cli
 from jaxchain._sweeps.atomic import save_figure, write_text
-from jaxchain._cli.main import main
 from jaxchain._sweeps.result_store import CsvStore
 from jaxchain._sweeps.zarr_store import SweepStore
 
@@ -115,7 +114,7 @@ def test_a_command_killed_as_it_replaces_its_dataset_leaves_the_previous_one(tmp
     (out / "localized_vd1.5.png").write_bytes(b"an earlier figure")
     before = _snapshot(out)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "jaxchain._cli.main", "localized", "--n-osc", "3",
+        [*JAXCHAIN, "localized", "--n-osc", "3",
          "--t-end", "400", "--transient", "200", "--no-progress", "--out", str(out)],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=hold_env(hooks))
     try:
@@ -129,14 +128,14 @@ def test_a_command_killed_as_it_replaces_its_dataset_leaves_the_previous_one(tmp
 #: hook off, a hold once it is stored, then `jaxchain sweep --overwrite` at 1.6.
 _OVERWRITE = """
 import os, sys
+import jaxchain as jc
 from jaxchain._sweeps.atomic import HOLD, hold
-from jaxchain._cli.main import main
 
 hooks = os.environ.pop(HOLD)
-assert main([*sys.argv[2:], "--vd", "1.5", "--out", sys.argv[1]]) == 0
+assert jc.main([*sys.argv[2:], "--vd", "1.5", "--out", sys.argv[1]]) == 0
 os.environ[HOLD] = hooks
 hold("old store written")
-main([*sys.argv[2:], "--vd", "1.6", "--overwrite", "--out", sys.argv[1]])
+jc.main([*sys.argv[2:], "--vd", "1.6", "--overwrite", "--out", sys.argv[1]])
 """
 
 
@@ -219,7 +218,7 @@ def test_a_folder_that_is_not_a_sweep_store_is_refused_and_left_untouched(tmp_pa
     out = tmp_path / "out"
     xr.Dataset({"y": ("j", np.ones(2))}).to_zarr(out / "sweep.zarr", consolidated=False)
     before = _snapshot(out)
-    assert main([*sweep_cli("1.5"), "--overwrite", "--out", str(out)]) == 2
+    assert jc.main([*sweep_cli("1.5"), "--overwrite", "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and str(out / "sweep.zarr") in err
     assert _snapshot(out) == before

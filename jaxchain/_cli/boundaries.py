@@ -5,7 +5,8 @@ import argparse
 import json
 import time
 
-from .._studies.bistable_range import RATIO_VALUES, XI_VALUES, boundaries, fig3a_simulations
+from .._studies.bistable_range import (BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES,
+                                       bistable_range, fig3a_simulations)
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
 from .._sweeps.atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
@@ -49,12 +50,12 @@ def add_parser(sub):
     g = p.add_argument_group("analysis")
     g.add_argument("--target", type=positive_float, default=0.5,
                    help="design: the bistable window width to stay below (default 0.5)")
-    g.add_argument("--xi-values", type=comma_list(float), default=list(XI_VALUES),
+    g.add_argument("--xi-values", type=comma_list(float), default=list(BISTABLE_XI_VALUES),
                    metavar="X,X,...", help="damping ratios of the two-parameter curves "
-                   f"(default {','.join(map(str, XI_VALUES))})")
-    g.add_argument("--ratio-values", type=comma_list(float), default=list(RATIO_VALUES),
+                   f"(default {','.join(map(str, BISTABLE_XI_VALUES))})")
+    g.add_argument("--ratio-values", type=comma_list(float), default=list(BISTABLE_RATIO_VALUES),
                    metavar="R,R,...", help="values of mu_st/mu_d of the two-parameter curves "
-                   f"(default {','.join(map(str, RATIO_VALUES))})")
+                   f"(default {','.join(map(str, BISTABLE_RATIO_VALUES))})")
     g.add_argument("--no-ring", action="store_true", help="skip the ring")
     g.add_argument("--no-simulation", action="store_true",
                    help="skip the simulation dots of Fig. 3(a)")
@@ -74,7 +75,7 @@ def run(args) -> None:
     writable_folder(args.out)
     progress = show_progress(args)
     start = time.perf_counter()
-    found = boundaries(params, target=args.target, xi_values=args.xi_values,
+    found = bistable_range(params, target=args.target, xi_values=args.xi_values,
                        ratio_values=args.ratio_values, ring=not args.no_ring,
                        progress=progress)
     s = found.summary

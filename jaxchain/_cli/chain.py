@@ -2,13 +2,13 @@
 --seed and --chain, and the `ChainParams` they give."""
 
 import argparse
-import tomllib
 from pathlib import Path
 
 from .._physics.chain import BOUNDARIES
 from .._physics.friction import FRICTION_LAWS
 from .._physics.params import ChainParams, mistune
-from .._physics.record import chain_from_record
+from .._errors import ValidationError
+from .._physics.record import chain_from_record, read_chain_file
 from .common import UsageError
 
 CHAIN_HELP = """\
@@ -88,22 +88,6 @@ def parse_friction(text: str | None):
         raise UsageError(f"--friction: {err}") from None
 
 
-def read_chain_file(path: Path) -> dict:
-    """The settings of a TOML chain file.
-
-    **Raises:**
-
-    `UsageError` naming --chain when it cannot be read or parsed.
-    """
-    try:
-        with open(path, "rb") as f:
-            return tomllib.load(f)
-    except OSError as err:
-        raise UsageError(f"--chain {path}: cannot read it ({err.strerror})") from None
-    except tomllib.TOMLDecodeError as err:
-        raise UsageError(f"--chain {path}: not valid TOML ({err})") from None
-
-
 def chain_params(args, n_osc: int, **fields) -> ChainParams:
     """The chain of a command: `n_osc`, `fields` (v_d, eps, xi) and the chain
     options; a --chain file overrides them, then --mistuning draws the stiffness.
@@ -117,7 +101,11 @@ def chain_params(args, n_osc: int, **fields) -> ChainParams:
     params = base
     if args.chain is not None:
         try:
-            params = chain_from_record(read_chain_file(args.chain), base)
+            record = read_chain_file(args.chain)
+        except ValidationError as err:
+            raise UsageError(f"--chain {err}") from None
+        try:
+            params = chain_from_record(record, base)
         except (ValueError, TypeError) as err:
             raise UsageError(f"--chain {args.chain}: {err}") from None
     if getattr(args, "mistuning", None) is not None:

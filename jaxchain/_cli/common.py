@@ -233,7 +233,21 @@ def prefetch(*modules: str) -> None:
         for name in modules:
             importlib.import_module(name)
 
-    threading.Thread(target=load, name="jaxchain-prefetch", daemon=True).start()
+    thread = threading.Thread(target=load, name="jaxchain-prefetch", daemon=True)
+    _PREFETCHING.append(thread)
+    thread.start()
+
+
+#: The prefetch threads started by this process's command, joined when it returns.
+_PREFETCHING: list[threading.Thread] = []
+
+
+def finish_prefetch() -> None:
+    """Wait for the command's prefetch threads: a command that returns early (a bad
+    option found after they started) leaves no import half done behind it, for a
+    caller of `jaxchain.main` that goes on to use matplotlib."""
+    while _PREFETCHING:
+        _PREFETCHING.pop().join()
 
 
 def json_ready(obj):

@@ -7,8 +7,8 @@ import time
 
 import numpy as np
 
-from .._studies.scenes import (PAPER_SOLUTIONS, orbit_diagram_scene, phase_portrait_scene,
-                                time_delay_scene, time_series_scene)
+from .._studies.scenes import (PAPER_FIGURES, PAPER_SOLUTIONS, orbit_diagram_scene,
+                               phase_portrait_scene, time_delay_scene, time_series_scene)
 from .._sweeps.ensemble import ensemble
 from .._physics.initial import localized_family
 from .._engine.options import SimulationOptions
@@ -26,15 +26,6 @@ from .common import (DEFAULT_SOLVER, SOLVERS, RunsFailed, add_output_options,
                      show_progress, writable_folder)
 
 #: Each figure: its belt speed, initial conditions and what it shows.
-FIGURES = {
-    "4": (1.5, "eq8", "localized states: circles of radius proportional to amplitude"),
-    "5": (1.5, "eq8", "time series and phase plot of 2 excited oscillators, t in [0, 300]"),
-    "6": (1.5, "eq8", "time delays against time, solutions 1 2 5 8 9 12 13 19 20"),
-    "7": (1.5, "eq8", "3-D phase plots (x11, x12, x13), t in [1e4, 1.5e4], same solutions"),
-    "8": (1.5, "eq8", "orbit diagram of the 20 solutions, classified"),
-    "9": (1.65, "eq8", "localized states and orbit diagram"),
-    "10": (1.75, "eq10", "localized states and orbit diagram, eq. (10) initial conditions"),
-}
 #: --quick: a ring of 8 over [0, 600], observed over [400, 600] (Fig. 5: [0, 100]),
 #: in chunks of 50 (the Lyapunov exponent's batch means need several).
 QUICK = {"n_osc": 8, "t_end": 600.0, "transient": 400.0, "t_series": 100.0,
@@ -49,7 +40,7 @@ DESCRIPTION = """\
 Run one of the paper's scenes and draw its figure. NAME is the figure number:
 
 """ + "\n".join(f"  {k:>2}  v_d = {v:g}, {ics}: {what}"
-                for k, (v, ics, what) in FIGURES.items()) + """
+                for k, (v, ics, what) in PAPER_FIGURES.items()) + """
 
 At full size (the paper's: N = 20, t_end = 15000, the window [10000, 15000]) a
 scene takes up to a few minutes on 2 CPU cores (Fig. 8: about 2 minutes, Fig. 9:
@@ -68,8 +59,8 @@ and <out>/figure<NAME>.png."""
 def add_parser(sub):
     p = sub.add_parser("figure", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("name", choices=list(FIGURES), metavar="NAME",
-                   help="figure number: " + ", ".join(FIGURES))
+    p.add_argument("name", choices=list(PAPER_FIGURES), metavar="NAME",
+                   help="figure number: " + ", ".join(PAPER_FIGURES))
     p.add_argument("--quick", action="store_true",
                    help="a reduced scene: N = 8, t in [0, 600], window [400, 600]")
     g = p.add_argument_group("model and integration (other parameters eq. (7))")
@@ -86,7 +77,7 @@ def add_parser(sub):
 
 def _scene(name: str, size: dict, params: ChainParams, solver, options, progress):
     """The Dataset and the figure of scene `name`."""
-    ics = FIGURES[name][1]
+    ics = PAPER_FIGURES[name][1]
     solutions = [k for k in PAPER_SOLUTIONS if k <= params.n_osc]
     if name == "4":
         family = localized_family(params.n_osc, ics, params.boundary)
@@ -109,7 +100,7 @@ def _scene(name: str, size: dict, params: ChainParams, solver, options, progress
 
 def run(args) -> None:
     size = QUICK if args.quick else FULL
-    v_d, ics, _ = FIGURES[args.name]
+    v_d, ics, _ = PAPER_FIGURES[args.name]
     params = chain_params(args, size["n_osc"], v_d=v_d, eps=args.eps)
     options = SimulationOptions(t_end=size["t_end"], transient=size["transient"],
                                 rtol=args.rtol, atol=args.atol, controller=args.controller,

@@ -11,7 +11,8 @@ import platformdirs
 from .._errors import ValidationError
 from .._engine.programs import keep_programs
 from .._setup import configure
-from .common import Parser, RunsFailed, UsageError, one_line, usage_message
+from .common import (Parser, RunsFailed, UsageError, finish_prefetch, one_line,
+                     usage_message)
 
 #: The subcommands, each a module of this package with `add_parser(sub)`.
 COMMANDS = ("localized", "sweep", "figure", "crosscheck", "work-precision", "boundaries",
@@ -130,6 +131,7 @@ def main(argv=None) -> int:
             raise
         status, message = exit_status(err)
     finally:
+        finish_prefetch()
         if set_backend:
             del os.environ["MPLBACKEND"]
     print(f"jaxchain {args.command}: error: {message}", file=sys.stderr)

@@ -97,3 +97,23 @@ def chain_from_record(record: dict, base: ChainParams | None = None) -> ChainPar
                                   "draw; give one or the other")
         fields |= {"stiffness": drawn, "mistuning": mistuning}
     return ChainParams(**fields, friction=law(**law_values))
+
+
+def read_chain_file(path) -> dict:
+    """The settings of a TOML chain file, as a record for `chain_from_record`: n_osc,
+    boundary, xi, eta_c (one value per link), stiffness, load (one value per
+    oscillator), friction = "NAME" and the law's parameters.
+
+    **Raises:**
+
+    `ValidationError` naming the file when it cannot be read or is not valid TOML.
+    """
+    import tomllib
+
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except OSError as err:
+        raise ValidationError(f"{path}: cannot read it ({err.strerror})") from None
+    except tomllib.TOMLDecodeError as err:
+        raise ValidationError(f"{path}: not valid TOML ({err})") from None

@@ -141,13 +141,13 @@ def _curve_summary(single: ChainParams, where: str, curves: BoundaryCurves) -> d
 
 
 #: The default grids of the two-parameter curves: xi, and mu_st/mu_d.
-XI_VALUES = (0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.1)
-RATIO_VALUES = (1.6, 1.8, 2.0, 2.2, 2.4)
+BISTABLE_XI_VALUES = (0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.1)
+BISTABLE_RATIO_VALUES = (1.6, 1.8, 2.0, 2.2, 2.4)
 
 
-def boundaries(params: ChainParams | None = None, *, target: float = 0.5,
-               xi_values=XI_VALUES, ratio_values=RATIO_VALUES, ring: bool = True,
-               progress: bool = False) -> Boundaries:
+def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
+                   xi_values=BISTABLE_XI_VALUES, ratio_values=BISTABLE_RATIO_VALUES,
+                   ring: bool = True, progress: bool = False) -> Boundaries:
     """The Hopf and fold belt speeds of the single oscillator and of the chain.
 
     1. Single oscillator (the chain's first, `single_oscillator`, with its friction

@@ -40,6 +40,17 @@ PAPER_SOLUTIONS = (1, 2, 5, 8, 9, 12, 13, 19, 20)
 _SHARED = {"series_t": "time", "lyapunov_time": "lyapunov_time"}
 
 
+#: The paper's scenes: figure number -> (v_d, initial-condition family, what it shows).
+PAPER_FIGURES = {
+    "4": (1.5, "eq8", "localized states: circles of radius proportional to amplitude"),
+    "5": (1.5, "eq8", "time series and phase plot of 2 excited oscillators, t in [0, 300]"),
+    "6": (1.5, "eq8", "time delays against time, solutions 1 2 5 8 9 12 13 19 20"),
+    "7": (1.5, "eq8", "3-D phase plots (x11, x12, x13), t in [1e4, 1.5e4], same solutions"),
+    "8": (1.5, "eq8", "orbit diagram of the 20 solutions, classified"),
+    "9": (1.65, "eq8", "localized states and orbit diagram"),
+    "10": (1.75, "eq10", "localized states and orbit diagram, eq. (10) initial conditions"),
+}
+
 def _check_solutions(solutions, n_osc: int) -> np.ndarray:
     try:
         solutions = np.asarray(sorted(set(int(k) for k in solutions))

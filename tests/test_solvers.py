@@ -1,0 +1,189 @@
+"""The solver and step-size controller of jaxchain: ROS34PW2 with a diagonal W (its
+order, and its limit as eps -> 0), and the PI controller (`PIController`: its rules
+against the formulas of its docstring, its solutions against scipy and against
+diffrax's controller)."""
+
+import dataclasses
+
+import diffrax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import jaxchain as jc
+from helpers import SHORT, flat, reference_rhs, scipy_stick_slip_cycle
+from jaxchain._engine.simulate import terms
+from jaxchain._engine.solver.controller import CONTROLLERS, PIController
+from jaxchain._engine.solver.rosenbrock import Ros34PW2
+
+
+def _fixed_step_error(split, y0, t1, exact, n_steps):
+    sol = diffrax.diffeqsolve(split, Ros34PW2(), 0.0, t1, t1 / n_steps, y0,
+                              stepsize_controller=diffrax.ConstantStepSize(),
+                              max_steps=n_steps + 1)
+    return float(jnp.max(jnp.abs(sol.ys[-1] - exact)))
+
+
+def _orders(errors):
+    return np.log2(np.asarray(errors[:-1]) / np.asarray(errors[1:]))
+
+
+@pytest.mark.numerics
+def test_order_three_on_a_linear_problem_whose_w_is_not_its_jacobian():
+    """y' = R y - lam y, a rotation (explicit) plus a diagonal decay (the stiff term),
+    has the exact solution exp(-lam t) R(t) y0. W holds only the decay, not the
+    rotation, so the method runs as a W-method; it still converges with order 3."""
+    lam = 2.0
+    split = diffrax.MultiTerm(
+        diffrax.ODETerm(lambda t, y, a: jnp.stack([y[1], -y[0]])),
+        diffrax.ODETerm(lambda t, y, a: -lam * y))
+    y0, t1 = jnp.array([1.0, 0.5]), 3.0
+    c, s = np.cos(t1), np.sin(t1)
+    exact = np.exp(-lam * t1) * np.array([c * y0[0] + s * y0[1], -s * y0[0] + c * y0[1]])
+    errors = [_fixed_step_error(split, y0, t1, exact, n) for n in (40, 80, 160, 320)]
+    assert np.all(np.abs(_orders(errors) - 3) < 0.15), (errors, _orders(errors))
+
+
+@pytest.mark.numerics
+def test_order_three_on_the_smooth_chain_against_dopri8():
+    """Eq. (5) with a wide smoothing (eps = 0.2, no sharp stick) from an excited
+    state, over t in [0, 4]: the fixed-step error against Dopri8 at rtol 1e-13
+    falls with order 3 (the friction Jacobian is nonlinear, W is frozen per step)."""
+    p = jc.ChainParams(n_osc=4, eps=0.2)
+    y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(4, 2))(p)
+    ref = diffrax.diffeqsolve(diffrax.ODETerm(jc.vector_field), diffrax.Dopri8(), 0.0, 4.0,
+                              None, y0, p, max_steps=None,
+                              stepsize_controller=diffrax.PIDController(rtol=1e-13,
+                                                                         atol=1e-15))
+    split = terms(Ros34PW2())
+    errors = []
+    for n in (80, 160, 320, 640):
+        sol = diffrax.diffeqsolve(split, Ros34PW2(), 0.0, 4.0, 4.0 / n, y0, p,
+                                  stepsize_controller=diffrax.ConstantStepSize(),
+                                  max_steps=n + 1)
+        errors.append(float(jnp.max(jnp.abs(sol.ys[-1] - ref.ys[-1]))))
+    assert np.all(np.abs(_orders(errors) - 3) < 0.3), (errors, _orders(errors))
+
+
+@pytest.mark.numerics
+def test_converges_to_the_nonsmooth_stick_slip_cycle_as_eps_shrinks():
+    """One oscillator at v_d = 1.5: the amplitude error against the non-smooth
+    stick-slip cycle (scipy, with events) shrinks with eps down to 1e-5, where an
+    explicit solver would be stiffness-bound, and the cycle sticks at every eps.
+    The velocity error allowed per step, about rtol v_d, must stay below the width
+    eps of the stick band, so rtol is at most eps / 10 (the default 1e-5 down to
+    eps = 1e-4)."""
+    reference = scipy_stick_slip_cycle(jc.ChainParams(n_osc=1))[0]
+    errors = []
+    for eps in (1e-2, 1e-3, 1e-4, 1e-5):
+        p = jc.ChainParams(n_osc=1, eps=eps)
+        rtol = min(SHORT.rtol, eps / 10)
+        options = dataclasses.replace(SHORT, rtol=rtol, atol=rtol / 100)
+        obs = jc.simulate(p, jc.OutOfPhaseExcitation.eq8([True]), Ros34PW2(), options)
+        assert int(obs.n_halc) == 1
+        errors.append(abs(float(obs.amplitudes[0]) / reference - 1))
+    assert np.all(np.diff(errors) < 0), errors
+    assert errors[-1] < 2e-4, errors
+
+
+@pytest.mark.numerics
+def test_steps_are_not_bound_by_stiffness():
+    """At eps = 1e-5 the stick phase has stiffness mu_st / eps = 2e5. The explicit
+    Bosh3 must keep its step below its stability limit, about 1e-5, through every
+    stick phase; ROS34PW2 (L-stable) need not. With the same step budget (200000
+    steps per chunk of 100 time units) Bosh3 either runs out of steps or takes over
+    10 times as many."""
+    p = jc.ChainParams(n_osc=1, eps=1e-5)
+    ic = jc.OutOfPhaseExcitation.eq8([True])
+    rosw = jc.simulate(p, ic, Ros34PW2(), SHORT)
+    bosh = jc.simulate(p, ic, diffrax.Bosh3(), SHORT, throw=False)
+    assert int(rosw.n_halc) == 1
+    assert (bosh.status == jc.Status.max_steps_reached
+            or int(bosh.num_steps) > 10 * int(rosw.num_steps))
+
+
+RTOL, ATOL = 1e-4, 1e-6
+
+
+def _adapt(controller, state, dt, err, y=1.0):
+    """One call of adapt_step_size on a scalar state y with a scaled error `err`."""
+    y0 = jnp.array([y])
+    y_error = jnp.array([err * (ATOL + RTOL * y)])
+    return controller.adapt_step_size(0.0, dt, y0, y0, None, y_error, 3, state)
+
+
+def _state(prev_err=1.0):
+    return ((jnp.asarray(1.0 / prev_err), jnp.asarray(1.0), False), jnp.asarray(0.0),
+            jnp.asarray(0.0))
+
+
+@pytest.mark.numerics
+def test_accepted_step_follows_the_pi_rule_and_may_shrink():
+    c = PIController(rtol=RTOL, atol=ATOL)
+    keep, t0, t1, _, state, _ = _adapt(c, _state(prev_err=0.5), 0.1, 0.95)
+    expected = 0.1 * 0.9 * 0.95 ** (-(0.5 + 0.2) / 3) * 0.5 ** (0.2 / 3)
+    assert bool(keep) and float(t0) == 0.1
+    assert np.isclose(float(t1 - t0), expected, rtol=1e-12)
+    assert float(t1 - t0) < 0.1  # diffrax's controller would keep 0.1
+    _, _, t1_diffrax, _, _, _ = diffrax.PIDController(rtol=RTOL, atol=ATOL).adapt_step_size(
+        0.0, 0.1, jnp.array([1.0]), jnp.array([1.0]), None,
+        jnp.array([0.95 * (ATOL + RTOL)]), 3, (jnp.asarray(1.0), jnp.asarray(1.0), False))
+    assert float(t1_diffrax) - 0.1 == pytest.approx(0.1)
+
+
+@pytest.mark.numerics
+def test_second_rejection_uses_the_observed_order():
+    c = PIController(rtol=RTOL, atol=ATOL)
+    keep, t0, t1, _, state, _ = _adapt(c, _state(), 0.05, 2.65)
+    assert not bool(keep) and float(t0) == 0.0
+    first = float(t1)  # the asymptotic order 3: 0.9 * 2.65^(-1/3)
+    assert np.isclose(first, 0.05 * 0.9 * 2.65 ** (-1 / 3), rtol=1e-12)
+    keep, t0, t1, _, state, _ = _adapt(c, state, first, 2.37)
+    q = np.log(2.65 / 2.37) / np.log(0.05 / first)
+    assert q < 0.5  # the error hardly fell: the order is clipped to min_order
+    assert not bool(keep)
+    factor = max(c.factormin, 0.9 * 2.37 ** (-1 / 0.5))  # clipped to [factormin, safety]
+    assert np.isclose(float(t1), first * factor, rtol=1e-12)
+    assert float(t1) < first * 0.9 * 2.37 ** (-1 / 3)  # smaller than order 3 would take
+    # an accepted step clears the rejection memory
+    keep, t0, t1, _, state, _ = _adapt(c, state, float(t1), 0.5)
+    assert bool(keep) and float(state[1]) == 0.0 and float(state[2]) == 0.0
+
+
+@pytest.mark.numerics
+def test_rejection_with_a_nan_error_shrinks_by_factormin():
+    c = PIController(rtol=RTOL, atol=ATOL)
+    keep, _, t1, _, _, _ = _adapt(c, _state(), 0.1, np.nan)
+    assert not bool(keep) and np.isclose(float(t1), 0.1 * c.factormin)
+
+
+@pytest.mark.numerics
+@pytest.mark.parametrize("controller", list(CONTROLLERS))
+def test_solution_matches_scipy_within_the_tolerance(controller):
+    """Three oscillators through stick-slip switches, t in [0, 60]: the final state
+    against scipy's DOP853 at rtol 1e-12, within a bound set by rtol = 1e-7 (the
+    global error of 60 time units with some 20 switches, a few hundred times the
+    local tolerance)."""
+    p = jc.ChainParams(n_osc=3, v_d=1.5)
+    y0 = jc.OutOfPhaseExcitation.eq8(np.array([True, False, True]))(p)
+    opts = jc.SimulationOptions(t_end=60.0, transient=0.0, rtol=1e-7, atol=1e-9,
+                                controller=controller)
+    obs = jc.simulate(p, y0, options=opts)
+    ref = solve_ivp(reference_rhs(p), (0.0, 60.0), np.asarray(flat(y0)), method="DOP853",
+                    rtol=1e-12, atol=1e-13)
+    assert obs.status == jc.Status.ok
+    assert np.allclose(flat(obs.y_final), ref.y[:, -1], atol=1e-7 * 1e3)
+
+
+@pytest.mark.numerics
+def test_both_controllers_give_the_same_localized_state():
+    """The default controller and diffrax's, at the default tolerances: the same
+    oscillators on the HALC and amplitudes within the cross-check's 1 %."""
+    p = jc.ChainParams(n_osc=8, v_d=1.5)
+    y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(8, 2))(p)
+    runs = [jc.simulate(p, y0, options=jc.SimulationOptions(
+        t_end=600.0, transient=400.0, controller=c)) for c in ("pi", "diffrax")]
+    assert int(runs[0].n_halc) == int(runs[1].n_halc) == 2
+    assert np.allclose(runs[0].amplitudes, runs[1].amplitudes, rtol=1e-2,
+                       atol=1e-2 * float(np.max(runs[1].amplitudes)))
