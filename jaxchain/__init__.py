@@ -33,7 +33,8 @@ from ._bifurcation.fold import (
 )
 from ._bifurcation.hopf import (
     growth_rates as growth_rates, hopf_eps_correction as hopf_eps_correction,
-    hopf_point as hopf_point, hopf_vd_analytic as hopf_vd_analytic,
+    hopf_point as hopf_point, hopf_speed as hopf_speed, hopf_vd as hopf_vd,
+    hopf_vd_analytic as hopf_vd_analytic,
     HopfPoint as HopfPoint, leading_growth_rate as leading_growth_rate,
     mode_eigenvalues as mode_eigenvalues,
     steady_sliding_eigenvalues as steady_sliding_eigenvalues,
@@ -52,7 +53,7 @@ from ._bifurcation.shooting import (
 from ._bifurcation.two_parameter import (
     boundary_curves as boundary_curves, BoundaryCurves as BoundaryCurves,
     fold_and_derivative as fold_and_derivative, fold_curve as fold_curve,
-    fold_curve_problem as fold_curve_problem, hopf_vd as hopf_vd,
+    fold_curve_problem as fold_curve_problem,
 )
 from ._studies.crosscheck import crosscheck as crosscheck
 from ._analysis.classify import CLASSES as CLASSES, classify as classify
@@ -133,7 +134,7 @@ from ._physics.model import (
 from ._physics.params import (
     ChainParams as ChainParams, mistune as mistune, parameter_name as parameter_name,
     parameter_value as parameter_value, single_oscillator as single_oscillator,
-    stack_chains as stack_chains, with_parameter as with_parameter,
+    stack_chains as stack_chains, with_fields as with_fields, with_parameter as with_parameter,
 )
 from ._physics.record import (
     chain_from_record as chain_from_record, chain_record as chain_record,

@@ -158,7 +158,8 @@ def test_a_failed_hopf_solve_is_nan_never_a_number():
     analytic v0 ln((mu_st - mu_d) / (2 xi v0)) and its derivative -v0/xi in xi; and
     NaN, with a NaN derivative, where Newton's method cannot succeed: with
     mu_st = mu_d the growth rate is -xi at every belt speed (there is no root), and
-    from a guess of v_d = -50 the exponential law's slope vanishes in float64."""
+    from a guess of v_d = 800 the exponential law's slope exp(-v_d/v0) underflows to
+    zero in float64. A guess that is no belt speed is refused, naming it."""
     one = jc.ChainParams(n_osc=1)
     hopf, d_xi = jc.hopf_vd_and_derivative(one, "xi", 0.05)
     assert abs(float(hopf) - 0.5 * np.log(10)) < 1e-10
@@ -166,7 +167,9 @@ def test_a_failed_hopf_solve_is_nan_never_a_number():
     value, derivative = jc.hopf_vd_and_derivative(jc.ChainParams(n_osc=1, mu_st=0.5),
                                                "xi", 0.05)
     assert np.isnan(float(value)) and np.isnan(float(derivative))
-    assert np.isnan(float(jc.hopf_vd(one, guess=-50.0)))
+    assert np.isnan(float(jc.hopf_vd(one, guess=800.0)))
+    with pytest.raises(ValueError, match="guess"):
+        jc.hopf_vd(one, guess=-50.0)
 
 
 @pytest.mark.numerics

@@ -286,7 +286,7 @@ def hopf_modes(params: ChainParams, guess, rtol: float = 1e-12, atol: float = 1e
 
 
 def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
-               atol: float = 1e-12) -> HopfPoint:
+               atol: float = 1e-12, throw: bool = True) -> HopfPoint:
     """The Hopf boundary of steady sliding. On the homogeneous ring, mode by mode:
     the root in v_d of each Fourier mode's growth rate max Re(lambda)(v_d) = 0
     (`growth_rates`). On any other chain (mistuned, open, other loads): the root of
@@ -307,6 +307,10 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
         with several Hopf points, such as a Stribeck curve, gives the one Newton's
         method reaches).
     - `rtol`, `atol`: Newton tolerances on v_d, finite numbers > 0.
+    - `throw`: raise if Newton's method fails for a mode (the default), or give NaN
+        as that mode's `v_d`, so that a failed solve never passes for a belt speed
+        (as `throw` of `diffrax.diffeqsolve`); with `throw=False` it traces under
+        `jax.jit` and `jax.jvp` (`hopf_vd`).
 
     **Returns:**
 
@@ -318,8 +322,8 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
     `TypeError` if `params` is not a `ChainParams`, or `guess`, `rtol` or `atol` is
     not a real number;
     `ValidationError` naming `guess`, `rtol` or `atol` for a value that is not a
-    finite number > 0; `RuntimeError` if Newton's method fails for a mode (try
-    another `guess`).
+    finite number > 0; `RuntimeError` with `throw=True` if Newton's method fails for
+    a mode or gives v_d <= 0 (try another `guess`).
     """
     check_params(params)
     for name, value, what in (("guess", guess, "belt speed"), ("rtol", rtol, "number"),
@@ -328,7 +332,36 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
         if a.ndim != 0 or not (np.isfinite(a) and a > 0):
             raise ValidationError(f"{name} must be a finite {what} > 0, got {a.tolist()!r}")
     v, omega, slope, residual, steps, result = hopf_modes(params, guess, rtol, atol)
-    if not bool(jnp.all(result == optx.RESULTS.successful)) or not bool(jnp.all(v > 0)):
+    found = (result == optx.RESULTS.successful) & (v > 0)
+    if not throw:
+        v = jnp.where(found, v, jnp.nan)
+    elif not bool(jnp.all(found)):
         raise RuntimeError(f"Newton's method did not find the Hopf point from v_d = {guess}; "
                            "try another guess")
     return HopfPoint(v_d=v, omega=omega, slope=slope, residual=residual, newton_steps=steps)
+
+
+def hopf_vd(params: ChainParams, guess: float = 1.0) -> Float[Array, ""]:
+    """The Hopf belt speed of steady sliding (the largest over the Fourier modes of
+    the homogeneous ring, that of the leading eigenvalue on any other chain):
+    `hopf_point` with `throw=False`, reduced to one number. Traceable and
+    differentiable in `params` by implicit differentiation through optimistix's
+    Newton method.
+
+    **Returns:**
+
+    A scalar; NaN (and a NaN derivative) where Newton's method failed for a mode
+    or gave v_d <= 0.
+    """
+    return jnp.max(hopf_point(params, guess, throw=False).v_d)
+
+
+def hopf_speed(params: ChainParams) -> float:
+    """The Hopf belt speed of steady sliding as a number: the closed form of eq. (1)
+    where it holds (`hopf_vd_analytic`: the exponential law with uniform damping,
+    load and law, xi > 0, mu_st > mu_d), else Newton's method on the Jacobian's
+    eigenvalues (`hopf_vd`); NaN where neither finds one."""
+    try:
+        return float(hopf_vd_analytic(params))
+    except ValueError:
+        return float(hopf_vd(params))

@@ -8,32 +8,14 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from .._physics.params import ChainParams, parameter_value, with_parameter
 from .continuation import (Branch, ContinuationOptions, ContinuationProblem, PseudoArclength,
                            continuation)
 from .fold import FoldSystem, solve_fold
-from .hopf import hopf_modes
+from .hopf import hopf_vd
 from .._errors import ValidationError
-
-
-def hopf_vd(params: ChainParams, guess: float = 1.0) -> Float[Array, ""]:
-    """The Hopf belt speed of steady sliding (the largest over the Fourier modes of
-    the homogeneous ring, that of the leading eigenvalue on any other chain),
-    traceable and differentiable in `params` by implicit differentiation through
-    optimistix's Newton method (`hopf_point`).
-
-    **Returns:**
-
-    A scalar; NaN (and a NaN derivative) where Newton's method failed for a mode
-    or gave v_d <= 0, so that a failed solve never passes for a belt speed.
-    `hopf_point` raises instead.
-    """
-    v, *_, result = hopf_modes(params, guess)
-    ok = jnp.all(result == optx.RESULTS.successful) & jnp.all(v > 0)
-    return jnp.where(ok, v.max(), jnp.nan)
 
 
 def hopf_vd_and_derivative(params: ChainParams, where: Callable | str, value):

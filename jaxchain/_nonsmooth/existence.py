@@ -87,12 +87,9 @@ def stick_slip_existence_limit(params: ChainParams | None = None,
         raise ValidationError(f"the existence limit is that of one oscillator (n_osc = 1), got "
                               f"n_osc = {params.n_osc}; see single_oscillator")
     if lower is None:
-        from .._bifurcation.hopf import hopf_point, hopf_vd_analytic  # for a default
+        from .._bifurcation.hopf import hopf_speed  # for a default
 
-        try:
-            lower = float(hopf_vd_analytic(params))
-        except ValueError:
-            lower = float(jnp.max(hopf_point(params).v_d))
+        lower = hopf_speed(params)
         if not lower > 0:
             raise ValueError(f"no Hopf point of steady sliding to start from (v_d,H = "
                              f"{lower:.3g}): give lower, a belt speed with a stick-slip cycle")

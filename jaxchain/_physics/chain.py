@@ -38,6 +38,24 @@ def n_links(boundary: str, n_osc: int) -> int:
     return {"ring": n_osc, "free": n_osc - 1, "fixed": n_osc + 1}[boundary]
 
 
+def neighbours(boundary: str, n_osc: int) -> tuple[np.ndarray, np.ndarray]:
+    """The left and the right neighbour of each oscillator, 0-based indices of shape
+    (n_osc,): on the ring oscillator N's right neighbour is oscillator 1 (a ring of
+    one is its own neighbour); on an open line ("free", "fixed") the ends have none,
+    -1.
+
+    **Raises:**
+
+    `ValidationError` for an unknown boundary.
+    """
+    n_links(boundary, n_osc)
+    index = np.arange(n_osc)
+    left, right = (index - 1) % n_osc, (index + 1) % n_osc
+    if boundary != "ring":
+        left[0], right[-1] = -1, -1
+    return left, right
+
+
 def link_extensions(params: "ChainParams", x: Float[Array, " n_osc"]
                     ) -> Float[Array, " n_links"]:
     """The extension of each coupling spring, x_right - x_left (the ground's

@@ -200,8 +200,7 @@ def mistune(params: ChainParams, sigma: float, seed: int) -> ChainParams:
     """
     record = Mistuning(sigma=sigma, seed=seed)
     stiffness = params.stiffness if sigma == 0 else record.stiffness(params.n_osc)
-    fields = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)}
-    return ChainParams(**(fields | {"stiffness": stiffness, "mistuning": record}))
+    return with_fields(params, stiffness=stiffness, mistuning=record)
 
 
 def single_oscillator(params: ChainParams, index: int = 0) -> ChainParams:
@@ -318,6 +317,24 @@ def parameter_value(params: ChainParams, where: Callable | str):
     return parameter_lens(where, params)(params)
 
 
+def with_fields(params: ChainParams, **changes) -> ChainParams:
+    """`params` with the named fields of `ChainParams` replaced, built and validated
+    as a new `ChainParams`: the one route for a change of structure (n_osc, the
+    boundary, a field's shape, the mistuning record); `with_parameter` changes one
+    value.
+
+    **Raises:**
+
+    `ValidationError` naming an unknown field, or the field of a bad value.
+    """
+    fields = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)}
+    unknown = sorted(set(changes) - set(fields))
+    if unknown:
+        raise ValidationError(f"ChainParams has no field {unknown[0]!r}; its fields are "
+                              f"{', '.join(fields)}")
+    return ChainParams(**(fields | changes))
+
+
 def with_parameter(params: ChainParams, where: Callable | str, value) -> ChainParams:
     """`params` with one parameter set to `value`, validated like a new `ChainParams`.
     This is the one way jaxchain changes a parameter (a bare `eqx.tree_at` would skip
@@ -343,8 +360,7 @@ def with_parameter(params: ChainParams, where: Callable | str, value) -> ChainPa
     changed = eqx.tree_at(parameter_lens(where, params), params, value)
     law = changed.friction
     law = type(law)(**{name: getattr(law, name) for name in law.parameter_names()})
-    fields = {f.name: getattr(changed, f.name) for f in dataclasses.fields(changed)}
-    return ChainParams(**(fields | {"friction": law}))
+    return with_fields(changed, friction=law)
 
 
 def stack_chains(chains: list[ChainParams]) -> ChainParams:
@@ -361,8 +377,7 @@ def stack_chains(chains: list[ChainParams]) -> ChainParams:
     """
     if not chains:
         raise ValidationError("stack_chains needs at least one chain")
-    plain = [ChainParams(**({f.name: getattr(c, f.name) for f in dataclasses.fields(c)}
-                            | {"mistuning": None})) for c in chains]
+    plain = [with_fields(c, mistuning=None) for c in chains]
     structures = {jax.tree_util.tree_structure(c) for c in plain}
     if len(structures) != 1:
         raise ValidationError("stack_chains needs chains of one structure (n_osc, boundary, "

@@ -7,8 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .._bifurcation.hopf import hopf_vd_analytic
-from .._bifurcation.two_parameter import hopf_vd
+from .._bifurcation.hopf import hopf_speed
 from .._physics.record import chain_from_record, chain_settings
 from .._analysis.fronts import front_fractions, front_ranges
 from .._engine.status import Status
@@ -143,15 +142,12 @@ def _edges(values, lo, hi, cells) -> list[float]:
 def _hopf_vd(ds: xr.Dataset) -> float | None:
     """The Hopf point of steady sliding for the chain of `ds` (its attributes,
     `chain_record`): the closed form of eq. (1) where it holds, else Newton's
-    method on the Jacobian's eigenvalues (`hopf_vd`); None where there is none
+    method on the Jacobian's eigenvalues (`hopf_speed`); None where there is none
     (xi = 0, mu_st = mu_d, or Newton's method fails)."""
     record = {k: v for k, v in ds.attrs.items() if k in chain_settings(ds.attrs)}
     try:
         params = chain_from_record(record)
     except (KeyError, ValueError, TypeError):
         return None
-    try:
-        return float(hopf_vd_analytic(params))
-    except ValueError:
-        value = float(hopf_vd(params))
-        return value if np.isfinite(value) else None
+    value = hopf_speed(params)
+    return value if np.isfinite(value) else None

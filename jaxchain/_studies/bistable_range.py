@@ -10,11 +10,12 @@ import numpy as np
 from .._bifurcation.continuation import Branch, ContinuationOptions, continuation
 from .._bifurcation.damping_design import DampingDesign, smallest_damping
 from .._bifurcation.fold import FoldPoint, fold_point
-from .._bifurcation.hopf import HopfPoint, hopf_eps_correction, hopf_point, hopf_vd_analytic
+from .._bifurcation.hopf import (HopfPoint, hopf_eps_correction, hopf_point, hopf_speed,
+                                 hopf_vd_analytic)
 from .._bifurcation.limit_cycles import hopf_cycle, limit_cycle_problem
 from .._bifurcation.lyapunov_coefficient import first_lyapunov_coefficient
 from .._bifurcation.shooting import ShootingOptions, flow, periodic_orbit, unpack
-from .._bifurcation.two_parameter import BoundaryCurves, boundary_curves, hopf_vd
+from .._bifurcation.two_parameter import BoundaryCurves, boundary_curves
 from .._physics.initial import GivenState
 from .._nonsmooth.existence import stick_slip_existence_limit
 from .._engine.options import SimulationOptions
@@ -54,7 +55,7 @@ def design_check(params: ChainParams, design: DampingDesign, target: float,
     out = {}
     for side, factor in (("below", 1 - margin), ("above", 1 + margin)):
         p = with_parameter(params, "xi", design.xi * factor)
-        v = _hopf_speed(p) + target
+        v = hopf_speed(p) + target
         p = with_parameter(p, "v_d", v)
         obs = simulate(p, GivenState(jnp.array([[3.5], [0.0]])),
                        options=SimulationOptions(t_end=4000.0, transient=3500.0))
@@ -62,15 +63,6 @@ def design_check(params: ChainParams, design: DampingDesign, target: float,
                      "amplitude": float(obs.amplitudes[0]), "n_halc": int(obs.n_halc)}
     out["holds"] = out["below"]["n_halc"] == 1 and out["above"]["amplitude"] < 1e-3
     return out
-
-
-def _hopf_speed(params: ChainParams) -> float:
-    """The Hopf belt speed: the closed form of eq. (1) where it applies, else
-    Newton's method on the Jacobian's eigenvalues (`hopf_vd`)."""
-    try:
-        return float(hopf_vd_analytic(params))
-    except ValueError:
-        return float(hopf_vd(params))
 
 
 def _stick_slip_cycle(single: ChainParams, branch: Branch, hopf_vd: float, fold_vd: float,

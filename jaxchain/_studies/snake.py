@@ -22,6 +22,7 @@ from .._bifurcation.shooting import (ShootingOptions, floquet_multipliers, flow,
                                     unpack)
 from .._sweeps.ensemble import ensemble
 from .._engine.options import SimulationOptions
+from .._engine.observers.crossings import downward_crossings
 from .._physics.initial import GivenState, OutOfPhaseExcitation, excited_block
 from .._physics.params import ChainParams, with_parameter
 from .._physics.record import chain_record
@@ -53,13 +54,14 @@ SNAKE_CONTINUATION = ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.0, p_max=2
 def _downward_crossings(params: ChainParams, y, options: ShootingOptions,
                         horizon: float = 40.0) -> tuple[np.ndarray, np.ndarray, list]:
     """The flow from `y` sampled every 1e-3 over `horizon`: (times, states, and for
-    each oscillator the sample indices where x_n' passes from + to -)."""
+    each oscillator the sample indices where x_n' passes from + to -, the intervals
+    of `downward_crossings`)."""
     ts = np.linspace(0.0, horizon, int(round(horizon * 1000)) + 1)
     ys = np.asarray(flow(params, jnp.asarray(y), horizon, options,
                          diffrax.SaveAt(ts=jnp.asarray(ts))).ys)
-    v = ys[:, 1]
-    down = [np.flatnonzero((v[:-1, n] > 0) & (v[1:, n] <= 0)) for n in range(v.shape[1])]
-    return ts, ys, down
+    mask, _ = downward_crossings(ts, ys[:, 0], ys[:, 1], np.ones(ts.size, dtype=bool))
+    mask = np.asarray(mask)
+    return ts, ys, [np.flatnonzero(mask[:, n]) for n in range(mask.shape[1])]
 
 
 def _turning_point(params: ChainParams, y: np.ndarray, oscillator: int,

@@ -7,6 +7,7 @@ import numpy as np
 from jaxtyping import Bool, Float, Int
 
 from ..._engine.checks import real_array
+from ..._physics.chain import neighbours
 from ..._errors import ValidationError
 from ..._analysis.states import FAILED, STEADY_SLIDING, STICK_SLIP
 from ..._engine.status import Status
@@ -34,9 +35,8 @@ def halc_clusters(on_halc: Bool[np.ndarray, "*batch n_osc"], boundary: str = "ri
     ring and nothing on an open chain).
     """
     on = np.asarray(on_halc, dtype=bool)
-    left = np.roll(on, 1, axis=-1)
-    if boundary != "ring":
-        left[..., 0] = False
+    left_of, _ = neighbours(boundary, on.shape[-1])
+    left = np.where(left_of >= 0, on[..., left_of], False)
     starts = (on & ~left).sum(-1)
     return np.where(on.all(-1), 1, starts)
 

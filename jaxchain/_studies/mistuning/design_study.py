@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._engine.options import SimulationOptions
-from ..._physics.params import ChainParams, with_parameter
+from ..._physics.params import ChainParams, with_fields, with_parameter
 from ..._bifurcation.shooting import periodic_orbit
 from ..._engine.simulate import simulate
 from ..._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
@@ -98,11 +98,9 @@ def fold_by_simulation(problem, solution, delta: np.ndarray, site: int, *,
 
 
 def _ring_like(params: ChainParams, n_osc: int, stiffness) -> ChainParams:
-    """A ring of `n_osc` with the damping, coupling, smoothing, load and friction
-    law of `params` and the given stiffness."""
-    return ChainParams(n_osc=n_osc, xi=params.xi, eta_c=params.eta_c, eps=params.eps,
-                       load=params.load, friction=params.friction, v_d=params.v_d,
-                       stiffness=stiffness)
+    """The ring of `params` (its damping, coupling, smoothing, load and friction
+    law), of `n_osc` oscillators with the given stiffness."""
+    return with_fields(params, n_osc=n_osc, stiffness=stiffness, mistuning=None)
 
 
 def design_study(params: ChainParams | None = None, *, budget: float = 0.05,

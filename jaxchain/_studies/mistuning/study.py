@@ -7,7 +7,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import concurrent.futures
-import dataclasses
 import math
 from pathlib import Path
 
@@ -23,7 +22,8 @@ from ..._engine.status import Status
 from ..._physics.initial import GivenState, excited_block, localized_family
 from ..._analysis.localization import damped_decay, localization_factor, passband_frequency
 from ..._physics.model import jacobian, steady_sliding
-from ..._physics.params import ChainParams, mistune, single_oscillator, with_parameter
+from ..._physics.params import (ChainParams, mistune, single_oscillator, with_fields,
+                               with_parameter)
 from ..._sweeps.datasets import run_attributes, save_dataset
 from ..._engine.solver.registry import DEFAULT_SOLVER
 from ..._sweeps.result_store import CsvStore, settings_key
@@ -60,10 +60,8 @@ def study_chains(params: ChainParams, sigmas, n_draws: int) -> list[tuple[int, i
             chain = mistune(params, float(s) * float(params.eta_c), d)
             # the record is static metadata: dropped, and the stiffness always one
             # value per oscillator, so that every chain runs the one compiled program
-            fields = {f.name: getattr(chain, f.name) for f in dataclasses.fields(chain)}
             stiffness = np.broadcast_to(np.asarray(chain.stiffness, float), (params.n_osc,))
-            out.append((i, d, ChainParams(**(fields | {"mistuning": None,
-                                                       "stiffness": stiffness.copy()}))))
+            out.append((i, d, with_fields(chain, mistuning=None, stiffness=stiffness.copy())))
     return out
 
 

@@ -4,6 +4,7 @@ stability, where the vibration sits, and the fitted localization of the states."
 import numpy as np
 
 from ..basin.classes import wilson_interval
+from ..._physics.chain import neighbours
 from ..._engine.status import Status
 
 
@@ -139,9 +140,9 @@ def neighbour_detuning(deviations: np.ndarray, boundary: str = "ring") -> np.nda
     an open chain): how far oscillator n is tuned away from the oscillators it is
     coupled to. Shape of `deviations` (..., n_osc)."""
     d = np.asarray(deviations, dtype=float)
-    left, right = np.roll(d, 1, -1), np.roll(d, -1, -1)
-    if boundary != "ring":
-        left[..., 0], right[..., -1] = right[..., 0], left[..., -1]
+    left_of, right_of = neighbours(boundary, d.shape[-1])
+    left = np.where(left_of >= 0, d[..., left_of], d[..., right_of])
+    right = np.where(right_of >= 0, d[..., right_of], d[..., left_of])
     return d - 0.5 * (left + right)
 
 
