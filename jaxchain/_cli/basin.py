@@ -9,7 +9,7 @@ import numpy as np
 
 from .._studies.basin.basin import BASIN_OPTIONS, basin_stability
 from .._studies.basin.sampling import Box
-from .._engine.options import SimulationOptions
+from .common import simulation_options
 from .._engine.status import Status
 from .._plots.basin import plot_basin_stability, plot_halc_histogram
 from .._physics.record import chain_record
@@ -105,7 +105,7 @@ def run(args) -> None:
     if not 0 <= transient < t_end:
         raise UsageError(f"--transient must lie in [0, t_end = {t_end:g}), got {transient:g}")
     box = Box(x=tuple(args.x_range), v=tuple(args.v_range))
-    options = SimulationOptions(t_end=t_end, transient=transient)
+    options = simulation_options(args, t_end=t_end, transient=transient)
     params = chain_params(args, n_osc, eps=args.eps)
     n_osc = params.n_osc
     writable_folder(args.out)

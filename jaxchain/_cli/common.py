@@ -111,10 +111,12 @@ def add_ring_options(g, *, n_osc: int = 20) -> None:
 def add_run_options(p: argparse.ArgumentParser) -> None:
     """--t-end, --transient, --solver, --rtol, --atol, --controller, --max-steps."""
     g = p.add_argument_group("integration")
-    g.add_argument("--t-end", type=positive_float, default=15000.0, metavar="T",
-                   help="final time, in units of 1/omega_n (default 15000, as the paper)")
-    g.add_argument("--transient", type=float, default=10000.0, metavar="T",
-                   help="observables are taken after this time (default 10000)")
+    g.add_argument("--t-end", type=positive_float, default=DEFAULTS.t_end, metavar="T",
+                   help=f"final time, in units of 1/omega_n (default {DEFAULTS.t_end:g}, as "
+                        "the paper)")
+    g.add_argument("--transient", type=float, default=DEFAULTS.transient, metavar="T",
+                   help=f"observables are taken after this time (default "
+                        f"{DEFAULTS.transient:g})")
     g.add_argument("--solver", choices=sorted(SOLVERS) + ["auto"], default=DEFAULT_SOLVER,
                    help=f"diffrax solver (default {DEFAULT_SOLVER}, the fastest at the "
                         "default eps and rtol: a Rosenbrock-W method whose W is the "
@@ -122,8 +124,28 @@ def add_run_options(p: argparse.ArgumentParser) -> None:
                         "friction force implicit; auto takes tsit5 where mu_st/eps <= "
                         "100 and ros34pw2 elsewhere")
     add_tolerance_options(g)
-    g.add_argument("--max-steps", type=positive_int, default=200_000,
-                   help="step budget per chunk of 250 time units (default 200000)")
+    g.add_argument("--max-steps", type=positive_int, default=DEFAULTS.max_steps,
+                   help=f"step budget per chunk of {DEFAULTS.chunk_length:g} time units "
+                        f"(default {DEFAULTS.max_steps})")
+
+
+#: The options of `add_run_options` and `add_tolerance_options` that set a field of
+#: `SimulationOptions` of the same name.
+_RUN_FIELDS = ("t_end", "transient", "rtol", "atol", "max_steps", "controller")
+
+
+def simulation_options(args, **fields) -> SimulationOptions:
+    """The `SimulationOptions` of a command: its run options (those its parser has
+    of --t-end, --transient, --rtol, --atol, --max-steps, --controller), then
+    `fields`, which override them; the library's defaults for the rest.
+
+    **Raises:**
+
+    `ValidationError` for a bad combination (transient >= t_end, say): exit
+    status 2.
+    """
+    given = {name: getattr(args, name) for name in _RUN_FIELDS if hasattr(args, name)}
+    return SimulationOptions(**(given | fields))
 
 
 def add_tolerance_options(g) -> None:

@@ -7,7 +7,7 @@ import time
 
 from .._studies.crosscheck import CROSSCHECK_ICS, CROSSCHECK_VD, crosscheck
 from .._nonsmooth.options import NonsmoothOptions
-from .._engine.options import SimulationOptions
+from .common import simulation_options
 from .._engine.status import Status
 from .._physics.params import with_parameter
 from .._plots.crosscheck import plot_crosscheck
@@ -80,9 +80,7 @@ def run(args) -> None:
     params = chain_params(args, args.n_osc, eps=args.eps)
     for vd in args.vd:
         with_parameter(params, "v_d", vd)  # validates every belt speed now
-    options = SimulationOptions(t_end=args.t_end, transient=args.transient,
-                                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps,
-                                controller=args.controller)
+    options = simulation_options(args)
     ref_options = NonsmoothOptions(t_end=args.t_end, transient=args.transient,
                                    rtol=args.ref_rtol, atol=args.ref_rtol)
     writable_folder(args.out)

@@ -11,7 +11,7 @@ from .._studies.scenes import (PAPER_FIGURES, PAPER_SOLUTIONS, orbit_diagram_sce
                                phase_portrait_scene, time_delay_scene, time_series_scene)
 from .._sweeps.ensemble import ensemble
 from .._physics.initial import localized_family
-from .._engine.options import SimulationOptions
+from .common import simulation_options
 from .._physics.params import ChainParams
 from .._plots.dynamics import (plot_orbit_diagram, plot_phase_portraits,
                                plot_states_and_orbits, plot_time_delays, plot_time_series)
@@ -102,9 +102,8 @@ def run(args) -> None:
     size = QUICK if args.quick else FULL
     v_d, ics, _ = PAPER_FIGURES[args.name]
     params = chain_params(args, size["n_osc"], v_d=v_d, eps=args.eps)
-    options = SimulationOptions(t_end=size["t_end"], transient=size["transient"],
-                                rtol=args.rtol, atol=args.atol, controller=args.controller,
-                                chunk_length=size["chunk_length"])
+    options = simulation_options(args, t_end=size["t_end"], transient=size["transient"],
+                                 chunk_length=size["chunk_length"])
     writable_folder(args.out)
     solver = args.solver
 

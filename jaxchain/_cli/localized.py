@@ -9,7 +9,7 @@ import numpy as np
 
 from .._sweeps.ensemble import ensemble
 from .._physics.initial import FAMILIES, localized_family
-from .._engine.options import SimulationOptions
+from .common import simulation_options
 from .._engine.status import status_names
 from .._physics.record import chain_record
 from .._sweeps.atomic import save_figure
@@ -48,9 +48,7 @@ def add_parser(sub):
 def run(args) -> None:
     prefetch("xarray", "matplotlib.pyplot")
     params = chain_params(args, args.n_osc, v_d=args.vd, eps=args.eps)
-    options = SimulationOptions(t_end=args.t_end, transient=args.transient,
-                                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps,
-                                controller=args.controller)
+    options = simulation_options(args)
     writable_folder(args.out)
     solver = args.solver
     ics = localized_family(params.n_osc, args.ics, params.boundary)

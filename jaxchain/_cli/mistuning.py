@@ -10,18 +10,15 @@ import numpy as np
 from .._studies.mistuning.edges import EDGE_OPTIONS
 from .._studies.mistuning.study import (STUDY_OPTIONS, STUDY_SIGMAS, STUDY_VD, TABLE_SIGMAS, THETAS,
                                 mistuning_study)
-from .._studies.mistuning.summary import (edge_correlations, halc_correlation, localization_table,
-                                  localized_fraction, staircase_fraction,
-                                  vibrating_fraction)
+from .._studies.mistuning.summary import failed_runs, localization_table, study_summary
 from .._engine.options import SimulationOptions
-from .._engine.status import Status
 from .._physics.record import chain_record
 from .._plots.mistuning import plot_mistuned_states, plot_mistuning_study, plot_site_edges
 from .._sweeps.atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_scheduler_option, cluster_client, comma_list, json_ready,
-                     positive_float, positive_int, show_progress,
+                     positive_float, positive_int, show_progress, simulation_options,
                      writable_folder)
 from .sweep import belt_speeds
 
@@ -134,7 +131,7 @@ def run(args) -> None:
         study = mistuning_study(
             params, args.sigmas, args.draws, v_d=args.vd, n_samples=args.samples,
             key=args.seed, n_folds=args.folds,
-            options=SimulationOptions(t_end=args.t_end, transient=args.transient),
+            options=simulation_options(args),
             edge_options=SimulationOptions(t_end=args.edge_t_end,
                                            transient=0.8 * args.edge_t_end),
             out=args.out, resume=args.resume, client=client, progress=show_progress(args))
@@ -146,7 +143,7 @@ def run(args) -> None:
     shown = 1.0 if 1.0 in study["sigma"].values else float(study["sigma"].values[-1])
     figures["fig4"] = args.out / "mistuned_fig4.png"
     save_figure(plot_mistuned_states(study, shown, 0, 1.5), figures["fig4"])
-    s = summary(study) | {"localization_factor": table, "chain": chain_record(params),
+    s = study_summary(study) | {"localization_factor": table, "chain": chain_record(params),
                           "wall_time_s": wall,
                           "figures": {k: str(v) for k, v in figures.items()}}
     text = json.dumps(json_ready(s), allow_nan=False)
@@ -155,67 +152,10 @@ def run(args) -> None:
         print(text)
     else:
         _print_summary(s)
-    ran = (Status.ok, Status.not_run)
-    failed = int(np.isin(study["staircase_status"].values, ran, invert=True).sum()
-                 + np.isin(study["basin_status"].values, ran, invert=True).sum())
+    failed = failed_runs(study)
     if failed:
         raise RunsFailed(f"{failed} runs failed; they are left out of the shares "
                          f"(status in {args.out / 'mistuning.nc'})")
-
-
-def _stats(values) -> dict:
-    v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v)]
-    if not v.size:
-        return {"count": 0}
-    return {"count": int(v.size), "mean": float(v.mean()), "std": float(v.std(ddof=1))
-            if v.size > 1 else 0.0, "min": float(v.min()), "max": float(v.max())}
-
-
-def summary(study) -> dict:
-    """The JSON summary of a `mistuning_study`: per sigma, the staircase and basin
-    shares per belt speed with their intervals, the HALC correlation, and the
-    distributions of the edges and of the envelope decay."""
-    stair, basin, corr = staircase_fraction(study), vibrating_fraction(study), \
-        halc_correlation(study)
-    local = localized_fraction(study)
-    n_halc = np.where(study["basin_status"].values == Status.ok,
-                      study["basin_n_halc"].values, np.nan)
-    rows = []
-    for i, sigma in enumerate(study["sigma"].values):
-        rows.append({
-            "sigma_over_eta_c": float(sigma),
-            "v_d": study["v_d"].values.tolist(),
-            "staircase_fraction": stair["fraction"][i].tolist(),
-            "staircase_ci": [stair["low"][i].tolist(), stair["high"][i].tolist()],
-            "staircase_runs": stair["total"][i].tolist(),
-            "basin_stability_vibrating": basin["fraction"][i].tolist(),
-            "basin_ci": [basin["low"][i].tolist(), basin["high"][i].tolist()],
-            "basin_runs": basin["total"][i].tolist(),
-            "basin_stability_localized": local["fraction"][i].tolist(),
-            "localized_ci": [local["low"][i].tolist(), local["high"][i].tolist()],
-            "mean_n_halc_random_starts": np.nanmean(n_halc[i], axis=(0, 2)).tolist(),
-            "halc_deviation_correlation": corr["correlation"][i].tolist(),
-            "mean_deviation_on_halc_over_sigma": corr["mean_deviation_on_halc"][i].tolist(),
-            "hopf_vd": _stats(study["hopf_vd"].values[i]),
-            "upper_edge": _stats(study["upper_edge"].values[i]) | {
-                "per_draw": study["upper_edge"].values[i].tolist()},
-            "fold_by_shooting": [{"draw": int(d), "v_d": float(f), "site": int(j) + 1,
-                                  "upper_edge_simulation": float(e)}
-                                 for d, (f, j, e) in enumerate(zip(
-                                     study["fold_vd"].values[i], study["fold_site"].values[i],
-                                     study["upper_edge"].values[i])) if np.isfinite(f)],
-            "envelope_decay": _stats(study["envelope_decay"].values[i]),
-            "anderson_gamma_at_state_frequency": float(study["state_gamma"].values[i]),
-            "anderson_gamma_at_state_frequency_error":
-                float(study["state_gamma_error"].values[i])})
-    a = study.attrs
-    return {"sigmas": rows, "state_period": a["state_period"],
-            "state_omega2": a["state_omega2"], "sliding_damping": a["sliding_damping"],
-            "damped_chain_decay": a["state_damped_decay"],
-            "edge_resolution": a["edge_resolution"],
-            "site_edge_correlation": edge_correlations(study), "n_draws": a["n_draws"],
-            "n_samples": a["n_samples"], "t_end": a["t_end"], "transient": a["transient"]}
 
 
 def _print_summary(s: dict) -> None:

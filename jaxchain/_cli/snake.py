@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from .._studies.snake import SITES, SNAKE_CONTINUATION, localized_branches
+from .._studies.snake import SNAKE_CONTINUATION, default_sites, localized_branches
 from .._plots.snake import plot_snake
 from .._sweeps.atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
@@ -51,9 +51,11 @@ def add_parser(sub):
     g = p.add_argument_group("continuation")
     g.add_argument("--vd", type=positive_float, default=1.5,
                    help="belt speed where the states are found by simulation (default 1.5)")
-    g.add_argument("--sites", type=comma_list(int), default=list(SITES), metavar="K,K,...",
-                   help="oscillators excited by eq. (8) for each branch (default "
-                        f"{','.join(map(str, SITES))}; those above N are dropped)")
+    g.add_argument("--sites", type=comma_list(int), default=None, metavar="K,K,...",
+                   help="oscillators excited by eq. (8) for each branch (default 1, 2, 4, "
+                        "... up to N/2, and N: "
+                        f"{','.join(map(str, default_sites(20)))} on the ring of 20; those "
+                        "above N are dropped)")
     g.add_argument("--vd-min", type=positive_float, default=1.0,
                    help="smallest belt speed of the branches (default 1.0)")
     g.add_argument("--vd-max", type=positive_float, default=2.2,
@@ -72,7 +74,8 @@ def add_parser(sub):
 
 def run(args) -> None:
     params = chain_params(args, args.n_osc, eps=args.eps, v_d=args.vd)
-    sites = [k for k in args.sites if k <= params.n_osc]
+    asked = default_sites(params.n_osc) if args.sites is None else args.sites
+    sites = [k for k in asked if k <= params.n_osc]
     if not sites or min(sites) < 1:
         raise UsageError(f"--sites: give numbers in 1..{params.n_osc}, got {args.sites}")
     if not args.vd_min < args.vd < args.vd_max:

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from .._physics.initial import FAMILIES, localized_family
-from .._engine.options import SimulationOptions
+from .common import simulation_options
 from .._plots.sweep import plot_bifurcation_diagram
 from .._engine.status import Status, status_names
 from .._analysis.fronts import front_fractions, front_ranges
@@ -116,9 +116,7 @@ def add_parser(sub):
 
 def run(args) -> None:
     params = chain_params(args, args.n_osc, eps=args.eps)
-    options = SimulationOptions(t_end=args.t_end, transient=args.transient,
-                                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps,
-                                controller=args.controller)
+    options = simulation_options(args)
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
     writable_folder(args.out)

@@ -34,9 +34,12 @@ from .._engine.status import Status
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr
 
-#: The branches of `localized_branches` by default: eq. (8) with 1, 2, 4 and 8
-#: oscillators excited, and the whole chain (the paper's Figs. 4 and 8).
-SITES = (1, 2, 4, 8, 20)
+def default_sites(n_osc: int) -> tuple[int, ...]:
+    """The branches of `localized_branches` by default: eq. (8) with 1, 2, 4, ...
+    oscillators excited (the powers of two up to half the chain) and the whole
+    chain; 1, 2, 4, 8 and 20 on the paper's ring (its Figs. 4 and 8)."""
+    sites = [2**i for i in range(n_osc.bit_length()) if 2**i <= n_osc // 2]
+    return tuple(sites + [n_osc])
 
 #: Shooting on a chain: Levenberg-Marquardt converges from a simulated state.
 SNAKE_SHOOTING = ShootingOptions(root_finder="levenberg-marquardt")
@@ -75,7 +78,7 @@ def _turning_point(params: ChainParams, y: np.ndarray, oscillator: int,
     return ys[down[0]], float(ts[down[1]] - ts[down[0]])
 
 
-def start_orbits(params: ChainParams, sites=SITES, *, options: SimulationOptions = SNAKE_START,
+def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions = SNAKE_START,
                  shooting: ShootingOptions = SNAKE_SHOOTING, progress: bool = False):
     """Periodic localized states of the chain at `params.v_d`, refined by shooting
     from direct simulation: eq. (8) with k oscillators excited (`excited_block`),
@@ -86,7 +89,8 @@ def start_orbits(params: ChainParams, sites=SITES, *, options: SimulationOptions
     **Arguments:**
 
     - `params`: the chain; `params.v_d` is the belt speed of the start.
-    - `sites`: the numbers of excited oscillators, each in 1..n_osc.
+    - `sites`: the numbers of excited oscillators, each in 1..n_osc
+        (`default_sites` by default).
     - `options`: `SimulationOptions` of the simulations.
     - `shooting`: `ShootingOptions` (its `phase_oscillator` is replaced).
     - `progress`: progress bars.
@@ -101,7 +105,7 @@ def start_orbits(params: ChainParams, sites=SITES, *, options: SimulationOptions
 
     `ValidationError` for a k outside 1..n_osc.
     """
-    sites = tuple(int(k) for k in sites)
+    sites = default_sites(params.n_osc) if sites is None else tuple(int(k) for k in sites)
     if not sites or min(sites) < 1 or max(sites) > params.n_osc:
         raise ValidationError(f"sites must be in 1..n_osc = {params.n_osc}, got {sites}")
     masks = np.stack([excited_block(params.n_osc, k, params.boundary) for k in sites])
@@ -425,7 +429,7 @@ def multiplier_accuracy(params: ChainParams, branch: xr.Dataset, points,
             "trivial_error": [float(max(e, default=np.nan)) for e in trivial]}
 
 
-def localized_branches(params: ChainParams | None = None, sites=SITES, *,
+def localized_branches(params: ChainParams | None = None, sites=None, *,
                        shooting: ShootingOptions = SNAKE_SHOOTING,
                        continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
                        start_options: SimulationOptions = SNAKE_START,
@@ -442,7 +446,7 @@ def localized_branches(params: ChainParams | None = None, sites=SITES, *,
 
     - `params`: the chain (any chain of `ChainParams`); `params.v_d` is where the
         states are found (1.5 by default, inside the paper's bistable range).
-    - `sites`: excited oscillators of each start.
+    - `sites`: excited oscillators of each start (`default_sites` by default).
     - `shooting`: `ShootingOptions` of every orbit.
     - `continuation_options`: `ContinuationOptions` (direction is set both ways).
     - `start_options`: `SimulationOptions` of the starting simulations.
@@ -464,7 +468,7 @@ def localized_branches(params: ChainParams | None = None, sites=SITES, *,
     """
     if params is None:  # built on call: a chain needs `configure` first
         params = ChainParams()
-    sites = tuple(int(k) for k in sites)
+    sites = default_sites(params.n_osc) if sites is None else tuple(int(k) for k in sites)
     datasets, starts, failed = {}, {}, {}
     settings = {"chain": chain_record(params), "shooting": shooting,
                 "continuation": continuation_options, "start": start_options}

@@ -158,3 +158,67 @@ def edge_correlations(study) -> dict:
     det = np.abs(neighbour_detuning(dev, boundary))
     return {"own_deviation": float(np.corrcoef(np.abs(dev)[keep], edge[keep])[0, 1]),
             "neighbour_detuning": float(np.corrcoef(det[keep], edge[keep])[0, 1])}
+
+
+def _stats(values) -> dict:
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return {"count": 0}
+    return {"count": int(v.size), "mean": float(v.mean()), "std": float(v.std(ddof=1))
+            if v.size > 1 else 0.0, "min": float(v.min()), "max": float(v.max())}
+
+
+def study_summary(study) -> dict:
+    """The JSON summary of a `mistuning_study` (what `jaxchain mistuning` prints and
+    writes): per sigma, the staircase and basin
+    shares per belt speed with their intervals, the HALC correlation, and the
+    distributions of the edges and of the envelope decay."""
+    stair, basin, corr = staircase_fraction(study), vibrating_fraction(study), \
+        halc_correlation(study)
+    local = localized_fraction(study)
+    n_halc = np.where(study["basin_status"].values == Status.ok,
+                      study["basin_n_halc"].values, np.nan)
+    rows = []
+    for i, sigma in enumerate(study["sigma"].values):
+        rows.append({
+            "sigma_over_eta_c": float(sigma),
+            "v_d": study["v_d"].values.tolist(),
+            "staircase_fraction": stair["fraction"][i].tolist(),
+            "staircase_ci": [stair["low"][i].tolist(), stair["high"][i].tolist()],
+            "staircase_runs": stair["total"][i].tolist(),
+            "basin_stability_vibrating": basin["fraction"][i].tolist(),
+            "basin_ci": [basin["low"][i].tolist(), basin["high"][i].tolist()],
+            "basin_runs": basin["total"][i].tolist(),
+            "basin_stability_localized": local["fraction"][i].tolist(),
+            "localized_ci": [local["low"][i].tolist(), local["high"][i].tolist()],
+            "mean_n_halc_random_starts": np.nanmean(n_halc[i], axis=(0, 2)).tolist(),
+            "halc_deviation_correlation": corr["correlation"][i].tolist(),
+            "mean_deviation_on_halc_over_sigma": corr["mean_deviation_on_halc"][i].tolist(),
+            "hopf_vd": _stats(study["hopf_vd"].values[i]),
+            "upper_edge": _stats(study["upper_edge"].values[i]) | {
+                "per_draw": study["upper_edge"].values[i].tolist()},
+            "fold_by_shooting": [{"draw": int(d), "v_d": float(f), "site": int(j) + 1,
+                                  "upper_edge_simulation": float(e)}
+                                 for d, (f, j, e) in enumerate(zip(
+                                     study["fold_vd"].values[i], study["fold_site"].values[i],
+                                     study["upper_edge"].values[i])) if np.isfinite(f)],
+            "envelope_decay": _stats(study["envelope_decay"].values[i]),
+            "anderson_gamma_at_state_frequency": float(study["state_gamma"].values[i]),
+            "anderson_gamma_at_state_frequency_error":
+                float(study["state_gamma_error"].values[i])})
+    a = study.attrs
+    return {"sigmas": rows, "state_period": a["state_period"],
+            "state_omega2": a["state_omega2"], "sliding_damping": a["sliding_damping"],
+            "damped_chain_decay": a["state_damped_decay"],
+            "edge_resolution": a["edge_resolution"],
+            "site_edge_correlation": edge_correlations(study), "n_draws": a["n_draws"],
+            "n_samples": a["n_samples"], "t_end": a["t_end"], "transient": a["transient"]}
+
+
+def failed_runs(study) -> int:
+    """The runs of a `mistuning_study` that failed (status neither `ok` nor
+    `not_run`): the staircase and the random starts."""
+    ran = (Status.ok, Status.not_run)
+    return int(np.isin(study["staircase_status"].values, ran, invert=True).sum()
+               + np.isin(study["basin_status"].values, ran, invert=True).sum())
