@@ -50,15 +50,11 @@ def params_vector(params) -> np.ndarray:
 
 
 def chunk_bounds(options) -> tuple[np.ndarray, np.ndarray, float]:
-    """Start and end of every chunk of a jaxchain run (as in `_simulate._spans`: the
+    """Start and end of every chunk of a jaxchain run (`AbstractHorizon.phases`: the
     transient, then the observed window, each cut into equal chunks), the 100-ULP
     clip floor of each end (diffrax's `t1_clip_floor`), and the transient."""
     starts, ends = [], []
-    spans = [(0.0, options.transient), (options.transient, options.t_end)]
-    for a, b in spans:
-        if b <= a:
-            continue
-        n, length = options.chunks(a, b)
+    for a, length, n, _ in options.phases():
         for i in range(n):
             t0 = a + length * i
             starts.append(t0)

@@ -101,18 +101,19 @@ from ._engine.observers.energy import Energy as Energy
 from ._engine.observers.extrema import Extrema as Extrema
 from ._engine.observers.lyapunov_exponent import LargestLyapunov as LargestLyapunov
 from ._engine.observers.series import TimeSeries as TimeSeries
+from ._engine.horizon import AbstractHorizon as AbstractHorizon
 from ._engine.options import SimulationOptions as SimulationOptions
-from ._physics.chain import (
-    BOUNDARIES as BOUNDARIES, coupling_force as coupling_force, Mistuning as Mistuning,
-    stiffness_matrix as stiffness_matrix,
+from ._physics.chain import BOUNDARIES as BOUNDARIES, Mistuning as Mistuning
+from ._physics.forces import (
+    coupling_force as coupling_force, friction_coefficient as friction_coefficient,
+    slip_friction_force as slip_friction_force,
+    smoothed_friction_force as smoothed_friction_force,
+    static_friction as static_friction, stiffness_matrix as stiffness_matrix,
 )
 from ._physics.friction import (
     FRICTION_LAWS as FRICTION_LAWS, AbstractFrictionLaw as AbstractFrictionLaw,
-    Coulomb as Coulomb, ExponentialDecay as ExponentialDecay,
-    friction_coefficient as friction_coefficient, Polynomial as Polynomial,
-    slip_friction_force as slip_friction_force,
-    smoothed_friction_force as smoothed_friction_force,
-    static_friction as static_friction, Stribeck as Stribeck,
+    Coulomb as Coulomb, ExponentialDecay as ExponentialDecay, Polynomial as Polynomial,
+    Stribeck as Stribeck,
 )
 from ._physics.initial import (
     AbstractInitialCondition as AbstractInitialCondition,

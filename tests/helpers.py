@@ -288,7 +288,9 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "mistuning design problems": ("jaxchain._studies.mistuning.pattern_design",
                                            "design_problems"),
              "pattern folds": ("jaxchain._studies.mistuning.pattern_design", "pattern_folds"),
-             "tasks on devices": ("jaxchain._engine.lanes", "on_devices")}
+             "tasks on devices": ("jaxchain._engine.lanes", "on_devices"),
+             "smoothed observation": ("jaxchain._engine.observers.base", "observe_chunk"),
+             "non-smooth observation": ("jaxchain._nonsmooth.solve", "observe_sample")}
 
 
 def internal_module(what: str):

@@ -159,3 +159,58 @@ def test_energy_at_steady_sliding_and_against_scipy():
     assert abs(float(out["energy_mean"]) / (np.trapezoid(energy, t) / 50.0) - 1) < 1e-5
     # the maximum is over the samples (every 0.05: every 50th point here)
     assert abs(float(out["energy_max"]) / energy[::50].max() - 1) < 1e-6
+
+
+def _prescribed_stream(params, ts):
+    """A prescribed stream of states (2, n_osc) at times `ts`: oscillator n moves as
+    x = A_n cos(t + phi_n), except where it sticks (x' = v_d exactly, held over a
+    stretch); it is no solution of eq. (5), only samples to observe."""
+    n = params.n_osc
+    amplitude = 0.5 + 0.1 * np.arange(n)
+    phase = 0.7 * np.arange(n)
+    x = amplitude * np.cos(ts[:, None] + phase)
+    v = -amplitude * np.sin(ts[:, None] + phase)
+    stuck = (np.arange(n) % 2 == 0) & (np.sin(0.1 * ts[:, None]) > 0.5)
+    v = np.where(stuck, float(params.v_d), v)
+    return np.stack([x, v], axis=1)
+
+
+def test_both_engines_observe_a_prescribed_stream_alike():
+    """The smoothed engine hands `Extrema` chunks of dense samples (the end sample
+    of one chunk repeated at the start of the next), the non-smooth reference one
+    located sample at a time: the same stream gives the same extrema, bitwise, and
+    those of NumPy over each half of the window."""
+    from helpers import internal
+
+    observe_chunk, observe_sample = (internal("smoothed observation"),
+                                     internal("non-smooth observation"))
+    params = jc.ChainParams(n_osc=4, v_d=1.5, eps=1e-3)
+    options = jc.SimulationOptions(t_end=100.0, transient=40.0, chunk_length=15.0)
+    ts = np.linspace(options.transient, options.t_end, 241)  # mid = 70 among them
+    ys = _prescribed_stream(params, ts)
+    observer = jc.Extrema()
+
+    chunked = (observer.init(ys[0], params, options),)
+    for lo in range(0, 240, 20):  # chunks [ts[lo], ts[lo + 20]], ends shared
+        chunk = jc.Chunk(t0=ts[lo], t1=ts[lo + 20], ts=jnp.asarray(ts[lo:lo + 21]),
+                         ys=jnp.asarray(ys[lo:lo + 21]), log_growth=None)
+        chunked = observe_chunk((observer,), chunked, chunk, params, options)
+    located = (observer.init(ys[0], params, options),)
+    for t, y in zip(ts, ys):
+        located = observe_sample(located, jnp.asarray(t), jnp.asarray(y), params, options)
+
+    zero_eps = jc.with_fields(params, eps=1e-300)  # the reference's band, v_rel = 0
+    smooth = observer.result(chunked[0], zero_eps, options)
+    event = observer.result(located[0], zero_eps, options)
+    for name in ("x_max_halves", "x_min_halves", "min_slip_speed", "v_max", "on_halc",
+                 "n_halc_halves", "amplitudes"):
+        np.testing.assert_array_equal(smooth[name], event[name], err_msg=name)
+
+    mid = 0.5 * (options.transient + options.t_end)
+    halves = [ts <= mid, ts >= mid]
+    x, v = ys[:, 0], ys[:, 1]
+    np.testing.assert_array_equal(event["x_max_halves"], [x[h].max(0) for h in halves])
+    np.testing.assert_array_equal(event["x_min_halves"], [x[h].min(0) for h in halves])
+    np.testing.assert_array_equal(event["min_slip_speed"],
+                                  np.abs(v - float(params.v_d)).min(0))
+    np.testing.assert_array_equal(event["on_halc"], np.arange(4) % 2 == 0)

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._physics.chain import stiffness_matrix
+from .._physics.forces import stiffness_matrix
 from .._errors import ValidationError
 
 

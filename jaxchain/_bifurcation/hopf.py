@@ -10,8 +10,9 @@ import optimistix as optx
 from jaxtyping import Array, Complex, Float
 
 from .._engine.checks import check_params, real_array
-from .._physics.chain import is_homogeneous_ring
-from .._physics.friction import ExponentialDecay, friction_coefficient
+from .._physics.forces import friction_coefficient
+from .._physics.friction import ExponentialDecay
+from .._physics.params import is_homogeneous_ring
 from .._physics.model import jacobian
 from .._physics.params import ChainParams, with_parameter
 from .._errors import ValidationError

@@ -1,17 +1,16 @@
 """Options of a simulation run: horizon, tolerances and how observables are sampled."""
 
-import math
-
 import equinox as eqx
-import jax
 import numpy as np
 
+from .horizon import AbstractHorizon, positive
 from .solver.controller import CONTROLLERS
 from .._errors import ValidationError
 
 
-class SimulationOptions(eqx.Module):
-    """How long to integrate, how accurately, and how to observe.
+class SimulationOptions(AbstractHorizon):
+    """How long to integrate, how accurately, and how to observe: the horizon of
+    `AbstractHorizon` with the smoothed engine's tolerances and sampling.
 
     All fields but the tolerances are static: changing one recompiles. `rtol` and
     `atol` may be given as JAX arrays, so that a sweep over tolerances compiles
@@ -66,13 +65,9 @@ class SimulationOptions(eqx.Module):
     dtmin: float = eqx.field(static=True, default=1e-10)
 
     def __check_init__(self):
-        for name in ("t_end", "rtol", "atol", "sample_dt", "chunk_length", "max_steps",
-                     "dtmin"):
+        for name in ("rtol", "atol", "sample_dt", "max_steps", "dtmin"):
             value = getattr(self, name)
-            if isinstance(value, jax.Array) and value.shape == ():
-                value = float(value)
-            if not (isinstance(value, (int, float, np.integer, np.floating))
-                    and not isinstance(value, bool) and math.isfinite(value) and value > 0):
+            if not positive(value):
                 raise ValidationError(f"SimulationOptions.{name} must be a finite number > 0, "
                                       f"got {value!r}")
         if self.controller not in CONTROLLERS:
@@ -81,13 +76,4 @@ class SimulationOptions(eqx.Module):
         if isinstance(self.max_steps, bool) or not isinstance(self.max_steps, (int, np.integer)):
             raise ValidationError(f"SimulationOptions.max_steps must be an integer >= 1, got "
                                   f"{self.max_steps!r}")
-        if not (isinstance(self.transient, (int, float, np.integer, np.floating))
-                and not isinstance(self.transient, bool) and math.isfinite(self.transient)
-                and 0 <= self.transient < self.t_end):
-            raise ValidationError(f"SimulationOptions.transient must lie in [0, t_end = "
-                                  f"{self.t_end}), got {self.transient!r}")
-
-    def chunks(self, t0: float, t1: float) -> tuple[int, float]:
-        """Number and length of the equal chunks that cover [t0, t1]."""
-        n = max(1, math.ceil((t1 - t0) / self.chunk_length - 1e-9))
-        return n, (t1 - t0) / n
+        self.check_horizon()

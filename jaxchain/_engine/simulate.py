@@ -1,5 +1,6 @@
 """Integration of one trajectory of eq. (5) with diffrax, observing while integrating."""
 
+import dataclasses
 from collections.abc import Sequence
 
 import diffrax
@@ -16,7 +17,7 @@ from .._physics.custom_types import State
 from .status import Status, failure_hint
 from .._physics.initial import AbstractInitialCondition, GivenState
 from .._physics.model import split_vector_field, vector_field
-from .observers.base import AbstractObserver, Chunk
+from .observers.base import AbstractObserver, Chunk, no_partial_answers, observe_chunk
 from .observers.extrema import Extrema
 from .options import SimulationOptions
 from .._physics.params import ChainParams
@@ -133,7 +134,7 @@ def _advance(terms_, solver, args, options, observers, progress, tangent, carry,
         y_end = jnp.stack([y_end[0], y_end[1] / norm])
         samples = None if ts is None else samples[:, 0]
     chunk = Chunk(t0=t0, t1=t1, ts=ts, ys=samples, log_growth=log_growth)
-    states = tuple(o.update(s, chunk, args, options) for o, s in zip(observers, states))
+    states = observe_chunk(observers, states, chunk, args, options)
     state_end = y_end[0] if tangent else y_end
     # Where a failed solve stopped: its t1 save holds the time it reached.
     mean_step = (sol.ts[0][-1] - t0) / jnp.maximum(sol.stats["num_steps"], 1)
@@ -168,21 +169,12 @@ def _with_tangent(terms_):
 
 
 def _spans(options: SimulationOptions) -> list[tuple[float, float, int, int]]:
-    """The phases of a run as (start, chunk length, number of chunks, samples per
-    chunk): the transient (not sampled), then the observed window."""
-    n_tr, len_tr = options.chunks(0.0, options.transient)
-    n_obs, len_obs = options.chunks(options.transient, options.t_end)
-    n_samples = int(np.ceil(len_obs / options.sample_dt)) + 1
-    spans = [(0.0, len_tr, n_tr, 0)] if options.transient > 0 else []
-    return spans + [(options.transient, len_obs, n_obs, n_samples)]
-
-
-def _no_partial_answers(value, ok):
-    if jnp.issubdtype(value.dtype, jnp.bool_):
-        return value & ok
-    if jnp.issubdtype(value.dtype, jnp.integer):
-        return jnp.where(ok, value, -1)
-    return jnp.where(ok, value, jnp.nan)
+    """The phases of a run (`AbstractHorizon.phases`) as (start, chunk length,
+    number of chunks, samples per chunk): the transient (not sampled), then the
+    observed window."""
+    return [(start, length, count,
+             int(np.ceil(length / options.sample_dt)) + 1 if observed else 0)
+            for start, length, count, observed in options.phases()]
 
 
 def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
@@ -243,10 +235,8 @@ def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
     if tangent:
         y_final = y_final[0]
     ok = status == Status.ok
-    results = tuple(
-        {k: _no_partial_answers(jnp.asarray(v), ok)
-         for k, v in o.result(s, args, options).items()}
-        for o, s in zip(observers, states))
+    results = tuple(no_partial_answers(o.result(s, args, options), ok)
+                    for o, s in zip(observers, states))
     return results, y_final, steps, status
 
 
@@ -258,8 +248,9 @@ def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
     host callback."""
     (extrema,), y_final, steps, status = integrate(
         terms(solver), solver, y0, params, options, (Extrema(),), progress)
-    return Observables(**extrema, y_initial=y0, y_final=y_final, num_steps=steps,
-                       status=status)
+    kept = {f.name for f in dataclasses.fields(Observables)}
+    return Observables(**{k: v for k, v in extrema.items() if k in kept},
+                       y_initial=y0, y_final=y_final, num_steps=steps, status=status)
 
 
 def run_observers(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
@@ -297,11 +288,6 @@ def check_observers(observers: Sequence[AbstractObserver]) -> tuple:
     if len(set(names)) != len(names):
         raise ValidationError(f"observers must be of distinct kinds, got {names}")
     return observers
-
-
-def n_ticks(options: SimulationOptions) -> int:
-    """Number of progress ticks (chunks) of one trajectory."""
-    return sum(count for _, _, count, _ in _spans(options))
 
 
 _run_jit = eqx.filter_jit(run)
@@ -356,7 +342,7 @@ def _single(fn, name, params, y0, solver, options, extra, throw, progress):
     if not isinstance(y0, AbstractInitialCondition):
         y0 = GivenState(y0)
     y = y0(params)
-    with progress_bar(n_ticks(options), name, progress):
+    with progress_bar(options.n_chunks(), name, progress):
         out = fn(params, y, solver, options, *extra, progress)
     status = int(out["status"] if isinstance(out, dict) else out.status)
     if throw and status != Status.ok:

@@ -6,7 +6,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import optimistix as optx
 
-from .._physics.friction import static_friction
+from .._physics.forces import static_friction
 from .._physics.params import ChainParams, with_parameter
 from .switching import mode_field
 from .._errors import ValidationError

@@ -1,14 +1,14 @@
 """Options of a run of the non-smooth reference."""
 
-import math
-
 import equinox as eqx
 
+from .._engine.horizon import AbstractHorizon, positive
 from .._errors import ValidationError
 
 
-class NonsmoothOptions(eqx.Module):
-    """Horizon, tolerances and bookkeeping of `simulate_nonsmooth`.
+class NonsmoothOptions(AbstractHorizon):
+    """Horizon, tolerances and bookkeeping of `simulate_nonsmooth`: the horizon of
+    `AbstractHorizon` with the event-driven run's tolerances and budgets.
 
     All fields are static: changing one recompiles. Times are dimensionless, in units
     of 1/omega_n (eq. (4) of the paper).
@@ -51,25 +51,10 @@ class NonsmoothOptions(eqx.Module):
     log_size: int = eqx.field(static=True, default=1024)
 
     def __check_init__(self):
-        for name in ("t_end", "rtol", "atol", "root_tol", "switch_tol", "chunk_length",
-                     "max_steps", "max_events", "log_size"):
+        for name in ("rtol", "atol", "root_tol", "switch_tol", "max_steps", "max_events",
+                     "log_size"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            if not positive(value):
                 raise ValidationError(f"NonsmoothOptions.{name} must be a finite number > 0, "
                                       f"got {value!r}")
-        if not (math.isfinite(self.transient) and 0 <= self.transient < self.t_end):
-            raise ValidationError(f"NonsmoothOptions.transient must lie in [0, t_end = "
-                                  f"{self.t_end}), got {self.transient!r}")
-
-    def phases(self) -> list[tuple[float, float, int, int]]:
-        """The phases of a run as (start, chunk length, number of chunks, half): the
-        transient (half -1, not observed), then the two halves 0 and 1 of the
-        observed window."""
-        mid = 0.5 * (self.transient + self.t_end)
-        bounds = [(0.0, self.transient, -1), (self.transient, mid, 0), (mid, self.t_end, 1)]
-        out = []
-        for t0, t1, half in bounds:
-            if t1 > t0:
-                n = max(1, math.ceil((t1 - t0) / self.chunk_length - 1e-9))
-                out.append((t0, (t1 - t0) / n, n, half))
-        return out
+        self.check_horizon()

@@ -10,9 +10,10 @@ from jaxtyping import Array, Bool, Float, Int
 from .._physics.custom_types import State
 from .._physics.initial import AbstractInitialCondition, GivenState
 from .._physics.params import ChainParams
+from .._engine.observers.base import Chunk, no_partial_answers, observe_chunk
+from .._engine.observers.extrema import Extrema
 from .._engine.progress import progress_bar, tick
 from .._engine.status import Status
-from .._physics.stick import sticks
 from .options import NonsmoothOptions
 from .switching import guard, initial_modes, mode_field, switch, turning_directions
 
@@ -31,11 +32,11 @@ class NonsmoothObservables(eqx.Module):
     - `on_halc`: whether each oscillator is on the HALC: it sticks during the
         window, `min_slip_speed` = 0 (`sticks` with eps = 0), shape (n_osc,).
     - `n_halc`: number of oscillators on the HALC, shape ().
-    - `min_slip_speed`: smallest |x_n' - v_d| over the window: exactly 0 for an
-        oscillator that sticks (x_n' = v_d in stick); for one that only slips, the
-        smallest value at the window's events and chunk ends, an upper bound of the
-        true minimum (a slip reversal, v_rel passing through 0 at one instant
-        without stick, is left out), shape (n_osc,).
+    - `min_slip_speed`: smallest |x_n' - v_d| over the located samples of the
+        window (events and chunk ends): exactly 0 for an oscillator that sticks
+        (x_n' = v_d in stick); about the event tolerance at a slip reversal (v_rel
+        passing through 0 without stick), which is therefore no stick; otherwise an
+        upper bound of the true minimum, shape (n_osc,).
     - `stick_fraction`: fraction of the window each oscillator spends in stick,
         shape (n_osc,).
     - `x_max`, `x_min`: extrema of x_n over each half of the window, shape
@@ -56,7 +57,9 @@ class NonsmoothObservables(eqx.Module):
     - `status`: the `Status` of the run (its integer value; `Status.ok` is
         success, `Status.event_not_resolved` its own failure), shape ().
 
-    A failed run gives NaN observables and `n_halc` = -1. All quantities are
+    The window's observables are those of the smoothed engine's `Extrema`, fed
+    the state at every located event and chunk end (`observe_sample`). A failed
+    run gives NaN observables and `n_halc` = -1. All quantities are
     dimensionless (eqs. (4)-(6)).
     """
 
@@ -87,10 +90,8 @@ class _Carry(eqx.Module):
     y: State
     work: Float[Array, "2"]
     modes: Float[Array, " n_osc"]
-    x_max: Float[Array, "2 n_osc"]
-    x_min: Float[Array, "2 n_osc"]
+    observed: tuple
     stick_time: Float[Array, " n_osc"]
-    slip_speed: Float[Array, " n_osc"]
     log_time: Float[Array, " log"]
     log_osc: Int[Array, " log"]
     log_kind: Int[Array, " log"]
@@ -101,9 +102,29 @@ class _Carry(eqx.Module):
     status: Int[Array, ""]
 
 
-def _segment(params, options, observe, half, t_stop, c: _Carry) -> _Carry:
-    """Integrate from c.t with fixed modes until the first event or t_stop, then
-    apply the switching rule."""
+#: What the reference observes (`Extrema`, with the halves of the window).
+_OBSERVERS = (Extrema(),)
+
+
+def _observers_args(params: ChainParams) -> ChainParams:
+    """The chain as the observers see it: eps = 0, since the reference has no
+    smoothing (its stick band is v_rel = 0, `sticks`). The reference never reads
+    eps, so no check of eps > 0 is bypassed where it matters."""
+    return eqx.tree_at(lambda p: p.eps, params, jnp.zeros_like(params.eps))
+
+
+def observe_sample(states: tuple, t, y, params: ChainParams, options) -> tuple:
+    """The observers' states after one located sample, the state `y` at time `t`:
+    a chunk of one sample through `observe_chunk`, the route of the smoothed
+    engine."""
+    chunk = Chunk(t0=t, t1=t, ts=jnp.reshape(t, (1,)), ys=y[None], log_growth=None)
+    return observe_chunk(_OBSERVERS, states, chunk, _observers_args(params), options)
+
+
+def _segment(params, options, observe, t_stop, c: _Carry) -> _Carry:
+    """Integrate from c.t with fixed modes until the first event or t_stop, hand
+    the state there to the observers (while `observe`), then apply the switching
+    rule."""
     sigma = turning_directions(params, c.y, c.modes, options.switch_tol)
     args = (params, c.modes, sigma, observe, options.switch_tol)
     sol = diffrax.diffeqsolve(
@@ -124,33 +145,22 @@ def _segment(params, options, observe, half, t_stop, c: _Carry) -> _Carry:
     code = jnp.where(ok, finite, code)
 
     stick_time = c.stick_time + jnp.where(observe & (c.modes == 0), tau, 0.0)
-    y_new, modes, kind, turned, resolved = switch(params, y, c.modes, sigma, observe,
-                                                  options.switch_tol)
-    # Slip speed: 0 in stick; at the segment's end for an oscillator that slips on
-    # (one that switches here is at v_rel ~ 0 only for an instant).
-    speed = jnp.where(c.modes == 0, 0.0,
-                      jnp.where(event & (kind >= 0), jnp.inf, jnp.abs(y[1] - params.v_d)))
-    slip_speed = jnp.where(observe, jnp.minimum(c.slip_speed, speed), c.slip_speed)
+    t_new = jnp.where(event, c.t + tau, t_stop)
+    observed = observe_sample(c.observed, t_new, y, params, options) if observe \
+        else c.observed
+    y_new, modes, kind, _, resolved = switch(params, y, c.modes, sigma, observe,
+                                             options.switch_tol)
     # An event that no guard accounts for would repeat forever: stop the run.
     code = jnp.where((code == Status.ok) & event & ~resolved, Status.event_not_resolved,
                      code)
     modes = jnp.where(event, modes, c.modes)
     y = jnp.where(event, y_new, y)
-    turned = event & turned & observe
-    h = jnp.maximum(half, 0)
-    x = y[0]
-    x_max = c.x_max.at[h].set(jnp.where(turned & (sigma > 0), jnp.maximum(c.x_max[h], x),
-                                        c.x_max[h]))
-    x_min = c.x_min.at[h].set(jnp.where(turned & (sigma < 0), jnp.minimum(c.x_min[h], x),
-                                        c.x_min[h]))
     # Event log: a ring buffer; the switching oscillators are appended in index order.
-    t_new = jnp.where(event, c.t + tau, t_stop)
     logged = event & (kind >= 0)
     size = options.log_size
     slot = jnp.where(logged, (c.log_count + jnp.cumsum(logged) - 1) % size, size)
     return _Carry(
-        t=t_new, y=y, work=work, modes=modes, x_max=x_max, x_min=x_min,
-        stick_time=stick_time, slip_speed=slip_speed,
+        t=t_new, y=y, work=work, modes=modes, observed=observed, stick_time=stick_time,
         log_time=c.log_time.at[slot].set(t_new, mode="drop"),
         log_osc=c.log_osc.at[slot].set(jnp.arange(params.n_osc), mode="drop"),
         log_kind=c.log_kind.at[slot].set(kind, mode="drop"),
@@ -160,28 +170,18 @@ def _segment(params, options, observe, half, t_stop, c: _Carry) -> _Carry:
     )
 
 
-def _observe_point(c: _Carry, half: int) -> _Carry:
-    """Include the current x in the extrema of `half` (window edges count)."""
-    if half < 0:
-        return c
-    x = c.y[0]
-    return eqx.tree_at(lambda d: (d.x_max, d.x_min), c,
-                       (c.x_max.at[half].max(x), c.x_min.at[half].min(x)))
-
-
-def _chunk(params, options, progress, half, c: _Carry, t_stop) -> _Carry:
+def _chunk(params, options, progress, observe, c: _Carry, t_stop) -> _Carry:
     """Advance to t_stop through as many event-separated segments as it takes."""
-    observe = half >= 0
     c = eqx.tree_at(lambda d: d.chunk_events, c, jnp.array(0))
 
     def cond(d):
         return (d.t < t_stop) & (d.status == Status.ok) & (d.chunk_events < options.max_events)
 
-    c = jax.lax.while_loop(cond, lambda d: _segment(params, options, observe, half,
-                                                    t_stop, d), c)
+    c = jax.lax.while_loop(cond, lambda d: _segment(params, options, observe, t_stop, d),
+                           c)
     status = jnp.where((c.status == Status.ok) & (c.t < t_stop),
                        Status.event_not_resolved, c.status)
-    c = _observe_point(eqx.tree_at(lambda d: d.status, c, status), half)
+    c = eqx.tree_at(lambda d: d.status, c, status)
     if progress:
         tick(c.t)
     return c
@@ -197,48 +197,43 @@ def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
     size = options.log_size
     c = _Carry(
         t=jnp.array(0.0), y=y, work=jnp.zeros(2), modes=modes,
-        x_max=jnp.full((2, n), -jnp.inf), x_min=jnp.full((2, n), jnp.inf),
-        stick_time=jnp.zeros(n), slip_speed=jnp.full(n, jnp.inf),
-        log_time=jnp.full(size, jnp.nan),
+        observed=tuple(o.init(y0, params, options) for o in _OBSERVERS),
+        stick_time=jnp.zeros(n), log_time=jnp.full(size, jnp.nan),
         log_osc=jnp.full(size, -1), log_kind=jnp.full(size, -1), log_count=jnp.array(0),
         events=jnp.array(0), chunk_events=jnp.array(0), steps=jnp.array(0),
         status=jnp.where(jnp.all(jnp.isfinite(y0)), Status.ok, Status.non_finite_state),
     )
-    for start, length, count, half in options.phases():
-        c = _observe_point(c, half)
+    for start, length, count, observe in options.phases(halves=True):
+        if observe:  # the window's edge, where no segment ends
+            c = eqx.tree_at(lambda d: d.observed, c,
+                            observe_sample(c.observed, c.t, c.y, params, options))
 
-        def body(d, t_stop, half=half):
-            return _chunk(params, options, progress, half, d, t_stop), None
+        def body(d, t_stop, observe=observe):
+            return _chunk(params, options, progress, observe, d, t_stop), None
 
         c, _ = jax.lax.scan(body, c, start + length * jnp.arange(1, count + 1))
 
     ok = c.status == Status.ok
-    x_max, x_min = (jnp.where(ok, e, jnp.nan) for e in (c.x_max, c.x_min))
-    amplitudes = 0.5 * (x_max.max(0) - x_min.min(0))
-    scale = jnp.maximum(1.0, jnp.max(amplitudes))
+    (extrema,) = (no_partial_answers(o.result(s, _observers_args(params), options), ok)
+                  for o, s in zip(_OBSERVERS, c.observed))
+    x_max, x_min = extrema["x_max_halves"], extrema["x_min_halves"]
+    scale = jnp.maximum(1.0, jnp.max(extrema["amplitudes"]))
     half_difference = jnp.maximum(jnp.max(jnp.abs(x_max[0] - x_max[1])),
                                   jnp.max(jnp.abs(x_min[0] - x_min[1]))) / scale
     window = options.t_end - options.transient
     stick_fraction = jnp.where(ok, c.stick_time / window, jnp.nan)
-    slip_speed = jnp.where(ok, c.slip_speed, jnp.nan)
-    on_halc = sticks(slip_speed, 0.0)  # no smoothing: the stick band is v_rel = 0
     # Oldest first in the ring buffer of the log.
     order = (c.log_count + jnp.arange(size)) % size
     return NonsmoothObservables(
-        amplitudes=amplitudes, energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc,
-        n_halc=jnp.where(ok, jnp.sum(on_halc), -1), min_slip_speed=slip_speed,
-        stick_fraction=stick_fraction,
+        amplitudes=extrema["amplitudes"], energy=extrema["energy"],
+        on_halc=extrema["on_halc"], n_halc=extrema["n_halc"],
+        min_slip_speed=extrema["min_slip_speed"], stick_fraction=stick_fraction,
         x_max=x_max, x_min=x_min, half_difference=half_difference, y_initial=y0,
         y_final=c.y, modes_final=c.modes, friction_work=c.work[0],
         viscous_dissipation=c.work[1], log_time=c.log_time[order],
         log_osc=c.log_osc[order], log_kind=c.log_kind[order], num_events=c.events,
         num_steps=c.steps, status=c.status,
     )
-
-
-def n_ticks_nonsmooth(options: NonsmoothOptions) -> int:
-    """Number of progress ticks (chunks) of one reference run."""
-    return sum(count for _, _, count, _ in options.phases())
 
 
 _run_jit = eqx.filter_jit(run_nonsmooth)
@@ -257,6 +252,10 @@ def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State
     zero, and the oscillator then sticks if |f_n| < mu_st and otherwise reverses
     slip direction. This is the switch model of Leine et al. (1998), Nonlinear
     Dynamics 16, 41-54, without its stick band: stick is exact.
+
+    The state at every event and chunk end of the window is handed to the
+    observers of the smoothed engine (`Extrema`, `observe_chunk`), so both engines
+    compute their amplitudes, extrema and HALC alike.
 
     Every event (a switch, or a turning point of an oscillator while observing) is
     located by bisection (`optimistix.Bisection`, to `options.root_tol`) on
@@ -289,7 +288,7 @@ def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State
     if not isinstance(y0, AbstractInitialCondition):
         y0 = GivenState(y0)
     y = y0(params)
-    with progress_bar(n_ticks_nonsmooth(options), "non-smooth reference", progress):
+    with progress_bar(options.n_chunks(halves=True), "non-smooth reference", progress):
         obs = _run_jit(params, y, options, progress)
     status = Status(int(obs.status))
     if throw and status is not Status.ok:

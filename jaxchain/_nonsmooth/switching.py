@@ -20,8 +20,7 @@ earliest event however many oscillators there are.
 
 import jax.numpy as jnp
 
-from .._physics.chain import coupling_force
-from .._physics.friction import slip_friction_force, static_friction
+from .._physics.forces import coupling_force, slip_friction_force, static_friction
 from .._physics.model import stick_force
 
 #: Kinds of switch recorded in the event log.

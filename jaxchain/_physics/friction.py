@@ -1,9 +1,7 @@
-"""Friction laws mu(v_rel) as objects (eq. (1) of the paper and others), and the
-friction force they give: smoothed by tanh(v_rel/eps) for the smoothed model, or
-with the slip direction for the non-smooth reference (eq. (2))."""
+"""Friction laws mu(v_rel) as objects (eq. (1) of the paper and others). The
+friction force they give on a chain is in `forces`."""
 
 import abc
-from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax
@@ -12,9 +10,6 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .._errors import ValidationError
-
-if TYPE_CHECKING:
-    from .params import ChainParams
 
 
 def as_parameter(value):
@@ -283,68 +278,3 @@ class Coulomb(AbstractFrictionLaw):
 #: The friction laws by the names the command line takes (`--friction NAME:...`).
 FRICTION_LAWS = {"exponential": ExponentialDecay, "stribeck": Stribeck,
                  "polynomial": Polynomial, "coulomb": Coulomb}
-
-
-def friction_coefficient(params: "ChainParams", v_rel: Float[ArrayLike, "*shape"]
-                         ) -> Float[Array, "*shape"]:
-    """The friction coefficient mu(v_rel) of the chain's law (`params.friction`),
-    eq. (1) of the paper by default: mu_d + (mu_st - mu_d) exp(-|v_rel| / v0).
-
-    **Arguments:**
-
-    - `params`: the chain parameters.
-    - `v_rel`: relative velocity x' - v_d, shape () or (n_osc,), dimensionless.
-
-    **Returns:**
-
-    mu, of the broadcast shape of `v_rel` and the law's fields.
-    """
-    return params.friction(v_rel)
-
-
-def smoothed_friction_force(params: "ChainParams", v_rel: Float[ArrayLike, "*shape"]
-                            ) -> Float[Array, "*shape"]:
-    """Smoothed friction force F_n = -(P_n/P) mu(v_rel) tanh(v_rel / eps), in units
-    of the nominal normal load P.
-
-    This is eq. (2) of the paper with sign(v_rel) replaced by tanh(v_rel / eps), and
-    scaled by each oscillator's normal load `params.load` (1 by default). The stick
-    phase becomes a stiff slip at |v_rel| ~ eps, of stiffness about P_n mu(0)/eps.
-
-    **Arguments:**
-
-    - `params`: the chain parameters (its friction law, `load` and `eps`).
-    - `v_rel`: relative velocity x' - v_d, shape () or (n_osc,), dimensionless.
-
-    **Returns:**
-
-    F, of the broadcast shape, dimensionless (F/P in eq. (6)).
-    """
-    return -(params.load * friction_coefficient(params, v_rel)) * jnp.tanh(v_rel / params.eps)
-
-
-def slip_friction_force(params: "ChainParams", v_rel: Float[ArrayLike, "*shape"],
-                        direction: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
-    """Friction force in slip, F = -(P_n/P) mu(|v_rel|) sign(v_rel), eq. (2) of the
-    paper, with sign(v_rel) given as the slip `direction` (+1 or -1) of the
-    non-smooth reference. Taking the sign from the slip mode, not from v_rel, keeps
-    the force smooth within a slip phase, up to and through the zero of v_rel where
-    the phase ends (the event is then located on a smooth function).
-
-    **Arguments:**
-
-    - `params`: the chain parameters (its friction law and `load`).
-    - `v_rel`: relative velocity x' - v_d, dimensionless.
-    - `direction`: slip direction, +1 or -1, broadcastable against `v_rel`.
-
-    **Returns:**
-
-    F, of the broadcast shape, dimensionless (F/P in eq. (6)).
-    """
-    return -(params.load * friction_coefficient(params, v_rel)) * direction
-
-
-def static_friction(params: "ChainParams") -> Float[Array, "*shape"]:
-    """The bound of the set-valued stick condition, |F_n| <= (P_n/P) mu(0), for each
-    oscillator (shape () for a homogeneous chain, else (n_osc,))."""
-    return params.load * params.friction.static()

@@ -7,9 +7,8 @@ import lineax as lx
 from jaxtyping import Array, Float
 
 from .custom_types import State
-from .chain import coupling_energy, coupling_force, is_homogeneous_ring, stiffness_matrix
-from .friction import smoothed_friction_force
-from .params import ChainParams
+from .forces import coupling_energy, coupling_force, smoothed_friction_force, stiffness_matrix
+from .params import ChainParams, is_homogeneous_ring
 from .._errors import ValidationError
 
 

@@ -388,3 +388,20 @@ def stack_chains(chains: list[ChainParams]) -> ChainParams:
         return np.stack([np.broadcast_to(np.asarray(x, dtype=float), shape) for x in xs])
 
     return jax.tree_util.tree_map(stack, *plain)
+
+
+def is_homogeneous_ring(params: ChainParams) -> bool:
+    """Whether the chain is the paper's homogeneous ring: boundary "ring" and every
+    per-oscillator or per-link field a scalar (a lane-batched `ChainParams` counts
+    by its fields' trailing shape). Then the Jacobian at steady sliding is
+    block-circulant (the Fourier route of `mode_eigenvalues`)."""
+    if params.boundary != "ring":
+        return False
+    return all(np.ndim(leaf) == 0 for leaf in per_oscillator_leaves(params))
+
+
+def per_oscillator_leaves(params: ChainParams) -> list:
+    """The fields that may hold one value per oscillator or per link: stiffness,
+    load, xi, eta_c and the friction law's parameters."""
+    return ([params.stiffness, params.load, params.xi, params.eta_c]
+            + jax.tree_util.tree_leaves(params.friction))

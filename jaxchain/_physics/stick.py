@@ -48,7 +48,8 @@ def sticks(slip_speed: Float[ArrayLike, "*shape"], eps: Float[ArrayLike, ""]
 
     A slip reversal (v_rel passing through 0 with |f| > mu_st, not stick) crosses
     the band in about 2 STICK_BAND eps / |f| <= 0.006 time units; the sampled
-    smoothed minimum may catch it, the reference does not count it. No reversal
+    smoothed minimum may catch it; the reference locates it at |v_rel| of about
+    its event tolerance, not 0, and does not count it. No reversal
     occurred in the states measured (N = 20, v_d = 1.2 - 1.75).
 
     **Arguments:**

@@ -19,9 +19,8 @@ from .._bifurcation.two_parameter import BoundaryCurves, boundary_curves
 from .._physics.initial import GivenState
 from .._nonsmooth.existence import stick_slip_existence_limit
 from .._engine.options import SimulationOptions
-from .._physics.chain import is_homogeneous_ring
 from .._physics.friction import ExponentialDecay
-from .._physics.params import ChainParams, single_oscillator, with_parameter
+from .._physics.params import ChainParams, is_homogeneous_ring, single_oscillator, with_parameter
 from .._physics.record import chain_record
 from .._engine.simulate import simulate
 from .._errors import ValidationError

@@ -8,7 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float, PyTree
 
-from ..options import SimulationOptions
+from ..horizon import AbstractHorizon
 from ..._errors import ValidationError
 
 
@@ -47,25 +47,25 @@ class AbstractObserver(eqx.Module):
     needs_tangent: ClassVar[bool] = False
 
     @abc.abstractmethod
-    def init(self, y0: PyTree, args: PyTree, options: SimulationOptions) -> PyTree:
+    def init(self, y0: PyTree, args: PyTree, options: AbstractHorizon) -> PyTree:
         """The observer's state before the first chunk; fixed shapes."""
 
     @abc.abstractmethod
     def update(self, state: PyTree, chunk: Chunk, args: PyTree,
-               options: SimulationOptions) -> PyTree:
+               options: AbstractHorizon) -> PyTree:
         """The state after `chunk`."""
 
     @abc.abstractmethod
-    def result(self, state: PyTree, args: PyTree, options: SimulationOptions
+    def result(self, state: PyTree, args: PyTree, options: AbstractHorizon
                ) -> dict[str, Array]:
         """The observed quantities, by name."""
 
     @abc.abstractmethod
-    def dims(self, options: SimulationOptions) -> dict[str, tuple[str, ...]]:
+    def dims(self, options: AbstractHorizon) -> dict[str, tuple[str, ...]]:
         """The dims of each quantity of `result` (without batch dims), for xarray."""
 
 
-def window_start(t_start: float | None, options: SimulationOptions) -> float:
+def window_start(t_start: float | None, options: AbstractHorizon) -> float:
     """An observer's window start: `t_start`, or the start of the sampled window
     (`options.transient`) when None.
 
@@ -82,6 +82,42 @@ def window_start(t_start: float | None, options: SimulationOptions) -> float:
     return float(t_start)
 
 
+def _slack(t: float) -> float:
+    """How far a sample may miss a window edge t and still count as on it."""
+    return 1e-9 * max(1.0, abs(t))
+
+
 def in_window(chunk: Chunk, start: float) -> Array:
     """Mask of the chunk's samples at or after `start`, shape (samples,)."""
-    return chunk.ts >= start - 1e-9 * jnp.maximum(1.0, jnp.abs(start))
+    return chunk.ts >= start - _slack(start)
+
+
+def in_halves(chunk: Chunk, start: float, end: float) -> Array:
+    """Masks of the chunk's samples in the first and in the second half of the
+    window [start, end], shape (2, samples); a sample at the middle is in both."""
+    mid = 0.5 * (start + end)
+    return jnp.stack([in_window(chunk, start) & (chunk.ts <= mid + _slack(mid)),
+                      chunk.ts >= mid - _slack(mid)])
+
+
+def observe_chunk(observers, states: tuple, chunk: Chunk, args: PyTree,
+                  options: AbstractHorizon) -> tuple:
+    """The observers' states after `chunk`: the one route by which both engines,
+    the smoothed (`integrate`, a chunk of dense samples) and the non-smooth
+    reference (`run_nonsmooth`, one sample per located event), observe a run."""
+    return tuple(o.update(s, chunk, args, options) for o, s in zip(observers, states))
+
+
+def no_partial_answers(results: dict, ok) -> dict:
+    """An observer's results where the run failed: NaN (float), -1 (integer) or
+    False (boolean), never a partial answer."""
+
+    def mask(value):
+        value = jnp.asarray(value)
+        if jnp.issubdtype(value.dtype, jnp.bool_):
+            return value & ok
+        if jnp.issubdtype(value.dtype, jnp.integer):
+            return jnp.where(ok, value, -1)
+        return jnp.where(ok, value, jnp.nan)
+
+    return {k: mask(v) for k, v in results.items()}

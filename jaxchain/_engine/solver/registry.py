@@ -4,7 +4,7 @@ import diffrax
 import numpy as np
 import optimistix as optx
 
-from ..._physics.friction import static_friction
+from ..._physics.forces import static_friction
 from .rosenbrock import Ros34PW2
 
 

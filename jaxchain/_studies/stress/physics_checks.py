@@ -11,7 +11,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._bifurcation.hopf import growth_rates
-from ..._physics.friction import Coulomb, ExponentialDecay, friction_coefficient
+from ..._physics.forces import friction_coefficient
+from ..._physics.friction import Coulomb, ExponentialDecay
 from ..._physics.model import mechanical_energy, split_vector_field, steady_sliding
 from ..._physics.params import single_oscillator
 from ..._nonsmooth.existence import stick_slip_existence_limit

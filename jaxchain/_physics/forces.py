@@ -1,0 +1,152 @@
+"""The forces of eq. (5) on a chain (`ChainParams`): the coupling of the springs
+eta_c between neighbours (the one coupling force of the smoothed model, the
+non-smooth reference and the energy) and the friction law evaluated with the
+chain's loads: smoothed by tanh(v_rel/eps) for the smoothed model, or with the
+slip direction for the non-smooth reference (eq. (2))."""
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+from .params import ChainParams
+
+
+def link_extensions(params: ChainParams, x: Float[Array, " n_osc"]
+                    ) -> Float[Array, " n_links"]:
+    """The extension of each coupling spring, x_right - x_left (the ground's
+    displacement is 0), in the link order of `BOUNDARIES`.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (`boundary`).
+    - `x`: displacements, shape (n_osc,), dimensionless.
+
+    **Returns:**
+
+    Shape (n_links,).
+    """
+    if params.boundary == "ring":
+        return jnp.roll(x, -1) - x
+    if params.boundary == "free":
+        return x[1:] - x[:-1]
+    ground = jnp.zeros((1,), dtype=x.dtype)
+    return jnp.diff(jnp.concatenate([ground, x, ground]))
+
+
+def coupling_force(params: ChainParams, x: Float[Array, " n_osc"]
+                   ) -> Float[Array, " n_osc"]:
+    """The restoring force of the coupling springs on each oscillator, the coupling
+    term of eq. (5) of the paper generalised to any boundary and to one eta_c per
+    link: the sum over oscillator n's links l of eta_l (x_n - x_other(l)).
+
+    On the homogeneous ring (scalar eta_c) this is eq. (5)'s
+    eta_c (2 x_n - x_{n+1} - x_{n-1}), evaluated in that form, so that the paper's
+    runs are reproduced bit for bit.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (`boundary`, `eta_c` of shape () or (n_links,)).
+    - `x`: displacements, shape (n_osc,), dimensionless.
+
+    **Returns:**
+
+    Shape (n_osc,), dimensionless (in units of the normal load P); it enters eq. (5)
+    with a minus sign.
+    """
+    if params.boundary == "ring" and jnp.ndim(params.eta_c) == 0:
+        return params.eta_c * (2 * x - jnp.roll(x, 1) - jnp.roll(x, -1))
+    tension = params.eta_c * link_extensions(params, x)
+    if params.boundary == "ring":  # link n pulls oscillator n forward, n+1 back
+        return jnp.roll(tension, 1) - tension
+    if params.boundary == "free":
+        nothing = jnp.zeros((1,), dtype=tension.dtype)
+        tension = jnp.concatenate([nothing, tension, nothing])
+    return tension[:-1] - tension[1:]
+
+
+def coupling_energy(params: ChainParams, x: Float[Array, " n_osc"]
+                    ) -> Float[Array, " n_links"]:
+    """The elastic energy of each coupling spring, eta_l (extension)^2 / 2, shape
+    (n_links,), dimensionless (in units of P x_0). Its gradient in x is
+    `coupling_force`."""
+    return 0.5 * params.eta_c * link_extensions(params, x) ** 2
+
+
+def stiffness_matrix(params: ChainParams) -> Float[Array, "n_osc n_osc"]:
+    """The stiffness matrix K of the linear chain, x'' = -K x + ...: the ground
+    springs (`stiffness`, 1 + delta_n in eq. (5)) on the diagonal plus the Jacobian
+    of `coupling_force` (by `jax.jacfwd`). Symmetric; its eigenvalues are the
+    squared natural frequencies of the undamped chain.
+
+    **Returns:**
+
+    Shape (n_osc, n_osc), dimensionless.
+    """
+    n = params.n_osc
+    coupling = jax.jacfwd(lambda x: coupling_force(params, x))(jnp.zeros(n))
+    return jnp.diag(jnp.broadcast_to(params.stiffness, (n,))) + coupling
+
+
+def friction_coefficient(params: ChainParams, v_rel: Float[ArrayLike, "*shape"]
+                         ) -> Float[Array, "*shape"]:
+    """The friction coefficient mu(v_rel) of the chain's law (`params.friction`),
+    eq. (1) of the paper by default: mu_d + (mu_st - mu_d) exp(-|v_rel| / v0).
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `v_rel`: relative velocity x' - v_d, shape () or (n_osc,), dimensionless.
+
+    **Returns:**
+
+    mu, of the broadcast shape of `v_rel` and the law's fields.
+    """
+    return params.friction(v_rel)
+
+
+def smoothed_friction_force(params: ChainParams, v_rel: Float[ArrayLike, "*shape"]
+                            ) -> Float[Array, "*shape"]:
+    """Smoothed friction force F_n = -(P_n/P) mu(v_rel) tanh(v_rel / eps), in units
+    of the nominal normal load P.
+
+    This is eq. (2) of the paper with sign(v_rel) replaced by tanh(v_rel / eps), and
+    scaled by each oscillator's normal load `params.load` (1 by default). The stick
+    phase becomes a stiff slip at |v_rel| ~ eps, of stiffness about P_n mu(0)/eps.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (its friction law, `load` and `eps`).
+    - `v_rel`: relative velocity x' - v_d, shape () or (n_osc,), dimensionless.
+
+    **Returns:**
+
+    F, of the broadcast shape, dimensionless (F/P in eq. (6)).
+    """
+    return -(params.load * friction_coefficient(params, v_rel)) * jnp.tanh(v_rel / params.eps)
+
+
+def slip_friction_force(params: ChainParams, v_rel: Float[ArrayLike, "*shape"],
+                        direction: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
+    """Friction force in slip, F = -(P_n/P) mu(|v_rel|) sign(v_rel), eq. (2) of the
+    paper, with sign(v_rel) given as the slip `direction` (+1 or -1) of the
+    non-smooth reference. Taking the sign from the slip mode, not from v_rel, keeps
+    the force smooth within a slip phase, up to and through the zero of v_rel where
+    the phase ends (the event is then located on a smooth function).
+
+    **Arguments:**
+
+    - `params`: the chain parameters (its friction law and `load`).
+    - `v_rel`: relative velocity x' - v_d, dimensionless.
+    - `direction`: slip direction, +1 or -1, broadcastable against `v_rel`.
+
+    **Returns:**
+
+    F, of the broadcast shape, dimensionless (F/P in eq. (6)).
+    """
+    return -(params.load * friction_coefficient(params, v_rel)) * direction
+
+
+def static_friction(params: ChainParams) -> Float[Array, "*shape"]:
+    """The bound of the set-valued stick condition, |F_n| <= (P_n/P) mu(0), for each
+    oscillator (shape () for a homogeneous chain, else (n_osc,))."""
+    return params.load * params.friction.static()
