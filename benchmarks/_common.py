@@ -137,6 +137,22 @@ def cores() -> int:
     return os.cpu_count() or 1
 
 
+def _commit() -> str:
+    """The git commit of the measured code, marked "+ changes" when the work tree
+    differs from it; "unknown" outside a git checkout."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root,
+                              capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
+                               cwd=root, capture_output=True, text=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + (" + changes" if dirty else "")
+
+
 def machine_info() -> dict:
     """What the timings depend on: CPU, cores, JAX devices, library versions, the
     XLA flags in effect and the load when the run started (other processes on the
@@ -150,6 +166,7 @@ def machine_info() -> dict:
         "load average at start (1, 5, 15 min)":
             ", ".join(f"{x:.2f}" for x in os.getloadavg()),
         "date": time.strftime("%Y-%m-%d %H:%M %Z"),
+        "commit": _commit(),
     }
     for pkg in ("jaxchain", "jax", "jaxlib", "diffrax", "equinox", "numpy", "scipy",
                 "numba"):

@@ -201,3 +201,9 @@ from ._studies.mistuning.summary import (
     vibrating_fraction as vibrating_fraction,
 )
 from ._setup import XLA_FLAGS as XLA_FLAGS
+from . import _setup
+
+__version__: str = _setup.VERSION
+
+#: Every public name above, for `from jaxchain import *` and the documentation.
+__all__ = sorted(name for name in dir() if not name.startswith("_"))

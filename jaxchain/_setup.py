@@ -3,8 +3,22 @@ importing jaxchain changes nothing global."""
 
 import contextlib
 import os
+from importlib.metadata import PackageNotFoundError, version
 
 import jax
+
+
+def _installed_version() -> str:
+    """jaxchain's version as installed (pyproject.toml), "unknown" when it is run
+    from a source tree that pip has not installed."""
+    try:
+        return version("jaxchain")
+    except PackageNotFoundError:
+        return "unknown"
+
+
+#: The version of jaxchain (`jaxchain.__version__`), written into every result.
+VERSION = _installed_version()
 
 #: XLA's CPU backend runs a while loop op by op, through its runtime, unless the
 #: loop's buffers are smaller than this threshold (in bytes). Raised, a diffrax step

@@ -128,7 +128,7 @@ def damped_decay(eta_c: float, omega2, damping: float) -> np.ndarray:
     a = (1 + 2 eta_c - omega^2 + i omega c) / eta_c (the decaying root of the
     transfer matrix). With c = 2 xi + mu'(v_d) of steady sliding it is the
     envelope of a state localized by friction, whose neighbours slip about steady
-    sliding (README, "Anderson meets friction"). Dimensionless.
+    sliding (documentation, "Anderson meets friction"). Dimensionless.
 
     **Arguments:**
 

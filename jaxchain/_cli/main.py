@@ -10,7 +10,7 @@ import platformdirs
 
 from .._errors import ValidationError
 from .._engine.programs import keep_programs
-from .._setup import configure
+from .._setup import VERSION, configure
 from .common import (Parser, RunsFailed, UsageError, finish_prefetch, one_line,
                      usage_message)
 
@@ -35,6 +35,7 @@ def build_parser(commands=COMMANDS) -> Parser:
                "empty value turns it off) or else in the user's cache folder "
                "(platformdirs.user_cache_dir('jaxchain')/xla). "
                "JAXCHAIN_TRACEBACK=1 shows a failure's traceback.")
+    parser.add_argument("--version", action="version", version=f"jaxchain {VERSION}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     for command in commands:
         module = importlib.import_module("." + command.replace("-", "_"), __package__)

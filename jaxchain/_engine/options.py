@@ -26,7 +26,7 @@ class SimulationOptions(AbstractHorizon):
         and 3e-7, are the loosest at which the cross-check holds (every n_HALC
         agrees with the non-smooth reference; at 1e-4 the states near the fold of
         existence, v_d = 1.75, decay): the integration error is then below the
-        error of the smoothing at the default eps = 1e-3 (README, "Speed").
+        error of the smoothing at the default eps = 1e-3 (documentation, "Performance").
     - `controller`: the step-size controller, "pi" (`PIController`, the default)
         or "diffrax" (diffrax's `PIDController` as an integral controller, the
         controller jaxchain used first); see `CONTROLLERS`.

@@ -62,7 +62,7 @@ class ChainParams(eqx.Module):
     homogeneous ring.
 
     The default `eps = 1e-3` is chosen from the work-precision study against the
-    event-driven non-smooth reference (README, "Choice of eps and solver"): it is
+    event-driven non-smooth reference (documentation, "Choice of eps and solver"): it is
     the largest eps whose amplitudes stay within 1 % of the reference on every
     periodic state of the cross-check grid, n_HALC included (0.23 % on the chain
     scene; at eps = 3e-3 the case v_d = 1.75, eq. (10), k = 20 falls to steady

@@ -5,7 +5,6 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import dataclasses
-from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import diffrax
@@ -19,6 +18,7 @@ from .._physics.params import ChainParams
 from .._physics.record import chain_record
 from .._engine.simulate import Observables
 from .._engine.status import flag_attributes
+from .._setup import VERSION
 from .._physics.stick import STICK_BAND
 
 if TYPE_CHECKING:  # heavy: imported where they are used
@@ -26,13 +26,6 @@ if TYPE_CHECKING:  # heavy: imported where they are used
 
 PAPER = ("Multiple spatially localized dynamical states in friction-excited "
          "oscillator chains")
-
-
-def _package_version() -> str:
-    try:
-        return version("jaxchain")
-    except PackageNotFoundError:
-        return "unknown"
 
 
 #: Descriptions of the observables, as the `long_name` of their variables.
@@ -84,7 +77,7 @@ def run_attributes(params: ChainParams, solver: diffrax.AbstractSolver,
     attrs |= {k: (v if isinstance(v, (str, int)) else float(v))
               for k, v in field_values(options).items()}
     attrs |= {"solver": type(solver).__name__, "ics": ics,
-              "jaxchain_version": _package_version(), "paper": PAPER,
+              "jaxchain_version": VERSION, "paper": PAPER,
               "units": "dimensionless, eqs. (4)-(6) of the paper"}
     return attrs
 

@@ -39,7 +39,7 @@ SOLVERS = {
 #: friction Jacobian, is not: 10.8M steps at the default rtol 3e-5 with
 #: `PIController` (15M at the previous rtol 1e-5 with diffrax's controller), with
 #: the error of the eps floor (0.24 % on the work-precision chain scene), at about
-#: twice the cost per step (README, "Choice of eps and solver").
+#: twice the cost per step (documentation, "Choice of eps and solver").
 DEFAULT_SOLVER = "ros34pw2"
 
 #: The name that picks a solver from the parameters (`auto_solver`).

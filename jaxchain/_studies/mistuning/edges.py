@@ -70,7 +70,7 @@ def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: fl
     bisection on [low, high], every (chain, oscillator) lane at once through
     `run_lanes`. The chain's upper edge of the bistable range is the largest over
     its oscillators (on the homogeneous ring the fold of the single-site state,
-    1.7956 for eq. (7), is the highest fold of the stable localized states: README,
+    1.7956 for eq. (7), is the highest fold of the stable localized states: documentation,
     "The snake").
 
     **Arguments:**

@@ -167,7 +167,7 @@ def intentional_mistuning(params: ChainParams | None = None, *, budget: float = 
                           seed: int = 0, start=None, progress: bool = True) -> MistuningDesign:
     """A stiffness mistuning pattern of period n_osc, |delta_n| <= `budget`, that
     lowers (or raises) the highest fold of the single-site localized states
-    (eq. (8), k = 1): the upper edge of the bistable range of the ring (README,
+    (eq. (8), k = 1): the upper edge of the bistable range of the ring (documentation,
     "The snake"), the belt speed above which no localized vibration survives.
     Tiled along a longer ring (`pattern_deviations`) it mistunes that ring.
 
