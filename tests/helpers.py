@@ -290,7 +290,11 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "pattern folds": ("jaxchain._studies.mistuning.pattern_design", "pattern_folds"),
              "tasks on devices": ("jaxchain._engine.lanes", "on_devices"),
              "smoothed observation": ("jaxchain._engine.observers.base", "observe_chunk"),
-             "non-smooth observation": ("jaxchain._nonsmooth.solve", "observe_sample")}
+             "non-smooth observation": ("jaxchain._nonsmooth.solve", "observe_sample"),
+             "command-line parser": ("jaxchain._cli.main", "build_parser"),
+             "commands": ("jaxchain._cli.main", "COMMANDS"),
+             "belt speeds": ("jaxchain._cli.common", "belt_speeds"),
+             "one belt speed": ("jaxchain._cli.common", "one_belt_speed")}
 
 
 def internal_module(what: str):
@@ -316,3 +320,22 @@ def replace_internal(monkeypatch, what: str, replacement) -> None:
 
     module, name = _COMPUTES[what]
     monkeypatch.setattr(importlib.import_module(module), name, replacement)
+
+
+def assert_cf_compliant(path) -> None:
+    """The IOOS compliance checker's CF test (`compliance-checker --test cf`)
+    reports no error on the netCDF file at `path`: its high-priority count is 0."""
+    import json
+    import tempfile
+
+    from compliance_checker.runner import CheckSuite, ComplianceChecker
+
+    CheckSuite.load_all_available_checkers()
+    with tempfile.TemporaryDirectory() as folder:
+        report = Path(folder) / "cf.json"
+        ComplianceChecker.run_checker(str(path), ["cf"], 0, "normal",
+                                      output_filename=str(report), output_format="json")
+        (result,) = json.loads(report.read_text()).values()
+    errors = [p["name"] + ": " + "; ".join(p["msgs"]) for p in result["high_priorities"]
+              if p["value"][0] < p["value"][1]]
+    assert result["high_count"] == 0 and not errors, errors

@@ -10,7 +10,7 @@ import xarray as xr
 from scipy.stats import binomtest
 
 import jaxchain as jc
-from helpers import assert_usage_error, batch_writes, batches_done
+from helpers import assert_cf_compliant, assert_usage_error, batch_writes, batches_done
 
 
 SHORT = jc.SimulationOptions(t_end=300.0, transient=200.0)
@@ -105,11 +105,13 @@ def test_basin_command_json_and_figures(tmp_path, capsys):
             "--transient", "200", "--out", str(tmp_path), "--json", "--no-progress"]
     assert jc.main(argv) == 0
     out = json.loads(capsys.readouterr().out)
+    assert set(out["outputs"]) == {"basin.zarr", "basin.nc", "basin.png", "basin_halc.png"}
     assert out["classes"] == ["steady sliding", "stick-slip", "failed"]
     assert np.array(out["fractions"]).shape == (2, 3) and out["n_samples"] == 12
     assert out["fractions"][0][1] == 1.0 and out["fractions"][1][1] == 0.0
     assert all((tmp_path / f).stat().st_size > 0 for f in ("basin.nc", "basin.png",
                                                             "basin_halc.png"))
+    assert_cf_compliant(tmp_path / "basin.nc")
 
 
 @pytest.mark.parametrize("argv, says", [

@@ -13,7 +13,7 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from helpers import assert_usage_error
+from helpers import assert_cf_compliant, assert_usage_error
 
 SMALL = ["--n-osc", "3", "--t-end", "400", "--transient", "200"]
 #: The installed console script: beside this interpreter (a venv) or on PATH.
@@ -52,8 +52,8 @@ def test_bad_option_exits_2_with_one_line(argv, says, capsys):
     (["crosscheck", "--vd", "1.5,-1"], "--vd"),                # ChainParams
     (["crosscheck", "--eq8", "0"], "--eq8"),
     (["crosscheck", "--ref-rtol", "0"], "--ref-rtol"),
-    (["work-precision", "--rtols", "2"], "--rtols"),
-    (["work-precision", "--solvers", "euler"], "--solvers"),
+    (["work-precision", "--rtol", "2"], "--rtol"),
+    (["work-precision", "--solver", "euler"], "--solver"),
     (["work-precision", "--max-steps", "-3"], "--max-steps"),
     (["boundaries", "--xi", "nan"], "--xi"),
     (["sweep", "--vd", "1.0:2.0:0"], "--vd"),
@@ -79,10 +79,10 @@ def test_command_draws_with_agg_unless_mplbackend_is_set(monkeypatch):
     try:
         matplotlib.use("svg")
         monkeypatch.setenv("MPLBACKEND", "svg")
-        assert jc.main(["work-precision", "--rtols", "2"]) == 2
+        assert jc.main(["work-precision", "--rtol", "2"]) == 2
         assert matplotlib.get_backend() == "svg"
         monkeypatch.delenv("MPLBACKEND")
-        jc.main(["work-precision", "--rtols", "2"])
+        jc.main(["work-precision", "--rtol", "2"])
         assert matplotlib.get_backend().lower() == "agg"
     finally:
         matplotlib.use(before)
@@ -127,14 +127,17 @@ def test_localized_json_and_files(localized_small):
     reference does from the same start, and the amplitudes agree with the
     reference's to the smoothing error at the default eps (below 1 %, as
     test_crosscheck.py finds on periodic states); E is eq. (9), 1/2 sum A_n^2."""
-    res, out = localized_small
-    for key in ("v_d", "n_excited", "n_halc", "energy", "amplitudes", "status",
-                "wall_time_s"):
+    doc, out = localized_small
+    assert set(doc["outputs"]) == {"localized_vd1.5.nc", "localized_vd1.5.png"}
+    assert "wall_time_s" in doc and len(doc["runs"]) == 1
+    res = doc["runs"][0]
+    for key in ("v_d", "n_excited", "n_halc", "energy", "amplitudes", "status"):
         assert key in res
     assert res["n_excited"] == [1, 2, 3]
     assert len(res["amplitudes"]) == 3 and len(res["amplitudes"][0]) == 3
     assert res["status"] == ["ok"] * 3
     ds = xr.load_dataset(out / "localized_vd1.5.nc")
+    assert_cf_compliant(out / "localized_vd1.5.nc")
     assert ds["energy"].values[0].tolist() == pytest.approx(res["energy"])
     assert ds.attrs["eps"] == jc.ChainParams().eps and ds.attrs["n_osc"] == 3
     assert (out / "localized_vd1.5.png").stat().st_size > 1000
@@ -155,7 +158,7 @@ def test_failed_runs_give_valid_json_with_nulls_and_exit_1(tmp_path, capsys):
             "--max-steps", "5", "--json", "--out", str(tmp_path)]
     assert jc.main(argv) == 1
     captured = capsys.readouterr()
-    res = json.loads(captured.out)  # strict JSON: NaN would not parse here
+    res = json.loads(captured.out)["runs"][0]  # strict JSON: NaN would not parse here
     err = captured.err.strip()
     assert len(err.splitlines()) == 1 and "2 of 2 trajectories failed" in err
     assert res["status"] == [jc.Status.max_steps_reached.name] * 2
@@ -193,7 +196,7 @@ def test_installed_command_table_and_usage_error(localized_small, tmp_path):
                    for r in results), name
     lines = run.stdout.splitlines()
     assert lines[1].split()[:3] == ["n_excited", "n_HALC", "E"]
-    assert len(lines) == 2 + 3 + 1
+    assert len(lines) == 2 + 3  # the table; the note of wall time and files on stderr
     bad = subprocess.run([SCRIPT, "localized", "--eps", "x"], capture_output=True,
                          text=True)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1

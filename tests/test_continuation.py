@@ -185,6 +185,8 @@ def test_boundaries_command_json_and_figures(tmp_path, capsys):
                  str(tmp_path)])
     assert code == 0
     out = json.loads(capsys.readouterr().out)
+    assert set(out["outputs"]) == {"bifurcation_single.png", "bistable_region.png",
+                                   "boundaries.json"}
     assert abs(out["hopf_vd"] - 0.5 * np.log(10)) < 1e-6
     assert abs(out["fold_vd"] - jc.stick_slip_existence_limit()) < 0.01
     assert out["subcritical"] is True and out["eps"] == jc.ChainParams().eps
@@ -199,5 +201,6 @@ def test_boundaries_command_json_and_figures(tmp_path, capsys):
     assert abs(design["window"] - design["target_window"]) < 1e-6
     check = design["simulation_check"]
     assert check["below"]["n_halc"] == 1 and check["above"]["amplitude"] < 1e-3
-    for png in out["figures"]:
-        assert Path(png).stat().st_size > 10_000
+    for name, path in out["outputs"].items():
+        if name.endswith(".png"):
+            assert Path(path).stat().st_size > 10_000

@@ -8,7 +8,7 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from helpers import replace_internal, scipy_stick_slip_cycle
+from helpers import assert_cf_compliant, replace_internal, scipy_stick_slip_cycle
 
 SMALL = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=150.0)
 #: Long enough for the localized state of a 4-ring to settle to a periodic orbit.
@@ -129,12 +129,14 @@ def test_crosscheck_command_json_and_files(tmp_path, capsys):
                  "--t-end", "600", "--transient", "300", "--json", "--out", str(out)])
     assert code == 0
     report = json.loads(capsys.readouterr().out)
+    assert set(report["outputs"]) == {"crosscheck_cases", "crosscheck.nc", "crosscheck.png"}
     (case,) = report["cases"]
     assert case["ic"] == "eq8 k=1" and case["v_d"] == 1.5
     assert case["n_halc_smoothed"] == case["n_halc_reference"] == 1 and case["n_halc_agrees"]
     assert case["class_reference"] == case["class_smoothed"] == "stick-slip (periodic)"
     assert (out / "crosscheck.png").stat().st_size > 0
     ds = xr.load_dataset(out / "crosscheck.nc", engine="h5netcdf")
+    assert_cf_compliant(out / "crosscheck.nc")
     assert ds.attrs["reference_rtol"] == 1e-12 and ds.attrs["eps"] == jc.ChainParams().eps
     expected, _ = scipy_stick_slip_cycle(jc.ChainParams(n_osc=1, v_d=1.5))
     reference = float(ds["amplitudes_reference"].values[0, 0])

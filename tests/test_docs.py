@@ -59,3 +59,25 @@ def test_executed_notebook_holds_the_code_of_its_notebook(name):
     outputs = nbformat.read(executed, as_version=4)
     assert any("image/png" in o.get("data", {}) for c in outputs.cells
                if c.cell_type == "code" for o in c.get("outputs", [])), "no figure shown"
+
+
+def test_citation_file_is_valid():
+    """`cffconvert --validate` on CITATION.cff (the schema of CFF 1.2.0)."""
+    import shutil
+    import subprocess
+    import sys
+
+    cffconvert = shutil.which("cffconvert", path=str(Path(sys.executable).parent))
+    assert cffconvert is not None, "pip install -e '.[test]' installs cffconvert"
+    run = subprocess.run([cffconvert, "--validate", "-i", str(ROOT / "CITATION.cff")],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stdout + run.stderr
+
+
+def test_version_is_the_installed_one_and_the_command_prints_it(capsys):
+    from importlib.metadata import version
+
+    assert jc.__version__ == version("jaxchain")
+    with pytest.raises(SystemExit) as exc:
+        jc.main(["--version"])
+    assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"jaxchain {jc.__version__}"

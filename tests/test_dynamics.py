@@ -77,7 +77,8 @@ def run_figure(name, tmp_path, capsys):
     assert exc.value.code == 0, capsys.readouterr().err
     report = json.loads(capsys.readouterr().out)
     assert (tmp_path / f"figure{name}.png").stat().st_size > 10_000
-    return report, xr.open_dataset(report["dataset"])
+    assert set(report["outputs"]) == {f"figure{name}.nc", f"figure{name}.png"}
+    return report, xr.open_dataset(report["outputs"][f"figure{name}.nc"])
 
 
 @pytest.mark.numerics
@@ -120,7 +121,7 @@ def test_figure_command_quick_runs_every_scene_and_keeps_only_what_it_shows(tmp_
     assert np.allclose(data["8"]["amplitudes"].values[periodic],
                        fig4["amplitudes"].values[periodic], rtol=1e-3, atol=1e-3)
     for name in ("6", "8", "9", "10"):
-        solutions, ds = reports[name]["solutions"], data[name]
+        solutions, ds = reports[name]["runs"][0]["solutions"], data[name]
         assert [s["n_excited"] for s in solutions] == ds["solution"].values.tolist()
         for s, row in zip(solutions, (ds.isel(solution=i) for i in range(len(solutions)))):
             assert s["n_halc"] == int(row["n_halc"]) and s["class"] == str(row["class"].values)

@@ -101,7 +101,10 @@ def test_dataset_round_trip_keeps_parameters(tmp_path):
     assert back.attrs["t_end"] == TIGHT.t_end
     assert back.attrs["solver"] == type(jc.SOLVERS[jc.DEFAULT_SOLVER]()).__name__
     assert back["n_excited"].values.tolist() == [1, 2, 3]
-    assert back.identical(ds)
+    xr.testing.assert_equal(back, ds)
+    assert set(ds.attrs) <= set(back.attrs)  # every parameter, and the CF attributes
+    assert back.attrs["Conventions"].startswith("CF-") and "jaxchain" in back.attrs["source"]
+    assert back["energy"].attrs["units"] == "1" and "flag_values" in back["status"].attrs
     # eq. (8) at v_d = 1.5, stored: unexcited oscillators start at steady sliding
     ss = jc.steady_sliding(jc.ChainParams(n_osc=3, eps=2e-2))
     assert np.allclose(back["y_initial"].sel(component="x")[0, 0], np.asarray(ss[0]) + [0, 2, 0])

@@ -119,8 +119,8 @@ REFUSED = [
     (["localized", "--transient", "20000"], "--transient"),      # SimulationOptions
     (["sweep", "--mistuning", "40"], "stiffness"),               # mistune's draw
     (["figure", "4", "--mistuning", "40"], "stiffness"),
-    (["crosscheck", "--vd", "1.5,-1"], "--vd"),                  # ChainParams
-    (["work-precision", "--solvers", ""], "solvers"),            # work_precision
+    (["crosscheck", "--transient", "2e4"], "--transient"),       # SimulationOptions
+    (["work-precision", "--solver", ""], "solver"),            # work_precision
     (["boundaries", "--mistuning", "40"], "stiffness"),
     (["basin", "--samples", "10", "--check", "20"], "--check"),  # basin_stability
     (["snake", "--mistuning", "40"], "stiffness"),
@@ -279,7 +279,7 @@ def test_work_precision_failed_runs_exit_1(tmp_path, monkeypatch, capsys):
             row | {"rtol": "1e-08", "status": "max_steps_reached", "wall_s": "0.3"},
             row | {"rtol": "1e-10", "status": "not_run: max_steps at rtol 1e-08"}]
     monkeypatch.setattr(cli_work_precision, "work_precision", lambda *a, **k: rows)
-    code = jc.main(["work-precision", "--scenes", "single", "--solvers", "tsit5", "--rtols",
+    code = jc.main(["work-precision", "--scenes", "single", "--solver", "tsit5", "--rtol",
                  "1e-6,1e-8,1e-10", "--eps", "1e-2", "--no-scipy", "--json",
                  "--no-progress", "--out", str(tmp_path)])
     assert code == 1

@@ -120,6 +120,7 @@ def test_snake_command_json_and_bad_options(tmp_path, capsys):
                     "--no-simulation", "--out", str(tmp_path), "--json", "--no-progress"])
     assert code == 0
     out = json.loads(capsys.readouterr().out)
+    assert set(out["outputs"]) == {"snake", "snake.png", "snake.json"}
     (branch,) = out["branches"]
     assert set(branch) >= {"sites", "stable_ranges", "bifurcations", "connects_to"}
     assert branch["sites"] == 1 and (tmp_path / "snake.png").exists()

@@ -22,10 +22,11 @@ def test_quick_matrix_verifies_every_case_on_the_default_solver(tmp_path, capsys
     xi = 0, x ± 1e3), is verified by its physics checks. A case that fails, even
     with a specific status, is a regression of the default solver. A second run
     with the same --out reads every row back and runs no case."""
-    argv = ["stress", "--quick", "--solvers", "ros34pw2", "--out", str(tmp_path), "--json",
+    argv = ["stress", "--quick", "--solver", "ros34pw2", "--out", str(tmp_path), "--json",
             "--no-progress"]
     assert jc.main(argv) == 0
     out = json.loads(capsys.readouterr().out)
+    assert set(out["outputs"]) == {"stress.csv", "stress.md"}
     cases = out["cases"]
     assert [(c["what"], c["value"]) for c in cases] == [(c.what, c.value) for c in QUICK]
     assert set(cases[0]) == {"what", "value", "solver", "outcome", "status", "check", "hint"}
@@ -44,7 +45,7 @@ def test_quick_matrix_verifies_every_case_on_the_default_solver(tmp_path, capsys
     def no_case(*args, **kwargs):
         raise AssertionError("a stored row should have been read back")
     replace_internal(monkeypatch, "stress case", no_case)
-    assert jc.main(argv) == 0
+    assert jc.main([*argv, "--resume"]) == 0
     again = json.loads(capsys.readouterr().out)
     assert again["cases"] == cases and again["defects"] == 0
 
@@ -125,8 +126,8 @@ def test_auto_solver_is_explicit_only_where_the_stick_phase_is_not_stiff():
 
 @pytest.mark.parametrize("argv, says", [
     (["--what", "bogus"], "--what"),
-    (["--solvers", "euler"], "--solvers"),
-    (["--solvers", ""], "--solvers"),
+    (["--solver", "euler"], "--solver"),
+    (["--solver", ""], "--solver"),
     (["--what", ""], "--what"),
     (["--out", __file__], "--out"),
 ])

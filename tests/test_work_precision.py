@@ -129,11 +129,12 @@ def test_work_precision_command(tmp_path, capsys, monkeypatch):
     the study while running the same code), its CSV and its figure."""
     monkeypatch.setattr(wp, "REFERENCE_RTOLS", wp.REFERENCE_RTOLS[:1])
     out = tmp_path / "out"
-    code = jc.main(["work-precision", "--scenes", "single", "--solvers", "tsit5",
-                 "--rtols", "1e-6", "--eps", "1e-2", "--no-scipy", "--json",
+    code = jc.main(["work-precision", "--scenes", "single", "--solver", "tsit5",
+                 "--rtol", "1e-6", "--eps", "1e-2", "--no-scipy", "--json",
                  "--no-progress", "--out", str(out)])
     assert code == 0
     report = json.loads(capsys.readouterr().out)
+    assert set(report["outputs"]) == {"work_precision.csv", "work_precision_single.png"}
     assert report["runs"] == 1 + len(wp.REFERENCE_RTOLS)
     assert (out / "work_precision_single.png").stat().st_size > 0
     header = (out / "work_precision.csv").read_text().splitlines()[0]

@@ -1,9 +1,7 @@
 """`jaxchain basin`: basin stability of the chain's states over belt speeds."""
 
 import argparse
-import json
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -13,17 +11,16 @@ from .common import simulation_options
 from .._engine.status import Status
 from .._plots.basin import plot_basin_stability, plot_halc_histogram
 from .._physics.record import chain_record
-from .._sweeps.atomic import save_figure
-from .._sweeps.datasets import save_dataset
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, UsageError, add_scheduler_option, cluster_client,
-                     json_ready, positive_float, positive_int, show_progress, writable_folder)
-from .sweep import belt_speeds
+from .common import (Outputs, RunsFailed, UsageError, add_output_options,
+                     add_scheduler_option, add_solver_options, add_vd_option, cluster_client,
+                     note, positive_float, positive_int, print_json, show_progress)
 
 HELP = "basin stability: how likely each state is from random initial states"
 DESCRIPTION = """\
 Draw --samples initial states uniformly from the box x_n(0) in --x-range, x_n'(0) in
---v-range (independently for each oscillator, with the JAX PRNG key of --seed), run
+--v-range (independently for each oscillator, with the JAX PRNG key of
+--sample-seed), run
 each at every belt speed of --vd to --t-end, and classify the state after
 --transient by n_HALC (for one oscillator: steady sliding or stick-slip) and by the
 number of separate groups of HALC oscillators. Prints, per belt speed, the fraction
@@ -57,8 +54,7 @@ def add_parser(sub):
     p = sub.add_parser("basin", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     box = Box()
-    p.add_argument("--vd", type=belt_speeds, default=None, metavar="LIST|START:STOP:NUM",
-                   help="belt speeds (default 1.5; --quick 0.8:2.2:8)")
+    add_vd_option(p, None, "belt speeds (the command's choice: 1.5; --quick 0.8:2.2:8)")
     p.add_argument("--n-osc", type=positive_int, default=None, metavar="N",
                    help="oscillators on the ring (default 20; --quick 1)")
     p.add_argument("--samples", type=positive_int, default=None, metavar="S",
@@ -68,28 +64,25 @@ def add_parser(sub):
                         "--x-range=-3,3 when LO is negative)")
     p.add_argument("--v-range", type=pair, default=box.v, metavar="LO,HI",
                    help=f"box of x_n'(0) (default {box.v[0]:g},{box.v[1]:g})")
-    p.add_argument("--t-end", type=positive_float, default=None, metavar="T",
-                   help=f"final time (default {BASIN_OPTIONS.t_end:g}; --quick 500)")
-    p.add_argument("--transient", type=float, default=None, metavar="T",
-                   help=f"classify after this time (default {BASIN_OPTIONS.transient:g}; "
-                        "--quick 400)")
     p.add_argument("--check", type=int, default=None, metavar="C",
                    help="samples of the convergence check, run again to 2 t_end "
                         "(default min(S, 50); 0 for none)")
-    p.add_argument("--seed", type=int, default=0, metavar="K",
-                   help="seed of the JAX PRNG key of the samples and of the mistuning "
-                        "draw (default 0)")
+    p.add_argument("--sample-seed", type=int, default=0, metavar="K",
+                   help="seed of the JAX PRNG key of the initial states (default 0)")
     p.add_argument("--eps", type=positive_float, default=1e-3,
                    help="tanh smoothing velocity (default 0.001)")
-    add_chain_options(p.add_argument_group("chain"), seed=False)
-    p.add_argument("--out", type=Path, default=Path("jaxchain-out"),
-                   metavar="DIR", help="output folder (default ./jaxchain-out/)")
-    p.add_argument("--resume", action="store_true",
-                   help="continue the runs stored in <out>/basin.zarr")
+    add_chain_options(p.add_argument_group("chain"))
+    g = p.add_argument_group("integration")
+    g.add_argument("--t-end", type=positive_float, default=None, metavar="T",
+                   help=f"final time (default {BASIN_OPTIONS.t_end:g}; --quick 500)")
+    g.add_argument("--transient", type=float, default=None, metavar="T",
+                   help=f"classify after this time (default {BASIN_OPTIONS.transient:g}; "
+                        "--quick 400)")
+    add_solver_options(g)
     add_scheduler_option(p)
     p.add_argument("--quick", action="store_true", help="the small single-oscillator run")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    add_output_options(p, resume="the runs stored in DIR/basin.zarr (a killed run with "
+                                 "the same settings)")
     p.set_defaults(run=run)
     return p
 
@@ -108,26 +101,25 @@ def run(args) -> None:
     options = simulation_options(args, t_end=t_end, transient=transient)
     params = chain_params(args, n_osc, eps=args.eps)
     n_osc = params.n_osc
-    writable_folder(args.out)
+    outputs = Outputs(args, data=["basin.zarr", "basin.nc"], figures=["basin", "basin_halc"])
+    if args.resume and args.overwrite:
+        raise UsageError("--resume and --overwrite exclude each other")
     start = time.perf_counter()
-    store = args.out / "basin.zarr"
-    if store.exists() and not args.resume:
-        raise UsageError(f"--out {args.out}: basin.zarr exists; use --resume to continue "
-                         "it, or another --out")
     with cluster_client(args) as client:
-        ds = basin_stability(params, v_d, samples, box, args.seed, options=options,
-                             n_check=args.check, store=store, resume=args.resume,
-                             client=client,
+        ds = basin_stability(params, v_d, samples, box, args.sample_seed,
+                             solver=args.solver, options=options, n_check=args.check,
+                             store=outputs.path("basin.zarr"), resume=args.resume,
+                             overwrite=args.overwrite, client=client,
                              progress=show_progress(args))
     wall = time.perf_counter() - start
-    save_dataset(ds, args.out / "basin.nc")
-    save_figure(plot_basin_stability(ds), args.out / "basin.png")
-    save_figure(plot_halc_histogram(ds, 1.5), args.out / "basin_halc.png")
+    outputs.dataset(ds, "basin.nc")
+    outputs.figure(plot_basin_stability(ds), "basin")
+    outputs.figure(plot_halc_histogram(ds, 1.5), "basin_halc")
     classes = ds["class"].values.tolist()
     shown = [c for c in range(len(classes)) if ds["counts"].values[:, c].any()]
     if args.json:
-        print(json.dumps(json_ready({
-            "v_d": ds["v_d"].values.tolist(), "classes": classes,
+        print_json({
+            "v_d": ds["v_d"].values.tolist(), "classes": classes, "solver": args.solver,
             "chain": chain_record(params),
             "counts": ds["counts"].values.tolist(),
             "fractions": ds["fraction"].values.tolist(),
@@ -139,17 +131,18 @@ def run(args) -> None:
             "periodic_ci_high": ds["periodic_ci_high"].values.tolist(),
             "n_check": int(ds.attrs["n_check"]), "scheduler": args.scheduler,
             "n_osc": n_osc, "box": {"x": list(box.x), "v": list(box.v)},
-            "seed": args.seed, "t_end": t_end, "transient": transient}), allow_nan=False))
+            "sample_seed": args.sample_seed, "t_end": t_end, "transient": transient},
+            outputs)
     else:
         print(f"N = {n_osc}, {samples} samples, x in {list(box.x)}, x' in {list(box.v)}, "
-              f"seed {args.seed}, t_end = {t_end:g}, classified after {transient:g}")
+              f"sample seed {args.sample_seed}, t_end = {t_end:g}, classified after {transient:g}")
         for i, v in enumerate(ds["v_d"].values):
             parts = [f"{classes[c]} {ds['fraction'].values[i, c]:.3f} "
                      f"[{ds['ci_low'].values[i, c]:.3f}, {ds['ci_high'].values[i, c]:.3f}]"
                      for c in shown if ds["counts"].values[i, c]]
             print(f"v_d = {v:g}: " + "; ".join(parts)
                   + f" (class changed at 2 t_end: {ds['changed_fraction'].values[i]:.0%})")
-        print(f"{wall:.1f} s; wrote {args.out / 'basin.nc'}, basin.png, basin_halc.png")
+        note(f"{wall:.1f} s; {outputs.summary()}")
     failed = int((ds["status"].values != Status.ok).sum())
     if failed:
         raise RunsFailed(f"{failed} of {ds['status'].size} runs failed; they are counted "

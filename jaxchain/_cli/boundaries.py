@@ -6,13 +6,12 @@ import json
 import time
 
 from .._studies.bistable_range import (BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES,
-                                       bistable_range, fig3a_simulations)
+                                       FIG3A_OPTIONS, bistable_range, fig3a_simulations)
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
-from .._sweeps.atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
-                     comma_list, json_ready, param_default, positive_float,
-                     show_progress, writable_folder)
+from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
+                     add_solver_options, comma_list, json_ready, note, param_default,
+                     positive_float, print_json, show_progress, simulation_options)
 
 HELP = "Hopf and fold belt speeds of the bistable range (gradients, continuation)"
 DESCRIPTION = """\
@@ -35,8 +34,8 @@ stick-slip are both stable (the paper brackets it by simulation, 1.1 < v_d < 1.8
     stick-slipping in-phase and anti-phase states.
 
 Writes <out>/bifurcation_single.png (Fig. 3(a) with simulation dots),
-<out>/bistable_region.png and <out>/boundaries.json. About 4 minutes on 2 CPU cores
-with the defaults."""
+<out>/bistable_region.png and <out>/boundaries.json. The solver options set the
+simulation dots; shooting keeps its own tight tolerances."""
 
 
 def add_parser(sub):
@@ -59,6 +58,7 @@ def add_parser(sub):
     g.add_argument("--no-ring", action="store_true", help="skip the ring")
     g.add_argument("--no-simulation", action="store_true",
                    help="skip the simulation dots of Fig. 3(a)")
+    add_solver_options(p.add_argument_group("solver of the simulation dots"))
     add_output_options(p)
     p.set_defaults(run=run)
     return p
@@ -72,42 +72,43 @@ def run(args) -> None:
             raise UsageError(f"--{name.replace('_', '-')}: give positive numbers, got {values}")
     if min(args.ratio_values) <= 1:
         raise UsageError("--ratio-values: mu_st/mu_d must be > 1 for a Hopf point")
-    writable_folder(args.out)
+    outputs = Outputs(args, data=["boundaries.json"],
+                      figures=["bifurcation_single", "bistable_region"])
     progress = show_progress(args)
     start = time.perf_counter()
     found = bistable_range(params, target=args.target, xi_values=args.xi_values,
                        ratio_values=args.ratio_values, ring=not args.no_ring,
                        progress=progress)
     s = found.summary
-    sims = None if args.no_simulation else fig3a_simulations(params, progress=progress)
+    sims = None if args.no_simulation else fig3a_simulations(
+        params, solver=args.solver,
+        options=simulation_options(args, t_end=FIG3A_OPTIONS.t_end,
+                                   transient=FIG3A_OPTIONS.transient), progress=progress)
     fig = plot_limit_cycle_branch(found.branch, s["hopf_vd"], s["fold_vd"],
                                   float(found.fold.record.energy), sims,
                                   title=f"single oscillator (Fig. 3(a)), eps = {args.eps:g}")
-    single_png = args.out / "bifurcation_single.png"
-    save_figure(fig, single_png)
-    region_png = args.out / "bistable_region.png"
+    outputs.figure(fig, "bifurcation_single")
     curves = [c for c in ("xi_curve", "ratio_curve") if c in s]
     limits = [s[c]["existence_limit_nonsmooth"] for c in curves]
     mu_d = float(params.friction.mu_d) if found.curves_ratio is not None else None
-    save_figure(plot_bistable_region(found.curves_xi, found.curves_ratio, mu_d,
-                                     found.design, limits), region_png)
-    s |= {"wall_time_s": time.perf_counter() - start,
-          "figures": [str(single_png), str(region_png)]}
+    outputs.figure(plot_bistable_region(found.curves_xi, found.curves_ratio, mu_d,
+                                        found.design, limits), "bistable_region")
+    s |= {"wall_time_s": time.perf_counter() - start, "solver": args.solver}
     if sims is not None:
         s["simulation_energy"] = {"v_d": sims[0].tolist(), "energy": sims[1].tolist()}
-    text = json.dumps(json_ready(s), allow_nan=False)
-    write_text(args.out / "boundaries.json", text)
+    outputs.text(json.dumps(json_ready(s), allow_nan=False), "boundaries.json")
     missing = sum(f is None for c in curves for f in s[c]["fold_vd"])
     if args.json:
-        print(text)
+        print_json(s, outputs)
     else:
-        _print_summary(s, single_png, region_png)
+        _print_summary(s)
+        note(f"{s['wall_time_s']:.0f} s; {outputs.summary()}")
     if missing:
         raise RunsFailed(f"the fold was not found at {missing} points of the two-parameter "
-                         f"curves (null in {args.out / 'boundaries.json'})")
+                         f"curves (null in {outputs.path('boundaries.json')})")
 
 
-def _print_summary(s: dict, single_png, region_png) -> None:
+def _print_summary(s: dict) -> None:
     d = s["design"]
     print(f"single oscillator, eps = {s['eps']:g}:")
     analytic = ("" if s["hopf_vd_analytic"] is None else
@@ -152,4 +153,3 @@ def _print_summary(s: dict, single_png, region_png) -> None:
                 print(f"  {kind}: fold v_d = {fold}; at v_d = {k['at_vd']}: "
                       f"{'stable' if k['stable'] else 'unstable'} (|multipliers| "
                       f"{k['multipliers'][0]:.4f}, {k['multipliers'][1]:.4f})")
-    print(f"figures: {single_png}, {region_png}; {s['wall_time_s']:.0f} s")

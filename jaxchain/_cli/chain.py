@@ -1,5 +1,5 @@
 """The chain options every command takes: --boundary, --friction, --mistuning,
---seed and --chain, and the `ChainParams` they give."""
+--mistuning-seed and --chain, and the `ChainParams` they give."""
 
 import argparse
 from pathlib import Path
@@ -17,7 +17,7 @@ or fixed (an open line tied to the ground at both ends); --friction NAME:key=val
 with NAME one of exponential (eq. (1): mu_st, mu_d, v0; the default), stribeck
 (mu_s, mu_c, v_s, delta, viscous), polynomial (c0, c1, c2, c3) or coulomb (mu), for
 example --friction stribeck:mu_s=1,mu_c=0.5,v_s=0.5,delta=2,viscous=0.05 (missing
-keys take the law's defaults); --mistuning SIGMA --seed S draws the stiffnesses
+keys take the law's defaults); --mistuning SIGMA --mistuning-seed S draws the stiffnesses
 1 + delta_n, delta_n normal with standard deviation SIGMA; --chain FILE reads a TOML
 file of chain settings, which override the options above: n_osc, boundary, xi,
 eta_c (one value per link), stiffness, load (one value per oscillator), friction =
@@ -25,10 +25,9 @@ eta_c (one value per link), stiffness, load (one value per oscillator), friction
 mistuning_sigma and mistuning_seed."""
 
 
-def add_chain_options(g, seed: bool = True, mistuning: bool = True) -> None:
-    """--boundary, --friction, --mistuning, --seed and --chain, in the argument group
-    (or parser) `g`; without --seed where the command has its own (basin: one seed
-    for the samples and the mistuning draw), without --mistuning and --seed where
+def add_chain_options(g, mistuning: bool = True) -> None:
+    """--boundary, --friction, --mistuning, --mistuning-seed and --chain, in the
+    argument group (or parser) `g`; without --mistuning and --mistuning-seed where
     the command draws the mistuning itself (mistuning)."""
     g.add_argument("--boundary", choices=BOUNDARIES, default="ring",
                    help="ring (eq. (5), default), free or fixed ends")
@@ -39,9 +38,8 @@ def add_chain_options(g, seed: bool = True, mistuning: bool = True) -> None:
         g.add_argument("--mistuning", type=_non_negative, default=None, metavar="SIGMA",
                        help="standard deviation of random stiffness mistuning delta_n "
                             "(default none)")
-    if seed and mistuning:
-        g.add_argument("--seed", type=int, default=0, metavar="S",
-                       help="seed of the mistuning draw (default 0)")
+        g.add_argument("--mistuning-seed", type=int, default=0, metavar="S",
+                       help="seed of the JAX PRNG key of the mistuning draw (default 0)")
     g.add_argument("--chain", type=Path, default=None, metavar="FILE",
                    help="TOML file of chain settings (per-oscillator arrays included); "
                         "see the chain paragraph of --help")
@@ -109,5 +107,5 @@ def chain_params(args, n_osc: int, **fields) -> ChainParams:
         except (ValueError, TypeError) as err:
             raise UsageError(f"--chain {args.chain}: {err}") from None
     if getattr(args, "mistuning", None) is not None:
-        params = mistune(params, args.mistuning, args.seed)
+        params = mistune(params, args.mistuning, args.mistuning_seed)
     return params

@@ -5,11 +5,13 @@ table."""
 import argparse
 import contextlib
 import importlib
+import json
 import logging
 import math
 import sys
 import tempfile
 import threading
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -91,11 +93,55 @@ def comma_list(kind):
     return parse
 
 
+def belt_speeds(text: str) -> list[float]:
+    """An argparse type, the one grammar of --vd: a belt speed V, a comma-separated
+    list V1,V2,..., or START:STOP:NUM (NUM equally spaced values from START to
+    STOP, both included); each finite and > 0, dimensionless."""
+    try:
+        if ":" in text:
+            start, stop, num = text.split(":")
+            num = int(num)
+            if num < 1:
+                raise argparse.ArgumentTypeError(f"NUM must be >= 1, got {text!r}")
+            values = np.linspace(float(start), float(stop), num).round(12).tolist()
+        else:
+            values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected V, a list V1,V2,... or START:STOP:NUM, got {text!r}") from None
+    if not values:
+        raise argparse.ArgumentTypeError(f"expected at least one belt speed, got {text!r}")
+    if not all(np.isfinite(v) and v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"belt speeds must be finite and > 0, got {text!r}")
+    return values
+
+
+def one_belt_speed(text: str) -> float:
+    """An argparse type: --vd of a command that starts from one belt speed, in the
+    grammar of `belt_speeds`, refused (in one line) when it names several."""
+    values = belt_speeds(text)
+    if len(values) != 1:
+        raise argparse.ArgumentTypeError(f"this command starts from one belt speed, got "
+                                         f"{len(values)} ({text!r})")
+    return values[0]
+
+
+#: The metavar of --vd in every command.
+VD_FORMS = "V|V,V,...|START:STOP:NUM"
+
+
+def add_vd_option(g, default, help: str) -> None:
+    """--vd in the grammar of `belt_speeds`, `default` a list of belt speeds (or None
+    where the command chooses), in the argument group (or parser) `g`."""
+    shown = "the command's choice" if default is None else ",".join(f"{v:g}" for v in default)
+    g.add_argument("--vd", type=belt_speeds, default=default, metavar=VD_FORMS,
+                   help=f"{help} (default {shown})")
+
+
 def add_model_options(p: argparse.ArgumentParser, *, vd: float, n_osc: int) -> None:
     """--vd, --n-osc, --eps: the chain (other parameters are eq. (7) of the paper)."""
     g = p.add_argument_group("model (eq. (5) of the paper; other parameters eq. (7))")
-    g.add_argument("--vd", type=float, default=vd, metavar="V",
-                   help=f"belt speed v_d, dimensionless (default {vd})")
+    add_vd_option(g, [vd], "belt speeds v_d, dimensionless, each run in turn")
     add_ring_options(g, n_osc=n_osc)
 
 
@@ -108,21 +154,28 @@ def add_ring_options(g, *, n_osc: int = 20) -> None:
                    help=f"tanh smoothing velocity of sign(v_rel) (default {eps:g})")
 
 
-def add_run_options(p: argparse.ArgumentParser) -> None:
-    """--t-end, --transient, --solver, --rtol, --atol, --controller, --max-steps."""
+def add_run_options(p: argparse.ArgumentParser, defaults: SimulationOptions = DEFAULTS
+                    ) -> None:
+    """--t-end and --transient (defaults those of `defaults`), then the solver
+    options (`add_solver_options`)."""
     g = p.add_argument_group("integration")
-    g.add_argument("--t-end", type=positive_float, default=DEFAULTS.t_end, metavar="T",
-                   help=f"final time, in units of 1/omega_n (default {DEFAULTS.t_end:g}, as "
-                        "the paper)")
-    g.add_argument("--transient", type=float, default=DEFAULTS.transient, metavar="T",
+    g.add_argument("--t-end", type=positive_float, default=defaults.t_end, metavar="T",
+                   help=f"final time, in units of 1/omega_n (default {defaults.t_end:g})")
+    g.add_argument("--transient", type=float, default=defaults.transient, metavar="T",
                    help=f"observables are taken after this time (default "
-                        f"{DEFAULTS.transient:g})")
+                        f"{defaults.transient:g})")
+    add_solver_options(g)
+
+
+def add_solver_options(g) -> None:
+    """--solver, --rtol, --atol, --controller and --max-steps, with the library's
+    defaults, in the argument group (or parser) `g`: the same in every command
+    that integrates."""
     g.add_argument("--solver", choices=sorted(SOLVERS) + ["auto"], default=DEFAULT_SOLVER,
-                   help=f"diffrax solver (default {DEFAULT_SOLVER}, the fastest at the "
-                        "default eps and rtol: a Rosenbrock-W method whose W is the "
-                        "diagonal friction Jacobian); kencarp* are IMEX, with the "
-                        "friction force implicit; auto takes tsit5 where mu_st/eps <= "
-                        "100 and ros34pw2 elsewhere")
+                   help=f"diffrax solver (default {DEFAULT_SOLVER}, a Rosenbrock-W method "
+                        "whose W is the diagonal friction Jacobian); kencarp* are IMEX, "
+                        "with the friction force implicit; auto takes tsit5 where "
+                        "mu_st/eps <= 100 and ros34pw2 elsewhere")
     add_tolerance_options(g)
     g.add_argument("--max-steps", type=positive_int, default=DEFAULTS.max_steps,
                    help=f"step budget per chunk of {DEFAULTS.chunk_length:g} time units "
@@ -161,15 +214,106 @@ def add_tolerance_options(g) -> None:
                         "diffrax's integral controller, the one jaxchain used first)")
 
 
-def add_output_options(p: argparse.ArgumentParser) -> None:
-    """--out, --json, --no-progress."""
+#: The figure formats of --format.
+FIGURE_FORMATS = ("png", "pdf", "svg")
+
+
+def figure_formats(text: str) -> list[str]:
+    """An argparse type: a comma-separated list of `FIGURE_FORMATS`."""
+    names = [v.strip().lower() for v in text.split(",") if v.strip()]
+    unknown = [v for v in names if v not in FIGURE_FORMATS]
+    if not names or unknown:
+        raise argparse.ArgumentTypeError(f"expected formats of {','.join(FIGURE_FORMATS)}, "
+                                         f"got {text!r}")
+    return list(dict.fromkeys(names))
+
+
+def add_output_options(p: argparse.ArgumentParser, *, resume: str | None = None,
+                       figures: bool = True) -> None:
+    """--out, --overwrite, --resume (where the command resumes: `resume` says what it
+    continues), --format (where it draws), --json and --no-progress."""
     g = p.add_argument_group("output")
     g.add_argument("--out", type=Path, default=Path("jaxchain-out"), metavar="DIR",
-                   help="folder for the netCDF Dataset and the PNG "
-                        "(default ./jaxchain-out/)")
+                   help="folder of the results (default ./jaxchain-out/)")
+    g.add_argument("--overwrite", action="store_true",
+                   help="replace this command's results in DIR (refused by default)")
+    if resume is not None:
+        g.add_argument("--resume", action="store_true", help=f"continue {resume}")
+    if figures:
+        g.add_argument("--format", type=figure_formats, default=["png"], metavar="FMT,...",
+                       help=f"figure formats, of {','.join(FIGURE_FORMATS)} (default png)")
     g.add_argument("--json", action="store_true",
-                   help="print one JSON object on stdout instead of the table")
+                   help="print one JSON document on stdout, with the paths of the "
+                        "files written under 'outputs', instead of the table")
     g.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+
+class Outputs:
+    """The files a command writes under --out: claimed before it computes, written
+    whole or not at all, and listed by name in its JSON (`as_json`).
+
+    A claimed file that exists already is refused (`UsageError`, exit status 2)
+    unless --overwrite, or --resume where the command resumes: no result is lost
+    silently.
+    """
+
+    def __init__(self, args, data: Sequence[str] = (), figures: Sequence[str] = ()):
+        self.folder = Path(args.out)
+        self.formats = getattr(args, "format", ["png"])
+        self.written: dict[str, Path] = {}
+        claimed = list(data) + [f"{stem}.{fmt}" for stem in figures for fmt in self.formats]
+        writable_folder(self.folder)
+        if not (getattr(args, "overwrite", False) or getattr(args, "resume", False)):
+            existing = [name for name in claimed if (self.folder / name).exists()]
+            if existing:
+                again = " (or --resume to continue it)" if hasattr(args, "resume") else ""
+                raise UsageError(f"--out {self.folder}: {existing[0]} exists; give "
+                                 f"--overwrite to replace it{again}")
+
+    def path(self, name: str) -> Path:
+        """Where `name` goes, recorded as written (a store the library writes)."""
+        self.written[name] = self.folder / name
+        return self.written[name]
+
+    def dataset(self, ds, name: str) -> Path:
+        """Write `ds` to netCDF (`save_dataset`)."""
+        from .._sweeps.datasets import save_dataset
+
+        return save_dataset(ds, self.path(name))
+
+    def text(self, text: str, name: str) -> Path:
+        """Write `text` (`write_text`)."""
+        from .._sweeps.atomic import write_text
+
+        return write_text(self.path(name), text)
+
+    def figure(self, fig, stem: str) -> list[Path]:
+        """Write the matplotlib figure `fig` as `stem` in every --format, then
+        close it."""
+        from .._sweeps.atomic import save_figure
+
+        return [save_figure(fig, self.path(f"{stem}.{fmt}"), close=(i == len(self.formats) - 1))
+                for i, fmt in enumerate(self.formats)]
+
+    def as_json(self) -> dict[str, str]:
+        """Each written file's name (relative to --out) and path."""
+        return {name: str(path) for name, path in self.written.items()}
+
+    def summary(self) -> str:
+        """The written files, for the note on standard error."""
+        return "wrote " + ", ".join(str(p) for p in self.written.values())
+
+
+def print_json(payload: dict, outputs: Outputs) -> None:
+    """Print the command's one JSON document on stdout: `payload` with the written
+    files under "outputs" (non-finite numbers as null)."""
+    print(json.dumps(json_ready(payload | {"outputs": outputs.as_json()}), allow_nan=False))
+
+
+def note(text: str) -> None:
+    """A note for the user (wall time, files written, a warning): standard error,
+    so that standard output carries only the table or the JSON."""
+    print(text, file=sys.stderr)
 
 
 def scheduler(text: str) -> str:

@@ -2,7 +2,6 @@
 reference on a grid of belt speeds and initial conditions."""
 
 import argparse
-import json
 import time
 
 from .._studies.crosscheck import CROSSCHECK_ICS, CROSSCHECK_VD, crosscheck
@@ -11,14 +10,11 @@ from .common import simulation_options
 from .._engine.status import Status
 from .._physics.params import with_parameter
 from .._plots.crosscheck import plot_crosscheck
-from .._sweeps.datasets import save_dataset
 from .._physics.record import chain_record
-from .._sweeps.atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
-                     add_run_options, add_scheduler_option, cluster_client, comma_list,
-                     json_ready, positive_float, show_progress,
-                     writable_folder)
+                     add_run_options, add_scheduler_option, add_vd_option, cluster_client,
+                     comma_list, note, Outputs, positive_float, print_json, show_progress)
 
 HELP = "smoothed model against the non-smooth stick/slip reference"
 DESCRIPTION = f"""\
@@ -37,18 +33,17 @@ agree (to 1e-6 for the reference, 1e-3 for the sampled smoothed model).
 Writes <out>/crosscheck.nc and <out>/crosscheck.png; each reference run is stored
 in <out>/crosscheck_cases/ as it finishes, under a hash of everything that
 determines it (parameters, initial state, reference options); a later run reads
-back only runs of equal settings (resume) and recomputes the others. About 5
-minutes on 2 CPU cores with the defaults. --scheduler runs each reference run as a
-task on a Dask cluster (local:N starts N worker processes here), which stores it in
-<out>/crosscheck_cases/; the smoothed runs stay in this process."""
+back only runs of equal settings (--resume) and recomputes the others. --scheduler
+runs each reference run as a task on a Dask cluster (local:N starts N worker
+processes here), which stores it in <out>/crosscheck_cases/; the smoothed runs stay
+in this process."""
 
 
 def add_parser(sub):
     p = sub.add_parser("crosscheck", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("grid (eq. (5) of the paper; other parameters eq. (7))")
-    g.add_argument("--vd", type=comma_list(float), default=list(CROSSCHECK_VD), metavar="V,V,...",
-                   help="belt speeds (default " + ",".join(map(str, CROSSCHECK_VD)) + ")")
+    add_vd_option(g, list(CROSSCHECK_VD), "belt speeds")
     default8 = [k for f, k in CROSSCHECK_ICS if f == "eq8"]
     default10 = [k for f, k in CROSSCHECK_ICS if f == "eq10"]
     g.add_argument("--eq8", type=comma_list(int), default=default8, metavar="K,K,...",
@@ -65,7 +60,7 @@ def add_parser(sub):
                    help="tolerance (rtol = atol) of the reference's smooth phases "
                         f"(default {NonsmoothOptions().rtol:g})")
     add_scheduler_option(g)
-    add_output_options(p)
+    add_output_options(p, resume="from the reference runs stored in DIR/crosscheck_cases")
     p.set_defaults(run=run)
     return p
 
@@ -83,18 +78,17 @@ def run(args) -> None:
     options = simulation_options(args)
     ref_options = NonsmoothOptions(t_end=args.t_end, transient=args.transient,
                                    rtol=args.ref_rtol, atol=args.ref_rtol)
-    writable_folder(args.out)
+    outputs = Outputs(args, data=["crosscheck.nc"], figures=["crosscheck"])
 
     start = time.perf_counter()
     with cluster_client(args) as client:
         ds = crosscheck(params, args.vd, ics, args.solver, options, ref_options,
-                        checkpoint=args.out / "crosscheck_cases", client=client,
+                        checkpoint=outputs.path("crosscheck_cases"), client=client,
                         progress=show_progress(args))
     wall = time.perf_counter() - start
     ds.attrs["wall_time_s"] = wall
-    nc = save_dataset(ds, args.out / "crosscheck.nc")
-    png = args.out / "crosscheck.png"
-    save_figure(plot_crosscheck(ds), png)
+    outputs.dataset(ds, "crosscheck.nc")
+    outputs.figure(plot_crosscheck(ds), "crosscheck")
 
     failed = int(((ds["status_smoothed"] != Status.ok)
                   | (ds["status_reference"] != Status.ok)).sum())
@@ -120,15 +114,14 @@ def run(args) -> None:
         "n_halc_agrees_all": all(r["n_halc_agrees"] for r in rows),
     }
     if args.json:
-        print(json.dumps(json_ready({
+        print_json({
             "cases": rows, **summary, "chain": chain_record(params), "eps": args.eps,
             "solver": args.solver, "scheduler": args.scheduler,
             "rtol": args.rtol, "reference_rtol": args.ref_rtol, "wall_time_s": wall,
             "smoothed_wall_time_s": ds.attrs["wall_time_s_smoothed"],
-            "dataset": str(nc), "figure": str(png),
             "note": "irregular states are compared by statistics (amplitudes, E, "
                     "n_HALC), not as time series",
-        }), allow_nan=False))
+        }, outputs)
     else:
         print(f"smoothed (eps = {args.eps:g}, {args.solver}, rtol {args.rtol:g}) against "
               f"the non-smooth reference, N = {args.n_osc}, window "
@@ -146,7 +139,7 @@ def run(args) -> None:
               f"{'-' if err is None else f'{100 * err:.3f} %'}, n_HALC agrees: "
               f"{summary['n_halc_agrees_periodic']}. Irregular states are compared by "
               f"statistics, not time series.")
-        print(f"wall time {wall:.1f} s; wrote {nc} and {png}")
+        note(f"wall time {wall:.1f} s; {outputs.summary()}")
     if failed:
         raise RunsFailed(f"{failed} of {ds.sizes['case']} cases failed (smoothed or "
                          "reference); their rows are kept in the Dataset")

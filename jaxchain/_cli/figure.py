@@ -2,7 +2,6 @@
 reduced, as a PNG and an xarray Dataset."""
 
 import argparse
-import json
 import time
 
 import numpy as np
@@ -16,14 +15,12 @@ from .._physics.params import ChainParams
 from .._plots.dynamics import (plot_orbit_diagram, plot_phase_portraits,
                                plot_states_and_orbits, plot_time_delays, plot_time_series)
 from .._plots.localized import plot_localized_states
-from .._sweeps.datasets import save_dataset
 from .._engine.status import status_names
 from .._physics.record import chain_record
-from .._sweeps.atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (DEFAULT_SOLVER, SOLVERS, RunsFailed, add_output_options,
-                     add_tolerance_options, json_ready, param_default, positive_float,
-                     show_progress, writable_folder)
+from .common import (Outputs, RunsFailed, add_output_options, add_solver_options,
+                     add_vd_option, note, param_default, positive_float, print_json,
+                     show_progress)
 
 #: Each figure: its belt speed, initial conditions and what it shows.
 #: --quick: a ring of 8 over [0, 600], observed over [400, 600] (Fig. 5: [0, 100]),
@@ -42,10 +39,8 @@ Run one of the paper's scenes and draw its figure. NAME is the figure number:
 """ + "\n".join(f"  {k:>2}  v_d = {v:g}, {ics}: {what}"
                 for k, (v, ics, what) in PAPER_FIGURES.items()) + """
 
-At full size (the paper's: N = 20, t_end = 15000, the window [10000, 15000]) a
-scene takes up to a few minutes on 2 CPU cores (Fig. 8: about 2 minutes, Fig. 9:
-2.5, Fig. 5: 10 s). --quick runs a ring of 8 over [0, 600], observed over
-[400, 600], in seconds.
+At full size (the paper's: N = 20, t_end = 15000, the window [10000, 15000]);
+--quick runs a ring of 8 over [0, 600], observed over [400, 600].
 
 Figs. 6, 8, 9 and 10 classify each state as periodic or irregular from two
 independent signals, the spread of its time delays (the paper's criterion) and
@@ -66,10 +61,10 @@ def add_parser(sub):
     g = p.add_argument_group("model and integration (other parameters eq. (7))")
     g.add_argument("--eps", type=positive_float, default=param_default("eps"),
                    help=f"tanh smoothing velocity (default {param_default('eps'):g})")
-    g.add_argument("--solver", choices=sorted(SOLVERS) + ["auto"], default=DEFAULT_SOLVER,
-                   help=f"diffrax solver (default {DEFAULT_SOLVER})")
+    add_vd_option(g, None, "belt speeds, each drawn in turn (default the figure's own, "
+                           "that of the paper)")
     add_chain_options(g)
-    add_tolerance_options(g)
+    add_solver_options(p.add_argument_group("solver"))
     add_output_options(p)
     p.set_defaults(run=run)
     return p
@@ -98,51 +93,62 @@ def _scene(name: str, size: dict, params: ChainParams, solver, options, progress
     return ds, (plot_orbit_diagram(ds) if name == "8" else plot_states_and_orbits(ds))
 
 
+def _stem(name: str, v_d: float, paper_vd: float) -> str:
+    """The file name of a figure at belt speed v_d: figureN at the paper's speed."""
+    return f"figure{name}" if v_d == paper_vd else f"figure{name}_vd{v_d:g}"
+
+
 def run(args) -> None:
     size = QUICK if args.quick else FULL
-    v_d, ics, _ = PAPER_FIGURES[args.name]
-    params = chain_params(args, size["n_osc"], v_d=v_d, eps=args.eps)
+    paper_vd, ics, _ = PAPER_FIGURES[args.name]
+    speeds = args.vd or [paper_vd]
+    stems = [_stem(args.name, v, paper_vd) for v in speeds]
+    outputs = Outputs(args, data=[f"{stem}.nc" for stem in stems], figures=stems)
     options = simulation_options(args, t_end=size["t_end"], transient=size["transient"],
                                  chunk_length=size["chunk_length"])
-    writable_folder(args.out)
-    solver = args.solver
-
+    reports, status = [], []
     start = time.perf_counter()
-    ds, fig = _scene(args.name, size, params, solver, options, show_progress(args))
-    wall = time.perf_counter() - start
-    ds.attrs |= {"figure": args.name, "quick": int(args.quick), "wall_time_s": wall}
-    nc = save_dataset(ds, args.out / f"figure{args.name}.nc")
-    png = args.out / f"figure{args.name}.png"
-    save_figure(fig, png)
-
-    status = status_names(np.ravel(ds["status"].values)).tolist()
-    report = {"figure": args.name, "v_d": v_d, "ics": ics, "n_osc": params.n_osc,
-              "chain": chain_record(params),
-              "eps": args.eps, "solver": args.solver, "quick": args.quick,
-              "wall_time_s": wall, "dataset": str(nc), "png": str(png)}
-    if args.name in CLASSIFIED:
-        report["solutions"] = [
-            {"n_excited": int(r["solution"]), "n_halc": int(r["n_halc"]),
-             "class": str(r["class"].values), "class_delays": str(r["class_delays"].values),
-             "class_lyapunov": str(r["class_lyapunov"].values),
-             "lyapunov": float(r["lyapunov"]), "lyapunov_error": float(r["lyapunov_error"]),
-             "delay_spread": float(r["delay_spread"]), "status": s}
-            for r, s in zip((ds.isel(solution=i) for i in range(ds.sizes["solution"])),
-                            status)]
-    if args.json:
-        print(json.dumps(json_ready(report), allow_nan=False))
-    else:
-        print(f"Fig. {args.name}{' (quick)' if args.quick else ''}: v_d = {v_d:g}, "
-              f"N = {params.n_osc}, eps = {args.eps:g}, {args.solver}, ics = {ics}")
+    for v_d, stem in zip(speeds, stems):
+        params = chain_params(args, size["n_osc"], v_d=v_d, eps=args.eps)
+        ds, fig = _scene(args.name, size, params, args.solver, options, show_progress(args))
+        ds.attrs |= {"figure": args.name, "quick": int(args.quick)}
+        outputs.dataset(ds, f"{stem}.nc")
+        outputs.figure(fig, stem)
+        states = status_names(np.ravel(ds["status"].values)).tolist()
+        status += states
+        report = {"v_d": v_d}
         if args.name in CLASSIFIED:
-            print(f"{'excited':>7} {'n_HALC':>6} {'class':>10} {'delays':>9} "
-                  f"{'Lyapunov':>9} {'lambda':>10} {'error':>9} {'spread':>9}")
-            for s in report["solutions"]:
-                print(f"{s['n_excited']:7d} {s['n_halc']:6d} {s['class']:>10} "
-                      f"{s['class_delays']:>9} {s['class_lyapunov']:>9} "
-                      f"{s['lyapunov']:10.2e} {s['lyapunov_error']:9.1e} "
-                      f"{s['delay_spread']:9.2e}")
-        print(f"wall time {wall:.1f} s (compilation included); wrote {nc} and {png}")
+            report["solutions"] = [
+                {"n_excited": int(r["solution"]), "n_halc": int(r["n_halc"]),
+                 "class": str(r["class"].values),
+                 "class_delays": str(r["class_delays"].values),
+                 "class_lyapunov": str(r["class_lyapunov"].values),
+                 "lyapunov": float(r["lyapunov"]),
+                 "lyapunov_error": float(r["lyapunov_error"]),
+                 "delay_spread": float(r["delay_spread"]), "status": s}
+                for r, s in zip((ds.isel(solution=i) for i in range(ds.sizes["solution"])),
+                                states)]
+        reports.append(report)
+    wall = time.perf_counter() - start
+    if args.json:
+        print_json({"figure": args.name, "runs": reports, "ics": ics,
+                    "n_osc": params.n_osc, "chain": chain_record(params), "eps": args.eps,
+                    "solver": args.solver, "quick": args.quick, "wall_time_s": wall},
+                   outputs)
+    else:
+        for report in reports:
+            print(f"Fig. {args.name}{' (quick)' if args.quick else ''}: "
+                  f"v_d = {report['v_d']:g}, N = {params.n_osc}, eps = {args.eps:g}, "
+                  f"{args.solver}, ics = {ics}")
+            if args.name in CLASSIFIED:
+                print(f"{'excited':>7} {'n_HALC':>6} {'class':>10} {'delays':>9} "
+                      f"{'Lyapunov':>9} {'lambda':>10} {'error':>9} {'spread':>9}")
+                for s in report["solutions"]:
+                    print(f"{s['n_excited']:7d} {s['n_halc']:6d} {s['class']:>10} "
+                          f"{s['class_delays']:>9} {s['class_lyapunov']:>9} "
+                          f"{s['lyapunov']:10.2e} {s['lyapunov_error']:9.1e} "
+                          f"{s['delay_spread']:9.2e}")
+        note(f"wall time {wall:.1f} s (compilation included); {outputs.summary()}")
     failed = [s for s in status if s != "ok"]
     if failed:
         raise RunsFailed(f"{len(failed)} of {len(status)} trajectories failed "

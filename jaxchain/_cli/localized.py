@@ -1,33 +1,32 @@
-"""`jaxchain localized`: the staircase of localized states at one belt speed (Fig. 4
+"""`jaxchain localized`: the staircase of localized states at each belt speed (Fig. 4
 and the v_d column of Fig. 3(b) of the paper)."""
 
 import argparse
-import json
 import time
 
 import numpy as np
 
 from .._sweeps.ensemble import ensemble
 from .._physics.initial import FAMILIES, localized_family
-from .common import simulation_options
 from .._engine.status import status_names
 from .._physics.record import chain_record
-from .._sweeps.atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, add_model_options, add_output_options,
-                     add_run_options, json_ready, prefetch, show_progress, writable_folder)
+from .common import (Outputs, RunsFailed, add_model_options, add_output_options,
+                     add_run_options, note, prefetch, print_json, show_progress,
+                     simulation_options)
 
-HELP = "localized states at one belt speed, N initial conditions (Fig. 4)"
+HELP = "localized states at each belt speed, N initial conditions (Fig. 4)"
 DESCRIPTION = """\
 Reproduce the staircase of localized states of Fig. 4 of the paper: N initial
 conditions with 1, 2, ..., N oscillators excited (eq. (8) by default, or eq. (10)),
 integrated to --t-end; amplitudes, the energy E of eq. (9) and the number of
 oscillators on the high-amplitude limit cycle (n_HALC) are taken after --transient.
 With no options this is the paper's scene: N = 20, v_d = 1.5, t_end = 15000,
-transient = 10000 (about 90 s on 2 CPU cores, compilation included).
+transient = 10000.
 
-Writes <out>/localized_vd<V>.nc (xarray Dataset with all parameters as attributes)
-and <out>/localized_vd<V>.png (circles of radius proportional to amplitude)."""
+Writes, for each belt speed V, <out>/localized_vd<V>.nc (xarray Dataset with all
+parameters as attributes) and <out>/localized_vd<V>.png (circles of radius
+proportional to amplitude)."""
 
 
 def add_parser(sub):
@@ -47,55 +46,48 @@ def add_parser(sub):
 
 def run(args) -> None:
     prefetch("xarray", "matplotlib.pyplot")
-    params = chain_params(args, args.n_osc, v_d=args.vd, eps=args.eps)
+    params = chain_params(args, args.n_osc, v_d=args.vd[0], eps=args.eps)
     options = simulation_options(args)
-    writable_folder(args.out)
-    solver = args.solver
+    stems = [f"localized_vd{v:g}" for v in args.vd]
+    outputs = Outputs(args, data=[f"{stem}.nc" for stem in stems], figures=stems)
     ics = localized_family(params.n_osc, args.ics, params.boundary)
     n_excited = np.arange(1, params.n_osc + 1)
 
     start = time.perf_counter()
-    ds = ensemble(params, [args.vd], ics, solver, options, progress=show_progress(args))
+    ds = ensemble(params, args.vd, ics, args.solver, options,
+                  progress=show_progress(args))
     wall = time.perf_counter() - start
 
     from .._plots.localized import plot_localized_states
-    from .._sweeps.datasets import save_dataset
 
     ds.attrs["ics_family"] = args.ics
     ds.attrs["wall_time_s"] = wall
-    stem = f"localized_vd{args.vd:g}"
-    nc = save_dataset(ds, args.out / f"{stem}.nc")
-    png = args.out / f"{stem}.png"
-    save_figure(plot_localized_states(ds), png)
-
-    row = ds.isel(v_d=0)
-    status = status_names(row["status"].values).tolist()
+    rows, status = [], []
+    for i, (v, stem) in enumerate(zip(args.vd, stems)):
+        one = ds.isel(v_d=[i])
+        outputs.dataset(one, f"{stem}.nc")
+        outputs.figure(plot_localized_states(one), stem)
+        row = one.isel(v_d=0)
+        rows.append({"v_d": v, "n_excited": n_excited.tolist(),
+                     "n_halc": row["n_halc"].values.tolist(),
+                     "energy": row["energy"].values.tolist(),
+                     "amplitudes": row["amplitudes"].values.tolist(),
+                     "status": status_names(row["status"].values).tolist(),
+                     "num_steps": row["num_steps"].values.tolist()})
+        status += rows[-1]["status"]
     if args.json:
-        print(json.dumps(json_ready({
-            "v_d": args.vd,
-            "n_excited": n_excited.tolist(),
-            "n_halc": row["n_halc"].values.tolist(),
-            "energy": row["energy"].values.tolist(),
-            "amplitudes": row["amplitudes"].values.tolist(),
-            "status": status,
-            "wall_time_s": wall,
-            "num_steps": row["num_steps"].values.tolist(),
-            "eps": args.eps,
-            "solver": args.solver,
-            "ics": args.ics,
-            "chain": chain_record(params),
-            "dataset": str(nc),
-            "figure": str(png),
-        }), allow_nan=False))
+        print_json({"runs": rows, "wall_time_s": wall, "eps": args.eps,
+                    "solver": args.solver, "ics": args.ics, "chain": chain_record(params)},
+                   outputs)
     else:
-        print(f"v_d = {args.vd:g}, N = {params.n_osc}, {params.boundary}, eps = {args.eps:g}, "
-              f"{args.solver}, ics = {args.ics}")
-        print(f"{'n_excited':>9} {'n_HALC':>6} {'E':>9} {'E/n_HALC':>8}  status")
-        for k, nh, e, s in zip(n_excited, row["n_halc"].values, row["energy"].values,
-                               status):
-            ratio = f"{e / nh:8.3f}" if nh > 0 else f"{'-':>8}"
-            print(f"{k:9d} {int(nh):6d} {e:9.3f} {ratio}  {s}")
-        print(f"wall time {wall:.1f} s (compilation included); wrote {nc} and {png}")
+        for r in rows:
+            print(f"v_d = {r['v_d']:g}, N = {params.n_osc}, {params.boundary}, "
+                  f"eps = {args.eps:g}, {args.solver}, ics = {args.ics}")
+            print(f"{'n_excited':>9} {'n_HALC':>6} {'E':>9} {'E/n_HALC':>8}  status")
+            for k, nh, e, s in zip(n_excited, r["n_halc"], r["energy"], r["status"]):
+                ratio = f"{e / nh:8.3f}" if nh > 0 else f"{'-':>8}"
+                print(f"{k:9d} {int(nh):6d} {e:9.3f} {ratio}  {s}")
+        note(f"wall time {wall:.1f} s (compilation included); {outputs.summary()}")
     failed = [s for s in status if s != "ok"]
     if failed:
         raise RunsFailed(f"{len(failed)} of {len(status)} trajectories failed "

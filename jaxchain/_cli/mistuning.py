@@ -14,13 +14,11 @@ from .._studies.mistuning.summary import failed_runs, localization_table, study_
 from .._engine.options import SimulationOptions
 from .._physics.record import chain_record
 from .._plots.mistuning import plot_mistuned_states, plot_mistuning_study, plot_site_edges
-from .._sweeps.atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
-                     add_scheduler_option, cluster_client, comma_list, json_ready,
-                     positive_float, positive_int, show_progress, simulation_options,
-                     writable_folder)
-from .sweep import belt_speeds
+from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
+                     add_scheduler_option, add_solver_options, add_vd_option, cluster_client,
+                     comma_list, json_ready, note, positive_float, positive_int, print_json,
+                     show_progress, simulation_options)
 
 HELP = "random mistuning against the localized states (Anderson meets friction)"
 DESCRIPTION = """\
@@ -37,7 +35,7 @@ command maps what it does to the localized states:
     N(0, sigma^2) (draw d: seed d, the same normal numbers at every sigma), at
     each belt speed of --vd: the Fig. 4 staircase (eq. (8), k = 1..N excited:
     the share that keeps n_HALC = k) and basin stability from --samples random
-    initial states (x in [-2, 2], x' in [0, 2], seed --seed), with 95 % Wilson
+    initial states (x in [-2, 2], x' in [0, 2], seed --sample-seed), with 95 % Wilson
     intervals, and the correlation between an oscillator being on the HALC and
     its delta_n;
   - per draw, the edges of the bistable range: the Hopf point of steady sliding
@@ -55,8 +53,7 @@ submits every chain's runs to a Dask cluster at once (local:N: N worker processe
 here), with the same results. Writes <out>/mistuning.nc, mistuning.json,
 mistuning.png (the summary), mistuning_edges.png (each single-site state's end
 against its delta_n) and mistuned_fig4.png (Fig. 4 of draw 0 at sigma = eta_c
-beside its delta_n). About 9 minutes on 2 CPU cores
-with the defaults.
+beside its delta_n).
 
 --design runs, instead, intentional mistuning by gradient (jc.design_study): on a
 ring of --period oscillators, a pattern |delta_n| <= --budget that lowers (mean
@@ -64,7 +61,7 @@ kept, and mean free) or raises the highest fold of the single-site states, with
 implicit gradients checked by finite differences and each optimum's fold checked
 by simulation on both sides; against the A-B pattern and 8 random draws, and the
 patterns tiled on the ring of --n-osc by simulation. Writes <out>/design.json and
-design.png (about 3 minutes)."""
+design.png."""
 
 
 def add_parser(sub):
@@ -79,13 +76,11 @@ def add_parser(sub):
                    f"{','.join(f'{s:g}' for s in STUDY_SIGMAS)})")
     g.add_argument("--draws", type=positive_int, default=8, metavar="D",
                    help="mistuning draws per sigma > 0 (default 8)")
-    g.add_argument("--vd", type=belt_speeds, default=list(STUDY_VD), metavar="LIST",
-                   help="belt speeds of the staircase and basin stability (default "
-                        f"{','.join(f'{v:g}' for v in STUDY_VD)})")
+    add_vd_option(g, list(STUDY_VD), "belt speeds of the staircase and basin stability")
     g.add_argument("--samples", type=int, default=8, metavar="S",
                    help="random initial states per chain and belt speed (default 8)")
-    g.add_argument("--seed", type=int, default=0, metavar="K",
-                   help="seed of the random initial states (default 0)")
+    g.add_argument("--sample-seed", type=int, default=0, metavar="K",
+                   help="seed of the JAX PRNG key of the random initial states (default 0)")
     g.add_argument("--folds", type=int, default=1, metavar="F",
                    help="draws per sigma whose upper edge is refined by shooting "
                         "(default 1)")
@@ -102,15 +97,14 @@ def add_parser(sub):
                    help="instead of the study: intentional mistuning by gradient on a "
                         "ring of --period oscillators within --budget, lowering and "
                         "raising the highest fold, against the A-B pattern and random "
-                        "draws (about 3 minutes)")
+                        "draws")
     g.add_argument("--budget", type=positive_float, default=0.05, metavar="B",
                    help="largest |delta_n| of the design (default 0.05)")
     g.add_argument("--period", type=positive_int, default=4, metavar="P",
                    help="oscillators in one period of the designed pattern (default 4)")
-    add_output_options(p)
-    p.add_argument("--resume", action="store_true",
-                   help="continue the stores in <out> (a killed run)")
+    add_solver_options(p.add_argument_group("solver of the simulations"))
     add_scheduler_option(p)
+    add_output_options(p, resume="the stores in DIR (a killed run)")
     p.set_defaults(run=run)
     return p
 
@@ -122,40 +116,39 @@ def run(args) -> None:
         raise UsageError(f"--transient must lie in [0, t_end = {args.t_end:g}), got "
                          f"{args.transient:g}")
     params = chain_params(args, args.n_osc, eps=args.eps, v_d=1.5)
-    writable_folder(args.out)
-    if (args.out / "chains").exists() and not args.resume:
-        raise UsageError(f"--out {args.out}: a study is stored there; use --resume to "
-                         "continue it, or another --out")
+    if args.resume and args.overwrite:
+        raise UsageError("--resume and --overwrite exclude each other")
+    outputs = Outputs(args, data=["mistuning.json", "mistuning.nc", "chains"],
+                      figures=["mistuning", "mistuning_edges", "mistuned_fig4"])
     start = time.perf_counter()
     with cluster_client(args) as client:
         study = mistuning_study(
             params, args.sigmas, args.draws, v_d=args.vd, n_samples=args.samples,
-            key=args.seed, n_folds=args.folds,
+            key=args.sample_seed, n_folds=args.folds, solver=args.solver,
             options=simulation_options(args),
             edge_options=SimulationOptions(t_end=args.edge_t_end,
                                            transient=0.8 * args.edge_t_end),
-            out=args.out, resume=args.resume, client=client, progress=show_progress(args))
+            out=args.out, resume=args.resume, overwrite=args.overwrite, client=client,
+            progress=show_progress(args))
     table = localization_table(float(params.eta_c), TABLE_SIGMAS, THETAS)
     wall = time.perf_counter() - start
-    figures = {"summary": args.out / "mistuning.png", "edges": args.out / "mistuning_edges.png"}
-    save_figure(plot_mistuning_study(study), figures["summary"])
-    save_figure(plot_site_edges(study), figures["edges"])
+    outputs.path("mistuning.nc")  # written by the study
+    outputs.figure(plot_mistuning_study(study), "mistuning")
+    outputs.figure(plot_site_edges(study), "mistuning_edges")
     shown = 1.0 if 1.0 in study["sigma"].values else float(study["sigma"].values[-1])
-    figures["fig4"] = args.out / "mistuned_fig4.png"
-    save_figure(plot_mistuned_states(study, shown, 0, 1.5), figures["fig4"])
+    outputs.figure(plot_mistuned_states(study, shown, 0, 1.5), "mistuned_fig4")
     s = study_summary(study) | {"localization_factor": table, "chain": chain_record(params),
-                          "wall_time_s": wall,
-                          "figures": {k: str(v) for k, v in figures.items()}}
-    text = json.dumps(json_ready(s), allow_nan=False)
-    write_text(args.out / "mistuning.json", text)
+                                "wall_time_s": wall, "solver": args.solver}
+    outputs.text(json.dumps(json_ready(s), allow_nan=False), "mistuning.json")
     if args.json:
-        print(text)
+        print_json(s, outputs)
     else:
         _print_summary(s)
+        note(f"{wall:.0f} s; {outputs.summary()}")
     failed = failed_runs(study)
     if failed:
         raise RunsFailed(f"{failed} runs failed; they are left out of the shares "
-                         f"(status in {args.out / 'mistuning.nc'})")
+                         f"(status in {outputs.path('mistuning.nc')})")
 
 
 def _print_summary(s: dict) -> None:
@@ -176,8 +169,7 @@ def _print_summary(s: dict) -> None:
         print(f"sigma/eta_c = {r['sigma_over_eta_c']:g}: staircase kept {stair}; "
               f"random starts vibrating/localized {basin}; upper edge {edge}")
     print(f"single-site state: decay per cell {s['damped_chain_decay']:.3f} on the damped "
-          f"homogeneous chain (period {s['state_period']:.4f}); "
-          f"figures in {s['figures']['summary']}; {s['wall_time_s']:.0f} s")
+          f"homogeneous chain (period {s['state_period']:.4f})")
 
 
 def run_design(args) -> None:
@@ -191,17 +183,15 @@ def run_design(args) -> None:
         raise UsageError(f"--period must be >= 2 and divide --n-osc {args.n_osc}, got "
                          f"{args.period}")
     params = chain_params(args, args.period, eps=args.eps, v_d=1.5)
-    writable_folder(args.out)
+    outputs = Outputs(args, data=["design.json"], figures=["design"])
     start = time.perf_counter()
     result = design_study(params, budget=args.budget, chain_n_osc=args.n_osc,
                           progress=show_progress(args))
-    result |= {"wall_time_s": time.perf_counter() - start, "chain": chain_record(params),
-               "figure": str(args.out / "design.png")}
-    save_figure(plot_mistuning_design(result), args.out / "design.png")
-    text = json.dumps(json_ready(result), allow_nan=False)
-    write_text(args.out / "design.json", text)
+    result |= {"wall_time_s": time.perf_counter() - start, "chain": chain_record(params)}
+    outputs.figure(plot_mistuning_design(result), "design")
+    outputs.text(json.dumps(json_ready(result), allow_nan=False), "design.json")
     if args.json:
-        print(text)
+        print_json(result, outputs)
     else:
         hom = result["homogeneous_fold"]
         print(f"homogeneous ring of {params.n_osc}: highest single-site fold {hom:.6f}")

@@ -7,13 +7,14 @@ import json
 import time
 from pathlib import Path
 
-from .._studies.snake import SNAKE_CONTINUATION, default_sites, localized_branches
+from .._studies.snake import (SNAKE_CONTINUATION, SNAKE_START, default_sites,
+                              localized_branches)
 from .._plots.snake import plot_snake
-from .._sweeps.atomic import save_figure, write_text
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
-                     comma_list, json_ready, positive_float, positive_int, show_progress,
-                     writable_folder)
+from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
+                     add_solver_options, comma_list, json_ready, note, one_belt_speed,
+                     positive_float, positive_int, print_json, show_progress,
+                     simulation_options)
 
 HELP = "continuation of the localized periodic states (the snake), with stability"
 DESCRIPTION = """\
@@ -38,8 +39,9 @@ which the paper's Fig. 3(b) only suggests by simulation ("snaking"):
 
 Writes <out>/snake.png, <out>/snake.json and each branch to
 <out>/snake/branch_k<k>.nc as it finishes; a second run with the same settings
-reads the stored branches back (resume). --sweep DIR/sweep.zarr draws the points of
-a `jaxchain sweep` underneath. About 10 minutes on 2 CPU cores with the defaults."""
+reads the stored branches back (--resume). --sweep DIR/sweep.zarr draws the points
+of a `jaxchain sweep` underneath. The solver options set the simulations (the
+starts and the checks); shooting keeps its own tight tolerances."""
 
 
 def add_parser(sub):
@@ -49,8 +51,9 @@ def add_parser(sub):
     add_ring_options(g)
     add_chain_options(g)
     g = p.add_argument_group("continuation")
-    g.add_argument("--vd", type=positive_float, default=1.5,
-                   help="belt speed where the states are found by simulation (default 1.5)")
+    g.add_argument("--vd", type=one_belt_speed, default=1.5, metavar="V",
+                   help="the belt speed where the states are found by simulation, one "
+                        "value (default 1.5)")
     g.add_argument("--sites", type=comma_list(int), default=None, metavar="K,K,...",
                    help="oscillators excited by eq. (8) for each branch (default 1, 2, 4, "
                         "... up to N/2, and N: "
@@ -67,7 +70,9 @@ def add_parser(sub):
                    help="skip the check by direct simulation at the ends of stable ranges")
     g.add_argument("--sweep", type=Path, default=None, metavar="STORE",
                    help="a sweep store (jaxchain sweep's sweep.zarr) to draw underneath")
-    add_output_options(p)
+    add_solver_options(p.add_argument_group("solver of the simulations"))
+    add_output_options(p, resume="from the branches stored in DIR/snake (those of equal "
+                                 "settings)")
     p.set_defaults(run=run)
     return p
 
@@ -85,25 +90,27 @@ def run(args) -> None:
     if args.sweep is not None:
         from .._sweeps.sweep import open_sweep
         sweep = open_sweep(args.sweep)
-    writable_folder(args.out)
+    outputs = Outputs(args, data=["snake.json"], figures=["snake"])
     start = time.perf_counter()
     options = dataclasses.replace(SNAKE_CONTINUATION, p_min=args.vd_min, p_max=args.vd_max,
                                   max_points=args.max_points)
     found = localized_branches(params, sites, continuation_options=options,
-                               simulation_check=not args.no_simulation,
-                               out=args.out / "snake", progress=show_progress(args))
-    png = args.out / "snake.png"
-    save_figure(plot_snake(found["datasets"], sweep,
-                           title=f"N = {params.n_osc}, eps = {args.eps:g}: stable solid, "
-                                 "unstable dashed"), png)
-    s = found["summary"] | {"wall_time_s": time.perf_counter() - start, "figure": str(png),
-                            "eps": args.eps, "n_osc": params.n_osc}
-    text = json.dumps(json_ready(s), allow_nan=False)
-    write_text(args.out / "snake.json", text)
+                               start_options=simulation_options(
+                                   args, t_end=SNAKE_START.t_end,
+                                   transient=SNAKE_START.transient),
+                               solver=args.solver, simulation_check=not args.no_simulation,
+                               out=outputs.path("snake"), progress=show_progress(args))
+    outputs.figure(plot_snake(found["datasets"], sweep,
+                              title=f"N = {params.n_osc}, eps = {args.eps:g}: stable solid, "
+                                    "unstable dashed"), "snake")
+    s = found["summary"] | {"wall_time_s": time.perf_counter() - start,
+                            "eps": args.eps, "n_osc": params.n_osc, "solver": args.solver}
+    outputs.text(json.dumps(json_ready(s), allow_nan=False), "snake.json")
     if args.json:
-        print(text)
+        print_json(s, outputs)
     else:
         _print_summary(s)
+        note(f"{s['wall_time_s']:.0f} s; {outputs.summary()}")
     disagree = [c for b in s["branches"] for c in b.get("simulation_check", [])
                 if c["agrees"] is False]
     if not s["branches"]:
@@ -129,4 +136,3 @@ def _print_summary(s: dict) -> None:
                   [c["agrees"]] + ")")
     for f in s["not_periodic"]:
         print(f"k={f['excited']} excited: {f['reason']}")
-    print(f"figure: {s['figure']}; {s['wall_time_s']:.0f} s")

@@ -2,11 +2,8 @@
 paper), stored batch by batch and resumable."""
 
 import argparse
-import json
-import sys
 import time
 
-import numpy as np
 
 from .._physics.initial import FAMILIES, localized_family
 from .common import simulation_options
@@ -15,11 +12,10 @@ from .._engine.status import Status, status_names
 from .._analysis.fronts import front_fractions, front_ranges
 from .._sweeps.sweep import sweep
 from .._physics.record import chain_record
-from .._sweeps.atomic import save_figure
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, UsageError, add_output_options, add_ring_options, add_run_options,
-                     add_scheduler_option, cluster_client, json_ready, positive_int,
-                     show_progress, writable_folder)
+from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
+                     add_run_options, add_scheduler_option, add_vd_option, belt_speeds,
+                     cluster_client, note, positive_int, print_json, show_progress)
 
 HELP = "bifurcation diagram over belt speeds, stored as it runs (Fig. 3(b))"
 DESCRIPTION = """\
@@ -28,8 +24,7 @@ Reproduce the bifurcation diagram of Fig. 3(b) of the paper: every belt speed of
 and/or eq. (10)) is integrated to --t-end, and the energy E of eq. (9) and the
 number of oscillators on the high-amplitude limit cycle (n_HALC) are taken after
 --transient. With no options: v_d = 1.0, 1.05, ..., 2.0, eq. (8), N = 20,
-t_end = 15000, transient = 10000 (420 trajectories, about 7 minutes on 2 CPU
-cores).
+t_end = 15000, transient = 10000 (420 trajectories).
 
 The trajectories run in batches of --batch-size over all cores. Each finished
 batch is written to <out>/sweep.zarr (a zarr store, read with
@@ -51,28 +46,6 @@ shaded (the paper's red dashed lines). A failed trajectory is marked in the stor
 and the exit status is 1."""
 
 
-def belt_speeds(text: str) -> list[float]:
-    """An argparse type: a comma-separated list of belt speeds, or START:STOP:NUM
-    (NUM equally spaced values from START to STOP, both included)."""
-    try:
-        if ":" in text:
-            start, stop, num = text.split(":")
-            num = int(num)
-            if num < 1:
-                raise argparse.ArgumentTypeError(f"NUM must be >= 1, got {text!r}")
-            values = np.linspace(float(start), float(stop), num).round(12).tolist()
-        else:
-            values = [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a list V1,V2,... or START:STOP:NUM, got {text!r}") from None
-    if not values:
-        raise argparse.ArgumentTypeError(f"expected at least one belt speed, got {text!r}")
-    if not all(np.isfinite(v) and v > 0 for v in values):
-        raise argparse.ArgumentTypeError(f"belt speeds must be finite and > 0, got {text!r}")
-    return values
-
-
 def families(text: str) -> list[str]:
     """An argparse type: a comma-separated list of initial-condition families."""
     names = [v.strip() for v in text.split(",") if v.strip()]
@@ -87,10 +60,7 @@ def add_parser(sub):
     p = sub.add_parser("sweep", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("grid (eq. (5) of the paper; other parameters eq. (7))")
-    g.add_argument("--vd", type=belt_speeds, default=belt_speeds("1.0:2.0:21"),
-                   metavar="LIST|START:STOP:NUM",
-                   help="belt speeds: V1,V2,... or START:STOP:NUM, both ends included "
-                        "(default 1.0:2.0:21)")
+    add_vd_option(g, belt_speeds("1.0:2.0:21"), "belt speeds")
     g.add_argument("--ics", type=families, default=["eq8"], metavar="eq8,eq10",
                    help="initial-condition families, each with k = 1..N excited "
                         "oscillators around oscillator N//2+1 (default eq8)")
@@ -101,15 +71,12 @@ def add_parser(sub):
     s.add_argument("--batch-size", type=positive_int, default=64, metavar="B",
                    help="trajectories per stored batch (default 64); memory is set by "
                         "it, never by the grid")
-    s.add_argument("--resume", action="store_true",
-                   help="continue the sweep stored in <out>/sweep.zarr, or an --overwrite "
-                        "of it cut short, skipping its finished batches (refused if it "
-                        "was made with other settings)")
-    s.add_argument("--overwrite", action="store_true",
-                   help="replace <out>/sweep.zarr by a new sweep, built beside it and "
-                        "swapped in once complete: the old one stays whole until then")
     add_scheduler_option(s)
-    add_output_options(p)
+    add_output_options(p, resume="the sweep stored in DIR/sweep.zarr, or an --overwrite "
+                                 "of it cut short, skipping its finished batches (refused "
+                                 "if it was made with other settings); --overwrite builds "
+                                 "the new store beside the old one and swaps it in once "
+                                 "complete")
     p.set_defaults(run=run)
     return p
 
@@ -119,9 +86,9 @@ def run(args) -> None:
     options = simulation_options(args)
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
-    writable_folder(args.out)
+    outputs = Outputs(args, data=["sweep.zarr"], figures=["sweep"])
     ics = {name: localized_family(params.n_osc, name, params.boundary) for name in args.ics}
-    store = args.out / "sweep.zarr"
+    store = outputs.path("sweep.zarr")
 
     start = time.perf_counter()
     with cluster_client(args) as client:
@@ -130,8 +97,7 @@ def run(args) -> None:
                    overwrite=args.overwrite, client=client,
                    progress=show_progress(args)).load()
     wall = time.perf_counter() - start
-    png = args.out / "sweep.png"
-    save_figure(plot_bifurcation_diagram(ds), png)
+    outputs.figure(plot_bifurcation_diagram(ds), "sweep")
 
     v_d = ds["v_d"].values
     status = status_names(ds["status"].values)
@@ -146,9 +112,9 @@ def run(args) -> None:
                f"of {args.batch_size} ({ds.attrs['batches_run']} run now), "
                f"{n_halc.size} trajectories, {wall:.1f} s; {int((~ok).sum())} failed; "
                f"fronts invading at v_d in {_ranges_text(ranges['invading'])}, receding "
-               f"at {_ranges_text(ranges['receding'])}; wrote {store} and {png}")
+               f"at {_ranges_text(ranges['receding'])}; {outputs.summary()}")
     if args.json:
-        print(json.dumps(json_ready({
+        print_json({
             "v_d": v_d.tolist(),
             "chain": chain_record(params),
             "family": ds["family"].values.tolist(),
@@ -166,10 +132,8 @@ def run(args) -> None:
             "wall_time_s": wall,
             "eps": args.eps,
             "solver": args.solver,
-            "store": str(store),
-            "figure": str(png),
-        }), allow_nan=False))
-        print(summary, file=sys.stderr)
+        }, outputs)
+        note(summary)
     else:
         print(f"N = {args.n_osc}, eps = {args.eps:g}, {args.solver}, ics = "
               f"{','.join(args.ics)}, t_end = {args.t_end:g}, transient = {args.transient:g}")
@@ -177,7 +141,7 @@ def run(args) -> None:
         for i, v in enumerate(v_d):
             print(f"{v:6.3g} {len(states[i]):6d} {share['invading'][i]:8.0%} "
                   f"{share['receding'][i]:8.0%}  {' '.join(map(str, states[i]))}")
-        print(summary)
+        note(summary)
     failed = int((~ok).sum())
     if failed:
         kinds = sorted(set(status[~ok].tolist()))

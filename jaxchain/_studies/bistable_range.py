@@ -23,6 +23,7 @@ from .._physics.friction import ExponentialDecay
 from .._physics.params import ChainParams, is_homogeneous_ring, single_oscillator, with_parameter
 from .._physics.record import chain_record
 from .._engine.simulate import simulate
+from .._engine.solver.registry import DEFAULT_SOLVER
 from .._errors import ValidationError
 
 
@@ -255,17 +256,21 @@ def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
                       ring_branches=ring_branches)
 
 
+#: The horizon of the simulation dots of Fig. 3(a).
+FIG3A_OPTIONS = SimulationOptions(t_end=3000.0, transient=2500.0)
+
+
 def fig3a_simulations(params: ChainParams, v_d=np.round(np.arange(0.6, 2.21, 0.1), 2),
+                      solver=DEFAULT_SOLVER, options: SimulationOptions = FIG3A_OPTIONS,
                       progress: bool = False):
     """The simulation dots of Fig. 3(a): the single oscillator at each belt speed
     from a small and a large initial displacement (x = 0.6 and 3.5, x' = 0),
-    t_end = 3000, observed after 2500. Returns (v_d, energy) with energy of shape
-    (n_vd, 2)."""
+    integrated with `solver` over `options` (t_end = 3000, observed after 2500, by
+    default). Returns (v_d, energy) with energy of shape (n_vd, 2)."""
     from .._sweeps.ensemble import ensemble
 
     single = single_oscillator(params)
     ds = ensemble(single, jnp.asarray(v_d), GivenState(jnp.array([[[0.6], [0.0]],
                                                                   [[3.5], [0.0]]])),
-                  options=SimulationOptions(t_end=3000.0, transient=2500.0),
-                  progress=progress)
+                  solver, options, progress=progress)
     return np.asarray(v_d), ds["energy"].values

@@ -27,6 +27,7 @@ from .._physics.initial import GivenState, OutOfPhaseExcitation, excited_block
 from .._physics.params import ChainParams, with_parameter
 from .._physics.record import chain_record
 from .._engine.simulate import simulate
+from .._engine.solver.registry import DEFAULT_SOLVER
 from .._sweeps.result_store import read_dataset, write_dataset
 from .._errors import ValidationError
 from .._engine.status import Status
@@ -79,7 +80,8 @@ def _turning_point(params: ChainParams, y: np.ndarray, oscillator: int,
 
 
 def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions = SNAKE_START,
-                 shooting: ShootingOptions = SNAKE_SHOOTING, progress: bool = False):
+                 shooting: ShootingOptions = SNAKE_SHOOTING, solver=DEFAULT_SOLVER,
+                 progress: bool = False):
     """Periodic localized states of the chain at `params.v_d`, refined by shooting
     from direct simulation: eq. (8) with k oscillators excited (`excited_block`),
     integrated over `options`, then a turning point of the oscillator of largest
@@ -93,6 +95,7 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
         (`default_sites` by default).
     - `options`: `SimulationOptions` of the simulations.
     - `shooting`: `ShootingOptions` (its `phase_oscillator` is replaced).
+    - `solver`: the solver of the simulations (`SOLVERS`; shooting has its own).
     - `progress`: progress bars.
 
     **Returns:**
@@ -111,7 +114,7 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
     masks = np.stack([excited_block(params.n_osc, k, params.boundary) for k in sites])
     ics = OutOfPhaseExcitation(excited=jnp.asarray(masks),
                                velocity=jnp.zeros(len(sites)), base_sign=-1.0)
-    ds = ensemble(params, [float(params.v_d)], ics, options=options, progress=progress)
+    ds = ensemble(params, [float(params.v_d)], ics, solver, options, progress=progress)
     out = {}
     for i, k in enumerate(sites):
         amplitudes = ds["amplitudes"].values[0, i]
@@ -276,8 +279,8 @@ def check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, 
                         delta: float = 0.03, perturbation: float = 1e-3, seed: int = 0,
                         shooting: ShootingOptions = SNAKE_SHOOTING,
                         options: SimulationOptions = SimulationOptions(t_end=5000.0,
-                                                                       transient=4500.0)
-                        ) -> list[dict]:
+                                                                       transient=4500.0),
+                        solver=DEFAULT_SOLVER) -> list[dict]:
     """Direct simulation just inside and just outside each end of a stable segment
     that a bifurcation ends, each from an orbit of the branch with its positions
     perturbed by `perturbation`:
@@ -329,7 +332,7 @@ def check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, 
             y0 = np.asarray(y_orbit).copy()
             y0[0] += perturbation * rng.standard_normal(y0.shape[1])
             p = with_parameter(params, "v_d", float(vd))
-            obs = simulate(p, GivenState(jnp.asarray(y0)), options=options)
+            obs = simulate(p, GivenState(jnp.asarray(y0)), solver, options)
             amp = np.asarray(obs.amplitudes)
             sim_sites = np.flatnonzero(amp > 0.5 * amp.max())
             lag_difference = None
@@ -433,8 +436,8 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
                        shooting: ShootingOptions = SNAKE_SHOOTING,
                        continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
                        start_options: SimulationOptions = SNAKE_START,
-                       simulation_check: bool = True, out: Path | None = None,
-                       progress: bool = False) -> dict:
+                       solver=DEFAULT_SOLVER, simulation_check: bool = True,
+                       out: Path | None = None, progress: bool = False) -> dict:
     """The snake: each localized periodic state that simulation finds at
     `params.v_d` (eq. (8) with k excited, for k in `sites`), refined by shooting,
     continued over v_d both ways by pseudo-arclength through its folds, with its
@@ -450,6 +453,8 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     - `shooting`: `ShootingOptions` of every orbit.
     - `continuation_options`: `ContinuationOptions` (direction is set both ways).
     - `start_options`: `SimulationOptions` of the starting simulations.
+    - `solver`: the solver of the simulations, the starts and the checks
+        (`SOLVERS`); shooting has its own (`shooting.solver`).
     - `simulation_check`: run `check_by_simulation` on every stable range.
     - `out`: a folder: each branch is stored there as `branch_k<k>.nc` with the key
         of its settings (`write_dataset`) as it finishes, and read back on a later
@@ -471,7 +476,8 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     sites = default_sites(params.n_osc) if sites is None else tuple(int(k) for k in sites)
     datasets, starts, failed = {}, {}, {}
     settings = {"chain": chain_record(params), "shooting": shooting,
-                "continuation": continuation_options, "start": start_options}
+                "continuation": continuation_options, "start": start_options,
+                "solver": solver if isinstance(solver, str) else type(solver).__name__}
     paths = {k: None if out is None else Path(out) / f"branch_k{k}.nc" for k in sites}
     todo = []
     for k in sites:
@@ -483,7 +489,7 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
             todo.append(k)
     if todo:
         for k, (orbit, sim, reason) in start_orbits(params, todo, options=start_options,
-                                                    shooting=shooting,
+                                                    shooting=shooting, solver=solver,
                                                     progress=progress).items():
             starts[k] = sim
             if orbit is None:
@@ -525,7 +531,8 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
                                                            shooting)
         if simulation_check:
             entry["simulation_check"] = [c for r in ranges for c in
-                                         check_by_simulation(params, ds, r, shooting=shooting)]
+                                         check_by_simulation(params, ds, r, shooting=shooting,
+                                                             solver=solver)]
         branches.append(entry)
         bar.update()
     bar.close()

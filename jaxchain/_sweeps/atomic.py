@@ -94,10 +94,10 @@ def write_text(path: str | Path, text: str) -> Path:
     return Path(path)
 
 
-def save_figure(fig, path: str | Path, dpi: int = 150) -> Path:
+def save_figure(fig, path: str | Path, dpi: int = 150, close: bool = True) -> Path:
     """Write a matplotlib figure to `path` whole or not at all (`replacing`), in
-    the format of its suffix (.png, .pdf, .svg), and close it (a command makes
-    several).
+    the format of its suffix (.png, .pdf, .svg), and close it unless `close` is
+    False (a command makes several, and may save one in several formats).
 
     **Returns:**
 
@@ -111,5 +111,6 @@ def save_figure(fig, path: str | Path, dpi: int = 150) -> Path:
             fig.savefig(partial, dpi=dpi,
                         format=path.suffix.lstrip(".") or plt.rcParams["savefig.format"])
     finally:
-        plt.close(fig)
+        if close:
+            plt.close(fig)
     return path

@@ -36,7 +36,56 @@ LONG_NAMES = {
                 f"min_slip_speed <= {STICK_BAND:g} eps"),
     "n_halc_halves": "n_halc over the first and over the second half of the window",
     "min_slip_speed": "smallest |x_n' - v_d| after the transient",
+    "n_halc": "number of oscillators on the high-amplitude limit cycle (HALC)",
+    "x_max": "largest x_n after the transient",
+    "x_min": "smallest x_n after the transient",
+    "v_max": "largest x_n' after the transient",
+    "y_initial": "state (x_n, x_n') at t = 0",
+    "y_final": "state (x_n, x_n') at t_end, or where the run stopped",
+    "num_steps": "accepted plus rejected integration steps",
+    "status": "how the run ended (jaxchain.Status)",
+    "v_d": "belt speed v_d",
+    "ic": "initial condition",
+    "osc": "oscillator n, from 1",
+    "n_excited": "number of oscillators excited by the initial condition",
+    "family": "family of initial conditions (eq. (8) or eq. (10))",
+    "component": "component of the state: x_n or x_n'",
+    "half": "half of the observed window",
 }
+
+#: The CF conventions that the netCDF results follow.
+CONVENTIONS = "CF-1.11"
+
+
+def cf_dataset(ds: xr.Dataset) -> xr.Dataset:
+    """`ds` with the attributes of the CF conventions (`CONVENTIONS`): on every
+    variable a `long_name` (`LONG_NAMES`, else its name in words) and, for numbers
+    that are not flags, `units` = "1" (every quantity of jaxchain is
+    dimensionless, eqs. (4)-(6)); globally `Conventions`, `title`, `source` (the
+    jaxchain version), `history` (the time and the command line) and
+    `references` (the paper). Coordinates get no fill value."""
+    import sys
+    import time
+
+    ds = ds.copy()
+    for name, var in ds.variables.items():
+        attrs = dict(var.attrs)
+        attrs.setdefault("long_name", LONG_NAMES.get(name, name.replace("_", " ")))
+        if var.dtype.kind in "biuf" and "flag_values" not in attrs:
+            attrs.setdefault("units", "1")
+        var.attrs = attrs
+        if name in ds.coords and var.dtype.kind in "f":
+            var.encoding["_FillValue"] = None
+    command = " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]) if sys.argv else "python"
+    stamp = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    ds.attrs = {"Conventions": CONVENTIONS,
+                "title": ds.attrs.get("title", "jaxchain results: chains of "
+                                      "friction-excited oscillators, eq. (5)"),
+                "source": f"jaxchain {VERSION}",
+                "history": f"{stamp}: {command}",
+                "references": PAPER} | {k: v for k, v in ds.attrs.items()
+                                         if k not in ("history", "source", "Conventions")}
+    return ds
 
 
 def observables_variables(obs: Observables, lead: tuple[str, ...]) -> dict:
@@ -118,7 +167,8 @@ def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
 
 
 def save_dataset(ds: xr.Dataset, path: str | Path) -> Path:
-    """Write `ds` to netCDF (h5netcdf engine), creating the parent folder. The file
+    """Write `ds` to netCDF (h5netcdf engine), with the attributes of the CF
+    conventions (`cf_dataset`), creating the parent folder. The file
     is written whole or not at all: to a temporary file beside `path`, renamed
     into place, so that a run killed while it writes leaves the previous file
     intact.
@@ -128,5 +178,5 @@ def save_dataset(ds: xr.Dataset, path: str | Path) -> Path:
     The path written.
     """
     with replacing(path) as partial:
-        ds.to_netcdf(partial, engine="h5netcdf")
+        cf_dataset(ds).to_netcdf(partial, engine="h5netcdf")
     return Path(path)

@@ -81,8 +81,8 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
                     box: Box = Box(), key=0, *, solver=DEFAULT_SOLVER,
                     options: SimulationOptions = BASIN_OPTIONS, n_check: int | None = None,
                     batch_size: int = 64, store: str | Path | None = None,
-                    resume: bool = False, client=None, progress: bool = True
-                    ) -> xr.Dataset:
+                    resume: bool = False, overwrite: bool = False, client=None,
+                    progress: bool = True) -> xr.Dataset:
     """The basin stability of each state of the chain at each belt speed: the
     fraction of `n_samples` initial states, drawn uniformly from `box` with `key`,
     that end in it, with 95 % Wilson intervals.
@@ -107,7 +107,8 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
         default.
     - `n_check`: samples of the convergence check, min(n_samples, 50) by default;
         0 for none.
-    - `batch_size`, `store`, `resume`, `client`, `progress`: as for `sweep`
+    - `batch_size`, `store`, `resume`, `overwrite`, `client`, `progress`: as for
+        `sweep`
         (`client`: the samples run as batches on a Dask cluster; the convergence
         subset runs in this process).
 
@@ -146,7 +147,8 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
     n_osc = params.n_osc
     states = sample_states(key, box, int(n_samples), n_osc)
     ds = sweep(params, v, GivenState(states), solver, options, batch_size=batch_size,
-               store=store, resume=resume, client=client, progress=progress).load()
+               store=store, resume=resume, overwrite=overwrite, client=client,
+               progress=progress).load()
     status = ds["status"].values
     index = class_index(ds["n_halc"].values, status, n_osc)
     clusters = np.where(status == Status.ok,

@@ -2,6 +2,8 @@
 edges of the model (tiny eps, long rings, a belt that nearly stops or races, strong
 coupling, no damping, large initial states)."""
 
+import dataclasses
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -100,9 +102,18 @@ def make_case(what: str, value, options: SimulationOptions = OPTIONS) -> StressC
                       options=options)
 
 
-def stress_cases(quick: bool = False) -> list[StressCase]:
+def stress_cases(quick: bool = False, **tolerances) -> list[StressCase]:
     """Every case of `MATRIX` (or of `QUICK_MATRIX`, with `QUICK_OPTIONS`), in
-    order. A value equal to the default appears once per row, as in the table."""
+    order. A value equal to the default appears once per row, as in the table.
+    `tolerances` replace fields of the cases' `SimulationOptions` (rtol, atol,
+    controller, max_steps).
+
+    **Raises:**
+
+    `ValidationError` for a field `SimulationOptions` refuses, naming it.
+    """
     matrix, options = (QUICK_MATRIX, QUICK_OPTIONS) if quick else (MATRIX, OPTIONS)
+    if tolerances:
+        options = dataclasses.replace(options, **tolerances)
     return [make_case(what, value, options) for what, values in matrix.items()
             for value in values]
