@@ -76,3 +76,17 @@ def test_a_command_of_one_belt_speed_refuses_a_list(capsys):
     assert exc.value.code == 2
     (line,) = capsys.readouterr().err.strip().splitlines()
     assert "--vd" in line and "one belt speed" in line
+
+
+@pytest.mark.parametrize("command", COMMANDS)
+def test_help_names_no_issue_and_no_measured_time(command):
+    """Measured times live on the documentation's Performance page, and issue
+    numbers in the history, never in --help."""
+    import re
+
+    jc.configure()
+    parser = build_parser([command])
+    sub = next(a for a in parser._actions if a.dest == "command")
+    text = parser.format_help() + sub.choices[command].format_help()
+    assert not re.search(r"\bissues? \d+", text, re.IGNORECASE)
+    assert not re.search(r"\b\d+(\.\d+)? ?(s|ms|us|µs|min|minutes|seconds|hours)\b", text)

@@ -2,6 +2,8 @@
 form, the stored study read back and resumed identically, its summaries on
 synthetic data, and the command line."""
 
+import contextlib
+import io
 import json
 import shutil
 
@@ -21,7 +23,12 @@ ARGS = ["mistuning", "--n-osc", "4", "--sigmas", "0,2", "--draws", "2", "--vd", 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory):
     out = tmp_path_factory.mktemp("mistuning")
-    assert jc.main(ARGS + ["--out", str(out)]) in (0, None)
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        assert jc.main(ARGS + ["--out", str(out)]) in (0, None)
+    doc = json.loads(printed.getvalue())  # one JSON document, the files it wrote
+    assert set(doc["outputs"]) == {"mistuning.nc", "mistuning.png", "mistuning_edges.png",
+                                   "mistuned_fig4.png", "mistuning.json"}
     return out
 
 

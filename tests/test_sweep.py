@@ -2,6 +2,7 @@
 stored batch, never resumed with other settings; a parameter swept through a lens
 gives the runs made one by one; propagating fronts are flagged."""
 
+import json
 import signal
 import subprocess
 
@@ -105,6 +106,11 @@ def test_a_store_of_other_settings_is_refused_with_status_2(tmp_path, capsys):
     assert jc.main([*CLI, "--out", str(out)]) == 2  # exists: neither --resume nor --overwrite
     assert "exists" in capsys.readouterr().err
     assert _chunk_times(out / "sweep.zarr", range(3)) == before  # nothing lost
+    # resumed with its own settings: every batch read back, one JSON document
+    assert jc.main([*CLI, "--resume", "--json", "--no-progress", "--out", str(out)]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert set(doc["outputs"]) == {"sweep.zarr", "sweep.png"} and doc["batches_run"] == 0
+    assert _chunk_times(out / "sweep.zarr", range(3)) == before
 
 
 @pytest.mark.numerics
