@@ -7,6 +7,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .canvas import single_axes
+
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr
 
@@ -16,7 +18,7 @@ def _shown(ds: xr.Dataset) -> list[int]:
     return [c for c in range(ds.sizes["class"]) if ds["counts"].values[:, c].any()]
 
 
-def plot_basin_stability(ds: xr.Dataset):
+def plot_basin_stability(ds: xr.Dataset, ax=None):
     """The fraction of initial states that end in each class (`basin_stability`)
     against v_d, as stacked areas, with each class's 95 % Wilson interval as an
     error bar at the top of its band.
@@ -24,6 +26,7 @@ def plot_basin_stability(ds: xr.Dataset):
     **Arguments:**
 
     - `ds`: the Dataset of `basin_stability`.
+    - `ax`: a matplotlib Axes to draw on; a new figure if None.
 
     **Returns:**
 
@@ -33,7 +36,7 @@ def plot_basin_stability(ds: xr.Dataset):
 
     v_d, fraction = ds["v_d"].values, ds["fraction"].values
     classes = _shown(ds)
-    fig, ax = plt.subplots(figsize=(7, 4.2), layout="constrained")
+    fig, ax = single_axes(ax, (7, 4.2))
     colours = plt.get_cmap("viridis", max(2, len(classes)))
     bottom = np.zeros(v_d.size)
     for i, c in enumerate(classes):
@@ -55,28 +58,33 @@ def plot_basin_stability(ds: xr.Dataset):
     return fig
 
 
-def plot_halc_histogram(ds: xr.Dataset, v_d: float):
+def plot_halc_histogram(ds: xr.Dataset, v_d: float, ax=None):
     """The distribution of n_HALC at the belt speed nearest `v_d`: the fraction of
     samples in each class with its 95 % Wilson interval.
+
+    **Arguments:**
+
+    - `ds`: the Dataset of `basin_stability`; `v_d`: the belt speed (nearest).
+    - `ax`: a matplotlib Axes to draw on; a new figure if None.
+
 
     **Returns:**
 
     The matplotlib `Figure`.
     """
-    import matplotlib.pyplot as plt
 
     i = int(np.argmin(np.abs(ds["v_d"].values - v_d)))
     row = ds.isel(v_d=i)
     k = np.arange(ds.sizes["class"])
     fraction = row["fraction"].values
     err = np.abs(np.stack([row["ci_low"].values - fraction, row["ci_high"].values - fraction]))
-    fig, ax = plt.subplots(figsize=(7, 3.6), layout="constrained")
+    fig, ax = single_axes(ax, (7, 3.6))
     ax.bar(k, fraction, color="tab:blue", alpha=0.8)
     ax.errorbar(k, fraction, yerr=err, fmt="none", ecolor="k", capsize=2)
     labels = [str(c).replace("n_HALC = ", "") for c in ds["class"].values]
     labels = ["0" if s == "steady sliding" else s for s in labels]
     ax.set_xticks(k, labels, fontsize=7)
-    ax.set(xlabel="n_HALC (oscillators on the high-amplitude limit cycle)",
+    ax.set(xlabel=r"$n_\mathrm{HALC}$ (oscillators on the high-amplitude limit cycle)",
            ylabel="fraction of samples",
            title=f"v_d = {row['v_d'].item():g}: {ds.attrs['n_samples']} samples, "
                  "95 % Wilson intervals")

@@ -6,11 +6,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .canvas import panel_figure
+
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr
 
 
-def plot_crosscheck(ds: xr.Dataset):
+def plot_crosscheck(ds: xr.Dataset, fig=None):
     """Two panels: (a) every oscillator's amplitude, smoothed against non-smooth,
     on the diagonal when they agree; (b) the amplitude error of each case against
     v_d, filled for periodic states (of the reference), open for irregular ones,
@@ -20,21 +22,22 @@ def plot_crosscheck(ds: xr.Dataset):
     **Arguments:**
 
     - `ds`: a Dataset from `crosscheck`.
+    - `fig`: a matplotlib Figure or SubFigure to draw the panels on; a new figure
+        if None.
 
     **Returns:**
 
     The matplotlib Figure.
     """
-    import matplotlib.pyplot as plt
-
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.5))
+    fig = panel_figure(fig, (11, 4.5))
+    left, right = fig.subplots(1, 2)
     a_r = ds["amplitudes_reference"].values.ravel()
     a_s = ds["amplitudes_smoothed"].values.ravel()
     top = np.nanmax(np.concatenate([a_r, a_s, [1.0]])) * 1.05
     left.plot([0, top], [0, top], color="0.7", lw=1)
     left.scatter(a_r, a_s, s=10, alpha=0.6)
     left.set(xlabel="amplitude, non-smooth reference", ylabel="amplitude, smoothed",
-             title=f"(a) all oscillators, eps = {ds.attrs['eps']:g}",
+             title=f"(a) all oscillators, $\\varepsilon$ = {ds.attrs['eps']:g}",
              xlim=(0, top), ylim=(0, top))
 
     error = 100 * ds["amplitude_error"].values
@@ -53,11 +56,10 @@ def plot_crosscheck(ds: xr.Dataset):
     wrong = ~ds["n_halc_agrees"].values
     if wrong.any():
         right.scatter(x[wrong], shown[wrong], marker="x", s=80, color="red",
-                      label="n_HALC disagrees")
+                      label=r"$n_\mathrm{HALC}$ disagrees")
     right.axhline(1.0, color="k", lw=1, ls="--", label="1 %")
-    right.set(yscale="log", xlabel="belt speed v_d",
+    right.set(yscale="log", xlabel="belt speed $v_d$",
               ylabel="amplitude error, % of max(1, largest amplitude)",
               title="(b) smoothed vs non-smooth, per case")
     right.legend(fontsize=8)
-    fig.tight_layout()
     return fig

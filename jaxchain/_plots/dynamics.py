@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .._analysis.delays import reference_oscillator, time_delays
+from .canvas import panel_figure, single_axes
 from .localized import plot_localized_states
 
 if TYPE_CHECKING:  # heavy: imported where they are used
@@ -41,10 +42,16 @@ def _label(row) -> str:
     return text
 
 
-def plot_time_series(ds: xr.Dataset):
+def plot_time_series(ds: xr.Dataset, fig=None):
     """Fig. 5: (a) x_n against time, (b) the phase plot x_n' against x_n, (c) x_n'
     against time, one colour per oscillator, for the first solution of a
     `time_series_scene`.
+
+    **Arguments:**
+
+    - `ds`: the Dataset of `time_series_scene`.
+    - `fig`: a matplotlib Figure or SubFigure to draw the panels on; a new figure
+        if None.
 
     **Returns:**
 
@@ -54,7 +61,8 @@ def plot_time_series(ds: xr.Dataset):
 
     row = ds.isel(solution=0)
     t, series = ds["time"].values, np.asarray(row["series"])
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
+    fig = panel_figure(fig, (13, 3.8))
+    axes = fig.subplots(1, 3)
     colours = plt.cm.viridis(np.linspace(0, 1, series.shape[-1]))
     for n in range(series.shape[-1]):
         x, v = series[:, 0, n], series[:, 1, n]
@@ -64,33 +72,38 @@ def plot_time_series(ds: xr.Dataset):
     v_d = float(ds.attrs["v_d"])
     for ax in (axes[1], axes[2]):
         ax.axhline(v_d, color="k", lw=0.6, ls=":")
-    axes[0].set(xlabel="time τ", ylabel="x_n", title="(a) displacement")
-    axes[1].set(xlabel="x_n", ylabel="x_n'", title="(b) phase plot (stick at x' = v_d)")
-    axes[2].set(xlabel="time τ", ylabel="x_n'", title="(c) velocity")
-    fig.suptitle(f"Time series, v_d = {v_d:g}, {int(row['solution'])} oscillators "
+    axes[0].set(xlabel=r"time $\tau$", ylabel="$x_n$", title="(a) displacement")
+    axes[1].set(xlabel="$x_n$", ylabel="$x_n'$", title="(b) phase plot (stick at $x' = v_d$)")
+    axes[2].set(xlabel=r"time $\tau$", ylabel="$x_n'$", title="(c) velocity")
+    fig.suptitle(f"Time series, $v_d$ = {v_d:g}, {int(row['solution'])} oscillators "
                  f"excited (cf. Fig. 5)", fontsize=10)
-    fig.tight_layout()
     return fig
 
 
-def _grid(n: int):
-    import matplotlib.pyplot as plt
-
+def _grid(fig, n: int):
+    """(figure, axes) of a grid of n panels, three per row."""
     cols = min(3, n)
     rows = -(-n // cols)
-    return plt.subplots(rows, cols, figsize=(4.2 * cols, 2.9 * rows), squeeze=False)
+    fig = panel_figure(fig, (4.2 * cols, 2.9 * rows))
+    return fig, fig.subplots(rows, cols, squeeze=False)
 
 
-def plot_time_delays(ds: xr.Dataset):
+def plot_time_delays(ds: xr.Dataset, fig=None):
     """Fig. 6: for each solution of a `time_delay_scene`, the time delays phi_i =
     tau_peak,i - tau_peak,ref of its HALC oscillators against time, with the start
     of the classification window marked.
+
+    **Arguments:**
+
+    - `ds`: the Dataset of `time_delay_scene`.
+    - `fig`: a matplotlib Figure or SubFigure to draw the panels on; a new figure
+        if None.
 
     **Returns:**
 
     The matplotlib Figure.
     """
-    fig, axes = _grid(ds.sizes["solution"])
+    fig, axes = _grid(fig, ds.sizes["solution"])
     start = ds.attrs.get("classify_from")
     for i, ax in enumerate(axes.flat):
         if i >= ds.sizes["solution"]:
@@ -102,41 +115,44 @@ def plot_time_delays(ds: xr.Dataset):
         if start is not None:
             ax.axvline(start, color="k", lw=0.6, ls=":")
         ax.set_title(f"({chr(97 + i)}) {_label(ds.isel(solution=i))}", fontsize=9)
-        ax.set(xlabel="time τ", ylabel=f"φ_i = τ_i - τ_{ref}")
-    fig.suptitle(f"Time delays of the HALC oscillators, v_d = {float(ds.attrs['v_d']):g} "
-                 "(cf. Fig. 6)", fontsize=10)
-    fig.tight_layout()
+        ax.set(xlabel=r"time $\tau$",
+               ylabel=f"$\\varphi_i = \\tau_i - \\tau_{{{ref}}}$")
+    fig.suptitle(f"Time delays of the HALC oscillators, $v_d$ = "
+                 f"{float(ds.attrs['v_d']):g} (cf. Fig. 6)", fontsize=10)
     return fig
 
 
-def plot_phase_portraits(ds: xr.Dataset):
+def plot_phase_portraits(ds: xr.Dataset, fig=None):
     """Fig. 7: for each solution of a `phase_portrait_scene`, the 3-D phase plot of
     the displacements of its three oscillators over the observed window.
+
+    **Arguments:**
+
+    - `ds`: the Dataset of `phase_portrait_scene`.
+    - `fig`: a matplotlib Figure or SubFigure to draw the panels on; a new figure
+        if None.
 
     **Returns:**
 
     The matplotlib Figure.
     """
-    import matplotlib.pyplot as plt
-
     n = ds.sizes["solution"]
     cols = min(3, n)
     rows = -(-n // cols)
-    fig = plt.figure(figsize=(4 * cols, 3.6 * rows))
+    fig = panel_figure(fig, (4 * cols, 3.6 * rows))
     numbers = ds["series_osc"].values
     for i in range(n):
         ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
         x = np.asarray(ds["series"].isel(solution=i))[:, 0]
         ax.plot(x[:, 0], x[:, 1], x[:, 2], lw=0.3)
         ax.set_title(f"({chr(97 + i)}) {_label(ds.isel(solution=i))}", fontsize=9)
-        ax.set_xlabel(f"x_{numbers[0]}", fontsize=8)
-        ax.set_ylabel(f"x_{numbers[1]}", fontsize=8)
-        ax.set_zlabel(f"x_{numbers[2]}", fontsize=8)
+        ax.set_xlabel(f"$x_{{{numbers[0]}}}$", fontsize=8)
+        ax.set_ylabel(f"$x_{{{numbers[1]}}}$", fontsize=8)
+        ax.set_zlabel(f"$x_{{{numbers[2]}}}$", fontsize=8)
         ax.tick_params(labelsize=6)
     t = ds["time"].values
-    fig.suptitle(f"Phase plots over τ in [{t[0]:g}, {t[-1]:g}], v_d = "
+    fig.suptitle(f"Phase plots over $\\tau$ in [{t[0]:g}, {t[-1]:g}], $v_d$ = "
                  f"{float(ds.attrs['v_d']):g} (cf. Fig. 7)", fontsize=10)
-    fig.tight_layout()
     return fig
 
 
@@ -155,10 +171,7 @@ def plot_orbit_diagram(ds: xr.Dataset, ax=None):
 
     The matplotlib Figure.
     """
-    import matplotlib.pyplot as plt
-
-    if ax is None:
-        _, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = single_axes(ax, (8, 4))
     start = float(ds.attrs.get("classify_from", ds.attrs["transient"]))
     for i in range(ds.sizes["solution"]):
         row = ds.isel(solution=i)
@@ -173,28 +186,29 @@ def plot_orbit_diagram(ds: xr.Dataset, ax=None):
             ax.plot([], [], ".", color=colour, label=name)
     ax.legend(fontsize=7, loc="upper left")
     ax.set_xticks(ds["solution"].values)
-    ax.set(xlabel="solution (oscillators excited)", ylabel="time delay φ")
-    ax.set_title(f"Orbit diagram, v_d = {float(ds.attrs['v_d']):g}, τ in "
+    ax.set(xlabel="solution (oscillators excited)", ylabel=r"time delay $\varphi$")
+    ax.set_title(f"Orbit diagram, $v_d$ = {float(ds.attrs['v_d']):g}, $\\tau$ in "
                  f"[{start:g}, {float(ds.attrs['t_end']):g}] (cf. Figs. 8-10)", fontsize=9)
-    fig = ax.figure
-    fig.tight_layout()
     return fig
 
 
-def plot_states_and_orbits(ds: xr.Dataset):
+def plot_states_and_orbits(ds: xr.Dataset, fig=None):
     """Figs. 9 and 10: (a) the localized states as circles (`plot_localized_states`)
     and (b) the orbit diagram (`plot_orbit_diagram`) of an `orbit_diagram_scene`.
+
+    **Arguments:**
+
+    - `ds`: a classified Dataset of `orbit_diagram_scene`.
+    - `fig`: a matplotlib Figure or SubFigure to draw the panels on; a new figure
+        if None.
 
     **Returns:**
 
     The matplotlib Figure.
     """
-    import matplotlib.pyplot as plt
-
     n_sol, n_osc = ds.sizes["solution"], ds.sizes["osc"]
-    fig, (ax_a, ax_b) = plt.subplots(
-        1, 2, figsize=(0.45 * n_osc + 10, max(4.0, 0.4 * n_sol + 1.2)),
-        gridspec_kw={"width_ratios": [0.45 * n_osc + 4, 7]})
+    fig = panel_figure(fig, (0.45 * n_osc + 10, max(4.0, 0.4 * n_sol + 1.2)))
+    ax_a, ax_b = fig.subplots(1, 2, gridspec_kw={"width_ratios": [0.45 * n_osc + 4, 7]})
     states = (ds[["amplitudes", "n_halc", "energy", "status"]]
               .rename(solution="ic").expand_dims(v_d=[float(ds.attrs["v_d"])])
               .assign_coords(n_excited=("ic", ds["solution"].values)))
@@ -202,5 +216,4 @@ def plot_states_and_orbits(ds: xr.Dataset):
     ax_a.set_title("(a) " + ax_a.get_title(), fontsize=9)
     plot_orbit_diagram(ds, ax=ax_b)
     ax_b.set_title("(b) " + ax_b.get_title(), fontsize=9)
-    fig.tight_layout()
     return fig

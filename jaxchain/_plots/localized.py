@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .._engine.status import Status
+from .canvas import single_axes
 
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr
@@ -28,15 +29,13 @@ def plot_localized_states(ds: xr.Dataset, v_d: float | None = None, ax=None):
 
     The matplotlib Figure.
     """
-    import matplotlib.pyplot as plt
     from matplotlib.collections import PatchCollection
     from matplotlib.patches import Circle
 
     row = ds.isel(v_d=0) if v_d is None else ds.sel(v_d=v_d, method="nearest")
     amps = np.nan_to_num(np.asarray(row["amplitudes"]), nan=0.0)
     n_ic, n_osc = amps.shape
-    if ax is None:
-        _, ax = plt.subplots(figsize=(0.45 * n_osc + 2.5, 0.4 * n_ic + 1.2))
+    fig, ax = single_axes(ax, (0.45 * n_osc + 2.5, 0.4 * n_ic + 1.2))
     scale = 0.45 / max(float(amps.max()), 1e-12)
     labels = (np.asarray(row["n_excited"]) if "n_excited" in row.coords
               else np.arange(1, n_ic + 1))
@@ -56,10 +55,8 @@ def plot_localized_states(ds: xr.Dataset, v_d: float | None = None, ax=None):
     ax.set_yticks(-np.arange(n_ic), [str(k) for k in labels])
     ax.set_xlabel("oscillator n")
     ax.set_ylabel("oscillators excited")
-    ax.set_title(f"Localized states, v_d = {float(row['v_d']):g} "
+    ax.set_title(f"Localized states, $v_d$ = {float(row['v_d']):g} "
                  f"(radius ∝ amplitude; cf. Fig. 4)", fontsize=9)
     for side in ("top", "right"):
         ax.spines[side].set_visible(False)
-    fig = ax.figure
-    fig.tight_layout()
     return fig

@@ -5,12 +5,13 @@ import json
 
 import numpy as np
 
+from .canvas import single_axes
 from .bifurcation import _segments
 
 _MARKERS = {"fold": "o", "branch point": "s", "period doubling": "D", "Neimark-Sacker": "^"}
 
 
-def plot_snake(datasets: dict, sweep=None, title: str = ""):
+def plot_snake(datasets: dict, sweep=None, title: str = "", ax=None):
     """Energy E of eq. (9) against v_d for every branch of `localized_branches`:
     stable solid, unstable dashed, each bifurcation marked by its kind; the points
     of a Fig. 3(b) sweep (`open_sweep` or `sweep`) in grey underneath when given.
@@ -20,6 +21,7 @@ def plot_snake(datasets: dict, sweep=None, title: str = ""):
     - `datasets`: label -> a joined branch (`follow_branch`), dims (point,).
     - `sweep`: an `xarray.Dataset` of a sweep (dims (v_d, ic)) or None.
     - `title`: the axes' title.
+    - `ax`: a matplotlib Axes to draw on; a new figure if None.
 
     **Returns:**
 
@@ -27,7 +29,7 @@ def plot_snake(datasets: dict, sweep=None, title: str = ""):
     """
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 5.5))
+    fig, ax = single_axes(ax, (8, 5.5))
     if sweep is not None:
         v = np.broadcast_to(sweep["v_d"].values[:, None], sweep["energy"].shape)
         ax.plot(v.ravel(), np.asarray(sweep["energy"].values).ravel(), ".", color="0.6",
@@ -51,5 +53,4 @@ def plot_snake(datasets: dict, sweep=None, title: str = ""):
     ax.set_yscale("symlog", linthresh=1.0)
     ax.set_title(title or "localized periodic states: stable solid, unstable dashed")
     ax.legend(fontsize=8, loc="upper left")
-    fig.tight_layout()
     return fig

@@ -11,6 +11,7 @@ from .._bifurcation.hopf import hopf_speed
 from .._physics.record import chain_from_record, chain_settings
 from .._analysis.fronts import front_fractions, front_ranges
 from .._engine.status import Status
+from .canvas import panel_figure
 
 if TYPE_CHECKING:  # heavy: imported where they are used
     import xarray as xr
@@ -20,7 +21,7 @@ FRONT_COLOURS = {1: "tab:red", -1: "tab:blue"}
 FRONT_NAMES = {1: "stick-slip invades", -1: "stick-slip recedes"}
 
 
-def plot_bifurcation_diagram(ds: xr.Dataset):
+def plot_bifurcation_diagram(ds: xr.Dataset, fig=None):
     """Draw a sweep in the manner of Fig. 3(b) of the paper.
 
     - Upper panel: the energy E of eq. (9) of every (value, initial condition) as a
@@ -41,6 +42,8 @@ def plot_bifurcation_diagram(ds: xr.Dataset):
 
     - `ds`: a Dataset from `sweep` (dims (name, ic), with `energy`, `n_halc`,
         `status` and `front`).
+    - `fig`: a matplotlib Figure or SubFigure to draw the panels on; a new figure
+        if None.
 
     **Returns:**
 
@@ -59,8 +62,8 @@ def plot_bifurcation_diagram(ds: xr.Dataset):
     front = np.where(ok, np.asarray(ds["front"]), 0)
     n_osc = int(ds.sizes["osc"])
     fractions = front_fractions(ds)
-    fig, (ax, low) = plt.subplots(2, 1, figsize=(7.5, 6), sharex=True,
-                                  gridspec_kw={"height_ratios": [3, 1]})
+    fig = panel_figure(fig, (7.5, 6))
+    ax, low = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
 
     cells = _cells(values)
     for sign, colour in FRONT_COLOURS.items():
@@ -99,11 +102,11 @@ def plot_bifurcation_diagram(ds: xr.Dataset):
     dots = ax.scatter(x[ok], energy[ok], c=n_halc[ok], cmap="viridis", norm=norm, s=18,
                       zorder=2, edgecolors=ring, linewidths=1.2)
     bar = fig.colorbar(dots, ax=[ax, low], pad=0.02, fraction=0.05)
-    bar.set_label("oscillators on the HALC, n_HALC")
+    bar.set_label(r"oscillators on the HALC, $n_\mathrm{HALC}$")
     bar.set_ticks(np.unique(np.linspace(0, n_osc, min(n_osc, 10) + 1).round().astype(int)))
 
-    label = {"v_d": "belt speed v_d"}.get(name, name)
-    ax.set_ylabel("E = 1/2 sum A_n^2, eq. (9)")
+    label = {"v_d": "belt speed $v_d$"}.get(name, name)
+    ax.set_ylabel(r"$\tilde E = \frac{1}{2}\sum_n A_n^2$, eq. (9)")
     failed = int((~ok).sum())
     note = f"; {failed} failed run(s) not shown" if failed else ""
     ax.set_title(f"Bifurcation diagram, N = {n_osc} (cf. Fig. 3(b)){note}", fontsize=10)

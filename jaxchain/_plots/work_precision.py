@@ -3,11 +3,13 @@
 import numpy as np
 
 from .._engine.status import Status
+from .canvas import panel_figure
 
 _MARKERS = {"scipy LSODA": "s", "scipy Radau": "D", "reference": "*"}
 
 
-def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_error"):
+def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_error",
+                        fig=None):
     """One panel per eps, one line per diffrax solver over its rtols (wall time
     against `error`, log-log), and the outside points in black: scipy's LSODA and
     Radau at the same eps, and the non-smooth reference at its own tolerances (in
@@ -18,17 +20,18 @@ def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_er
     - `rows`: rows of `work_precision` (dicts of strings).
     - `scene`: which scene to draw.
     - `error`: "amplitude_error", "energy_error" or "trajectory_error".
+    - `fig`: a matplotlib Figure or SubFigure to draw the panels on; a new figure
+        if None.
 
     **Returns:**
 
     The matplotlib Figure.
     """
-    import matplotlib.pyplot as plt
 
     rows = [r for r in rows if r["scene"] == scene]
     eps_values = sorted({float(r["eps"]) for r in rows if float(r["eps"]) > 0}, reverse=True)
-    fig, axes = plt.subplots(1, max(1, len(eps_values)), figsize=(3.6 * len(eps_values), 4),
-                             sharex=True, sharey=True, squeeze=False)
+    fig = panel_figure(fig, (3.6 * max(1, len(eps_values)), 4.6))
+    axes = fig.subplots(1, max(1, len(eps_values)), sharex=True, sharey=True, squeeze=False)
     solvers = sorted({r["method"] for r in rows} - set(_MARKERS))
     colors = {s: f"C{i}" for i, s in enumerate(solvers)}
     ok = [r for r in rows if r["status"] == Status.ok.name and r[error] != ""]
@@ -57,13 +60,16 @@ def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_er
                         label=method)
         ax.axhline(1e-2, color="0.6", lw=0.8, ls="--")
         ax.axhline(1e-3, color="0.6", lw=0.8, ls=":")
-        ax.set(xscale="log", yscale="log", title=f"eps = {eps:g}", xlabel="wall time (s)")
+        ax.set(xscale="log", yscale="log", title=f"$\\varepsilon$ = {eps:g}",
+               xlabel="wall time (s)")
+        ax.tick_params(axis="x", which="minor", labelbottom=False)  # no crowded labels
     axes[0, 0].set_ylabel(f"{error.replace('_', ' ')} vs non-smooth")
     handles = {}
     for ax in axes[0]:
         for h, label in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(label, h)
-    axes[0, -1].legend(handles.values(), handles.keys(), fontsize=7, loc="lower left")
+    # below the panels, where it covers no data
+    fig.legend(handles.values(), handles.keys(), fontsize=7, loc="outside lower center",
+               ncols=min(len(handles), 6))
     fig.suptitle(f"work-precision, {scene} scene (x: failed; dashed 1 %, dotted 0.1 %)")
-    fig.tight_layout()
     return fig
