@@ -11,7 +11,7 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from helpers import (JAXCHAIN, SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, batch_writes,
+from helpers import (JAXCHAIN, assert_cf_compliant, SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, batch_writes,
                      batches_done, held, hold_env, internal, kill, release, replace_internal,
                      small_sweep, sweep_cli)
 
@@ -111,6 +111,20 @@ def test_a_store_of_other_settings_is_refused_with_status_2(tmp_path, capsys):
     doc = json.loads(capsys.readouterr().out)
     assert set(doc["outputs"]) == {"sweep.zarr", "sweep.png"} and doc["batches_run"] == 0
     assert _chunk_times(out / "sweep.zarr", range(3)) == before
+    _assert_cf_store(out / "sweep.zarr", tmp_path / "sweep.nc")
+
+
+def _assert_cf_store(store, copy) -> None:
+    """The zarr store carries the CF attributes (the compliance checker reads no
+    zarr v3, so it checks a netCDF copy, written with xarray's defaults but no fill
+    value on the coordinates, as CF wants)."""
+    ds = xr.open_zarr(store, consolidated=False).load()
+    assert ds.attrs["Conventions"].startswith("CF-") and ds.attrs["history"]
+    assert ds.attrs["source"] == f"jaxchain {jc.__version__}"
+    assert all("long_name" in v.attrs for v in ds.variables.values())
+    ds.to_netcdf(copy, encoding={c: {"_FillValue": None} for c in ds.coords
+                                 if ds[c].dtype.kind == "f"})
+    assert_cf_compliant(copy)
 
 
 @pytest.mark.numerics

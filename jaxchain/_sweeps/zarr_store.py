@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import hold, partial_path
+from .datasets import cf_dataset
 from .._errors import ValidationError
 
 if TYPE_CHECKING:  # heavy: imported where they are used
@@ -173,7 +174,7 @@ class SweepStore:
                                             chunks=(batch_size, *var.shape[1:])),
                           var.attrs)
         data["batch_done"] = ("batch", da.zeros(n_batches, dtype=np.uint8, chunks=1))
-        template = xr.Dataset(data, coords=coords, attrs=attrs)
+        template = cf_dataset(xr.Dataset(data, coords=coords, attrs=attrs))
         partial = partial_path(self.path)
         template.to_zarr(partial, mode="w", compute=False, consolidated=False)
         self.path.parent.mkdir(parents=True, exist_ok=True)
