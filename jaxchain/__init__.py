@@ -103,7 +103,10 @@ from ._engine.observers.lyapunov_exponent import LargestLyapunov as LargestLyapu
 from ._engine.observers.series import TimeSeries as TimeSeries
 from ._engine.horizon import AbstractHorizon as AbstractHorizon
 from ._engine.options import SimulationOptions as SimulationOptions
-from ._physics.chain import BOUNDARIES as BOUNDARIES, Mistuning as Mistuning
+from ._physics.chain import (
+    BOUNDARIES as BOUNDARIES, GROUND as GROUND, Graph as Graph,
+    LATTICE_BOUNDARIES as LATTICE_BOUNDARIES, Mistuning as Mistuning,
+)
 from ._physics.forces import (
     coupling_force as coupling_force, friction_coefficient as friction_coefficient,
     slip_friction_force as slip_friction_force,
@@ -113,7 +116,7 @@ from ._physics.forces import (
 from ._physics.friction import (
     FRICTION_LAWS as FRICTION_LAWS, AbstractFrictionLaw as AbstractFrictionLaw,
     Coulomb as Coulomb, ExponentialDecay as ExponentialDecay, Polynomial as Polynomial,
-    Stribeck as Stribeck,
+    Stribeck as Stribeck, Tabulated as Tabulated,
 )
 from ._physics.initial import (
     AbstractInitialCondition as AbstractInitialCondition,
@@ -139,8 +142,13 @@ from ._physics.params import (
 )
 from ._physics.record import (
     chain_from_record as chain_from_record, chain_record as chain_record,
+    check_recordable as check_recordable, chain_from_file as chain_from_file,
+    write_chain_file as write_chain_file,
 )
 from ._physics.stick import STICK_BAND as STICK_BAND, sticks as sticks
+from ._physics.units import (
+    Scales as Scales, from_physical as from_physical, to_physical as to_physical,
+)
 from ._plots.basin import (
     plot_basin_stability as plot_basin_stability,
     plot_halc_histogram as plot_halc_histogram,

@@ -27,7 +27,7 @@ def lyapunov_class(exponent: float, error: float) -> str:
 
 def classify(peak_times, on_halc, n_halc: int, status: int, lyapunov: float,
              lyapunov_error: float, t_from: float,
-             tolerances: ClassTolerances = ClassTolerances(), boundary: str = "ring") -> dict:
+             tolerances: ClassTolerances = ClassTolerances(), boundary="ring") -> dict:
     """Classify one state as periodic or irregular from two independent signals.
 
     - **The time delays** (the paper's criterion, Section 3.3): `delay_spread` of

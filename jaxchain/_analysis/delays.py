@@ -4,20 +4,24 @@ of the paper)."""
 import numpy as np
 from jaxtyping import Bool, Float
 
+from .._physics.chain import Graph, as_graph
+from .._physics.initial import centre_site
 
-def reference_oscillator(on_halc: Bool[np.ndarray, " n_osc"], boundary: str = "ring") -> int:
+
+def reference_oscillator(on_halc: Bool[np.ndarray, " n_osc"],
+                         boundary: str | Graph = "ring") -> int:
     """The paper's reference oscillator: the 11th of 20 (0-based N//2), which is
-    excited and on the HALC in every solution of Fig. 4. When it is not on the
-    HALC, the HALC oscillator nearest to it along the chain (around the ring, or
-    along an open chain, `boundary`); N//2 when none is."""
-    n = on_halc.size
-    centre = n // 2
+    excited and on the HALC in every solution of Fig. 4; on a lattice its centre
+    site (`centre_site`). When it is not on the HALC, the HALC oscillator nearest
+    to it by graph distance (around the ring, along an open chain, across a
+    lattice: `boundary`, a name of `BOUNDARIES` or the `Graph`), the lower index
+    first; the centre when none is."""
+    graph = as_graph(boundary, on_halc.size)
+    centre = centre_site(graph)
     halc = np.flatnonzero(on_halc)
     if halc.size == 0 or on_halc[centre]:
         return centre
-    distance = np.abs(halc - centre)
-    if boundary == "ring":
-        distance = np.minimum(distance, n - distance)
+    distance = graph.distances()[centre][halc]
     return int(halc[np.argmin(distance)])
 
 

@@ -4,25 +4,31 @@
 import argparse
 from pathlib import Path
 
-from .._physics.chain import BOUNDARIES
-from .._physics.friction import FRICTION_LAWS
+from .._physics.chain import BOUNDARIES, Graph
+from .._physics.friction import FRICTION_LAWS, Tabulated
 from .._physics.params import ChainParams, mistune
 from .._errors import ValidationError
-from .._physics.record import chain_from_record, read_chain_file
+from .._physics.record import chain_from_file
 from .common import UsageError
 
 CHAIN_HELP = """\
 The chain: --boundary ring (eq. (5) of the paper, the default), free (an open line)
-or fixed (an open line tied to the ground at both ends); --friction NAME:key=value,...
+or fixed (an open line tied to the ground at both ends); --lattice ROWSxCOLS makes
+it a 2-D lattice (oscillator r*cols + c at row r, column c, 0-based) whose two
+directions take --boundary (ring: periodic); --friction NAME:key=value,...
 with NAME one of exponential (eq. (1): mu_st, mu_d, v0; the default), stribeck
 (mu_s, mu_c, v_s, delta, viscous), polynomial (c0, c1, c2, c3) or coulomb (mu), for
 example --friction stribeck:mu_s=1,mu_c=0.5,v_s=0.5,delta=2,viscous=0.05 (missing
-keys take the law's defaults); --mistuning SIGMA --mistuning-seed S draws the stiffnesses
+keys take the law's defaults), or --friction table:FILE.csv, a measured curve (columns
+v and mu, v >= 0 increasing; monotone cubic interpolation, held constant beyond the
+table); --mistuning SIGMA --mistuning-seed S draws the stiffnesses
 1 + delta_n, delta_n normal with standard deviation SIGMA; --chain FILE reads a TOML
-file of chain settings, which override the options above: n_osc, boundary, xi,
-eta_c (one value per link), stiffness, load (one value per oscillator), friction =
-"NAME" and the law's parameters (numbers or lists of one per oscillator),
-mistuning_sigma and mistuning_seed."""
+file of chain settings, which override the options above (the schema is in the
+documentation, "Chain files"): n_osc, boundary, lattice = [ROWS, COLS] or links =
+[[i, j], ...], xi, eta_c (one value per link), stiffness, load, mass (one value per
+oscillator), friction = "NAME" with the law's parameters or friction = "table" with
+table = "FILE.csv", mistuning_sigma, mistuning_seed, and units = "SI" for a chain in
+kg, N/m, N s/m, N and m/s."""
 
 
 def add_chain_options(g, mistuning: bool = True) -> None:
@@ -30,7 +36,11 @@ def add_chain_options(g, mistuning: bool = True) -> None:
     argument group (or parser) `g`; without --mistuning and --mistuning-seed where
     the command draws the mistuning itself (mistuning)."""
     g.add_argument("--boundary", choices=BOUNDARIES, default="ring",
-                   help="ring (eq. (5), default), free or fixed ends")
+                   help="ring (eq. (5), default), free or fixed ends (of each direction "
+                        "of a lattice)")
+    g.add_argument("--lattice", type=_lattice_size, default=None, metavar="ROWSxCOLS",
+                   help="a 2-D lattice of ROWS x COLS oscillators (sets the number of "
+                        "oscillators)")
     g.add_argument("--friction", default=None, metavar="NAME:k=v,...",
                    help=f"friction law, one of {', '.join(FRICTION_LAWS)} with its "
                         "parameters (default eq. (1) of the paper, exponential)")
@@ -43,6 +53,18 @@ def add_chain_options(g, mistuning: bool = True) -> None:
     g.add_argument("--chain", type=Path, default=None, metavar="FILE",
                    help="TOML file of chain settings (per-oscillator arrays included); "
                         "see the chain paragraph of --help")
+
+
+def _lattice_size(text: str) -> tuple[int, int]:
+    rows, sep, cols = text.lower().partition("x")
+    try:
+        size = (int(rows), int(cols))
+    except ValueError:
+        size = None
+    if not sep or size is None or min(size) < 1:
+        raise argparse.ArgumentTypeError(f"expected ROWSxCOLS, two integers >= 1 such as "
+                                         f"4x5, got {text!r}")
+    return size
 
 
 def _non_negative(text: str) -> float:
@@ -66,6 +88,11 @@ def parse_friction(text: str | None):
     if text is None:
         return None
     name, _, rest = text.partition(":")
+    if name == "table":
+        try:
+            return Tabulated.from_csv(rest)
+        except ValidationError as err:
+            raise UsageError(f"--friction table: {err}") from None
     if name not in FRICTION_LAWS:
         raise UsageError(f"--friction: unknown law {name!r}; choose one of "
                          f"{', '.join(FRICTION_LAWS)}")
@@ -94,18 +121,18 @@ def chain_params(args, n_osc: int, **fields) -> ChainParams:
 
     `UsageError` or `ValidationError` (exit status 2) for a bad chain.
     """
-    base = ChainParams(n_osc=n_osc, boundary=args.boundary,
-                       friction=parse_friction(args.friction), **fields)
+    lattice = getattr(args, "lattice", None)
+    if lattice is None:
+        topology = {"n_osc": n_osc, "boundary": args.boundary}
+    else:
+        topology = {"graph": Graph.lattice(*lattice, args.boundary)}
+    base = ChainParams(**topology, friction=parse_friction(args.friction), **fields)
     params = base
     if args.chain is not None:
         try:
-            record = read_chain_file(args.chain)
-        except ValidationError as err:
-            raise UsageError(f"--chain {err}") from None
-        try:
-            params = chain_from_record(record, base)
+            params = chain_from_file(args.chain, base)
         except (ValueError, TypeError) as err:
-            raise UsageError(f"--chain {args.chain}: {err}") from None
+            raise UsageError(f"--chain {err}") from None
     if getattr(args, "mistuning", None) is not None:
         params = mistune(params, args.mistuning, args.mistuning_seed)
     return params

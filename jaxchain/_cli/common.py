@@ -130,10 +130,24 @@ def one_belt_speed(text: str) -> float:
 VD_FORMS = "V|V,V,...|START:STOP:NUM"
 
 
+class DefaultSpeeds(list):
+    """The default belt speeds of --vd, told apart from speeds the user gave (a
+    chain file's own v_d then replaces them, `speeds_of_chain`)."""
+
+
+def speeds_of_chain(args, params) -> list[float]:
+    """The belt speeds to run: --vd as given, or the chain's v_d (a chain file's, in
+    SI units its belt_speed) when --vd was not given and --chain was."""
+    if isinstance(args.vd, DefaultSpeeds) and getattr(args, "chain", None) is not None:
+        return [float(params.v_d)]
+    return list(args.vd)
+
+
 def add_vd_option(g, default, help: str) -> None:
     """--vd in the grammar of `belt_speeds`, `default` a list of belt speeds (or None
     where the command chooses), in the argument group (or parser) `g`."""
     shown = "the command's choice" if default is None else ",".join(f"{v:g}" for v in default)
+    default = None if default is None else DefaultSpeeds(default)
     g.add_argument("--vd", type=belt_speeds, default=default, metavar=VD_FORMS,
                    help=f"{help} (default {shown})")
 

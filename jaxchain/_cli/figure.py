@@ -75,7 +75,7 @@ def _scene(name: str, size: dict, params: ChainParams, solver, options, progress
     ics = PAPER_FIGURES[name][1]
     solutions = [k for k in PAPER_SOLUTIONS if k <= params.n_osc]
     if name == "4":
-        family = localized_family(params.n_osc, ics, params.boundary)
+        family = localized_family(params.n_osc, ics, params.graph)
         ds = ensemble(params, [params.v_d.item()], family, solver, options, progress=progress)
         return ds, plot_localized_states(ds)
     if name == "5":

@@ -13,7 +13,7 @@ from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, add_model_options, add_output_options,
                      add_run_options, note, prefetch, print_json, show_progress,
-                     simulation_options)
+                     simulation_options, speeds_of_chain)
 
 HELP = "localized states at each belt speed, N initial conditions (Fig. 4)"
 DESCRIPTION = """\
@@ -26,7 +26,8 @@ transient = 10000.
 
 Writes, for each belt speed V, <out>/localized_vd<V>.nc (xarray Dataset with all
 parameters as attributes) and <out>/localized_vd<V>.png (circles of radius
-proportional to amplitude)."""
+proportional to amplitude, drawn on the grid for a lattice). With --chain and no
+--vd, the chain file's v_d (or belt_speed) is run."""
 
 
 def add_parser(sub):
@@ -47,10 +48,11 @@ def add_parser(sub):
 def run(args) -> None:
     prefetch("xarray", "matplotlib.pyplot")
     params = chain_params(args, args.n_osc, v_d=args.vd[0], eps=args.eps)
+    args.vd = speeds_of_chain(args, params)
     options = simulation_options(args)
     stems = [f"localized_vd{v:g}" for v in args.vd]
     outputs = Outputs(args, data=[f"{stem}.nc" for stem in stems], figures=stems)
-    ics = localized_family(params.n_osc, args.ics, params.boundary)
+    ics = localized_family(params.n_osc, args.ics, params.graph)
     n_excited = np.arange(1, params.n_osc + 1)
 
     start = time.perf_counter()

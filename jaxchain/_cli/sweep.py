@@ -87,7 +87,7 @@ def run(args) -> None:
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
     outputs = Outputs(args, data=["sweep.zarr"], figures=["sweep"])
-    ics = {name: localized_family(params.n_osc, name, params.boundary) for name in args.ics}
+    ics = {name: localized_family(params.n_osc, name, params.graph) for name in args.ics}
     store = outputs.path("sweep.zarr")
 
     start = time.perf_counter()

@@ -42,8 +42,10 @@ def mode_field(t, state, args):
     force = jnp.where(stick, stick_force(params, x),
                       slip_friction_force(params, v - params.v_d, modes))
     dx = jnp.where(stick, params.v_d, v)
-    a = jnp.where(stick, 0.0, -2 * params.xi * v - params.stiffness * x
-                  - coupling_force(params, x) + force)
+    a = -2 * params.xi * v - params.stiffness * x - coupling_force(params, x) + force
+    if params.mass is not None:
+        a = a / params.mass
+    a = jnp.where(stick, 0.0, a)
     power = jnp.stack([jnp.sum(force * dx), jnp.sum(2 * params.xi * dx**2)])
     return jnp.stack([dx, a]), power
 

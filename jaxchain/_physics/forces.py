@@ -14,23 +14,26 @@ from .params import ChainParams
 def link_extensions(params: ChainParams, x: Float[Array, " n_osc"]
                     ) -> Float[Array, " n_links"]:
     """The extension of each coupling spring, x_right - x_left (the ground's
-    displacement is 0), in the link order of `BOUNDARIES`.
+    displacement is 0), in the link order of the chain's `Graph`.
 
     **Arguments:**
 
-    - `params`: the chain parameters (`boundary`).
+    - `params`: the chain parameters (`graph`).
     - `x`: displacements, shape (n_osc,), dimensionless.
 
     **Returns:**
 
-    Shape (n_links,).
+    Shape (n_links,). A line's links are taken by shifts of x; any other graph's by
+    its incidence matrix (`Graph.incidence`, a constant of the compiled program).
     """
     if params.boundary == "ring":
         return jnp.roll(x, -1) - x
     if params.boundary == "free":
         return x[1:] - x[:-1]
-    ground = jnp.zeros((1,), dtype=x.dtype)
-    return jnp.diff(jnp.concatenate([ground, x, ground]))
+    if params.boundary == "fixed":
+        ground = jnp.zeros((1,), dtype=x.dtype)
+        return jnp.diff(jnp.concatenate([ground, x, ground]))
+    return jnp.asarray(params.graph.incidence()) @ x
 
 
 def coupling_force(params: ChainParams, x: Float[Array, " n_osc"]
@@ -45,7 +48,7 @@ def coupling_force(params: ChainParams, x: Float[Array, " n_osc"]
 
     **Arguments:**
 
-    - `params`: the chain parameters (`boundary`, `eta_c` of shape () or (n_links,)).
+    - `params`: the chain parameters (`graph`, `eta_c` of shape () or (n_links,)).
     - `x`: displacements, shape (n_osc,), dimensionless.
 
     **Returns:**
@@ -61,7 +64,9 @@ def coupling_force(params: ChainParams, x: Float[Array, " n_osc"]
     if params.boundary == "free":
         nothing = jnp.zeros((1,), dtype=tension.dtype)
         tension = jnp.concatenate([nothing, tension, nothing])
-    return tension[:-1] - tension[1:]
+    if params.graph.is_line:
+        return tension[:-1] - tension[1:]
+    return jnp.asarray(params.graph.incidence()).T @ tension
 
 
 def coupling_energy(params: ChainParams, x: Float[Array, " n_osc"]

@@ -105,6 +105,23 @@ class AbstractFrictionLaw(eqx.Module):
         """The names of the law's parameters (its fields), in order."""
         return tuple(f for f in cls.__dataclass_fields__)
 
+    def scaled(self, velocity: float) -> "AbstractFrictionLaw":
+        """The law with its velocities divided by `velocity` (a law in m/s made
+        dimensionless by the velocity scale x_0 omega_n, `from_physical`): mu~(v~) =
+        mu(v~ velocity).
+
+        **Raises:** `ValidationError` for a law that does not say how (a user's law:
+        give it dimensionless)."""
+        raise ValidationError(f"{type(self).__name__} does not say how to rescale its "
+                              "velocities: give it in dimensionless velocities")
+
+    @classmethod
+    def table_names(cls) -> tuple[str, ...]:
+        """The parameters that hold a table (shape (m,), the same for every
+        oscillator) rather than one value or one per oscillator; none but in
+        `Tabulated`."""
+        return ()
+
     @classmethod
     @abc.abstractmethod
     def rules(cls) -> dict:
@@ -147,6 +164,9 @@ class ExponentialDecay(AbstractFrictionLaw):
 
     def __call__(self, v_rel):
         return self.mu_d + (self.mu_st - self.mu_d) * jnp.exp(-jnp.abs(v_rel) / self.v0)
+
+    def scaled(self, velocity):
+        return eqx.tree_at(lambda f: f.v0, self, self.v0 / velocity)
 
     def static(self):
         return jnp.asarray(self.mu_st)
@@ -198,6 +218,10 @@ class Stribeck(AbstractFrictionLaw):
         decay = jnp.where(r > 0, jnp.exp(-safe**self.delta), 1.0)
         return self.mu_c + (self.mu_s - self.mu_c) * decay + self.viscous * jnp.abs(v_rel)
 
+    def scaled(self, velocity):
+        return eqx.tree_at(lambda f: (f.v_s, f.viscous), self,
+                           (self.v_s / velocity, self.viscous * velocity))
+
     def static(self):
         return jnp.asarray(self.mu_s)
 
@@ -246,6 +270,10 @@ class Polynomial(AbstractFrictionLaw):
         s = jnp.abs(v_rel)
         return self.c0 + s * (self.c1 + s * (self.c2 + s * self.c3))
 
+    def scaled(self, velocity):
+        return eqx.tree_at(lambda f: (f.c1, f.c2, f.c3), self,
+                           (self.c1 * velocity, self.c2 * velocity**2, self.c3 * velocity**3))
+
     def static(self):
         return jnp.asarray(self.c0)
 
@@ -271,10 +299,124 @@ class Coulomb(AbstractFrictionLaw):
     def __call__(self, v_rel):
         return self.mu + 0.0 * jnp.abs(v_rel)
 
+    def scaled(self, velocity):
+        return self
+
     def static(self):
         return jnp.asarray(self.mu)
 
 
+def _table_speeds(value) -> tuple:
+    """The speeds of a table as a tuple of floats (a static, hashable field)."""
+    try:
+        return tuple(float(v) for v in np.asarray(value, dtype=float).reshape(-1))
+    except (TypeError, ValueError):
+        raise ValidationError(f"Tabulated.v must be real numbers, got {value!r}") from None
+
+
+class Tabulated(AbstractFrictionLaw):
+    """A friction law from measured samples: mu at relative speeds v_1 < v_2 < ...
+    (v >= 0; mu(-v) = mu(v)), interpolated by a monotone piecewise cubic Hermite
+    interpolant (PCHIP, Fritsch & Carlson (1980), SIAM J. Numer. Anal. 17, 238-246,
+    by `interpax.interp1d(method="monotonic")`): continuously differentiable,
+    monotone between monotone samples, with no overshoot beyond the samples.
+
+    Beyond the table mu is held at its end values: mu(|v|) = mu_1 for |v| < v_1 and
+    mu_last for |v| > v_last. The static coefficient (the stick bound) is
+    mu(0) = mu_1 (the first sample, at v_1 = 0 when the table starts there).
+
+    **Arguments:**
+
+    - `v`: the speeds, shape (m,), m >= 2, strictly increasing, >= 0, in the units of
+        the chain's velocities (dimensionless, eq. (4); see `from_physical` for m/s).
+        Static: a new table of speeds compiles anew.
+    - `mu`: the friction coefficients, shape (m,), > 0 (traced: differentiable, for
+        identification).
+
+    **Raises:**
+
+    `ValidationError` naming the field for fewer than 2 samples, speeds that are not
+    sorted or negative, a NaN, or a coefficient <= 0 or of another length.
+    """
+
+    v: tuple = eqx.field(static=True, converter=_table_speeds)
+    mu: ArrayLike = eqx.field(converter=as_parameter)
+
+    def __check_init__(self):
+        speeds = np.asarray(self.v, dtype=float)
+        if speeds.size < 2:
+            raise ValidationError(f"Tabulated.v needs at least 2 samples, got {speeds.size}")
+        if not np.all(np.isfinite(speeds)):
+            raise ValidationError("Tabulated.v must be finite, got a NaN or an infinity")
+        if speeds[0] < 0:
+            raise ValidationError(f"Tabulated.v must be >= 0 (mu is even in v), got "
+                                  f"{speeds[0]!r}")
+        if not np.all(np.diff(speeds) > 0):
+            i = int(np.flatnonzero(np.diff(speeds) <= 0)[0])
+            raise ValidationError(f"Tabulated.v must be strictly increasing, got "
+                                  f"{speeds[i]!r} then {speeds[i + 1]!r}")
+        if np.shape(self.mu) != speeds.shape:
+            raise ValidationError(f"Tabulated.mu must have the shape of v, {speeds.shape}, "
+                                  f"got {np.shape(self.mu)}")
+        self.check()
+
+    @classmethod
+    def rules(cls):
+        return {"mu": (_positive, "> 0")}
+
+    @classmethod
+    def parameter_names(cls) -> tuple[str, ...]:
+        return ("mu",)
+
+    @classmethod
+    def table_names(cls) -> tuple[str, ...]:
+        return ("mu",)
+
+    @classmethod
+    def from_csv(cls, path) -> "Tabulated":
+        """A table read from a CSV file with a header naming the columns `v` and
+        `mu` (other columns are ignored).
+
+        **Raises:** `ValidationError` naming the file for a file that cannot be read,
+        a missing column, or a value that is not a number (or the table's errors)."""
+        import csv
+
+        try:
+            with open(path, newline="") as f:
+                rows = list(csv.DictReader(f))
+        except OSError as err:
+            raise ValidationError(f"{path}: cannot read it ({err.strerror})") from None
+        if not rows or not {"v", "mu"} <= set(rows[0]):
+            raise ValidationError(f"{path}: needs a header with the columns v and mu")
+        try:
+            v = [float(r["v"]) for r in rows]
+            mu = [float(r["mu"]) for r in rows]
+        except (TypeError, ValueError):
+            raise ValidationError(f"{path}: a value in column v or mu is not a number") \
+                from None
+        try:
+            return cls(v=v, mu=mu)
+        except ValidationError as err:
+            raise ValidationError(f"{path}: {err}") from None
+
+    def __call__(self, v_rel):
+        import interpax
+
+        speeds = jnp.asarray(self.v)
+        s = jnp.clip(jnp.abs(jnp.asarray(v_rel)), speeds[0], speeds[-1])
+        flat = jnp.reshape(s, (-1,))
+        with jax.numpy_rank_promotion("allow"):  # interpax broadcasts inside
+            mu = interpax.interp1d(flat, speeds, jnp.asarray(self.mu), method="monotonic",
+                                   extrap=True)
+        return jnp.reshape(mu, jnp.shape(s))
+
+    def scaled(self, velocity):
+        return Tabulated(v=np.asarray(self.v) / velocity, mu=self.mu)
+
+    def static(self):
+        return jnp.asarray(self.mu)[0]
+
+
 #: The friction laws by the names the command line takes (`--friction NAME:...`).
 FRICTION_LAWS = {"exponential": ExponentialDecay, "stribeck": Stribeck,
-                 "polynomial": Polynomial, "coulomb": Coulomb}
+                 "polynomial": Polynomial, "coulomb": Coulomb, "table": Tabulated}

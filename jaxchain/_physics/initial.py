@@ -9,29 +9,35 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .custom_types import State
-from .chain import BOUNDARIES
+from .chain import Graph, as_graph
 from .model import steady_sliding
 from .params import ChainParams
 from .._errors import ValidationError
 
 
-def excited_block(n_osc: int, n_excited: int, boundary: str = "ring"
+def excited_block(n_osc: int, n_excited: int, boundary: str | Graph = "ring"
                   ) -> Bool[np.ndarray, " n_osc"]:
-    """Mask of `n_excited` contiguous oscillators around the centre of the chain.
+    """Mask of `n_excited` oscillators around the centre of the chain: the excited
+    block of eq. (8), or a patch on any other graph.
 
     The paper does not say which oscillators it excites, only that the 11th (of 20)
-    is always excited (Section 3.3). We take the block that starts at the centre
-    oscillator c = N//2 + 1 (1-based; c = 11 for N = 20) and grows alternately to
-    the right and to the left: oscillators c - (k-1)//2, ..., c + k//2, wrapping
-    around the ring. So k = 1 excites {11}, k = 2 {11, 12}, k = 3 {10, 11, 12}, and
-    k = 20 the whole ring. An open chain ("free", "fixed") has no wrap: a block
-    that would pass its last oscillator is shifted back to end there.
+    is always excited (Section 3.3). On a line we take the block that starts at the
+    centre oscillator c = N//2 + 1 (1-based; c = 11 for N = 20) and grows
+    alternately to the right and to the left: oscillators c - (k-1)//2, ...,
+    c + k//2, wrapping around the ring. So k = 1 excites {11}, k = 2 {11, 12}, k = 3
+    {10, 11, 12}, and k = 20 the whole ring. An open chain ("free", "fixed") has no
+    wrap: a block that would pass its last oscillator is shifted back to end there.
+
+    On any other graph the patch is the k oscillators nearest to the centre by
+    graph distance (`Graph.distances`), ties broken by the lower index; the centre
+    is oscillator (rows//2) * cols + cols//2 of a lattice (row rows//2, column
+    cols//2, 0-based), else oscillator N//2 (0-based).
 
     **Arguments:**
 
     - `n_osc`: chain size N (>= 1).
     - `n_excited`: number of excited oscillators k, 0 <= k <= N.
-    - `boundary`: the chain's boundary (`BOUNDARIES`).
+    - `boundary`: the chain's boundary (`BOUNDARIES`) or its `Graph`.
 
     **Returns:**
 
@@ -43,16 +49,44 @@ def excited_block(n_osc: int, n_excited: int, boundary: str = "ring"
     """
     if not 0 <= n_excited <= n_osc:
         raise ValidationError(f"n_excited must lie in [0, {n_osc}], got {n_excited}")
-    if boundary not in BOUNDARIES:
-        raise ValidationError(f"boundary must be one of {', '.join(BOUNDARIES)}, got {boundary!r}")
+    graph = as_graph(boundary, n_osc)
+    mask = np.zeros(n_osc, dtype=bool)
+    if not graph.is_line:
+        mask[patch_order(graph)[:n_excited]] = True
+        return mask
     centre = n_osc // 2  # 0-based index of oscillator N//2 + 1
     start = centre - (n_excited - 1) // 2
-    if boundary != "ring":
+    if graph.kind != "ring":
         start = min(start, n_osc - n_excited)
-    idx = (start + np.arange(n_excited)) % n_osc
-    mask = np.zeros(n_osc, dtype=bool)
-    mask[idx] = True
+    mask[(start + np.arange(n_excited)) % n_osc] = True
     return mask
+
+
+def centre_site(graph: Graph) -> int:
+    """The 0-based index of the centre of the chain: (rows//2) * cols + cols//2 on a
+    lattice, N//2 otherwise (oscillator 11 of the paper's 20)."""
+    if graph.kind == "lattice":
+        rows, cols = graph.shape
+        return (rows // 2) * cols + cols // 2
+    return graph.n_osc // 2
+
+
+def patch_order(graph: Graph) -> np.ndarray:
+    """The oscillators by graph distance from `centre_site`, ties by index: the
+    first k form the excited patch of k sites."""
+    distance = graph.distances()[centre_site(graph)]
+    return np.lexsort((np.arange(graph.n_osc), distance))
+
+
+def alternating_signs(graph: Graph) -> np.ndarray:
+    """The signs of the out-of-phase excitation of eq. (8), shape (n_osc,): (-1)^n
+    (n from 1) on a line or any links, the checkerboard (-1)^(r + c + 1) on a
+    lattice (which is (-1)^n along a single row)."""
+    if graph.kind == "lattice":
+        rows, cols = graph.shape
+        r, c = np.divmod(np.arange(graph.n_osc), cols)
+        return (-1.0) ** (r + c + 1)
+    return (-1.0) ** np.arange(1, graph.n_osc + 1)
 
 
 class AbstractInitialCondition(eqx.Module):
@@ -104,9 +138,12 @@ class OutOfPhaseExcitation(AbstractInitialCondition):
             raise ValidationError(
                 f"excited must have shape ({params.n_osc},), got {excited.shape}"
             )
-        n = jnp.arange(1, params.n_osc + 1)
         base = -self.base_sign * steady_sliding(params)[0]
-        x = base + jnp.where(excited, 2.0 * (-1.0) ** n, 0.0)
+        if params.graph.kind == "lattice":
+            signs = jnp.asarray(alternating_signs(params.graph))
+        else:  # as eq. (8) reads
+            signs = (-1.0) ** jnp.arange(1, params.n_osc + 1)
+        x = base + jnp.where(excited, 2.0 * signs, 0.0)
         v = jnp.broadcast_to(jnp.asarray(self.velocity, dtype=x.dtype), x.shape)
         return jnp.stack([x, v])
 
@@ -186,7 +223,7 @@ def initial_states(params: ChainParams, ics: AbstractInitialCondition
     return eqx.filter_vmap(lambda p, ic: ic(p))(params, ics)
 
 
-def localized_family(n_osc: int, family: str = "eq8", boundary: str = "ring"
+def localized_family(n_osc: int, family: str = "eq8", boundary: str | Graph = "ring"
                      ) -> OutOfPhaseExcitation:
     """The paper's staircase of initial conditions: 1, 2, ..., N excited oscillators
     in the block of `excited_block`, by eq. (8) or eq. (10).
@@ -195,7 +232,8 @@ def localized_family(n_osc: int, family: str = "eq8", boundary: str = "ring"
 
     - `n_osc`: ring size N.
     - `family`: "eq8" or "eq10".
-    - `boundary`: the chain's boundary (where the block may wrap).
+    - `boundary`: the chain's boundary (where the block may wrap) or its `Graph`
+        (patches, `excited_block`).
 
     **Returns:**
 

@@ -17,9 +17,9 @@ def vector_field(t, y: State | Float[Array, " 2n"],
     """Right-hand side of eq. (5) of the paper, with the smoothed friction force of
     `smoothed_friction_force` and the coupling of `coupling_force`:
 
-        x_n'' = -2 xi_n x_n' - k_n x_n - (coupling)_n + (P_n/P) F(x_n' - v_d),
+        m_n x_n'' = -2 xi_n x_n' - k_n x_n - (coupling)_n + (P_n/P) F(x_n' - v_d),
 
-    on the paper's ring (coupling)_n = eta_c (2 x_n - x_{n+1} - x_{n-1}), k_n = 1 and
+    (m_n = 1 unless `params.mass` is given) on the paper's ring (coupling)_n = eta_c (2 x_n - x_{n+1} - x_{n-1}), k_n = 1 and
     P_n = P. For n_osc = 1 on the ring the coupling term vanishes (the oscillator
     is its own neighbour), which gives the single mass-on-moving-belt oscillator of
     Fig. 3(a).
@@ -66,9 +66,11 @@ def split_vector_field(t, y: State | Float[Array, " 2n"], params: ChainParams):
     if shape not in ((2, n), (2 * n,)):
         raise ValidationError(f"state must have shape (2, {n}) or ({2 * n},), got {shape}")
     x, v = jnp.reshape(y, (2, n))
-    elastic = jnp.stack([v, -2 * params.xi * v - params.stiffness * x
-                         - coupling_force(params, x)])
+    acceleration = -2 * params.xi * v - params.stiffness * x - coupling_force(params, x)
     force = smoothed_friction_force(params, v - params.v_d)
+    if params.mass is not None:
+        acceleration, force = acceleration / params.mass, force / params.mass
+    elastic = jnp.stack([v, acceleration])
     friction = jnp.stack([jnp.zeros_like(force), force])
     return jnp.reshape(elastic, shape), jnp.reshape(friction, shape)
 
@@ -120,7 +122,7 @@ def stick_force(params: ChainParams, x: Float[Array, " n_osc"]) -> Float[Array, 
 def mechanical_energy(params: ChainParams, y: State) -> Float[Array, ""]:
     """Kinetic plus elastic energy of the chain,
 
-        1/2 sum_n (x_n'^2 + k_n x_n^2) + sum_links `coupling_energy`,
+        1/2 sum_n (m_n x_n'^2 + k_n x_n^2) + sum_links `coupling_energy`,
 
     (on the paper's ring 1/2 sum_n (x_n'^2 + x_n^2 + eta_c (x_{n+1} - x_n)^2)), whose
     rate of change along eq. (5) is the power of friction minus the viscous
@@ -136,10 +138,11 @@ def mechanical_energy(params: ChainParams, y: State) -> Float[Array, ""]:
     The energy, shape (), dimensionless.
     """
     x, v = y
+    kinetic = v**2 if params.mass is None else params.mass * v**2
     if params.boundary == "ring":  # one link per oscillator: one sum, as eq. (5) reads
-        return 0.5 * jnp.sum(v**2 + params.stiffness * x**2
+        return 0.5 * jnp.sum(kinetic + params.stiffness * x**2
                              + params.eta_c * (jnp.roll(x, -1) - x) ** 2)
-    return 0.5 * jnp.sum(v**2 + params.stiffness * x**2) + jnp.sum(coupling_energy(params, x))
+    return 0.5 * jnp.sum(kinetic + params.stiffness * x**2) + jnp.sum(coupling_energy(params, x))
 
 
 def jacobian(params: ChainParams, y: State | None = None) -> Float[Array, "2n 2n"]:

@@ -9,7 +9,8 @@ import jax
 import numpy as np
 from jaxtyping import ArrayLike
 
-from .chain import BOUNDARIES, Mistuning, n_links
+from .chain import Graph, Mistuning, as_graph
+from .units import Scales
 from .friction import AbstractFrictionLaw, ExponentialDecay, as_parameter, check_values
 from .._errors import ValidationError
 from .._setup import check_float64
@@ -17,7 +18,12 @@ from .._setup import check_float64
 #: The fields that hold one value per chain (never per oscillator).
 CHAIN_SCALARS = ("v_d", "eps")
 #: The fields that may hold one value per oscillator, shape (n_osc,).
-PER_OSCILLATOR = ("xi", "stiffness", "load")
+PER_OSCILLATOR = ("xi", "stiffness", "load", "mass")
+
+
+def _optional_parameter(value):
+    """None as it is (a field that is not given), else `as_parameter`."""
+    return None if value is None else as_parameter(value)
 
 
 #: Marks a shorthand argument of `ChainParams` that was not given.
@@ -41,17 +47,27 @@ class ChainParams(eqx.Module):
 
     - `n_osc`: number of oscillators N (static, >= 1).
     - `xi`: damping ratio (>= 0), shape () or (n_osc,).
-    - `eta_c`: coupling stiffness k_c/k (>= 0), shape () or (n_links,) with
-        n_links = N (ring), N - 1 (free) or N + 1 (fixed), see `BOUNDARIES`.
+    - `eta_c`: coupling stiffness k_c/k (>= 0), shape () or (n_links,), one value
+        per link of the graph, in its order (n_links = N on the ring, N - 1 on a
+        free line, N + 1 on a fixed one, see `BOUNDARIES` and `Graph`).
     - `v_d`: belt speed (> 0; a belt moving the other way is the mirror image
         x -> -x), shape ().
     - `eps`: velocity scale of the tanh smoothing of sign(v_rel) (> 0), shape ().
     - `stiffness`: ground stiffness k_n/k = 1 + delta_n (> 0), shape () or (n_osc,).
     - `load`: normal load P_n/P, which scales oscillator n's friction force (> 0),
         shape () or (n_osc,).
+    - `mass`: mass m_n/m (> 0), shape () or (n_osc,), or None for unit masses (the
+        paper's chain; the time stays scaled by the reference oscillator's
+        1/omega_n, so that m_n x_n'' = ... in eq. (5)).
     - `friction`: the friction law (an `AbstractFrictionLaw`), whose fields are
         each of shape () or (n_osc,); eq. (1), `ExponentialDecay()`, by default.
-    - `boundary`: "ring" (eq. (5), the default), "free" or "fixed" (static).
+    - `boundary`: shorthand for `graph=Graph.line(n_osc, boundary)`: "ring" (eq. (5),
+        the default), "free" or "fixed".
+    - `graph`: the coupling `Graph` (static): a line, a 2-D lattice
+        (`Graph.lattice`) or any links; n_osc is then the graph's (give either
+        `graph` or `boundary`).
+    - `scales`: the `Scales` of a chain made from SI units by `from_physical`
+        (recorded in results; `to_physical` converts back), or None (static).
     - `mistuning`: the `Mistuning` record that drew `stiffness` (see `mistune`),
         or None (static).
     - `mu_st`, `mu_d`, `v0`: shorthand for `friction=ExponentialDecay(mu_st, mu_d,
@@ -81,8 +97,9 @@ class ChainParams(eqx.Module):
     **Raises:**
 
     `ValidationError` naming the field for a non-finite value, n_osc < 1, xi < 0,
-    eta_c < 0, v_d <= 0, eps <= 0, stiffness <= 0, load <= 0, a field of the wrong
-    shape, an unknown boundary, a friction law that is not an
+    eta_c < 0, v_d <= 0, eps <= 0, stiffness <= 0, load <= 0, mass <= 0, a field of
+    the wrong shape, an unknown boundary, both `graph` and `boundary`, a graph of
+    another n_osc, a friction law that is not an
     `AbstractFrictionLaw`, both `friction` and `mu_st`/`mu_d`/`v0`, or a
     `stiffness` that its `mistuning` record does not give. The friction law
     validates its own parameters.
@@ -96,13 +113,16 @@ class ChainParams(eqx.Module):
     eps: ArrayLike = eqx.field(converter=as_parameter)
     stiffness: ArrayLike = eqx.field(converter=as_parameter)
     load: ArrayLike = eqx.field(converter=as_parameter)
+    mass: ArrayLike | None = eqx.field(converter=_optional_parameter)
     friction: AbstractFrictionLaw
-    boundary: str = eqx.field(static=True)
+    graph: Graph = eqx.field(static=True)
     mistuning: Mistuning | None = eqx.field(static=True)
+    scales: Scales | None = eqx.field(static=True)
 
-    def __init__(self, n_osc: int = 20, xi=0.05, eta_c=0.01, v_d=1.5, eps=1e-3,
+    def __init__(self, n_osc: int = _ABSENT, xi=0.05, eta_c=0.01, v_d=1.5, eps=1e-3,
                  stiffness=1.0, load=1.0, friction: AbstractFrictionLaw | None = None,
-                 boundary: str = "ring", mistuning: Mistuning | None = None, *,
+                 boundary: str = _ABSENT, mistuning: Mistuning | None = None, *,
+                 mass=None, graph: Graph | None = None, scales: Scales | None = None,
                  mu_st=_ABSENT, mu_d=_ABSENT, v0=_ABSENT):
         check_float64()  # before the converters make arrays of the wrong precision
         shorthand = {k: v for k, v in (("mu_st", mu_st), ("mu_d", mu_d), ("v0", v0))
@@ -112,6 +132,25 @@ class ChainParams(eqx.Module):
         elif shorthand:
             raise ValidationError(f"ChainParams takes either friction or {', '.join(shorthand)} "
                                   "(the shorthand of ExponentialDecay), not both")
+        if graph is not None and boundary is not _ABSENT:
+            raise ValidationError("ChainParams takes either graph or boundary, not both")
+        if graph is not None and not isinstance(graph, Graph):
+            raise ValidationError(f"ChainParams.graph must be a jaxchain.Graph, got "
+                                  f"{type(graph).__name__}")
+        if n_osc is _ABSENT:
+            n_osc = 20 if graph is None else graph.n_osc
+        if graph is None:
+            if isinstance(n_osc, bool) or not isinstance(n_osc, (int, np.integer)):
+                raise ValidationError(f"ChainParams.n_osc must be an integer, got {n_osc!r}")
+            if n_osc < 1:
+                raise ValidationError(f"ChainParams.n_osc must be >= 1, got {n_osc!r}")
+            try:
+                graph = as_graph("ring" if boundary is _ABSENT else boundary, n_osc)
+            except ValidationError as err:
+                raise ValidationError(f"ChainParams.{err}") from None
+        elif graph.n_osc != n_osc:
+            raise ValidationError(f"ChainParams.n_osc is {n_osc!r} but its graph has "
+                                  f"{graph.n_osc} oscillators")
         self.n_osc = n_osc
         self.xi = xi
         self.eta_c = eta_c
@@ -119,18 +158,19 @@ class ChainParams(eqx.Module):
         self.eps = eps
         self.stiffness = stiffness
         self.load = load
+        self.mass = mass
         self.friction = friction
-        self.boundary = boundary
+        self.graph = graph
         self.mistuning = mistuning
+        self.scales = scales
+
+    @property
+    def boundary(self) -> str:
+        """The boundary of a line ("ring", "free", "fixed"), else the graph's kind
+        ("lattice", "links")."""
+        return self.graph.kind
 
     def __check_init__(self):
-        if isinstance(self.n_osc, bool) or not isinstance(self.n_osc, (int, np.integer)):
-            raise ValidationError(f"ChainParams.n_osc must be an integer, got {self.n_osc!r}")
-        if self.n_osc < 1:
-            raise ValidationError(f"ChainParams.n_osc must be >= 1, got {self.n_osc!r}")
-        if not isinstance(self.boundary, str) or self.boundary not in BOUNDARIES:
-            raise ValidationError(f"ChainParams.boundary must be one of {', '.join(BOUNDARIES)}, "
-                                  f"got {self.boundary!r}")
         if not isinstance(self.friction, AbstractFrictionLaw):
             raise ValidationError(f"ChainParams.friction must be a friction law (jaxchain."
                                   f"ExponentialDecay, Stribeck, Polynomial, Coulomb or another "
@@ -140,10 +180,12 @@ class ChainParams(eqx.Module):
                                   f"got {type(self.mistuning).__name__}")
         positive = (lambda a: a > 0, "> 0")
         non_negative = (lambda a: a >= 0, ">= 0")
-        check_values("ChainParams", {name: getattr(self, name) for name in
-                                     ("xi", "eta_c", "v_d", "eps", "stiffness", "load")},
+        names = ("xi", "eta_c", "v_d", "eps", "stiffness", "load", "mass")
+        check_values("ChainParams", {name: getattr(self, name) for name in names
+                                     if getattr(self, name) is not None},
                      {"xi": non_negative, "eta_c": non_negative, "v_d": positive,
-                      "eps": positive, "stiffness": positive, "load": positive})
+                      "eps": positive, "stiffness": positive, "load": positive,
+                      "mass": positive})
         self._check_shapes()
         if self.mistuning is not None and not isinstance(self.stiffness, jax.core.Tracer):
             given = np.asarray(self.stiffness, dtype=float)
@@ -154,14 +196,18 @@ class ChainParams(eqx.Module):
                                       "to give your own")
 
     def _check_shapes(self):
-        n, links = self.n_osc, n_links(self.boundary, self.n_osc)
+        n, links = self.n_osc, self.graph.n_links
         expected = {name: ((), (n,)) for name in PER_OSCILLATOR}
         expected |= {name: ((),) for name in CHAIN_SCALARS} | {"eta_c": ((), (links,))}
         for name, shapes in expected.items():
+            if getattr(self, name) is None:
+                continue
             shape = np.shape(getattr(self, name))
             if shape not in shapes:
                 raise ValidationError(_shape_message(f"ChainParams.{name}", shape, shapes))
         for name in self.friction.parameter_names():
+            if name in self.friction.table_names():
+                continue  # the law checks its own table
             shape = np.shape(getattr(self.friction, name))
             if shape not in ((), (n,)):
                 raise ValidationError(_shape_message(f"{type(self.friction).__name__}.{name}",
@@ -220,15 +266,19 @@ def single_oscillator(params: ChainParams, index: int = 0) -> ChainParams:
         return a if a.ndim == 0 else a[index]
 
     law = params.friction
-    law = type(law)(**{name: pick(getattr(law, name)) for name in law.parameter_names()})
+    tables = law.table_names()
+    law = eqx.tree_at(lambda f: [getattr(f, n) for n in law.parameter_names()], law,
+                      [getattr(law, n) if n in tables else pick(getattr(law, n))
+                       for n in law.parameter_names()])
     return ChainParams(n_osc=1, xi=pick(params.xi), eta_c=params.eta_c if np.ndim(
         params.eta_c) == 0 else 0.0, v_d=params.v_d, eps=params.eps,
-        stiffness=pick(params.stiffness), load=pick(params.load), friction=law)
+        stiffness=pick(params.stiffness), load=pick(params.load), friction=law,
+        mass=None if params.mass is None else pick(params.mass))
 
 
 def _chain_fields() -> list[str]:
     return [f.name for f in dataclasses.fields(ChainParams)
-            if f.name not in ("n_osc", "friction", "boundary", "mistuning")]
+            if f.name not in ("n_osc", "friction", "graph", "mistuning", "scales")]
 
 
 def parameter_names(params: ChainParams | None = None) -> list[str]:
@@ -320,7 +370,8 @@ def parameter_value(params: ChainParams, where: Callable | str):
 def with_fields(params: ChainParams, **changes) -> ChainParams:
     """`params` with the named fields of `ChainParams` replaced, built and validated
     as a new `ChainParams`: the one route for a change of structure (n_osc, the
-    boundary, a field's shape, the mistuning record); `with_parameter` changes one
+    graph or a line's `boundary`, a field's shape, the mistuning record; a new n_osc
+    of a line keeps its boundary); `with_parameter` changes one
     value.
 
     **Raises:**
@@ -328,11 +379,15 @@ def with_fields(params: ChainParams, **changes) -> ChainParams:
     `ValidationError` naming an unknown field, or the field of a bad value.
     """
     fields = {f.name: getattr(params, f.name) for f in dataclasses.fields(params)}
-    unknown = sorted(set(changes) - set(fields))
+    unknown = sorted(set(changes) - set(fields) - {"boundary"})
     if unknown:
         raise ValidationError(f"ChainParams has no field {unknown[0]!r}; its fields are "
                               f"{', '.join(fields)}")
-    return ChainParams(**(fields | changes))
+    fields |= changes
+    if "graph" not in changes and ("boundary" in changes or (
+            "n_osc" in changes and params.graph.is_line)):
+        fields["graph"] = as_graph(fields.pop("boundary", params.boundary), fields["n_osc"])
+    return ChainParams(**fields)
 
 
 def with_parameter(params: ChainParams, where: Callable | str, value) -> ChainParams:
@@ -358,9 +413,13 @@ def with_parameter(params: ChainParams, where: Callable | str, value) -> ChainPa
     `ValidationError` naming the field for a bad value or shape, or for an unknown name.
     """
     changed = eqx.tree_at(parameter_lens(where, params), params, value)
-    law = changed.friction
-    law = type(law)(**{name: getattr(law, name) for name in law.parameter_names()})
-    return with_fields(changed, friction=law)
+    return with_fields(changed, friction=revalidated(changed.friction))
+
+
+def revalidated(law: AbstractFrictionLaw) -> AbstractFrictionLaw:
+    """The law built again from its fields (static ones included), so that its
+    checks run on values set by `eqx.tree_at`."""
+    return type(law)(**{f.name: getattr(law, f.name) for f in dataclasses.fields(law)})
 
 
 def stack_chains(chains: list[ChainParams]) -> ChainParams:
@@ -368,7 +427,7 @@ def stack_chains(chains: list[ChainParams]) -> ChainParams:
     100 mistuning draws): every array field gains a leading lane axis, shape
     (lanes, ...); a field that is a scalar in some chains and per-oscillator in
     others is broadcast to (lanes, n_osc). The chains must share n_osc, the
-    boundary and the class of the friction law; their mistuning records are
+    graph, the class of the friction law and whether masses are given; their mistuning records are
     dropped (each lane's stiffness is kept). `run_lanes` takes the result.
 
     **Raises:**
@@ -380,8 +439,8 @@ def stack_chains(chains: list[ChainParams]) -> ChainParams:
     plain = [with_fields(c, mistuning=None) for c in chains]
     structures = {jax.tree_util.tree_structure(c) for c in plain}
     if len(structures) != 1:
-        raise ValidationError("stack_chains needs chains of one structure (n_osc, boundary, "
-                              "friction law)")
+        raise ValidationError("stack_chains needs chains of one structure (n_osc, graph, "
+                              "friction law, masses or none)")
 
     def stack(*xs):
         shape = np.broadcast_shapes(*(np.shape(x) for x in xs))
@@ -395,13 +454,15 @@ def is_homogeneous_ring(params: ChainParams) -> bool:
     per-oscillator or per-link field a scalar (a lane-batched `ChainParams` counts
     by its fields' trailing shape). Then the Jacobian at steady sliding is
     block-circulant (the Fourier route of `mode_eigenvalues`)."""
-    if params.boundary != "ring":
+    if params.boundary != "ring" or params.mass is not None:
         return False
     return all(np.ndim(leaf) == 0 for leaf in per_oscillator_leaves(params))
 
 
 def per_oscillator_leaves(params: ChainParams) -> list:
     """The fields that may hold one value per oscillator or per link: stiffness,
-    load, xi, eta_c and the friction law's parameters."""
-    return ([params.stiffness, params.load, params.xi, params.eta_c]
-            + jax.tree_util.tree_leaves(params.friction))
+    load, xi, eta_c, mass (unless None) and the friction law's parameters."""
+    mass = [] if params.mass is None else [params.mass]
+    law = params.friction
+    return ([params.stiffness, params.load, params.xi, params.eta_c] + mass
+            + [getattr(law, n) for n in law.parameter_names() if n not in law.table_names()])

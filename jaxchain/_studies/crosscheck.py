@@ -23,7 +23,7 @@ from .._nonsmooth.options import NonsmoothOptions
 from .._nonsmooth.solve import run_nonsmooth
 from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams, with_parameter
-from .._physics.record import chain_record
+from .._physics.record import chain_record, check_recordable
 from .._engine.lanes import lane_params, on_devices, run_lanes
 from .._sweeps.datasets import PAPER, field_values
 from .._engine.status import Status, flag_attributes
@@ -230,6 +230,7 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
         raise ValidationError("checkpoint: a cross-check on a Dask cluster needs a checkpoint "
                               "folder its workers can reach")
     params, solver, options, v_d = check_run(params, solver, options, v_d)
+    check_recordable(params)
     ics = list(ics)
     if not ics:
         raise ValidationError("ics must list at least one (family, n_excited) pair, got none")
@@ -245,7 +246,7 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
         if fam not in FAMILIES:
             raise ValidationError(f"ics family must be one of {sorted(FAMILIES)}, got {fam!r}")
         p = with_parameter(params, "v_d", vd)
-        y0.append(np.asarray(FAMILIES[fam](excited_block(params.n_osc, k, params.boundary))(p)))
+        y0.append(np.asarray(FAMILIES[fam](excited_block(params.n_osc, k, params.graph))(p)))
     vds = np.array([c[0] for c in cases])
     y0 = np.stack(y0)
 

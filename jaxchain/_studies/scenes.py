@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import diffrax
 import numpy as np
 
+from .._physics.record import check_recordable
 from .._engine.checks import as_solver, check_options, check_params
 from .._physics.initial import FAMILIES, initial_states, localized_family
 from .._engine.lanes import lane_params, run_lanes, take_lanes
@@ -102,10 +103,11 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
 
     observers = check_observers(observers)
     params = check_params(params)
+    check_recordable(params)
     solver = as_solver(solver, params=params)
     options = check_options(options)
     solutions = _check_solutions(solutions, params.n_osc)
-    family = take_lanes(localized_family(params.n_osc, ics, params.boundary), solutions - 1)
+    family = take_lanes(localized_family(params.n_osc, ics, params.graph), solutions - 1)
     lanes = lane_params(params, solutions.size)
     out = run_lanes(lanes, initial_states(lanes, family), solver, options,
                     engine=engine, progress=progress, observers=observers)
@@ -135,7 +137,7 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
         rows = [classify(ds["peak_times"].values[i], ds["on_halc"].values[i],
                          int(ds["n_halc"][i]), int(ds["status"][i]),
                          float(ds["lyapunov"][i]), float(ds["lyapunov_error"][i]),
-                         start, tolerances, params.boundary) for i in range(solutions.size)]
+                         start, tolerances, params.graph) for i in range(solutions.size)]
         for key in rows[0]:
             ds[key] = ("solution", np.asarray([r[key] for r in rows]))
         ds["ref"] = ds["ref"] + 1

@@ -111,7 +111,7 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
     sites = default_sites(params.n_osc) if sites is None else tuple(int(k) for k in sites)
     if not sites or min(sites) < 1 or max(sites) > params.n_osc:
         raise ValidationError(f"sites must be in 1..n_osc = {params.n_osc}, got {sites}")
-    masks = np.stack([excited_block(params.n_osc, k, params.boundary) for k in sites])
+    masks = np.stack([excited_block(params.n_osc, k, params.graph) for k in sites])
     ics = OutOfPhaseExcitation(excited=jnp.asarray(masks),
                                velocity=jnp.zeros(len(sites)), base_sign=-1.0)
     ds = ensemble(params, [float(params.v_d)], ics, solver, options, progress=progress)

@@ -8,6 +8,7 @@ import jax
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
+from .._physics.record import check_recordable
 from .._engine.checks import check_run
 from .._physics.initial import AbstractInitialCondition, batch_length, initial_states
 from .._engine.lanes import lane_params, run_lanes, take_lanes
@@ -62,6 +63,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     unknown solver name or engine; `TypeError` for arguments of the wrong type.
     """
     params, solver, options, v_d = check_run(params, solver, options, v_d)
+    check_recordable(params)  # before the run, not in to_dataset after it
     if not isinstance(ics, AbstractInitialCondition):
         raise TypeError(f"ics must be initial conditions (jaxchain.localized_family, "
                         f"GivenState, ...), got {type(ics).__name__}")

@@ -17,6 +17,7 @@ import numpy as np
 from jaxtyping import ArrayLike, Float
 from tqdm.auto import tqdm
 
+from .._physics.record import check_recordable
 from .._engine.checks import as_solver, check_options, check_params
 from .._physics.initial import AbstractInitialCondition
 from .._engine.lanes import block_size, expected_cost, run_lanes
@@ -128,6 +129,7 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     import xarray as xr
 
     params = check_params(params)
+    check_recordable(params)
     solver = as_solver(solver, params=params)
     options = check_options(options)
     grid = SweepGrid.build(params, where, values, ics)

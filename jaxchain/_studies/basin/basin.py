@@ -15,6 +15,7 @@ import jax
 import numpy as np
 from jaxtyping import ArrayLike, Float
 
+from ..._physics.record import check_recordable
 from ..._engine.checks import check_run
 from ..._analysis.classify import classify
 from ..._physics.initial import GivenState
@@ -133,6 +134,7 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
     import xarray as xr
 
     params, solver, options, v = check_run(params, solver, options, v_d)
+    check_recordable(params)
     if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) \
             or n_samples < 1:
         raise ValidationError(f"n_samples must be an integer >= 1, got {n_samples!r}")
@@ -152,7 +154,7 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
     status = ds["status"].values
     index = class_index(ds["n_halc"].values, status, n_osc)
     clusters = np.where(status == Status.ok,
-                        halc_clusters(ds["on_halc"].values, params.boundary), -1)
+                        halc_clusters(ds["on_halc"].values, params.graph), -1)
     names = class_names(n_osc)
     counts = np.stack([(index == c).sum(-1) for c in range(len(names))], axis=-1)
     low, high = wilson_interval(counts, n_samples)
@@ -203,7 +205,7 @@ def _convergence(params, v, states, index, solver, options, progress) -> dict:
                 continue
             verdict = classify(run["peak_times"][i, j], run["on_halc"][i, j],
                                int(run["n_halc"][i, j]), 0, math.nan, math.nan,
-                               longer.transient, boundary=params.boundary)
+                               longer.transient, boundary=params.graph)
             if not math.isfinite(verdict["delay_spread"]):  # too few peaks to judge
                 continue
             moving[i] += 1

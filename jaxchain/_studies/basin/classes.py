@@ -7,7 +7,7 @@ import numpy as np
 from jaxtyping import Bool, Float, Int
 
 from ..._engine.checks import real_array
-from ..._physics.chain import neighbours
+from ..._physics.chain import Graph, as_graph, neighbours
 from ..._errors import ValidationError
 from ..._analysis.states import FAILED, STEADY_SLIDING, STICK_SLIP
 from ..._engine.status import Status
@@ -16,8 +16,8 @@ from ..._engine.status import Status
 Z95 = 1.959963984540054
 
 
-def halc_clusters(on_halc: Bool[np.ndarray, "*batch n_osc"], boundary: str = "ring"
-                  ) -> Int[np.ndarray, "*batch"]:
+def halc_clusters(on_halc: Bool[np.ndarray, "*batch n_osc"],
+                  boundary: str | Graph = "ring") -> Int[np.ndarray, "*batch"]:
     """The number of separate groups of adjacent HALC oscillators: 0 at steady
     sliding, 1 for one localized group (or the whole chain), more for several.
 
@@ -26,7 +26,8 @@ def halc_clusters(on_halc: Bool[np.ndarray, "*batch n_osc"], boundary: str = "ri
     - `on_halc`: whether each oscillator is on the HALC, shape (..., n_osc).
     - `boundary`: the chain's boundary (`BOUNDARIES`): on the ring a group may run
         across the closure (oscillators N and 1 are neighbours); on an open chain
-        it may not.
+        it may not. Or the chain's `Graph`: groups connected by its links
+        (`Graph.clusters`).
 
     **Returns:**
 
@@ -35,7 +36,10 @@ def halc_clusters(on_halc: Bool[np.ndarray, "*batch n_osc"], boundary: str = "ri
     ring and nothing on an open chain).
     """
     on = np.asarray(on_halc, dtype=bool)
-    left_of, _ = neighbours(boundary, on.shape[-1])
+    graph = as_graph(boundary, on.shape[-1])
+    if not graph.is_line:
+        return graph.clusters(on)
+    left_of, _ = neighbours(graph.kind, on.shape[-1])
     left = np.where(left_of >= 0, on[..., left_of], False)
     starts = (on & ~left).sum(-1)
     return np.where(on.all(-1), 1, starts)

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
+from ..._physics.record import check_recordable
 from ..basin.basin import _key, _key_data
 from ..basin.sampling import Box, sample_states
 from ..._bifurcation.hopf import hopf_point
@@ -135,6 +136,7 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
     if params is None:  # built on call: a chain needs `configure` first
         params = ChainParams()
     params, solver, options, v = check_run(params, solver, options, v_d)
+    check_recordable(params)
     sigmas = np.atleast_1d(np.asarray(sigmas, dtype=float))
     if sigmas.ndim != 1 or sigmas.size == 0 or not np.all(np.isfinite(sigmas)) \
             or np.any(sigmas < 0):
@@ -150,7 +152,7 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
     samples = np.asarray(sample_states(key, box, int(n_samples), n)) if n_samples else None
     chains = study_chains(params, sigmas, n_draws)
     out = Path(out) if out is not None else None
-    ics = {"eq8": localized_family(n, "eq8", params.boundary)}
+    ics = {"eq8": localized_family(n, "eq8", params.graph)}
     if samples is not None:
         ics["random"] = GivenState(samples)
 
@@ -200,7 +202,7 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
                          np.nanmax(np.where(np.isnan(site_edge), -np.inf, site_edge), -1))
     fold, fold_site = _folds(chains, site_edge, n_folds, out, progress)
 
-    centre = int(np.flatnonzero(excited_block(n, 1, params.boundary))[0])
+    centre = int(np.flatnonzero(excited_block(n, 1, params.graph))[0])
     orbit, _ = localized_orbit(with_parameter(params, "v_d", 1.5), centre)
     period = float(orbit.period) if orbit is not None else math.nan
     omega2 = (2 * math.pi / period) ** 2

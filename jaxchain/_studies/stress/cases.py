@@ -89,7 +89,7 @@ def make_case(what: str, value, options: SimulationOptions = OPTIONS) -> StressC
     n = params.n_osc
     base = steady_sliding(params)
     if what != "ics":
-        y0 = OutOfPhaseExcitation.eq8(excited_block(n, max(1, n // 4), params.boundary))(params)
+        y0 = OutOfPhaseExcitation.eq8(excited_block(n, max(1, n // 4), params.graph))(params)
     elif value == "steady sliding":
         y0 = base
     elif value == "x ± 1e3":

@@ -1,0 +1,262 @@
+"""Any structure a user brings: coupling graphs and 2-D lattices, masses, measured
+friction tables and physical units, each against an independent reference (closed
+forms, scipy's eigensolvers and integrators, a Jacobian written here)."""
+
+import numpy as np
+import pytest
+import scipy.integrate
+import scipy.linalg
+import scipy.optimize
+
+import jaxchain as jc
+from helpers import assert_usage_error
+
+ETA = 0.3
+
+
+def _line_laplacian_eigenvalues(n: int, boundary: str) -> np.ndarray:
+    """Closed form: the eigenvalues of the graph Laplacian of a line of n sites."""
+    if boundary == "periodic":
+        k = np.arange(n)
+        return 2 - 2 * np.cos(2 * np.pi * k / n)
+    if boundary == "fixed":  # Dirichlet: both ends tied to the ground
+        k = np.arange(1, n + 1)
+        return 2 - 2 * np.cos(np.pi * k / (n + 1))
+    k = np.arange(n)  # free: Neumann
+    return 2 - 2 * np.cos(np.pi * k / n)
+
+
+@pytest.mark.parametrize("boundary", ["free", "fixed", "periodic"])
+def test_linear_modes_of_a_lattice_are_products_of_line_modes(boundary):
+    """K = 1 + eta_c (L_rows (+) L_cols): its eigenvalues are 1 + eta_c (a_i + b_j),
+    a, b the closed-form eigenvalues of the two lines."""
+    rows, cols = 3, 5
+    params = jc.ChainParams(graph=jc.Graph.lattice(rows, cols, boundary), eta_c=ETA)
+    got = np.linalg.eigvalsh(np.asarray(jc.stiffness_matrix(params)))
+    a = _line_laplacian_eigenvalues(rows, boundary)
+    b = _line_laplacian_eigenvalues(cols, boundary)
+    expected = np.sort((1 + ETA * (a[:, None] + b[None, :])).ravel())
+    np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-13)
+
+
+def _unequal_lattice(**kw):
+    rng = np.random.default_rng(4)
+    return jc.ChainParams(graph=jc.Graph.lattice(2, 3, "free"), eta_c=ETA,
+                          mass=rng.uniform(0.5, 2.0, 6), **kw)
+
+
+def test_lattice_with_masses_has_the_modes_of_the_generalised_eigenproblem():
+    """Undamped, with Coulomb friction (no slope at steady sliding): the Jacobian's
+    eigenvalues are +-i omega, omega^2 the eigenvalues of K phi = omega^2 M phi
+    (`scipy.linalg.eigh(K, M)`)."""
+    params = _unequal_lattice(xi=0.0, friction=jc.Coulomb(mu=0.5))
+    k = np.asarray(jc.stiffness_matrix(params))
+    omega2 = scipy.linalg.eigh(k, np.diag(np.asarray(params.mass)), eigvals_only=True)
+    values = np.linalg.eigvals(np.asarray(jc.jacobian(params)))
+    np.testing.assert_allclose(np.sort(values.imag[values.imag > 0]), np.sqrt(omega2),
+                               rtol=1e-10)
+    assert np.max(np.abs(values.real)) < 1e-10
+
+
+def _mu(v, law):
+    return law.mu_d + (law.mu_st - law.mu_d) * np.exp(-np.abs(v) / law.v0)
+
+
+def test_hopf_point_of_a_lattice_with_unequal_masses_against_a_jacobian_written_here():
+    """The Jacobian of M x'' = -2 xi x' - K x + P F(x' - v_d) at steady sliding,
+    written here with NumPy (friction slope by central differences), and the root
+    of its leading growth rate by `scipy.optimize.brentq`, against `hopf_point`."""
+    params = _unequal_lattice(xi=0.04, eps=0.01)
+    law, n = params.friction, params.n_osc
+    m, k = np.asarray(params.mass), np.asarray(jc.stiffness_matrix(params))
+
+    def force(v):
+        return -_mu(v, law) * np.tanh(v / params.eps)
+
+    def growth(v_d):
+        h = 1e-6
+        slope = (force(-v_d + h) - force(-v_d - h)) / (2 * h)
+        jac = np.block([[np.zeros((n, n)), np.eye(n)],
+                        [-k / m[:, None], np.diag((-2 * params.xi + slope) / m)]])
+        return np.max(np.linalg.eigvals(jac).real)
+
+    expected = scipy.optimize.brentq(growth, 0.3, 3.0, xtol=1e-13)
+    got = float(jc.hopf_point(params, guess=1.0).v_d[0])
+    assert abs(got - expected) < 1e-6
+
+
+def test_a_lattice_run_against_scipy_oscillator_by_oscillator():
+    """A 2 x 3 free lattice with masses and per-link stiffnesses, integrated by
+    jaxchain and by scipy's DOP853 of the equations written here, link by link: the
+    final states agree to the tolerances (both tight)."""
+    graph = jc.Graph.lattice(2, 3, "free")
+    eta = np.linspace(0.05, 0.4, graph.n_links)
+    params = jc.ChainParams(graph=graph, eta_c=eta, mass=np.linspace(0.7, 1.6, 6),
+                            xi=0.03, eps=0.05, v_d=1.2)
+    law, m = params.friction, np.asarray(params.mass)
+
+    def rhs(t, y):
+        x, v = y[:6], y[6:]
+        a = -2 * 0.03 * v - x - params.eps * 0 * x
+        for (left, right), e in zip(graph.links, eta):
+            a[left] += e * (x[right] - x[left])
+            a[right] -= e * (x[right] - x[left])
+        vr = v - 1.2
+        a = (a - _mu(vr, law) * np.tanh(vr / 0.05)) / m
+        return np.concatenate([v, a])
+
+    y0 = np.concatenate([np.linspace(-1.0, 1.5, 6), np.zeros(6)])
+    ref = scipy.integrate.solve_ivp(rhs, (0, 40.0), y0, method="DOP853", rtol=1e-11,
+                                    atol=1e-12).y[:, -1]
+    options = jc.SimulationOptions(t_end=40.0, transient=0.0, rtol=1e-10, atol=1e-12)
+    got = np.asarray(jc.simulate(params, y0.reshape(2, 6), options=options).y_final)
+    np.testing.assert_allclose(got.ravel(), ref, atol=1e-6)
+
+
+def test_energy_balance_on_a_lattice_with_masses():
+    """d/dt (1/2 sum m_n x_n'^2 + elastic energy) = friction power - viscous
+    dissipation, integrated beside the motion."""
+    import diffrax
+    import jax.numpy as jnp
+
+    params = _unequal_lattice(xi=np.linspace(0.02, 0.07, 6), eps=0.05)
+
+    def field(t, z, args):
+        y, _ = z
+        _, friction = jc.split_vector_field(t, y, params)
+        v = y[1]
+        power = jnp.sum(params.mass * friction[1] * v)  # the force, not the acceleration
+        return jc.vector_field(t, y, params), jnp.stack([power,
+                                                         jnp.sum(2 * params.xi * v**2)])
+
+    y0 = jnp.stack([jnp.linspace(-1.0, 2.0, 6), jnp.zeros(6)])
+    sol = diffrax.diffeqsolve(diffrax.ODETerm(field), diffrax.Dopri8(), 0.0, 40.0, 0.01,
+                              (y0, jnp.zeros(2)),
+                              stepsize_controller=diffrax.PIDController(rtol=1e-11, atol=1e-11),
+                              max_steps=200_000)
+    y1, (work, dissipated) = sol.ys[0][-1], sol.ys[1][-1]
+    change = jc.mechanical_energy(params, y1) - jc.mechanical_energy(params, y0)
+    assert abs(float(dissipated)) > 0.1
+    assert abs(float(change - (work - dissipated))) < 1e-8
+
+
+def test_tabulated_law_reproduces_the_stick_slip_cycle_of_its_closed_form():
+    """eq. (1) sampled at 241 speeds and interpolated (PCHIP): its interpolation
+    error is below 1e-5, and the stick-slip cycle of the single oscillator (its
+    amplitude) is that of eq. (1) within 1e-3 relative; the value beyond the table
+    is held at the last sample."""
+    law = jc.ExponentialDecay()
+    v = np.linspace(0.0, 6.0, 241)
+    table = jc.Tabulated(v=v, mu=_mu(v, law))
+    fine = np.linspace(0.0, 6.0, 2001)
+    error = np.max(np.abs(np.asarray(table(fine)) - _mu(fine, law)))
+    assert error < 1e-5
+    assert float(table(10.0)) == pytest.approx(_mu(6.0, law), rel=1e-14)
+    assert float(table(-0.7)) == pytest.approx(float(table(0.7)), rel=1e-14)
+    options = jc.SimulationOptions(t_end=300.0, transient=200.0)
+    y0 = np.array([[2.0], [0.0]])
+    amp = [float(jc.simulate(jc.ChainParams(n_osc=1, v_d=1.0, friction=f), y0,
+                             options=options).amplitudes[0]) for f in (law, table)]
+    assert amp[0] > 1.0  # on the stick-slip cycle
+    assert abs(amp[1] / amp[0] - 1) < 1e-3
+
+
+def test_from_physical_against_a_dimensional_scipy_integration():
+    """An SI oscillator (2 kg, 800 N/m, 4 N s/m, 40 N on a belt at 0.3 m/s, eq. (1)
+    with v0 = 0.05 m/s), integrated in seconds and metres by scipy, against the
+    converted jaxchain run; pint quantities in other units give the same chain."""
+    pint = pytest.importorskip("pint")
+    law = jc.ExponentialDecay(mu_st=1.0, mu_d=0.5, v0=0.05)
+    params = jc.from_physical(mass=2.0, stiffness=800.0, damping=4.0, normal_load=40.0,
+                              friction=law, belt_speed=0.3, n_osc=1, eps=1e-2)
+    s = params.scales
+    assert s.length == pytest.approx(0.05) and s.time == pytest.approx(0.05)
+    ureg = pint.UnitRegistry()
+    same = jc.from_physical(mass=2000 * ureg.g, stiffness=0.8 * ureg("N/mm"),
+                            damping=4 * ureg("N*s/m"), normal_load=0.04 * ureg.kN,
+                            friction=law, belt_speed=30 * ureg("cm/s"), n_osc=1, eps=1e-2)
+    for name in ("xi", "v_d", "stiffness", "load"):
+        assert float(getattr(same, name)) == pytest.approx(float(getattr(params, name)),
+                                                           rel=1e-12)
+    eps_si = 1e-2 * s.velocity
+
+    def rhs(t, y):
+        vr = y[1] - 0.3
+        mu = 0.5 + 0.5 * np.exp(-abs(vr) / 0.05)
+        return [y[1], (-4.0 * y[1] - 800.0 * y[0] - 40.0 * mu * np.tanh(vr / eps_si)) / 2.0]
+
+    t_end, y0 = 1.5, [0.01, 0.0]
+    ref = scipy.integrate.solve_ivp(rhs, (0, t_end), y0, method="Radau", rtol=1e-10,
+                                    atol=1e-13).y[:, -1]
+    options = jc.SimulationOptions(t_end=t_end / s.time, transient=0.0, rtol=1e-10,
+                                   atol=1e-12)
+    y0_dimless = np.array([[y0[0] / s.length], [y0[1] / s.velocity]])
+    got = np.asarray(jc.simulate(params, y0_dimless, options=options).y_final)[:, 0]
+    assert abs(got[0] * s.length - ref[0]) < 1e-7
+    assert abs(got[1] * s.velocity - ref[1]) < 1e-5
+    with pytest.raises(ValueError, match="stiffness"):
+        jc.from_physical(mass=2.0, stiffness=3 * ureg.kg, normal_load=40.0, friction=law,
+                         belt_speed=0.3, n_osc=1)
+
+
+@pytest.mark.parametrize("make, message", [
+    (lambda: jc.Graph.from_matrix([[0.2, -0.1], [-0.2, 0.2]]), "not symmetric"),
+    (lambda: jc.Graph.from_matrix([[-0.1, 0.1], [0.1, -0.1]]), "positive off-diagonal"),
+    (lambda: jc.Graph.from_links(3, [(0, 1), (1, 5)]), "does not exist"),
+    (lambda: jc.ChainParams(n_osc=3, mass=[1.0, -1.0, 1.0]), "ChainParams.mass"),
+    (lambda: jc.Tabulated(v=[0.0, 2.0, 1.0], mu=[1.0, 0.8, 0.6]), "strictly increasing"),
+    (lambda: jc.Tabulated(v=[0.0, 1.0], mu=[1.0, np.nan]), "Tabulated.mu"),
+    (lambda: jc.ChainParams(graph=jc.Graph.lattice(2, 2), boundary="free"), "graph or boundary"),
+])
+def test_bad_structures_are_refused_naming_what_is_wrong(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+def test_a_coupling_matrix_gives_back_its_graph():
+    """`Graph.from_matrix` of a lattice's coupling part (with a ground link) gives a
+    chain of the same stiffness matrix."""
+    params = jc.ChainParams(graph=jc.Graph.lattice(3, 3, ("fixed", "periodic")), eta_c=0.2)
+    coupling = np.asarray(jc.stiffness_matrix(params)) - np.eye(9)
+    graph, eta = jc.Graph.from_matrix(coupling)
+    rebuilt = jc.ChainParams(graph=graph, eta_c=eta)
+    np.testing.assert_allclose(jc.stiffness_matrix(rebuilt), jc.stiffness_matrix(params),
+                               atol=1e-15)
+
+
+def test_a_law_that_cannot_be_recorded_is_refused_before_the_run(monkeypatch):
+    """A user's law (a subclass of the abstract law) runs in `simulate`, and
+    `ensemble` refuses it before integrating anything, naming the law."""
+    import equinox as eqx
+
+    class Linear(jc.AbstractFrictionLaw):
+        mu: float = eqx.field(converter=jc._physics.friction.as_parameter, default=0.6)
+
+        @classmethod
+        def rules(cls):
+            return {}
+
+        def __call__(self, v_rel):
+            return self.mu + 0.0 * v_rel
+
+        def static(self):
+            return self.mu
+
+    params = jc.ChainParams(n_osc=2, friction=Linear())
+    assert np.isfinite(float(jc.simulate(params, np.ones((2, 2)), options=jc.SimulationOptions(
+        t_end=5.0, transient=0.0)).energy))
+    calls = []
+    monkeypatch.setattr("jaxchain._sweeps.ensemble.run_lanes",
+                        lambda *a, **k: calls.append(1))
+    with pytest.raises(ValueError, match="Linear cannot be recorded"):
+        jc.ensemble(params, [1.5], jc.localized_family(2), progress=False)
+    assert not calls
+
+
+def test_bad_lattice_or_table_on_the_command_line_exits_2_in_one_line(tmp_path, capsys):
+    table = tmp_path / "mu.csv"
+    table.write_text("v,mu\n0,1.0\n1,nan\n")
+    assert_usage_error(["localized", "--lattice", "4by5", "--out", str(tmp_path / "a")],
+                       "--lattice", capsys)
+    assert_usage_error(["localized", "--friction", f"table:{table}", "--out",
+                        str(tmp_path / "b")], "mu", capsys)
