@@ -21,6 +21,8 @@ default solver, eps and tolerances, unless stated):
    integral controller, rtol 1e-5) in the same run: steps and wall time of the
    Fig. 4 scene, the sweep estimate, and `import jaxchain` against `import jax,
    diffrax`;
+9. cost per step on a coupling graph: the 4 x 5 lattice (and with masses and a
+   friction table) against the ring of 20;
 cli. cold and warm start of `jaxchain localized` with a fresh JAXCHAIN_CACHE_DIR,
    and in the full run the main job's second run at the previous defaults.
 
@@ -49,7 +51,7 @@ import numpy as np  # noqa: E402
 
 from _common import FULL, QUICK, REPO, Row, machine_info, progress  # noqa: E402
 
-COMPARISONS = ("0", "1", "2", "3", "4", "5", "6", "7", "8", "cli")
+COMPARISONS = ("0", "1", "2", "3", "4", "5", "6", "7", "8", "9", "cli")
 
 EPILOG = """\
 timing:
@@ -136,6 +138,7 @@ def main(argv=None) -> int:
     start = time.perf_counter()
 
     import _ensembles
+    import _graphs
     import _plots
     import _processes
     import _single
@@ -192,6 +195,7 @@ def main(argv=None) -> int:
         flag_ok = out[2]
     attempt("8", "issue 24 targets against the previous defaults",
             _targets.compare_targets, settings, ORIGINAL_ENV, start)
+    attempt("9", "cost per step on a coupling graph", _graphs.compare_graphs, settings)
     attempt("cli", "command line cold and warm start", _processes.compare_cli, settings,
             ORIGINAL_ENV, start)
 

@@ -143,8 +143,8 @@ from ._physics.params import (
 from ._physics.record import (
     chain_from_record as chain_from_record, chain_record as chain_record,
     check_recordable as check_recordable, chain_from_file as chain_from_file,
-    write_chain_file as write_chain_file,
 )
+from ._sweeps.chain_files import write_chain_file as write_chain_file
 from ._physics.stick import STICK_BAND as STICK_BAND, sticks as sticks
 from ._physics.units import (
     Scales as Scales, from_physical as from_physical, to_physical as to_physical,

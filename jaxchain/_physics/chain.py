@@ -72,7 +72,7 @@ class Graph(eqx.Module):
             raise ValidationError(f"boundary must be one of {', '.join(BOUNDARIES)}, "
                                   f"got {boundary!r}")
         kind = {"ring": "periodic"}.get(boundary, boundary)
-        return cls(n_osc=n_osc, links=_line_links(n_osc, kind), kind=boundary,
+        return cls(n_osc=n_osc, links=tuple(_line_links(n_osc, kind)), kind=boundary,
                    shape=(n_osc,), boundary=(boundary,))
 
     @classmethod

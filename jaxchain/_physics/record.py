@@ -261,25 +261,3 @@ def chain_from_file(path, base: ChainParams | None = None) -> ChainParams:
         return from_physical(friction=law, n_osc=n_osc, **topology, **si)
     except (ValueError, TypeError) as err:
         raise ValidationError(f"{path}: {err}") from None
-
-
-def write_chain_file(params: ChainParams, path) -> None:
-    """Write the chain as a TOML chain file (its record, `chain_record`, in
-    dimensionless units, with its scales if it has them), to a temporary name
-    renamed into place. `chain_from_file` reads back the same chain.
-
-    **Raises:** `ValidationError` for a law that cannot be recorded."""
-    import os
-    from pathlib import Path
-
-    import tomli_w
-
-    record = chain_record(params)
-    if "links" in record:
-        flat = record["links"]
-        record["links"] = [flat[i:i + 2] for i in range(0, len(flat), 2)]
-    path = Path(path)
-    partial = path.with_name(f".{path.name}.partial")
-    partial.write_text("# jaxchain chain file (dimensionless, eqs. (4)-(6) of the paper)\n"
-                       + tomli_w.dumps(record))
-    os.replace(partial, path)

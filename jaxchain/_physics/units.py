@@ -200,6 +200,8 @@ def to_physical(ds: xr.Dataset, scales: Scales | None = None) -> xr.Dataset:
     for name in list(out.variables):
         var = out[name]
         kind = _KINDS.get(name)
+        if var.dtype.kind not in "fiu":
+            continue
         if kind is not None:
             out[name] = var * factor[kind]
             out[name].attrs = var.attrs | {"units": _UNITS[kind]}
