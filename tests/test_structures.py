@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.integrate
+import scipy.interpolate
 import scipy.linalg
 import scipy.optimize
 
@@ -143,8 +144,9 @@ def test_energy_balance_on_a_lattice_with_masses():
 
 
 def test_tabulated_law_reproduces_the_stick_slip_cycle_of_its_closed_form():
-    """eq. (1) sampled at 241 speeds and interpolated (PCHIP): its interpolation
-    error is below 1e-5, and the stick-slip cycle of the single oscillator (its
+    """eq. (1) sampled at 241 speeds and interpolated (PCHIP, equal to scipy's
+    `PchipInterpolator` on even and uneven tables): its interpolation error is below
+    1e-5, and the stick-slip cycle of the single oscillator (its
     amplitude) is that of eq. (1) within 1e-3 relative; the value beyond the table
     is held at the last sample."""
     law = jc.ExponentialDecay()
@@ -153,6 +155,12 @@ def test_tabulated_law_reproduces_the_stick_slip_cycle_of_its_closed_form():
     fine = np.linspace(0.0, 6.0, 2001)
     error = np.max(np.abs(np.asarray(table(fine)) - _mu(fine, law)))
     assert error < 1e-5
+    uneven = np.array([0.0, 0.1, 0.3, 0.7, 1.5, 3.0, 6.0])  # the search, not the division
+    for speeds in (v, uneven):
+        samples = _mu(speeds, law)
+        pchip = scipy.interpolate.PchipInterpolator(speeds, samples)(fine)
+        got = np.asarray(jc.Tabulated(v=speeds, mu=samples)(fine))
+        np.testing.assert_allclose(got, pchip, rtol=0, atol=1e-14)
     assert float(table(10.0)) == pytest.approx(_mu(6.0, law), rel=1e-14)
     assert float(table(-0.7)) == pytest.approx(float(table(0.7)), rel=1e-14)
     options = jc.SimulationOptions(t_end=150.0, transient=100.0)

@@ -6,9 +6,85 @@ slip direction for the non-smooth reference (eq. (2))."""
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from .params import ChainParams
+
+
+def _extensions_along(x, boundary: str, axis: int):
+    """The extensions x_right - x_left of the links of the lines of `x` along `axis`
+    (a line of `BOUNDARIES`, "periodic" for "ring"), in their link order."""
+    if boundary in ("ring", "periodic"):
+        return jnp.roll(x, -1, axis) - x
+    if boundary == "fixed":
+        pad = [(0, 0)] * x.ndim
+        pad[axis] = (1, 1)
+        x = jnp.pad(x, pad)
+    n = x.shape[axis]
+    return (jax.lax.slice_in_dim(x, 1, n, axis=axis)
+            - jax.lax.slice_in_dim(x, 0, n - 1, axis=axis))
+
+
+def _force_along(tension, boundary: str, axis: int):
+    """The force of the link tensions of the lines along `axis` on their sites: a
+    link pulls its left end forward and its right end back."""
+    if boundary in ("ring", "periodic"):
+        return jnp.roll(tension, 1, axis) - tension
+    if boundary == "free":
+        pad = [(0, 0)] * tension.ndim
+        pad[axis] = (1, 1)
+        tension = jnp.pad(tension, pad)
+    n = tension.shape[axis]
+    return (jax.lax.slice_in_dim(tension, 0, n - 1, axis=axis)
+            - jax.lax.slice_in_dim(tension, 1, n, axis=axis))
+
+
+def _lattice_laplacian(graph, x):
+    """sum over each site's links of (x_n - x_other) on a lattice, by shifts of the
+    flat x with constant masks (one fused loop, as the ring's eq. (5)): the right
+    and left neighbours by rolls of 1 (the other end of the row where a row wraps),
+    those below and above by rolls of cols (which wrap a periodic column by
+    themselves); a missing neighbour counts 0, a ground link also counts in the
+    degree."""
+    rows, cols = graph.shape
+    across, along = graph.boundary
+    n = rows * cols
+    r, c = np.divmod(np.arange(n), cols)
+    degree = np.zeros(n)
+    neighbours = jnp.zeros_like(x)
+    for size, position, boundary, step, wrap in ((cols, c, along, 1, cols - 1),
+                                                 (rows, r, across, cols, None)):
+        for sign, edge in ((1, size - 1), (-1, 0)):
+            value = jnp.roll(x, -sign * step)
+            inner = position != edge
+            if boundary == "periodic":
+                if wrap is not None:
+                    value = jnp.where(inner, value, jnp.roll(x, sign * wrap))
+                degree += 1.0
+            else:
+                value = value * inner
+                degree += 1.0 if boundary == "fixed" else inner
+            neighbours = neighbours + value
+    return degree * x - neighbours
+
+
+def _lattice_stiffnesses(params: ChainParams):
+    """eta_c of a lattice's links along the rows, shape () or (rows, links per row),
+    and along the columns, shape () or (links per column, cols)."""
+    eta = params.eta_c
+    if jnp.ndim(eta) == 0:
+        return eta, eta
+    rows, cols = params.graph.shape
+    per_row = (params.graph.n_links - cols * _n_line_links(rows, params.graph.boundary[0])
+               ) // rows
+    split = rows * per_row
+    return (jnp.reshape(eta[:split], (rows, per_row)),
+            jnp.reshape(eta[split:], (cols, -1)).T)
+
+
+def _n_line_links(n: int, boundary: str) -> int:
+    return {"periodic": n, "free": n - 1, "fixed": n + 1}[boundary]
 
 
 def link_extensions(params: ChainParams, x: Float[Array, " n_osc"]
@@ -23,28 +99,36 @@ def link_extensions(params: ChainParams, x: Float[Array, " n_osc"]
 
     **Returns:**
 
-    Shape (n_links,). A line's links are taken by shifts of x; any other graph's by
-    its incidence matrix (`Graph.incidence`, a constant of the compiled program).
+    Shape (n_links,). A line's and a lattice's links are taken by shifts of x (along
+    each direction of the lattice); any other graph's by its incidence matrix
+    (`Graph.incidence`, a constant of the compiled program).
     """
-    if params.boundary == "ring":
+    graph = params.graph
+    if graph.kind == "ring":
         return jnp.roll(x, -1) - x
-    if params.boundary == "free":
+    if graph.kind == "free":
         return x[1:] - x[:-1]
-    if params.boundary == "fixed":
+    if graph.kind == "fixed":
         ground = jnp.zeros((1,), dtype=x.dtype)
         return jnp.diff(jnp.concatenate([ground, x, ground]))
-    return jnp.asarray(params.graph.incidence()) @ x
+    if graph.kind == "lattice":
+        grid = jnp.reshape(x, graph.shape)
+        across, along = graph.boundary
+        return jnp.concatenate([_extensions_along(grid, along, 1).ravel(),
+                                _extensions_along(grid, across, 0).T.ravel()])
+    return jnp.asarray(graph.incidence()) @ x
 
 
 def coupling_force(params: ChainParams, x: Float[Array, " n_osc"]
                    ) -> Float[Array, " n_osc"]:
     """The restoring force of the coupling springs on each oscillator, the coupling
-    term of eq. (5) of the paper generalised to any boundary and to one eta_c per
+    term of eq. (5) of the paper generalised to any graph and to one eta_c per
     link: the sum over oscillator n's links l of eta_l (x_n - x_other(l)).
 
     On the homogeneous ring (scalar eta_c) this is eq. (5)'s
     eta_c (2 x_n - x_{n+1} - x_{n-1}), evaluated in that form, so that the paper's
-    runs are reproduced bit for bit.
+    runs are reproduced bit for bit. A line or a lattice is evaluated by shifts
+    along each direction; any other graph by its incidence matrix D (D^T (eta D x)).
 
     **Arguments:**
 
@@ -56,17 +140,28 @@ def coupling_force(params: ChainParams, x: Float[Array, " n_osc"]
     Shape (n_osc,), dimensionless (in units of the normal load P); it enters eq. (5)
     with a minus sign.
     """
-    if params.boundary == "ring" and jnp.ndim(params.eta_c) == 0:
+    graph = params.graph
+    if graph.kind == "ring" and jnp.ndim(params.eta_c) == 0:
         return params.eta_c * (2 * x - jnp.roll(x, 1) - jnp.roll(x, -1))
-    tension = params.eta_c * link_extensions(params, x)
-    if params.boundary == "ring":  # link n pulls oscillator n forward, n+1 back
-        return jnp.roll(tension, 1) - tension
-    if params.boundary == "free":
-        nothing = jnp.zeros((1,), dtype=tension.dtype)
-        tension = jnp.concatenate([nothing, tension, nothing])
-    if params.graph.is_line:
+    if graph.is_line:
+        tension = params.eta_c * link_extensions(params, x)
+        if graph.kind == "ring":  # link n pulls oscillator n forward, n+1 back
+            return jnp.roll(tension, 1) - tension
+        if graph.kind == "free":
+            nothing = jnp.zeros((1,), dtype=tension.dtype)
+            tension = jnp.concatenate([nothing, tension, nothing])
         return tension[:-1] - tension[1:]
-    return jnp.asarray(params.graph.incidence()).T @ tension
+    if graph.kind == "lattice" and jnp.ndim(params.eta_c) == 0:
+        return params.eta_c * _lattice_laplacian(graph, x)
+    if graph.kind == "lattice":
+        grid = jnp.reshape(x, graph.shape)
+        across, along = graph.boundary
+        eta_along, eta_across = _lattice_stiffnesses(params)
+        force = (_force_along(eta_along * _extensions_along(grid, along, 1), along, 1)
+                 + _force_along(eta_across * _extensions_along(grid, across, 0), across, 0))
+        return jnp.reshape(force, (-1,))
+    tension = params.eta_c * link_extensions(params, x)
+    return jnp.asarray(graph.incidence()).T @ tension
 
 
 def coupling_energy(params: ChainParams, x: Float[Array, " n_osc"]

