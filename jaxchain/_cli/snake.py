@@ -7,8 +7,8 @@ import json
 import time
 from pathlib import Path
 
-from .._studies.snake import (SNAKE_CONTINUATION, SNAKE_START, default_sites,
-                              localized_branches)
+from .._studies.snake import (SNAKE_CONTINUATION, SNAKE_START, check_starts, default_sites,
+                              default_starts, localized_branches)
 from .._plots.snake import plot_snake
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
@@ -44,6 +44,15 @@ of a `jaxchain sweep` underneath. The solver options set the simulations (the
 starts and the checks); shooting keeps its own tight tolerances."""
 
 
+def _start(text: str):
+    """A start of --sites: a number, or a name (checked against the chain later)."""
+    text = text.strip()
+    try:
+        return int(text)
+    except ValueError:
+        return text
+
+
 def add_parser(sub):
     p = sub.add_parser("snake", help=HELP, description=DESCRIPTION + "\n\n" + CHAIN_HELP,
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -54,11 +63,13 @@ def add_parser(sub):
     g.add_argument("--vd", type=one_belt_speed, default=1.5, metavar="V",
                    help="the belt speed where the states are found by simulation, one "
                         "value (default 1.5)")
-    g.add_argument("--sites", type=comma_list(int), default=None, metavar="K,K,...",
-                   help="oscillators excited by eq. (8) for each branch (default 1, 2, 4, "
-                        "... up to N/2, and N: "
-                        f"{','.join(map(str, default_sites(20)))} on the ring of 20; those "
-                        "above N are dropped)")
+    g.add_argument("--sites", type=comma_list(_start), default=None, metavar="K,K,...",
+                   help="the start of each branch: a number k of oscillators excited by "
+                        "eq. (8) (a patch on a lattice), site:N for oscillator N alone "
+                        "(0-based), or corner, edge, interior on a lattice (default 1, 2, "
+                        "4, ... up to N/2, and N: "
+                        f"{','.join(map(str, default_sites(20)))} on the ring of 20, those "
+                        "above N dropped; corner,edge,interior on a lattice)")
     g.add_argument("--vd-min", type=positive_float, default=1.0,
                    help="smallest belt speed of the branches (default 1.0)")
     g.add_argument("--vd-max", type=positive_float, default=2.2,
@@ -79,10 +90,12 @@ def add_parser(sub):
 
 def run(args) -> None:
     params = chain_params(args, args.n_osc, eps=args.eps, v_d=args.vd)
-    asked = default_sites(params.n_osc) if args.sites is None else args.sites
-    sites = [k for k in asked if k <= params.n_osc]
-    if not sites or min(sites) < 1:
-        raise UsageError(f"--sites: give numbers in 1..{params.n_osc}, got {args.sites}")
+    asked = default_starts(params.graph) if args.sites is None else args.sites
+    sites = [k for k in asked if isinstance(k, str) or k <= params.n_osc]
+    try:
+        sites = list(check_starts(params.graph, sites))
+    except ValueError as err:
+        raise UsageError(f"--sites: {err}") from None
     if not args.vd_min < args.vd < args.vd_max:
         raise UsageError(f"--vd must lie between --vd-min and --vd-max, got {args.vd_min}, "
                          f"{args.vd}, {args.vd_max}")

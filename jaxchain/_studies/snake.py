@@ -23,7 +23,8 @@ from .._bifurcation.shooting import (ShootingOptions, floquet_multipliers, flow,
 from .._sweeps.ensemble import ensemble
 from .._engine.options import SimulationOptions
 from .._engine.observers.crossings import downward_crossings
-from .._physics.initial import GivenState, OutOfPhaseExcitation, excited_block
+from .._physics.chain import Graph
+from .._physics.initial import GivenState, OutOfPhaseExcitation, centre_site, excited_block
 from .._physics.params import ChainParams, with_parameter
 from .._physics.record import chain_record
 from .._engine.simulate import simulate
@@ -41,6 +42,71 @@ def default_sites(n_osc: int) -> tuple[int, ...]:
     chain; 1, 2, 4, 8 and 20 on the paper's ring (its Figs. 4 and 8)."""
     sites = [2**i for i in range(n_osc.bit_length()) if 2**i <= n_osc // 2]
     return tuple(sites + [n_osc])
+
+#: The one-site starts of a lattice by the number of their neighbours: a corner (2),
+#: the middle of the top edge (3) and the centre (4; `centre_site`).
+LATTICE_STARTS = ("corner", "edge", "interior")
+
+
+def default_starts(graph: Graph) -> tuple:
+    """The starts of `localized_branches` by default: `default_sites` on a line or
+    any links, the one-site states of `LATTICE_STARTS` on a lattice."""
+    return LATTICE_STARTS if graph.kind == "lattice" else default_sites(graph.n_osc)
+
+
+def start_site(graph: Graph, name: str) -> int:
+    """The oscillator (0-based) of a named one-site start: "corner" (0), "edge" (row
+    0, column cols//2), "interior" (`centre_site`) on a lattice, or "site:N" (any
+    graph).
+
+    **Raises:** `ValidationError` for another name, a lattice name on another graph,
+    or an oscillator outside the chain."""
+    if name.startswith("site:"):
+        try:
+            n = int(name[5:])
+        except ValueError:
+            n = -1
+        if not 0 <= n < graph.n_osc:
+            raise ValidationError(f"start {name!r}: the oscillator must be in "
+                                  f"0..{graph.n_osc - 1}")
+        return n
+    if name not in LATTICE_STARTS or graph.kind != "lattice":
+        raise ValidationError(f"start {name!r}: give a number of excited oscillators, "
+                              f"site:N, or on a lattice one of {', '.join(LATTICE_STARTS)}")
+    cols = graph.shape[1]
+    return {"corner": 0, "edge": cols // 2, "interior": centre_site(graph)}[name]
+
+
+def start_mask(graph: Graph, start) -> np.ndarray:
+    """The oscillators a start excites: k of them in the block or patch of
+    `excited_block` for a number k, one for a named start (`start_site`)."""
+    if isinstance(start, str):
+        mask = np.zeros(graph.n_osc, dtype=bool)
+        mask[start_site(graph, start)] = True
+        return mask
+    return excited_block(graph.n_osc, int(start), graph)
+
+
+def _start_label(start) -> str:
+    return start if isinstance(start, str) else f"k={start}"
+
+
+def check_starts(graph: Graph, starts) -> tuple:
+    """The starts (`default_starts` if None), each a number in 1..n_osc or a name of
+    `start_site`.
+
+    **Raises:** `ValidationError` naming a bad start."""
+    starts = default_starts(graph) if starts is None else tuple(
+        s if isinstance(s, str) else int(s) for s in starts)
+    if not starts:
+        raise ValidationError("sites must name at least one start")
+    for s in starts:
+        if isinstance(s, str):
+            start_site(graph, s)
+        elif not 1 <= s <= graph.n_osc:
+            raise ValidationError(f"sites must be in 1..n_osc = {graph.n_osc}, got {starts}")
+    return starts
+
 
 #: Shooting on a chain: Levenberg-Marquardt converges from a simulated state.
 SNAKE_SHOOTING = ShootingOptions(root_finder="levenberg-marquardt")
@@ -91,8 +157,9 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
     **Arguments:**
 
     - `params`: the chain; `params.v_d` is the belt speed of the start.
-    - `sites`: the numbers of excited oscillators, each in 1..n_osc
-        (`default_sites` by default).
+    - `sites`: the starts: numbers of excited oscillators, each in 1..n_osc, or
+        named one-site starts (`start_site`: "corner", "edge", "interior" on a
+        lattice, "site:N"); `default_starts` by default.
     - `options`: `SimulationOptions` of the simulations.
     - `shooting`: `ShootingOptions` (its `phase_oscillator` is replaced).
     - `solver`: the solver of the simulations (`SOLVERS`; shooting has its own).
@@ -108,10 +175,8 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
 
     `ValidationError` for a k outside 1..n_osc.
     """
-    sites = default_sites(params.n_osc) if sites is None else tuple(int(k) for k in sites)
-    if not sites or min(sites) < 1 or max(sites) > params.n_osc:
-        raise ValidationError(f"sites must be in 1..n_osc = {params.n_osc}, got {sites}")
-    masks = np.stack([excited_block(params.n_osc, k, params.graph) for k in sites])
+    sites = check_starts(params.graph, sites)
+    masks = np.stack([start_mask(params.graph, k) for k in sites])
     ics = OutOfPhaseExcitation(excited=jnp.asarray(masks),
                                velocity=jnp.zeros(len(sites)), base_sign=-1.0)
     ds = ensemble(params, [float(params.v_d)], ics, solver, options, progress=progress)
@@ -449,14 +514,17 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
 
     - `params`: the chain (any chain of `ChainParams`); `params.v_d` is where the
         states are found (1.5 by default, inside the paper's bistable range).
-    - `sites`: excited oscillators of each start (`default_sites` by default).
+    - `sites`: the starts: numbers of excited oscillators (eq. (8)'s block or a
+        graph's patch) or named one-site starts (`start_site`); `default_starts`
+        by default (the corner, edge and interior one-site states on a lattice).
     - `shooting`: `ShootingOptions` of every orbit.
     - `continuation_options`: `ContinuationOptions` (direction is set both ways).
     - `start_options`: `SimulationOptions` of the starting simulations.
     - `solver`: the solver of the simulations, the starts and the checks
         (`SOLVERS`); shooting has its own (`shooting.solver`).
     - `simulation_check`: run `check_by_simulation` on every stable range.
-    - `out`: a folder: each branch is stored there as `branch_k<k>.nc` with the key
+    - `out`: a folder: each branch is stored there as `branch_k<k>.nc` (or
+        `branch_<name>.nc`) with the key
         of its settings (`write_dataset`) as it finishes, and read back on a later
         call with equal settings (resume).
     - `progress`: progress bars.
@@ -473,18 +541,20 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     """
     if params is None:  # built on call: a chain needs `configure` first
         params = ChainParams()
-    sites = default_sites(params.n_osc) if sites is None else tuple(int(k) for k in sites)
+    sites = check_starts(params.graph, sites)
     datasets, starts, failed = {}, {}, {}
     settings = {"chain": chain_record(params), "shooting": shooting,
                 "continuation": continuation_options, "start": start_options,
                 "solver": solver if isinstance(solver, str) else type(solver).__name__}
-    paths = {k: None if out is None else Path(out) / f"branch_k{k}.nc" for k in sites}
+    paths = {k: None if out is None else Path(out) / (
+        f"branch_{k}.nc" if isinstance(k, str) else f"branch_k{k}.nc").replace(":", "")
+        for k in sites}
     todo = []
     for k in sites:
         stored = None if out is None else read_dataset(paths[k], "snake branch", k=k,
                                                        **settings)
         if stored is not None:
-            datasets[f"k={k}"] = stored
+            datasets[_start_label(k)] = stored
         else:
             todo.append(k)
     if todo:
@@ -497,14 +567,18 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
                 continue
             opts = dataclasses.replace(
                 shooting, phase_oscillator=int(np.argmax(np.asarray(orbit.amplitudes))))
-            ds = follow_branch(orbit, opts, continuation_options, k=k, progress=progress)
-            ds = ds.assign_attrs(start_vd=float(params.v_d),
+            mask = start_mask(params.graph, k)
+            ds = follow_branch(orbit, opts, continuation_options, k=int(mask.sum()),
+                               progress=progress)
+            ds = ds.assign_attrs(start=_start_label(k),
+                                 start_sites=np.flatnonzero(mask).tolist(),
+                                 start_vd=float(params.v_d),
                                  start_energy=float(orbit.energy),
                                  start_n_halc=int(orbit.n_halc))
             if out is not None:
                 Path(out).mkdir(parents=True, exist_ok=True)
                 write_dataset(ds, paths[k], "snake branch", k=k, **settings)
-            datasets[f"k={k}"] = ds
+            datasets[_start_label(k)] = ds
     links = connections(datasets)
     branches = []
     bar = tqdm(total=len(datasets), desc="simulation check", disable=not (progress and
@@ -512,6 +586,8 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     for label, ds in datasets.items():
         ranges = stable_ranges(ds)
         entry = {"label": label, "excited": int(ds.attrs["excited"]),
+                 "start_sites": [int(i) for i in np.atleast_1d(ds.attrs.get(
+                     "start_sites", []))],
                  "sites": (int(np.bincount(ds["n_halc"].values[ds["stable"].values]).argmax())
                            if ds["stable"].values.any() else None),
                  "stable_ranges": [r["v_d"] for r in ranges],
