@@ -36,6 +36,9 @@ SMALL = {
         ("N_OSC = 4\nSIGMAS = (0.0, 2.0)\nDRAWS = 2\nSAMPLES = 2\nV_D = (1.5,)\n"
          "T_END, TRANSIENT = 300.0, 200.0\nEDGE_T_END = 300.0\nFOLDS = 0\nCELLS = 20_000\n"
          "OUT = 'anderson'", "staircase kept"),
+    "08_brake_pad.ipynb":
+        ("ROWS, COLS = 2, 2\nV_D = 1.5\nT_END, TRANSIENT = 300.0, 200.0\nMAX_POINTS = 3\n"
+         "START_T_END = 1500.0\nSTARTS = ('corner',)\nRING = False", "kept"),
     "07_snaking.ipynb":
         ("N_OSC = 4\nSITES = (1,)\nMAX_POINTS = 5\nSTART_T_END = 1500.0\nCHECK = False",
          "trivial multiplier error"),
@@ -47,7 +50,7 @@ PLOTTING = re.compile(r"\bplt\.show\(|\bjc\.plot_\w+\(")
 #: Notebooks that take more than about 30 s even at reduced size, on 2 cores with a
 #: cold compilation cache (each kernel compiles its programs afresh).
 SLOW = {"03_dynamics_of_localized_states.ipynb", "04_basin_stability.ipynb",
-        "06_anderson_meets_friction.ipynb", "07_snaking.ipynb"}
+        "06_anderson_meets_friction.ipynb", "07_snaking.ipynb", "08_brake_pad.ipynb"}
 
 
 @pytest.mark.parametrize("name", [
