@@ -311,3 +311,53 @@ def test_the_si_brake_pad_runs_from_its_chain_file(tmp_path, capsys):
     si = jc.to_physical(ds)
     np.testing.assert_allclose(si["amplitudes"], ds["amplitudes"] * chain.scales.length)
     assert si["v_d"].item() == pytest.approx(0.1)
+
+
+def test_a_mass_and_a_table_through_hopf_point_and_shooting():
+    """A single oscillator of mass 1.7 with eq. (1) sampled into a table: its Hopf
+    point is eq. (1)'s (the trace 2 xi - mu'(v_d) vanishes whatever the mass), within
+    the interpolation and smoothing errors; shooting finds the stick-slip cycle
+    whose period and amplitude a long simulation (another program) measures."""
+    law = jc.ExponentialDecay()
+    v = np.linspace(0.0, 6.0, 241)
+    params = jc.ChainParams(n_osc=1, mass=1.7, eps=0.01, v_d=1.0,
+                            friction=jc.Tabulated(v=v, mu=_mu(v, law)))
+    exact = float(jc.hopf_vd_analytic(jc.ChainParams(n_osc=1)))
+    assert abs(float(jc.hopf_point(params, guess=1.2).v_d[0]) - exact) < 1e-3
+    options = jc.SimulationOptions(t_end=200.0, transient=150.0, rtol=1e-8, atol=1e-10)
+    y0 = np.array([[2.0], [0.0]])
+    peaks = jc.observe(params, y0, [jc.PeakTimes(), jc.Extrema()], options=options)
+    times = np.asarray(peaks["peak_times"])[0]
+    period = float(np.median(np.diff(times[np.isfinite(times)])))
+    end = np.asarray(jc.simulate(params, y0, options=options).y_final)
+    orbit = jc.periodic_orbit(params, end, period, jc.ShootingOptions(
+        root_finder="levenberg-marquardt"))
+    assert bool(orbit.converged)
+    assert abs(float(orbit.period) / period - 1) < 2e-3
+    assert abs(float(orbit.amplitudes[0]) / float(peaks["amplitudes"][0]) - 1) < 2e-3
+
+
+def test_named_one_site_starts_of_a_lattice():
+    """The corner, edge and interior starts of the 4 x 5 pad excite one site each,
+    with 2, 3 and 4 neighbours; site:N names any oscillator; a bad name is refused."""
+    from jaxchain._studies.snake import start_mask, start_site
+
+    graph = jc.Graph.lattice(4, 5, "free")
+    sites = [start_site(graph, name) for name in ("corner", "edge", "interior")]
+    assert [int(graph.degree()[s]) for s in sites] == [2, 3, 4]
+    assert start_mask(graph, "site:7").sum() == 1 and start_mask(graph, "site:7")[7]
+    with pytest.raises(ValueError, match="corner"):
+        start_site(jc.Graph.line(20), "corner")
+
+
+def test_halc_clusters_follow_the_graph_and_a_1d_study_says_so(tmp_path, capsys):
+    """On a 3 x 3 lattice the four corners are four groups and a plus sign is one;
+    the mistuning study (1-D by nature) refuses a lattice in one line."""
+    graph = jc.Graph.lattice(3, 3, "free")
+    corners = np.zeros(9, dtype=bool)
+    corners[[0, 2, 6, 8]] = True
+    plus = np.zeros(9, dtype=bool)
+    plus[[1, 3, 4, 5, 7]] = True
+    assert jc.halc_clusters(np.stack([corners, plus]), graph).tolist() == [4, 1]
+    assert_usage_error(["mistuning", "--lattice", "2x2", "--out", str(tmp_path / "m")],
+                       "1-D by nature", capsys)

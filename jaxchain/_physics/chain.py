@@ -248,6 +248,17 @@ def as_graph(boundary, n_osc: int) -> Graph:
     return Graph.line(n_osc, boundary)
 
 
+def require_line(params, what: str) -> None:
+    """Refuse a chain that is not a line, for a study that is 1-D by nature (the
+    transfer matrix of a line gives its localization factor).
+
+    **Raises:** `ValidationError` naming the study and the graph."""
+    if not params.graph.is_line:
+        raise ValidationError(f"{what} is 1-D by nature (the transfer matrix of a line); "
+                              f"the chain is a {params.graph.describe()}: give a line "
+                              "(ring, free or fixed)")
+
+
 def _check_size(name: str, value) -> None:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ValidationError(f"{name} must be an integer >= 1, got {value!r}")

@@ -6,6 +6,7 @@ import diffrax
 import jax.numpy as jnp
 import numpy as np
 
+from ..._physics.chain import require_line
 from ..._engine.options import SimulationOptions
 from ..._physics.params import ChainParams, with_fields, with_parameter
 from ..._bifurcation.shooting import periodic_orbit
@@ -129,6 +130,7 @@ def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
     """
     if params is None:  # built on call: a chain needs `configure` first
         params = ChainParams(n_osc=4)
+    require_line(params, "the mistuning design")
     n = params.n_osc
     start = design_problems(params, budget)
     problem, solutions, homogeneous = start

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
+from ..._physics.chain import require_line
 from ..._physics.record import check_recordable
 from ..basin.basin import _key, _key_data
 from ..basin.sampling import Box, sample_states
@@ -136,6 +137,7 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
     if params is None:  # built on call: a chain needs `configure` first
         params = ChainParams()
     params, solver, options, v = check_run(params, solver, options, v_d)
+    require_line(params, "the mistuning study")
     check_recordable(params)
     sigmas = np.atleast_1d(np.asarray(sigmas, dtype=float))
     if sigmas.ndim != 1 or sigmas.size == 0 or not np.all(np.isfinite(sigmas)) \
