@@ -329,9 +329,8 @@ def test_a_mass_and_a_table_through_hopf_point_and_shooting():
     peaks = jc.observe(params, y0, [jc.PeakTimes(), jc.Extrema()], options=options)
     times = np.asarray(peaks["peak_times"])[0]
     period = float(np.median(np.diff(times[np.isfinite(times)])))
-    end = np.asarray(jc.simulate(params, y0, options=options).y_final)
-    orbit = jc.periodic_orbit(params, end, period, jc.ShootingOptions(
-        root_finder="levenberg-marquardt"))
+    orbit = jc.periodic_orbit(params, np.asarray(peaks["y_final"]), period,
+                              jc.ShootingOptions(root_finder="levenberg-marquardt"))
     assert bool(orbit.converged)
     assert abs(float(orbit.period) / period - 1) < 2e-3
     assert abs(float(orbit.amplitudes[0]) / float(peaks["amplitudes"][0]) - 1) < 2e-3
@@ -373,10 +372,10 @@ def test_the_nonsmooth_reference_with_masses_on_a_lattice_against_the_smoothed_m
                             eta_c=0.05, v_d=1.0, eps=1e-4,
                             friction=jc.Tabulated(v=v, mu=_mu(v, law)))
     y0 = np.array([[2.0, -1.0], [0.0, 0.0]])
-    smoothed = jc.simulate(params, y0, options=jc.SimulationOptions(t_end=300.0,
-                                                                    transient=200.0))
-    reference = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions(t_end=300.0,
-                                                                      transient=200.0))
+    smoothed = jc.simulate(params, y0, options=jc.SimulationOptions(t_end=150.0,
+                                                                    transient=100.0))
+    reference = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions(t_end=150.0,
+                                                                      transient=100.0))
     a, b = np.asarray(smoothed.amplitudes), np.asarray(reference.amplitudes)
     assert np.all(b > 0.5)  # both on stick-slip
     np.testing.assert_allclose(a, b, rtol=1e-2)

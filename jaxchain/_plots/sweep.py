@@ -36,12 +36,13 @@ def plot_bifurcation_diagram(ds: xr.Dataset, fig=None):
         resolves them no better).
     - Lower panel: that fraction against the swept parameter, for both kinds.
 
-    Failed runs are left out and counted in the title.
+    Failed runs are left out and counted in the title. A sweep converted by
+    `to_physical` is drawn in its units (v_d and the Hopf point in m/s).
 
     **Arguments:**
 
     - `ds`: a Dataset from `sweep` (dims (name, ic), with `energy`, `n_halc`,
-        `status` and `front`).
+        `status` and `front`), dimensionless or in SI units (`to_physical`).
     - `fig`: a matplotlib Figure or SubFigure to draw the panels on; a new figure
         if None.
 
@@ -84,12 +85,16 @@ def plot_bifurcation_diagram(ds: xr.Dataset, fig=None):
                 "-", color="k", lw=1, zorder=1,
                 label=f"fully stick-slipping chain ({n_osc} on the HALC)")
     hopf = _hopf_vd(ds) if name == "v_d" else None
+    si = ds.attrs.get("units") == "SI"  # converted by to_physical
+    if hopf is not None and si:
+        hopf *= float(ds.attrs["scale_velocity"])
     if hopf is not None:  # steady sliding, stable above the Hopf point
         span = (min(values[0], hopf), max(values[-1], hopf))
         ax.plot([span[0], hopf], [0, 0], ":", color="0.4", lw=2, zorder=1,
                 label="steady sliding, unstable")
         ax.plot([hopf, span[1]], [0, 0], "-", color="0.4", lw=3, alpha=0.5, zorder=1,
-                label=f"steady sliding, stable above v_d,H = {hopf:.4g} (Hopf)")
+                label=f"steady sliding, stable above v_d,H = {hopf:.4g}"
+                      f"{' m/s' if si else ''} (Hopf)")
     else:
         has_sliding = (ok & (n_halc == 0)).any(1)
         if has_sliding.any():
@@ -117,7 +122,8 @@ def plot_bifurcation_diagram(ds: xr.Dataset, fig=None):
     ax.set_ylim(top=1.3 * max(float(np.nanmax(energy[ok], initial=0.0)), 1e-9))
     low.set_ylim(0, 1)
     low.set_ylabel("fronts\n(fraction of ics)")
-    low.set_xlabel(f"{label} (dimensionless)")
+    unit = ds[name].attrs.get("units", "1")
+    low.set_xlabel(f"{label} ({'dimensionless' if unit == '1' else unit})")
     for a in (ax, low):
         for side in ("top", "right"):
             a.spines[side].set_visible(False)
