@@ -43,11 +43,17 @@ def pytest_unconfigure(config):
 
 
 def pytest_collection_modifyitems(session, config, items):
-    """The notebooks last: each runs a scene at the size of the test file that runs
-    the same scene (test_examples.py: SMALL), and loads that file's programs from
-    the session's compilation cache instead of compiling them again, once they are
-    there."""
+    """The notebooks last, the longest first: each runs a scene at the size of the
+    test file that runs the same scene (test_examples.py: SMALL), and loads that
+    file's programs from the session's compilation cache instead of compiling them
+    again, once they are there."""
     items.sort(key=lambda item: item.nodeid.startswith("tests/test_examples.py"))
+    # among the notebooks the later ones are the longer (08 the 2-D pad, 07 the snake):
+    # the longest first, so that the two workers end together (the longest last
+    # would run alone at the end)
+    first = next((i for i, item in enumerate(items)
+                  if item.nodeid.startswith("tests/test_examples.py")), len(items))
+    items[first:] = sorted(items[first:], key=lambda item: item.nodeid, reverse=True)
 
 
 def pytest_xdist_make_scheduler(config, log):

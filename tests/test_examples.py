@@ -38,7 +38,7 @@ SMALL = {
          "OUT = 'anderson'", "staircase kept"),
     "08_brake_pad.ipynb":
         ("ROWS, COLS = 2, 2\nV_D = 1.5\nT_END, TRANSIENT = 300.0, 200.0\nMAX_POINTS = 3\n"
-         "START_T_END = 1500.0\nSTARTS = ('corner',)\nRING = False", "kept"),
+         "START_T_END = 1000.0\nSTARTS = ('corner',)\nRING = False", "kept"),
     "07_snaking.ipynb":
         ("N_OSC = 4\nSITES = (1,)\nMAX_POINTS = 5\nSTART_T_END = 1500.0\nCHECK = False",
          "trivial multiplier error"),
