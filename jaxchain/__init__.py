@@ -56,6 +56,9 @@ from ._bifurcation.two_parameter import (
     fold_curve_problem as fold_curve_problem,
 )
 from ._studies.crosscheck import crosscheck as crosscheck
+from ._studies.identification.records import (
+    Record as Record, read_record as read_record, record_from_dataset as record_from_dataset,
+)
 from ._analysis.classify import CLASSES as CLASSES, classify as classify
 from ._analysis.delays import (
     delay_spread as delay_spread, reference_oscillator as reference_oscillator,

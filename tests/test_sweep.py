@@ -11,9 +11,9 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from helpers import (JAXCHAIN, assert_cf_compliant, SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, batch_writes,
-                     batches_done, held, hold_env, internal, kill, release, replace_internal,
-                     small_sweep, sweep_cli)
+from helpers import (JAXCHAIN, SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, assert_cf_compliant,
+                     batch_writes, batches_done, held, hold_env, internal, kill, release,
+                     replace_internal, small_sweep, sweep_cli)
 
 #: The grid of the kill-and-resume tests: 2 belt speeds x eq. (8) with k = 1..3 on
 #: a ring of 3, in 3 batches of 2 (`small_sweep`).

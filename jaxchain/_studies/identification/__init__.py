@@ -1,0 +1,1 @@
+"""Identification of friction and damping from measured stick-slip records."""

@@ -1,0 +1,65 @@
+"""Measured records: read from CSV files and Datasets, converted from SI units, and
+refused before any fit, each bad case with its error naming the file and column."""
+
+import numpy as np
+import pytest
+
+import jaxchain as jc
+
+
+def _write(path, header, rows):
+    path.write_text(",".join(header) + "\n"
+                    + "\n".join(",".join(str(v) for v in row) for row in rows) + "\n")
+    return path
+
+
+def test_a_record_is_read_in_its_columns_and_converted_from_si(tmp_path):
+    """Columns x3 and x1 (any order, any subset) come back sorted by oscillator with
+    their velocities; a record in SI units is divided by the chain's scales."""
+    t = np.linspace(0.0, 1.0, 5)
+    rows = np.stack([t, 2 * t, 3 * t, -t, np.full(5, 1.5)], axis=1)
+    path = _write(tmp_path / "r.csv", ["t", "x3", "x1", "v1", "v_d"], rows)
+    with pytest.raises(ValueError, match="v<n> must be those of the x<n>"):
+        jc.read_record(path)
+    rows = np.stack([t, 2 * t, 3 * t, -t, 4 * t, np.full(5, 1.5)], axis=1)
+    path = _write(tmp_path / "r.csv", ["t", "x3", "x1", "v1", "v3", "v_d"], rows)
+    record = jc.read_record(path)
+    assert record.oscillators == (1, 3) and record.v_d == 1.5
+    np.testing.assert_array_equal(record.x, np.stack([3 * t, 2 * t], axis=1))
+    np.testing.assert_array_equal(record.v, np.stack([-t, 4 * t], axis=1))
+    scales = jc.Scales.of(mass=2.0, stiffness=800.0, force=40.0)
+    si = jc.read_record(path, scales=scales)
+    np.testing.assert_allclose(si.t, t / scales.time)
+    np.testing.assert_allclose(si.x, record.x / scales.length)
+    assert si.v_d == pytest.approx(1.5 / scales.velocity)
+    import xarray as xr
+
+    ds = xr.Dataset({"x1": ("t", 3 * t)}, coords={"t": t})
+    assert jc.record_from_dataset(ds, v_d=1.2).oscillators == (1,)
+
+
+@pytest.mark.parametrize("header, rows, kw, says", [
+    (["time", "x1"], [[0, 1], [1, 2]], {"v_d": 1.0}, "no column t"),
+    (["t", "x1"], [[0, 1], [0, 2]], {"v_d": 1.0}, "column t must increase"),
+    (["t", "x1"], [[0, 1], [1, "nan"]], {"v_d": 1.0}, "column x1, sample 2"),
+    (["t", "x1"], [[0, 1], [1, "a"]], {"v_d": 1.0}, "column x1, line 3"),
+    (["t", "y1"], [[0, 1], [1, 2]], {"v_d": 1.0}, "unknown column 'y1'"),
+    (["t", "x1"], [[0, 1], [1, 2]], {}, "no column v_d"),
+    (["t", "x1", "v_d"], [[0, 1, 1.0], [1, 2, 1.1]], {}, "v_d must be constant"),
+    (["t", "x0"], [[0, 1], [1, 2]], {"v_d": 1.0}, "unknown column 'x0'"),
+])
+def test_bad_records_are_refused_naming_the_file_and_column(tmp_path, header, rows, kw, says):
+    path = _write(tmp_path / "bad.csv", header, rows)
+    with pytest.raises(ValueError, match=says) as err:
+        jc.read_record(path, **kw)
+    assert "bad.csv" in str(err.value)
+
+
+def test_a_record_is_checked_against_the_chain_and_the_fit(tmp_path):
+    path = _write(tmp_path / "r.csv", ["t", "x4"], [[0, 1], [1, 2], [2, 3]])
+    record = jc.read_record(path, v_d=1.0)
+    with pytest.raises(ValueError, match="column x4: the chain has 3 oscillators"):
+        record.check(n_osc=3)
+    with pytest.raises(ValueError, match="3 measured values for 4 unknowns"):
+        record.check(n_osc=4, n_parameters=4)
+    assert record.check(n_osc=4, n_parameters=3) is record
