@@ -20,9 +20,9 @@ def vector_field(t, y: State | Float[Array, " 2n"],
         m_n x_n'' = -2 xi_n x_n' - k_n x_n - (coupling)_n + (P_n/P) F(x_n' - v_d),
 
     (m_n = 1 unless `params.mass` is given); on the paper's ring (coupling)_n =
-    eta_c (2 x_n - x_{n+1} - x_{n-1}), k_n = 1 and P_n = P. For n_osc = 1 on the ring the coupling term vanishes (the oscillator
-    is its own neighbour), which gives the single mass-on-moving-belt oscillator of
-    Fig. 3(a).
+    eta_c (2 x_n - x_{n+1} - x_{n-1}), k_n = 1 and P_n = P. For n_osc = 1 on the
+    ring the coupling term vanishes (the oscillator is its own neighbour), which
+    gives the single mass-on-moving-belt oscillator of Fig. 3(a).
 
     **Arguments:**
 
