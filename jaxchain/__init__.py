@@ -182,7 +182,10 @@ from ._engine.simulate import (
     integrate as integrate, Observables as Observables,
     observe as observe, simulate as simulate,
 )
-from ._studies.snake import localized_branches as localized_branches
+from ._studies.snake import (
+    LATTICE_STARTS as LATTICE_STARTS, localized_branches as localized_branches,
+    start_mask as start_mask, start_site as start_site,
+)
 from ._engine.solver.registry import (
     DEFAULT_SOLVER as DEFAULT_SOLVER, SOLVERS as SOLVERS, auto_solver as auto_solver,
 )

@@ -240,7 +240,7 @@ def test_a_law_that_cannot_be_recorded_is_refused_before_the_run(monkeypatch):
     import equinox as eqx
 
     class Linear(jc.AbstractFrictionLaw):
-        mu: float = eqx.field(converter=jc._physics.friction.as_parameter, default=0.6)
+        mu: float = eqx.field(converter=np.asarray, default=0.6)
 
         @classmethod
         def rules(cls):
@@ -339,14 +339,12 @@ def test_a_mass_and_a_table_through_hopf_point_and_shooting():
 def test_named_one_site_starts_of_a_lattice():
     """The corner, edge and interior starts of the 4 x 5 pad excite one site each,
     with 2, 3 and 4 neighbours; site:N names any oscillator; a bad name is refused."""
-    from jaxchain._studies.snake import start_mask, start_site
-
     graph = jc.Graph.lattice(4, 5, "free")
-    sites = [start_site(graph, name) for name in ("corner", "edge", "interior")]
+    sites = [jc.start_site(graph, name) for name in jc.LATTICE_STARTS]
     assert [int(graph.degree()[s]) for s in sites] == [2, 3, 4]
-    assert start_mask(graph, "site:7").sum() == 1 and start_mask(graph, "site:7")[7]
+    assert jc.start_mask(graph, "site:7").sum() == 1 and jc.start_mask(graph, "site:7")[7]
     with pytest.raises(ValueError, match="corner"):
-        start_site(jc.Graph.line(20), "corner")
+        jc.start_site(jc.Graph.line(20), "corner")
 
 
 def test_halc_clusters_follow_the_graph_and_a_1d_study_says_so(tmp_path, capsys):
