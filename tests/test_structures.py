@@ -377,3 +377,22 @@ def test_the_nonsmooth_reference_with_masses_on_a_lattice_against_the_smoothed_m
     a, b = np.asarray(smoothed.amplitudes), np.asarray(reference.amplitudes)
     assert np.all(b > 0.5)  # both on stick-slip
     np.testing.assert_allclose(a, b, rtol=1e-2)
+
+
+@pytest.mark.parametrize("boundary", [("free", "free"), ("fixed", "periodic"),
+                                      ("periodic", "fixed"), ("periodic", "periodic")])
+def test_a_lattice_couples_as_its_list_of_links(boundary):
+    """The lattice's shifts (one eta_c) and per-axis tensions (one per link) give the
+    force of the same links taken one by one through the incidence matrix, for
+    sizes down to one row, one column and 2 x 2 (where periodic links double)."""
+    import jax.numpy as jnp
+
+    rng = np.random.default_rng(1)
+    for shape in [(4, 5), (1, 3), (3, 1), (2, 2), (1, 1)]:
+        graph = jc.Graph.lattice(*shape, boundary)
+        links = jc.Graph.from_links(graph.n_osc, graph.links)
+        x = jnp.asarray(rng.normal(size=graph.n_osc))
+        for eta in (0.3, rng.uniform(0.1, 1.0, graph.n_links)):
+            got = jc.coupling_force(jc.ChainParams(graph=graph, eta_c=eta), x)
+            expected = jc.coupling_force(jc.ChainParams(graph=links, eta_c=eta), x)
+            np.testing.assert_allclose(got, expected, rtol=0, atol=1e-14)

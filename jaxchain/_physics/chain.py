@@ -188,6 +188,13 @@ class Graph(eqx.Module):
         """Whether this is a line of `BOUNDARIES` (the paper's ring or an open line)."""
         return self.kind in BOUNDARIES
 
+    def row_links(self) -> int:
+        """The number of a lattice's links along its rows (they come first in
+        `links`); 0 for another graph."""
+        if self.kind != "lattice":
+            return 0
+        return self.shape[0] * len(_line_links(self.shape[1], self.boundary[1]))
+
     def incidence(self) -> np.ndarray:
         """The incidence matrix D, shape (n_links, n_osc): D @ x is the extension of
         each link, x_right - x_left (ground columns left out); D.T @ (eta D x) is

@@ -76,15 +76,9 @@ def _lattice_stiffnesses(params: ChainParams):
     if jnp.ndim(eta) == 0:
         return eta, eta
     rows, cols = params.graph.shape
-    per_row = (params.graph.n_links - cols * _n_line_links(rows, params.graph.boundary[0])
-               ) // rows
-    split = rows * per_row
-    return (jnp.reshape(eta[:split], (rows, per_row)),
+    split = params.graph.row_links()
+    return (jnp.reshape(eta[:split], (rows, -1)),
             jnp.reshape(eta[split:], (cols, -1)).T)
-
-
-def _n_line_links(n: int, boundary: str) -> int:
-    return {"periodic": n, "free": n - 1, "fixed": n + 1}[boundary]
 
 
 def link_extensions(params: ChainParams, x: Float[Array, " n_osc"]
