@@ -16,7 +16,9 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 #: the kernel finds the programs that test compiled in the session's persistent
 #: compilation cache (tests/conftest.py), or leaves its own there for the test: 01
 #: test_cli.py's `localized` run, 03 the `figure --quick` scenes of test_dynamics.py
-#: (jaxchain/_cli/figure.py: QUICK), 06 test_mistuning.py's study.
+#: (jaxchain/_cli/figure.py: QUICK), 06 test_mistuning.py's study. In 08 the ensemble
+#: and the branch's starting simulation share their options (T_END, TRANSIENT =
+#: START_T_END, START_T_END - 500), so that they share one program.
 SMALL = {
     "01_localized_states.ipynb":
         ("N_OSC = 3\nV_D = 1.5\nT_END = 400.0\nTRANSIENT = 200.0", "E / n_HALC"),
@@ -37,8 +39,8 @@ SMALL = {
          "T_END, TRANSIENT = 300.0, 200.0\nEDGE_T_END = 300.0\nFOLDS = 0\nCELLS = 20_000\n"
          "OUT = 'anderson'", "staircase kept"),
     "08_brake_pad.ipynb":
-        ("ROWS, COLS = 2, 2\nV_D = 1.5\nT_END, TRANSIENT = 300.0, 200.0\nMAX_POINTS = 3\n"
-         "START_T_END = 1000.0\nSTARTS = ('corner',)\nRING = False", "kept"),
+        ("ROWS, COLS = 2, 2\nV_D = 1.5\nT_END, TRANSIENT = 700.0, 200.0\nMAX_POINTS = 3\n"
+         "START_T_END = 700.0\nSTARTS = ('corner',)\nRING = False", "kept"),
     "07_snaking.ipynb":
         ("N_OSC = 4\nSITES = (1,)\nMAX_POINTS = 5\nSTART_T_END = 1500.0\nCHECK = False",
          "trivial multiplier error"),

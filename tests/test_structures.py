@@ -379,16 +379,16 @@ def test_the_nonsmooth_reference_with_masses_on_a_lattice_against_the_smoothed_m
     np.testing.assert_allclose(a, b, rtol=1e-2)
 
 
-@pytest.mark.parametrize("boundary", [("free", "free"), ("fixed", "periodic"),
-                                      ("periodic", "fixed"), ("periodic", "periodic")])
-def test_a_lattice_couples_as_its_list_of_links(boundary):
+def test_a_lattice_couples_as_its_list_of_links():
     """The lattice's shifts (one eta_c) and per-axis tensions (one per link) give the
-    force of the same links taken one by one through the incidence matrix, for
-    sizes down to one row, one column and 2 x 2 (where periodic links double)."""
+    force of the same links taken one by one through the incidence matrix: each
+    boundary in each direction, on a 4 x 5 lattice and a 2 x 2 one (where periodic
+    links double)."""
     import jax.numpy as jnp
 
     rng = np.random.default_rng(1)
-    for shape in [(4, 5), (1, 3), (3, 1), (2, 2), (1, 1)]:
+    for shape, boundary in [((4, 5), ("fixed", "periodic")), ((4, 5), ("periodic", "free")),
+                            ((4, 5), ("free", "fixed")), ((2, 2), ("periodic", "periodic"))]:
         graph = jc.Graph.lattice(*shape, boundary)
         links = jc.Graph.from_links(graph.n_osc, graph.links)
         x = jnp.asarray(rng.normal(size=graph.n_osc))
