@@ -56,6 +56,15 @@ from ._bifurcation.two_parameter import (
     fold_curve_problem as fold_curve_problem,
 )
 from ._studies.crosscheck import crosscheck as crosscheck
+from ._studies.identification.choice import compare_laws as compare_laws
+from ._studies.identification.fit import (
+    Identification as Identification, IdentifyOptions as IdentifyOptions,
+    identify as identify,
+)
+from ._studies.identification.synthetic import (
+    reference_record as reference_record, write_record as write_record,
+)
+from ._studies.identification.unknowns import unknowns_of as unknowns_of
 from ._studies.identification.records import (
     Record as Record, read_record as read_record, record_from_dataset as record_from_dataset,
 )
@@ -92,7 +101,7 @@ from ._nonsmooth.existence import (
 )
 from ._nonsmooth.options import NonsmoothOptions as NonsmoothOptions
 from ._nonsmooth.solve import (
-    NonsmoothObservables as NonsmoothObservables,
+    NonsmoothObservables as NonsmoothObservables, nonsmooth_trajectory as nonsmooth_trajectory,
     simulate_nonsmooth as simulate_nonsmooth,
 )
 from ._nonsmooth.switching import SWITCH_KINDS as SWITCH_KINDS

@@ -181,16 +181,17 @@ def add_run_options(p: argparse.ArgumentParser, defaults: SimulationOptions = DE
     add_solver_options(g)
 
 
-def add_solver_options(g) -> None:
+def add_solver_options(g, rtol: float = DEFAULTS.rtol, atol: float = DEFAULTS.atol) -> None:
     """--solver, --rtol, --atol, --controller and --max-steps, with the library's
     defaults, in the argument group (or parser) `g`: the same in every command
-    that integrates."""
+    that integrates (`rtol`, `atol`: where the command's library function has
+    other defaults)."""
     g.add_argument("--solver", choices=sorted(SOLVERS) + ["auto"], default=DEFAULT_SOLVER,
                    help=f"diffrax solver (default {DEFAULT_SOLVER}, a Rosenbrock-W method "
                         "whose W is the diagonal friction Jacobian); kencarp* are IMEX, "
                         "with the friction force implicit; auto takes tsit5 where "
                         "mu_st/eps <= 100 and ros34pw2 elsewhere")
-    add_tolerance_options(g)
+    add_tolerance_options(g, rtol, atol)
     g.add_argument("--max-steps", type=positive_int, default=DEFAULTS.max_steps,
                    help=f"step budget per chunk of {DEFAULTS.chunk_length:g} time units "
                         f"(default {DEFAULTS.max_steps})")
@@ -215,12 +216,14 @@ def simulation_options(args, **fields) -> SimulationOptions:
     return SimulationOptions(**(given | fields))
 
 
-def add_tolerance_options(g) -> None:
-    """--rtol, --atol and --controller, in the argument group (or parser) `g`."""
-    g.add_argument("--rtol", type=positive_float, default=DEFAULTS.rtol,
-                   help=f"relative tolerance (default {DEFAULTS.rtol:g})")
-    g.add_argument("--atol", type=positive_float, default=DEFAULTS.atol,
-                   help=f"absolute tolerance (default {DEFAULTS.atol:g})")
+def add_tolerance_options(g, rtol: float = DEFAULTS.rtol, atol: float = DEFAULTS.atol
+                          ) -> None:
+    """--rtol, --atol (defaults `rtol`, `atol`) and --controller, in the argument
+    group (or parser) `g`."""
+    g.add_argument("--rtol", type=positive_float, default=rtol,
+                   help=f"relative tolerance (default {rtol:g})")
+    g.add_argument("--atol", type=positive_float, default=atol,
+                   help=f"absolute tolerance (default {atol:g})")
     g.add_argument("--controller", choices=list(CONTROLLERS), default=DEFAULTS.controller,
                    help=f"step-size controller (default {DEFAULTS.controller}: a PI "
                         "controller that may shrink after an accepted step and, after "

@@ -4,6 +4,7 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
@@ -14,6 +15,7 @@ from .._engine.observers.base import Chunk, no_partial_answers, observe_chunk
 from .._engine.observers.extrema import Extrema
 from .._engine.progress import progress_bar, tick
 from .._engine.status import Status
+from .._errors import ValidationError
 from .options import NonsmoothOptions
 from .switching import guard, initial_modes, mode_field, switch, turning_directions
 
@@ -187,22 +189,26 @@ def _chunk(params, options, progress, observe, c: _Carry, t_stop) -> _Carry:
     return c
 
 
+def _initial_carry(params: ChainParams, y0: State, options: NonsmoothOptions,
+                   observed: tuple) -> _Carry:
+    size = options.log_size
+    return _Carry(
+        t=jnp.array(0.0), y=y0, work=jnp.zeros(2), modes=initial_modes(params, y0),
+        observed=observed, stick_time=jnp.zeros(params.n_osc),
+        log_time=jnp.full(size, jnp.nan), log_osc=jnp.full(size, -1),
+        log_kind=jnp.full(size, -1), log_count=jnp.array(0), events=jnp.array(0),
+        chunk_events=jnp.array(0), steps=jnp.array(0),
+        status=jnp.where(jnp.all(jnp.isfinite(y0)), Status.ok, Status.non_finite_state),
+    )
+
+
 def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
                   progress: bool = False) -> NonsmoothObservables:
     """Pure, traceable core of `simulate_nonsmooth` for one trajectory: no checks,
     no exceptions; vmap it for batches."""
-    n = params.n_osc
-    modes = initial_modes(params, y0)
-    y = y0
     size = options.log_size
-    c = _Carry(
-        t=jnp.array(0.0), y=y, work=jnp.zeros(2), modes=modes,
-        observed=tuple(o.init(y0, params, options) for o in _OBSERVERS),
-        stick_time=jnp.zeros(n), log_time=jnp.full(size, jnp.nan),
-        log_osc=jnp.full(size, -1), log_kind=jnp.full(size, -1), log_count=jnp.array(0),
-        events=jnp.array(0), chunk_events=jnp.array(0), steps=jnp.array(0),
-        status=jnp.where(jnp.all(jnp.isfinite(y0)), Status.ok, Status.non_finite_state),
-    )
+    c = _initial_carry(params, y0, options,
+                       tuple(o.init(y0, params, options) for o in _OBSERVERS))
     for start, length, count, observe in options.phases(halves=True):
         if observe:  # the window's edge, where no segment ends
             c = eqx.tree_at(lambda d: d.observed, c,
@@ -294,3 +300,52 @@ def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State
     if throw and status is not Status.ok:
         raise RuntimeError(f"{status}: {status.message}")
     return obs
+
+
+@eqx.filter_jit
+def _sampled(params: ChainParams, y0: State, ts, options: NonsmoothOptions):
+    def body(c, t):
+        c = _chunk(params, options, False, False, c, t)
+        return c, c.y
+
+    c, ys = jax.lax.scan(body, _initial_carry(params, y0, options, ()), ts)
+    return ys, c.status
+
+
+def nonsmooth_trajectory(params: ChainParams, y0: AbstractInitialCondition | State,
+                         ts: Float[Array, " m"],
+                         options: NonsmoothOptions = NonsmoothOptions()
+                         ) -> Float[Array, "m 2 n_osc"]:
+    """The state of the non-smooth reference (`simulate_nonsmooth`) at the times
+    `ts`: the exact switch model, integrated event by event from t = 0 to each
+    sample in turn, so that every sample is exact to the integration tolerance
+    (no interpolation across a switch). This is the reference from which the
+    identification's tests make their records.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (`eps` is not used).
+    - `y0`: an initial condition or a state of shape (2, n_osc) at t = 0.
+    - `ts`: sample times, increasing, >= 0, shape (m,), dimensionless (eq. (4)).
+    - `options`: `NonsmoothOptions`; its tolerances and event budget apply (its
+        horizon does not: `ts` is the horizon).
+
+    **Returns:**
+
+    The states, shape (m, 2, n_osc): rows (x, x') at each time.
+
+    **Raises:**
+
+    `ValidationError` for times that are not increasing or negative;
+    `RuntimeError` naming the status when the run fails.
+    """
+    ts = np.asarray(ts, dtype=float)
+    if ts.ndim != 1 or ts.size == 0 or ts[0] < 0 or np.any(np.diff(ts) <= 0):
+        raise ValidationError("ts must be a non-empty increasing array of times >= 0")
+    if not isinstance(y0, AbstractInitialCondition):
+        y0 = GivenState(y0)
+    ys, status = _sampled(params, y0(params), jnp.asarray(ts), options)
+    status = Status(int(status))
+    if status is not Status.ok:
+        raise RuntimeError(f"{status}: {status.message}")
+    return ys

@@ -123,6 +123,14 @@ class AbstractFrictionLaw(eqx.Module):
         return ()
 
     @classmethod
+    def ordered_pairs(cls) -> tuple[tuple[str, str], ...]:
+        """(upper, lower) pairs of parameters that the law requires in order, upper
+        >= lower: the static coefficient above the dynamic one (`mu_st` >= `mu_d`
+        of eq. (1)); none unless a law says so. The identification keeps them in
+        order by its parametrisation."""
+        return ()
+
+    @classmethod
     @abc.abstractmethod
     def rules(cls) -> dict:
         """field name -> (predicate, requirement text), for `check_values`."""
@@ -161,6 +169,10 @@ class ExponentialDecay(AbstractFrictionLaw):
     @classmethod
     def rules(cls):
         return {"mu_d": (_positive, "> 0"), "v0": (_positive, "> 0")}
+
+    @classmethod
+    def ordered_pairs(cls):
+        return (("mu_st", "mu_d"),)
 
     def __call__(self, v_rel):
         return self.mu_d + (self.mu_st - self.mu_d) * jnp.exp(-jnp.abs(v_rel) / self.v0)
@@ -209,6 +221,10 @@ class Stribeck(AbstractFrictionLaw):
     def rules(cls):
         return {"mu_c": (_positive, "> 0"), "v_s": (_positive, "> 0"),
                 "delta": (_positive, "> 0"), "viscous": (_non_negative, ">= 0")}
+
+    @classmethod
+    def ordered_pairs(cls):
+        return (("mu_s", "mu_c"),)
 
     def __call__(self, v_rel):
         r = jnp.abs(v_rel) / self.v_s

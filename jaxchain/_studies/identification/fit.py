@@ -1,0 +1,437 @@
+"""`identify`: the parameters of a chain and its friction law fitted to measured
+records by least squares through the integration, with their uncertainty."""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from ..._engine.checks import as_solver
+from ..._engine.options import SimulationOptions
+from ..._engine.solver.controller import CONTROLLERS
+from ..._engine.solver.registry import DEFAULT_SOLVER
+from ..._errors import ValidationError
+from ..._physics.params import ChainParams, parameter_value, with_parameter
+from .records import Record
+from .starts import breakaway_start, local_slopes
+from .unknowns import Unknowns, unknowns_of
+from .windows import FlowOptions, Windows, cut, predictions, residuals
+
+
+class IdentifyOptions(eqx.Module):
+    """How `identify` fits.
+
+    **Arguments** (static; times dimensionless, eq. (4)):
+
+    - `window`: the length of a multiple-shooting window. The default, 10, is
+        about one stick-slip period at the paper's parameters: long enough that
+        every window holds a stick phase and a slip arc (what determines mu(0),
+        mu(v) and xi), short enough that the misfit stays smooth in the window's
+        initial state (measured in `benchmarks/identification_windows.py` and on
+        the documentation page "Identification").
+    - `eps`: the smoothing of the fitted model. The fit is to the exact switch
+        model's records, so eps is a bias: 1e-5 keeps it below 0.5 % (1e-3, the
+        simulations' default, biases xi and v0 by about 3 %).
+    - `solver`, `rtol`, `atol`, `controller`, `max_steps`: the integration of
+        each window, as in `SimulationOptions`, but at rtol 1e-6, atol 1e-8: the
+        fit needs the forward-mode sensitivities, which are exact only for the
+        discrete solution, to be accurate too; at the simulations' rtol 3e-5
+        Levenberg-Marquardt stalls far from the minimum on the test records.
+    - `tol`: the Levenberg-Marquardt tolerance (optimistix, rtol = atol).
+    - `max_iterations`: iteration budget of each stage.
+    - `weights`: the weights of the continuity residuals in the successive stages:
+        the first, 1, lets windows jump while the parameters settle (the point of
+        multiple shooting); the last, 1e3, closes the jumps, so that the answer is
+        that of the continuous trajectory.
+    - `condition_limit`: the condition number of the parameters' correlation
+        matrix above which the fit warns that a direction is poorly determined.
+
+    **Raises:** `ValidationError` naming the field for a value that is not > 0.
+    """
+
+    window: float = eqx.field(static=True, default=10.0)
+    eps: float = eqx.field(static=True, default=1e-5)
+    solver: str = eqx.field(static=True, default=DEFAULT_SOLVER)
+    rtol: float = eqx.field(static=True, default=1e-6)
+    atol: float = eqx.field(static=True, default=1e-8)
+    controller: str = eqx.field(static=True, default=SimulationOptions().controller)
+    max_steps: int = eqx.field(static=True, default=SimulationOptions().max_steps)
+    tol: float = eqx.field(static=True, default=1e-9)
+    max_iterations: int = eqx.field(static=True, default=200)
+    weights: tuple = eqx.field(static=True, default=(1.0, 1e3))
+    condition_limit: float = eqx.field(static=True, default=1e6)
+
+    def __check_init__(self):
+        for name in ("window", "eps", "rtol", "atol", "max_steps", "tol", "max_iterations",
+                     "condition_limit"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
+                raise ValidationError(f"IdentifyOptions.{name} must be a number > 0, got "
+                                      f"{value!r}")
+        as_solver(self.solver, "IdentifyOptions.solver")
+        if self.controller not in CONTROLLERS:
+            raise ValidationError(f"IdentifyOptions.controller must be one of "
+                                  f"{', '.join(CONTROLLERS)}, got {self.controller!r}")
+        if not self.weights or any(not w > 0 for w in self.weights):
+            raise ValidationError(f"IdentifyOptions.weights must be numbers > 0, got "
+                                  f"{self.weights!r}")
+
+    @property
+    def flow(self) -> FlowOptions:
+        return FlowOptions(solver=self.solver, rtol=self.rtol, atol=self.atol,
+                           controller=self.controller, max_steps=self.max_steps)
+
+
+class _Problem(eqx.Module):
+    """The least-squares problem: the unknowns u = (theta, the windows' initial
+    states, the records' sensor offsets)."""
+
+    base: ChainParams
+    unknowns: Unknowns = eqx.field(static=True)
+    windows: Windows
+    n_records: int = eqx.field(static=True)
+    offsets: bool = eqx.field(static=True)
+    flow: FlowOptions = eqx.field(static=True)
+
+    def unpack(self, u):
+        p = self.unknowns.size
+        w, n = self.windows.n_windows, self.base.n_osc
+        states = jnp.reshape(u[p:p + 2 * n * w], (w, 2, n))
+        offsets = u[p + 2 * n * w:] if self.offsets else None
+        return u[:p], states, offsets
+
+    def parts(self, u, weight):
+        theta, states, offsets = self.unpack(u)
+        params = self.unknowns.params(self.base, theta)
+        return residuals(params, self.windows, states, offsets, weight, self.flow)
+
+    def residual(self, u, weight):
+        misfit, continuity = self.parts(u, weight)
+        return jnp.concatenate([jnp.ravel(misfit), jnp.ravel(continuity)])
+
+
+@eqx.filter_jit
+def _least_squares(problem: _Problem, u0, weight, tol: float, max_iterations: int):
+    sol = optx.least_squares(lambda u, w: problem.residual(u, w),
+                             optx.LevenbergMarquardt(rtol=tol, atol=tol), u0, weight,
+                             options=dict(jac="fwd"), max_steps=max_iterations, throw=False)
+    return sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
+
+
+@eqx.filter_jit
+def _jacobians(problem: _Problem, u):
+    def split(v):
+        misfit, continuity = problem.parts(v, 1.0)
+        return jnp.ravel(misfit), jnp.ravel(continuity)
+
+    j_data, j_cont = jax.jacfwd(split)(u)
+    return split(u)[0], j_data, j_cont
+
+
+@dataclasses.dataclass(frozen=True)
+class Identification:
+    """The result of `identify`.
+
+    **Fields:**
+
+    - `chain`: the fitted chain (`ChainParams`, at the eps of the chain given).
+    - `labels`: the fitted parameters (a vector parameter gets one label per
+        entry), shape (P,).
+    - `values`, `standard_errors`: their values and standard errors, shape (P,).
+    - `covariance`, `correlation`: shape (P, P), from the Gauss-Newton covariance
+        s^2 (J^T J)^-1 of the fit with continuity imposed, s^2 the residual
+        variance (Bard, *Nonlinear Parameter Estimation* (1974), Ch. 7); the window
+        states and offsets are marginalised out.
+    - `offsets`, `offset_errors`: the sensor offsets, one per record, with
+        their standard errors, shape (R,); None without `offsets=True`.
+    - `sigma`: the residual standard deviation (an estimate of the noise).
+    - `rss`, `n_data`, `n_free`: residual sum of squares, measured values, free
+        unknowns (parameters, first states of each record, offsets).
+    - `aic`, `bic`: Akaike's and the Bayesian information criterion for Gaussian
+        noise of unknown variance, n ln(rss/n) + 2k and n ln(rss/n) + k ln n.
+    - `converged`: whether Levenberg-Marquardt met its tolerance in every stage.
+    - `iterations`: its iterations over all stages.
+    - `fits`: per record, the fitted model at the sample times, shape (m, k) for
+        its k measured oscillators (offsets included).
+    - `warnings`: what the fit warned about (ill-conditioning, no convergence).
+    """
+
+    chain: ChainParams
+    labels: tuple
+    values: np.ndarray
+    standard_errors: np.ndarray
+    covariance: np.ndarray
+    correlation: np.ndarray
+    offsets: np.ndarray | None
+    offset_errors: np.ndarray | None
+    sigma: float
+    rss: float
+    n_data: int
+    n_free: int
+    aic: float
+    bic: float
+    converged: bool
+    iterations: int
+    fits: tuple
+    warnings: tuple
+    unknowns: Unknowns
+    theta: np.ndarray
+    theta_covariance: np.ndarray
+    base: ChainParams
+
+    def propagate(self, quantity) -> tuple[np.ndarray, np.ndarray]:
+        """A derived quantity and its standard error by the delta method through
+        JAX's derivatives: var q = g C g^T, g = dq/dtheta at the fit, C the
+        covariance of the fitted unknowns (first order: good while the standard
+        errors are small against the scale on which q bends).
+
+        **Arguments:** `quantity`: a function of a `ChainParams` (at the fitted
+        chain's eps) returning a scalar or an array, differentiable by
+        `jax.jacfwd` (a Hopf point, an existence limit, mu on a grid of speeds).
+
+        **Returns:** (value, standard error), arrays of the quantity's shape."""
+        eps = self.chain.eps
+
+        def q(theta):
+            params = with_parameter(self.unknowns.params(self.base, theta), "eps", eps)
+            return jnp.ravel(jnp.asarray(quantity(params)))
+
+        theta = jnp.asarray(self.theta)
+        value = np.asarray(q(theta))
+        g = np.asarray(jax.jacfwd(q)(theta)).reshape(value.size, -1)
+        var = np.einsum("ij,jk,ik->i", g, self.theta_covariance, g)
+        shape = jax.eval_shape(quantity, self.chain).shape
+        return value.reshape(shape), np.sqrt(np.maximum(var, 0.0)).reshape(shape)
+
+    def to_dict(self) -> dict:
+        """The result as plain numbers, for `--json`."""
+        out = {"parameters": {label: {"value": float(v), "standard_error": float(s)}
+                              for label, v, s in zip(self.labels, self.values,
+                                                     self.standard_errors)},
+               "correlation": self.correlation.tolist(), "sigma": self.sigma,
+               "rss": self.rss, "n_data": self.n_data, "n_free": self.n_free,
+               "aic": self.aic, "bic": self.bic, "converged": self.converged,
+               "iterations": self.iterations, "warnings": list(self.warnings)}
+        if self.offsets is not None:
+            out["offsets"] = [{"value": float(v), "standard_error": float(s)}
+                              for v, s in zip(self.offsets, self.offset_errors)]
+        return out
+
+    def summary(self) -> str:
+        """The fitted parameters with their standard errors, as a table."""
+        lines = [f"{'parameter':<12}{'value':>14}{'std. error':>14}{'rel.':>9}"]
+        for label, v, s in zip(self.labels, self.values, self.standard_errors):
+            rel = f"{abs(s / v):8.2%}" if v else "       -"
+            lines.append(f"{label:<12}{v:14.6g}{s:14.3g} {rel}")
+        if self.offsets is not None:
+            for r, (v, s) in enumerate(zip(self.offsets, self.offset_errors)):
+                lines.append(f"{f'offset[{r}]':<12}{v:14.6g}{s:14.3g}")
+        lines.append(f"residual sigma {self.sigma:.4g} over {self.n_data} values, "
+                     f"{self.iterations} iterations" + ("" if self.converged else
+                                                        ", NOT converged"))
+        return "\n".join(lines + [f"warning: {w}" for w in self.warnings])
+
+
+def identify(records: list[Record], chain: ChainParams, fit=("mu_st", "mu_d", "v0", "xi"),
+             *, start: dict | None = None, offsets: bool = False,
+             options: IdentifyOptions = IdentifyOptions()) -> Identification:
+    """Fit the named parameters of `chain` and its friction law to measured records
+    by least squares, with gradients from JAX through the integration.
+
+    Each record is cut into windows of `options.window` (multiple shooting: Bock
+    (1983); van Domselaar & Hemker (1975)); each window is integrated by the
+    smoothed model (eq. (5), tanh(v_rel/eps) friction) from its own fitted
+    initial state, and the residuals are the model minus every measured value,
+    plus the jumps between consecutive windows. Levenberg-Marquardt
+    (`optimistix.LevenbergMarquardt`, Jacobians by forward-mode autodiff through
+    diffrax) solves it in stages of growing continuity weight
+    (`IdentifyOptions.weights`), so that the answer is a continuous trajectory
+    per record. The parameters are fitted as the logarithm of the positive ones
+    and the excess of the static coefficient over the dynamic one
+    (`unknowns_of`): mu_st > mu_d > 0, v0 > 0, xi > 0 at every iterate.
+
+    Starting values: the chain's own values, replaced by the breakaway estimate of
+    mu(0) and xi from the records (`breakaway_start`) where those are fitted, and
+    by `start` where given; the windows' states from the measured samples (the
+    velocity by finite differences where not measured; an unmeasured oscillator
+    starts as the mean of the measured ones).
+
+    **Arguments:**
+
+    - `records`: the records (`read_record`, `record_from_dataset`), one belt
+        speed each.
+    - `chain`: the chain and its friction law, with the values of the parameters
+        that are not fitted.
+    - `fit`: the names of the fitted parameters (`unknowns_of`).
+    - `start`: starting values by name (floats, or arrays of the field's shape).
+    - `offsets`: also fit one sensor offset per record (added to its measured
+        displacements).
+    - `options`: `IdentifyOptions`.
+
+    **Returns:**
+
+    `Identification`: the fitted chain, the values with standard errors and
+    correlations, the per-record fits, the information criteria.
+
+    **Raises:**
+
+    `ValidationError` for no record, a record that does not fit the chain
+    (`Record.check`), a bad name in `fit` or `start`, or a window too short.
+    """
+    problem, u0 = _problem(records, chain, fit, start, offsets, options)
+    u, converged, iterations = u0, True, 0
+    for weight in options.weights:
+        u, ok, steps = _least_squares(problem, u, jnp.asarray(weight), options.tol,
+                                      options.max_iterations)
+        converged &= bool(ok)
+        iterations += int(steps)
+    return _result(problem, records, chain, u, converged, iterations, options)
+
+
+def _problem(records, chain, fit, start, offsets, options) -> tuple[_Problem, jnp.ndarray]:
+    if not records:
+        raise ValidationError("identify needs at least one record")
+    unknowns = unknowns_of(chain, fit) if fit else Unknowns(names=(), sizes=(), kinds=())
+    windows = cut(records, chain.n_osc, options.window)
+    n_unknowns = unknowns.size + 2 * chain.n_osc * len(records) + (len(records) * offsets)
+    for rec in records:
+        rec.check(chain.n_osc, 0)
+    total = sum(rec.n_samples for rec in records)
+    if total < n_unknowns:
+        raise ValidationError(f"{records[0].source}: {total} measured values for "
+                              f"{n_unknowns} unknowns: a fit needs more samples")
+    base = _start_chain(records, with_parameter(chain, "eps", options.eps), unknowns,
+                        start or {})
+    problem = _Problem(base=base, unknowns=unknowns, windows=windows,
+                       n_records=len(records), offsets=offsets, flow=options.flow)
+    states = _start_states(records, windows, chain.n_osc)
+    parts = [jnp.asarray(unknowns.theta(base)), jnp.ravel(states)]
+    if offsets:
+        parts.append(jnp.zeros(len(records)))
+    return problem, jnp.concatenate(parts)
+
+
+def _start_chain(records, chain: ChainParams, unknowns: Unknowns, start: dict) -> ChainParams:
+    law = type(chain.friction)
+    given = dict(start)
+    for name in given:
+        if name not in unknowns.names:
+            raise ValidationError(f"start: {name!r} is not a fitted parameter "
+                                  f"({', '.join(unknowns.names)})")
+    pairs = law.ordered_pairs()
+    estimate = breakaway_start(records, chain)
+    if pairs and pairs[0][0] in unknowns.names and "static" in estimate:
+        given.setdefault(pairs[0][0], estimate["static"])
+    if "xi" in unknowns.names and "xi" in estimate:
+        given.setdefault("xi", float(np.clip(estimate["xi"], 1e-3, 1.0)))
+    for upper, lower in pairs:  # keep the order: a dynamic level below the static one
+        if upper in given and lower not in start and np.any(
+                np.asarray(parameter_value(chain, lower)) >= given[upper]):
+            given[lower] = 0.5 * np.asarray(given[upper])
+    params = chain
+    for name in sorted(given, key=lambda n: n in dict(pairs)):
+        params = with_parameter(params, name, given[name])
+    return params
+
+
+def _start_states(records, windows: Windows, n_osc: int) -> np.ndarray:
+    states = np.zeros((windows.n_windows, 2, n_osc))
+    for w, (r, i) in enumerate(windows.start):
+        rec = records[r]
+        v = rec.v[i] if rec.v is not None else local_slopes(rec.t, rec.x)[i]
+        states[w, 0, :] = np.mean(rec.x[i])
+        states[w, 1, :] = np.mean(v)
+        cols = np.asarray(rec.oscillators) - 1
+        states[w, 0, cols] = rec.x[i]
+        states[w, 1, cols] = v
+    return states
+
+
+def _result(problem: _Problem, records, chain, u, converged, iterations,
+            options) -> Identification:
+    misfit, j_data, j_cont = (np.asarray(a) for a in _jacobians(problem, u))
+    mask = np.asarray(problem.windows.mask).reshape(-1)
+    misfit, j_data = misfit[mask], j_data[mask]
+    rss = float(misfit @ misfit)
+    n_data = int(mask.sum())
+    # Continuity imposed: the unknowns move in the null space Z of its Jacobian.
+    _, sv, vt = np.linalg.svd(j_cont, full_matrices=True)
+    rank = int(np.sum(sv > sv.max(initial=0.0) * 1e-10)) if sv.size else 0
+    z = vt[rank:].T
+    n_free = z.shape[1]
+    s2 = rss / max(n_data - n_free, 1)
+    reduced = z.T @ j_data.T @ j_data @ z
+    cov_u = s2 * z @ np.linalg.pinv(reduced, rcond=1e-14, hermitian=True) @ z.T
+    p = problem.unknowns.size
+    theta = np.asarray(u[:p])
+    cov_theta = cov_u[:p, :p]
+    g = np.asarray(jax.jacfwd(lambda th: problem.unknowns.values(problem.base, th))(
+        jnp.asarray(theta))) if p else np.zeros((0, 0))
+    cov = g @ cov_theta @ g.T
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    corr = cov / np.outer(se, se) if p else cov
+    notes = []
+    if not converged:
+        notes.append("Levenberg-Marquardt did not meet its tolerance: the values are the "
+                     "last iterate; try other starting values (--start) or windows")
+    if p > 1:
+        notes.extend(_conditioning(corr, problem.unknowns.labels, options.condition_limit))
+    for note in notes:
+        warnings.warn(note, stacklevel=3)
+    _, states, offsets = problem.unpack(u)
+    params = problem.unknowns.params(problem.base, jnp.asarray(theta))
+    ys = np.asarray(predictions(params, problem.windows, states, offsets, problem.flow))
+    fits = _stitch(records, problem.windows, ys)
+    values = np.asarray(problem.unknowns.values(problem.base, jnp.asarray(theta))) if p \
+        else np.zeros(0)
+    fitted = with_parameter(params, "eps", chain.eps)
+    log_term = n_data * np.log(max(rss, 1e-300) / n_data)
+    off, off_se = None, None
+    if problem.offsets:
+        k = len(records)
+        off = np.asarray(u[-k:])
+        off_se = np.sqrt(np.maximum(np.diag(cov_u)[-k:], 0.0))
+    return Identification(
+        chain=fitted, labels=problem.unknowns.labels, values=values, standard_errors=se,
+        covariance=cov, correlation=corr, offsets=off, offset_errors=off_se,
+        sigma=float(np.sqrt(s2)), rss=rss, n_data=n_data, n_free=n_free,
+        aic=float(log_term + 2 * n_free), bic=float(log_term + n_free * np.log(n_data)),
+        converged=converged, iterations=iterations, fits=fits, warnings=tuple(notes),
+        unknowns=problem.unknowns, theta=theta, theta_covariance=cov_theta,
+        base=problem.base)
+
+
+def _conditioning(corr: np.ndarray, labels, limit: float) -> list[str]:
+    """A warning naming the poorly determined direction when the correlation matrix
+    is ill-conditioned: its eigenvector of the smallest eigenvalue."""
+    if not np.all(np.isfinite(corr)):
+        return ["the covariance is singular: a fitted parameter has no effect on the "
+                "records (or the fit failed); fix it, or measure more"]
+    values, vectors = np.linalg.eigh(corr)
+    if values[0] > 0 and values[-1] / values[0] < limit:
+        return []
+    direction = vectors[:, 0]
+    terms = sorted(zip(np.abs(direction), direction, labels), reverse=True)
+    named = " ".join(f"{c:+.2f} {label}" for a, c, label in terms if a > 0.1)
+    cond = values[-1] / values[0] if values[0] > 0 else np.inf
+    return [f"ill-conditioned (condition number {cond:.3g} of the correlation matrix): "
+            f"the records hardly determine the direction {named} (relative to the "
+            "standard errors); fix one of them, or measure more (other belt speeds, "
+            "velocities, more oscillators)"]
+
+
+def _stitch(records, windows: Windows, ys: np.ndarray) -> tuple:
+    fits = [np.zeros_like(rec.x) for rec in records]
+    starts = list(windows.start) + [(None, None)]
+    for w, (r, i) in enumerate(windows.start):
+        nxt = starts[w + 1]
+        end = nxt[1] if nxt[0] == r else records[r].t.size
+        cols = np.asarray(records[r].oscillators) - 1
+        fits[r][i:end] = ys[w, :end - i, 0][:, cols]
+    return tuple(fits)

@@ -1,0 +1,135 @@
+"""The parameters an identification fits, and the parametrisation that keeps them
+valid: a positive parameter is fitted as its logarithm, and a static coefficient
+as its excess over the dynamic one, so that mu_st > mu_d > 0, v0 > 0 and xi > 0
+hold for every value of the unknowns, with no clipping."""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from ..._errors import ValidationError
+from ..._physics.params import ChainParams, parameter_names, parameter_value, with_parameter
+
+#: Fields of `ChainParams` a fit may take: each is >= 0 or > 0 (log-parametrised).
+#: `v_d` is each record's own, and `eps` is the smoothing, not the rig.
+CHAIN_FITTABLE = ("xi", "eta_c", "stiffness", "load", "mass")
+
+#: The value a log-parametrised start of 0 (a viscous term, a damping) is raised
+#: to: the logarithm needs a positive start.
+_FLOOR = 1e-3
+
+
+class Unknowns(eqx.Module):
+    """The fitted parameters of a chain and how they map to the unknowns theta of
+    the least-squares problem.
+
+    **Fields** (static):
+
+    - `names`: the fitted parameters, in order.
+    - `sizes`: their sizes (1 for a scalar; n_osc for a per-oscillator field; m
+        for a table's values).
+    - `kinds`: per name, `"log"` (theta = log p), `"above:<lower>"` (theta =
+        log(p - lower), the static coefficient over the dynamic one) or `"free"`
+        (theta = p, a coefficient of either sign).
+    """
+
+    names: tuple = eqx.field(static=True)
+    sizes: tuple = eqx.field(static=True)
+    kinds: tuple = eqx.field(static=True)
+
+    @property
+    def size(self) -> int:
+        """The number of unknowns theta."""
+        return int(sum(self.sizes))
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """One label per unknown: the name, with an index for a vector parameter."""
+        return tuple(name if size == 1 else f"{name}[{i}]"
+                     for name, size in zip(self.names, self.sizes) for i in range(size))
+
+    def theta(self, params: ChainParams) -> np.ndarray:
+        """The unknowns of `params`' values of the fitted parameters, shape (size,)."""
+        parts = []
+        for name, kind in zip(self.names, self.kinds):
+            p = np.asarray(parameter_value(params, name), dtype=float).reshape(-1)
+            if kind.startswith("above:"):
+                lower = np.asarray(parameter_value(params, kind[6:]), dtype=float)
+                p = p - lower.reshape(-1)
+            if kind != "free":
+                p = np.log(np.maximum(p, _FLOOR * np.maximum(np.abs(p).max(), 1.0)))
+            parts.append(p)
+        return np.concatenate(parts)
+
+    def params(self, base: ChainParams, theta) -> ChainParams:
+        """`base` with the fitted parameters set from `theta` (traceable): the
+        parameters above another are set last, over its new value."""
+        values = self.split(theta)
+        order = sorted(range(len(self.names)), key=lambda i: self.kinds[i].startswith("above:"))
+        params = base
+        for i in order:
+            name, kind, shape = self.names[i], self.kinds[i], np.shape(
+                parameter_value(base, self.names[i]))
+            value = values[i] if kind == "free" else jnp.exp(values[i])
+            if kind.startswith("above:"):
+                value = jnp.reshape(parameter_value(params, kind[6:]), (-1,)) + value
+            params = with_parameter(params, name, jnp.reshape(value, shape))
+        return params
+
+    def values(self, base: ChainParams, theta) -> jnp.ndarray:
+        """The fitted parameters' values (traceable) as one vector, in the order of
+        `labels`; for the covariance of the parameters by the delta method."""
+        params = self.params(base, theta)
+        return jnp.concatenate([jnp.reshape(parameter_value(params, name), (-1,))
+                                for name in self.names])
+
+    def split(self, theta) -> list:
+        """theta cut into one vector per fitted parameter."""
+        edges = np.cumsum((0,) + self.sizes)
+        return [theta[a:b] for a, b in zip(edges[:-1], edges[1:])]
+
+
+def unknowns_of(params: ChainParams, fit) -> Unknowns:
+    """The `Unknowns` that fit the named parameters of `params` and its friction law.
+
+    **Arguments:**
+
+    - `params`: the chain, with the starting values.
+    - `fit`: names, such as ("mu_st", "mu_d", "v0", "xi"): fields of the friction
+        law (its `parameter_names`) and of `CHAIN_FITTABLE`.
+
+    **Raises:**
+
+    `ValidationError` for no name, a repeated name, a name that is not a parameter
+    of this chain and law, or `v_d` / `eps`.
+    """
+    names = tuple(fit)
+    if not names:
+        raise ValidationError("fit: name at least one parameter to fit")
+    if len(set(names)) != len(names):
+        raise ValidationError(f"fit: a parameter is named twice in {', '.join(names)}")
+    law = type(params.friction)
+    allowed = CHAIN_FITTABLE + law.parameter_names()
+    for name in names:
+        if name in ("v_d", "eps"):
+            raise ValidationError(f"fit: {name} cannot be fitted (v_d is each record's "
+                                  "belt speed; eps is the smoothing of the model)")
+        if name not in allowed or name not in parameter_names(params):
+            raise ValidationError(f"fit: unknown parameter {name!r} for the {law.__name__} "
+                                  f"law: choose from {', '.join(allowed)}")
+        if name == "mass" and params.mass is None:
+            raise ValidationError("fit: mass needs the chain's masses (ChainParams(mass=...))")
+    rules = law.rules()
+    lowers = dict(law.ordered_pairs())
+    kinds = []
+    for name in names:
+        if name in lowers:
+            kinds.append(f"above:{lowers[name]}")
+        elif name in CHAIN_FITTABLE or rules.get(name, (None, ""))[1] in ("> 0", ">= 0"):
+            kinds.append("log")
+        else:
+            kinds.append("free")
+    sizes = tuple(int(np.size(parameter_value(params, name))) for name in names)
+    return Unknowns(names=names, sizes=sizes, kinds=tuple(kinds))

@@ -1,0 +1,157 @@
+"""Multiple shooting over the records: each record cut into windows, each window
+integrated from its own fitted initial state by the smoothed model, and the
+residuals of the fit (misfit to the samples, continuity between windows).
+
+Multiple shooting for parameter estimation in ODEs: Bock (1983), "Recent advances
+in parameter identification techniques for ODE", in Numerical Treatment of
+Inverse Problems in Differential and Integral Equations, Birkhauser, 95-121; and
+van Domselaar & Hemker (1975), Report NW 18/75, Mathematisch Centrum, Amsterdam.
+"""
+
+from __future__ import annotations
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float, Int
+
+from ..._engine.checks import as_solver
+from ..._engine.simulate import terms
+from ..._engine.solver.controller import step_size_controller
+from ..._errors import ValidationError
+from ..._physics.params import ChainParams, with_parameter
+from .records import Record
+
+
+class Windows(eqx.Module):
+    """The records cut into W windows of K samples (padded), for `jax.vmap`.
+
+    **Fields:**
+
+    - `times`: times from each window's start, shape (W, K + 1): its samples
+        (padded by repeating the last), then the next window's start.
+    - `data`: measured (x, x') of each oscillator, shape (W, K, 2, n_osc), 0
+        where not measured.
+    - `mask`: which entries of `data` are measured, shape (W, K, 2, n_osc).
+    - `linked`: whether the window continues into the next one (the same record),
+        shape (W,).
+    - `record`: the record of each window, shape (W,).
+    - `v_d`: the belt speed of each window, shape (W,).
+    - `start`: (record, first sample) of each window (static).
+    """
+
+    times: Float[Array, "W K1"]
+    data: Float[Array, "W K 2 n"]
+    mask: Bool[Array, "W K 2 n"]
+    linked: Bool[Array, " W"]
+    record: Int[Array, " W"]
+    v_d: Float[Array, " W"]
+    start: tuple = eqx.field(static=True)
+
+    @property
+    def n_windows(self) -> int:
+        return int(self.times.shape[0])
+
+    @property
+    def n_data(self) -> int:
+        """The number of measured values."""
+        return int(np.sum(np.asarray(self.mask)))
+
+
+def cut(records: list[Record], n_osc: int, window: float) -> Windows:
+    """The records cut into windows of about `window` time units (equal numbers of
+    samples within a record).
+
+    **Raises:** `ValidationError` for a window <= 0, or a record whose windows would
+    hold fewer than 2 samples."""
+    if not window > 0:
+        raise ValidationError(f"window must be > 0, got {window!r}")
+    pieces = []
+    for r, rec in enumerate(records):
+        duration = float(rec.t[-1] - rec.t[0])
+        count = max(1, int(round(duration / window)))
+        chunks = np.array_split(np.arange(rec.t.size), count)
+        if min(c.size for c in chunks) < 2:
+            raise ValidationError(f"{rec.source}: a window of {window} holds fewer than 2 "
+                                  "samples: choose a longer window")
+        for k, chunk in enumerate(chunks):
+            nxt = chunks[k + 1][0] if k + 1 < count else None
+            pieces.append((r, chunk, nxt))
+    size = max(c.size for _, c, _ in pieces)
+    times, data, mask, linked = [], [], [], []
+    for r, chunk, nxt in pieces:
+        rec = records[r]
+        t = rec.t[chunk] - rec.t[chunk[0]]
+        pad = size - chunk.size
+        end = rec.t[nxt] - rec.t[chunk[0]] if nxt is not None else t[-1]
+        times.append(np.concatenate([t, np.full(pad, t[-1]), [end]]))
+        d = np.zeros((size, 2, n_osc))
+        m = np.zeros((size, 2, n_osc), dtype=bool)
+        cols = np.asarray(rec.oscillators) - 1
+        d[:chunk.size, 0, cols] = rec.x[chunk]
+        m[:chunk.size, 0, cols] = True
+        if rec.v is not None:
+            d[:chunk.size, 1, cols] = rec.v[chunk]
+            m[:chunk.size, 1, cols] = True
+        data.append(d)
+        mask.append(m)
+        linked.append(nxt is not None)
+    return Windows(times=jnp.asarray(np.stack(times)), data=jnp.asarray(np.stack(data)),
+                   mask=jnp.asarray(np.stack(mask)), linked=jnp.asarray(linked),
+                   record=jnp.asarray([r for r, _, _ in pieces]),
+                   v_d=jnp.asarray([records[r].v_d for r, _, _ in pieces]),
+                   start=tuple((r, int(c[0])) for r, c, _ in pieces))
+
+
+class FlowOptions(eqx.Module):
+    """How a window is integrated: the solver (a name of `SOLVERS`), the step-size
+    controller (of `CONTROLLERS`) at `rtol`, `atol`, and the step budget, as in
+    `SimulationOptions`; forward-mode differentiable (`diffrax.ForwardMode`) for
+    the Jacobian of the fit."""
+
+    solver: str = eqx.field(static=True)
+    rtol: float = eqx.field(static=True)
+    atol: float = eqx.field(static=True)
+    controller: str = eqx.field(static=True)
+    max_steps: int = eqx.field(static=True)
+
+
+def window_flow(params: ChainParams, y0, times, options: FlowOptions):
+    """The smoothed model's states at `times` (from 0) from `y0`, shape
+    (len(times), 2, n_osc); NaN where the integration failed."""
+    solver = as_solver(options.solver)
+    sol = diffrax.diffeqsolve(
+        terms(solver), solver, 0.0, times[-1], None, y0, params,
+        saveat=diffrax.SaveAt(ts=times), stepsize_controller=step_size_controller(options),
+        adjoint=diffrax.ForwardMode(), max_steps=options.max_steps, throw=False)
+    return jnp.where(diffrax.is_successful(sol.result), sol.ys, jnp.nan)
+
+
+def predictions(params: ChainParams, windows: Windows, states, offsets,
+                options: FlowOptions):
+    """The model's states at every window's times, shape (W, K + 1, 2, n_osc), each
+    window from its state `states[w]` at its own belt speed, with the sensor
+    `offsets` (one per record, on the displacements) added to the displacements
+    (not to the last column, the next window's start)."""
+    def one(y0, times, v_d):
+        return window_flow(with_parameter(params, "v_d", v_d), y0, times, options)
+
+    ys = jax.vmap(one)(states, windows.times, windows.v_d)
+    shift = jnp.asarray(offsets)[windows.record] if offsets is not None else 0.0
+    shift = jnp.reshape(shift, (-1, 1))
+    return ys.at[:, :-1, 0, :].add(shift)
+
+
+def residuals(params: ChainParams, windows: Windows, states, offsets, weight,
+              options: FlowOptions):
+    """(misfit, continuity): the model minus the measured values, 0 where not
+    measured, shape (W, K, 2, n_osc); and `weight` times the jump of the state
+    from each window's end to the next window's start, 0 between records, shape
+    (W, 2, n_osc)."""
+    ys = predictions(params, windows, states, offsets, options)
+    misfit = jnp.where(windows.mask, ys[:, :-1] - windows.data, 0.0)
+    jump = ys[:, -1] - jnp.roll(states, -1, axis=0)
+    continuity = weight * jnp.where(windows.linked[:, None, None], jump, 0.0)
+    return misfit, continuity
