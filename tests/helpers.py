@@ -273,6 +273,10 @@ def scheduler_workers(scheduler: str) -> int | None:
     return local_workers(scheduler)
 
 
+#: A record of the example rig (examples/records), for the command lines of identify.
+EXAMPLE_RECORD = str(Path(__file__).resolve().parent.parent / "examples" / "records"
+                     / "rig_vd0.4.csv")
+
 #: Functions of jaxchain's internals that tests replace or call, by what they do:
 #: (module, name). A resumed study must read back instead of computing again.
 _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_reference_run"),
@@ -291,6 +295,7 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "tasks on devices": ("jaxchain._engine.lanes", "on_devices"),
              "smoothed observation": ("jaxchain._engine.observers.base", "observe_chunk"),
              "non-smooth observation": ("jaxchain._nonsmooth.solve", "observe_sample"),
+             "identification problem": ("jaxchain._studies.identification.fit", "_problem"),
              "command-line parser": ("jaxchain._cli.main", "build_parser"),
              "commands": ("jaxchain._cli.main", "COMMANDS"),
              "belt speeds": ("jaxchain._cli.common", "belt_speeds"),

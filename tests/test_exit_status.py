@@ -22,6 +22,7 @@ import jaxchain._cli.work_precision as cli_work_precision
 import jaxchain._studies.work_precision as wp
 from jaxchain._cli.common import RunsFailed, UsageError
 from jaxchain._cli.main import COMMANDS, build_parser, exit_status, main
+from helpers import EXAMPLE_RECORD as RECORD
 
 #: Per command, the first heavy step of its run, (module, name): reached only once
 #: the command's own checks and those of the library's entry point have passed
@@ -41,11 +42,13 @@ STUDIES = {
     "mistuning": [("jaxchain._studies.mistuning.study", "sample_states"),
                   ("jaxchain._studies.mistuning.study", "study_chains"),
                   ("jaxchain._studies.mistuning.design_study", "design_study")],
+    "identify": [("jaxchain._studies.identification.fit", "_stage")],
 }
 CLUSTER = ("jaxchain._engine.cluster", "connect")
 
 #: The smallest command line of each command (beside --out): its defaults.
-ARGV = {command: [command] for command in COMMANDS} | {"figure": ["figure", "4"]}
+ARGV = {command: [command] for command in COMMANDS} | {"figure": ["figure", "4"],
+                                                      "identify": ["identify", RECORD]}
 
 
 class Reached(BaseException):
@@ -125,6 +128,7 @@ REFUSED = [
     (["basin", "--samples", "10", "--check", "20"], "--check"),  # basin_stability
     (["snake", "--mistuning", "40"], "stiffness"),
     (["mistuning", "--sigmas", "-1"], "sigmas"),                 # mistuning_study
+    (["identify", RECORD, "--fit", "v_d"], "cannot be fitted"),  # unknowns_of
 ]
 
 

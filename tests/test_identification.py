@@ -63,3 +63,23 @@ def test_a_record_is_checked_against_the_chain_and_the_fit(tmp_path):
     with pytest.raises(ValueError, match="3 measured values for 4 unknowns"):
         record.check(n_osc=4, n_parameters=4)
     assert record.check(n_osc=4, n_parameters=3) is record
+
+
+@pytest.mark.parametrize("header, rows, options, says", [
+    (["time", "x1"], [[0, 1], [1, 2]], ["--vd", "1"], "no column t"),
+    (["t", "x1"], [[0, 1], [0, 2]], ["--vd", "1"], "column t must increase"),
+    (["t", "x1"], [[0, 1], [1, "nan"]], ["--vd", "1"], "column x1, sample 2"),
+    (["t", "x1", "v_d"], [[0, 1, 1], [1, 2, 1], [2, 3, 1]], [],
+     "3 measured values for 6 unknowns"),
+    (["t", "x2", "v_d"], [[0, 1, 1], [1, 2, 1]], ["--n-osc", "1"],
+     "column x2: the chain has 1 oscillators"),
+])
+def test_the_command_line_refuses_a_bad_record_in_one_line(tmp_path, capsys, header, rows,
+                                                           options, says):
+    """Each bad record of item 1 is refused by `jaxchain identify` before any fit:
+    exit status 2 and one line naming the file and the column."""
+    path = _write(tmp_path / "bad.csv", header, rows)
+    status = jc.main(["identify", str(path), *options, "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1, err
+    assert says in err[0] and "bad.csv" in err[0], err

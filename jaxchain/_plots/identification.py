@@ -13,7 +13,7 @@ from .canvas import panel_figure, single_axes
 def plot_record_fits(result, records, fig=None):
     """One column per record: (top) the measured displacements as dots and the
     fitted model as a line, (bottom) the residuals, measured minus fitted, with
-    +-2 sigma (the residual standard deviation).
+    +-2 sigma (the record's residual standard deviation, `Identification.noise`).
 
     **Arguments:**
 
@@ -36,8 +36,9 @@ def plot_record_fits(result, records, fig=None):
                      label=f"$x_{{{n}}}$ fitted")
             bottom.plot(rec.t, rec.x[:, k] - fitted[:, k], ".", ms=2, color=color)
         for s in (-2, 2):
-            bottom.axhline(s * result.sigma, color="0.5", lw=0.8, ls="--")
-        top.set(title=f"{Path(rec.source).name}, $v_d$ = {rec.v_d:g}", ylabel="x" if j == 0 else None)
+            bottom.axhline(s * float(np.max(result.noise[j])), color="0.5", lw=0.8, ls="--")
+        top.set(title=f"{Path(rec.source).name}, $v_d$ = {rec.v_d:g}",
+                ylabel="x" if j == 0 else None)
         bottom.set(xlabel="t", ylabel="residual" if j == 0 else None)
         if j == 0:
             top.legend(fontsize=7, loc="upper right")

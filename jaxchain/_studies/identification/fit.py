@@ -21,7 +21,7 @@ from ..._physics.params import ChainParams, parameter_value, with_parameter
 from .records import Record
 from .starts import breakaway_start, local_slopes
 from .unknowns import Unknowns, unknowns_of
-from .windows import FlowOptions, Windows, cut, predictions, residuals
+from .windows import FlowOptions, Windows, column_noise, cut, predictions, residuals
 
 
 class IdentifyOptions(eqx.Module):
@@ -62,7 +62,7 @@ class IdentifyOptions(eqx.Module):
     atol: float = eqx.field(static=True, default=1e-8)
     controller: str = eqx.field(static=True, default=SimulationOptions().controller)
     max_steps: int = eqx.field(static=True, default=SimulationOptions().max_steps)
-    tol: float = eqx.field(static=True, default=1e-9)
+    tol: float = eqx.field(static=True, default=1e-6)
     max_iterations: int = eqx.field(static=True, default=200)
     weights: tuple = eqx.field(static=True, default=(1.0, 1e3))
     condition_limit: float = eqx.field(static=True, default=1e6)
@@ -103,35 +103,66 @@ class _Problem(eqx.Module):
         p = self.unknowns.size
         w, n = self.windows.n_windows, self.base.n_osc
         states = jnp.reshape(u[p:p + 2 * n * w], (w, 2, n))
-        offsets = u[p + 2 * n * w:] if self.offsets else None
+        # the first record's sensor zero is the reference (offset 0), see `identify`
+        offsets = jnp.concatenate([jnp.zeros(1), u[p + 2 * n * w:]]) if self.offsets \
+            else None
         return u[:p], states, offsets
 
-    def parts(self, u, weight):
+    def parts(self, u, weighting):
+        """(misfit, continuity) of `residuals`; `weighting` is (noise of each
+        record's columns, shape (R, 2, n_osc); weight of the continuity)."""
         theta, states, offsets = self.unpack(u)
         params = self.unknowns.params(self.base, theta)
-        return residuals(params, self.windows, states, offsets, weight, self.flow)
+        noise, weight = weighting
+        return residuals(params, self.windows, states, offsets, noise, weight, self.flow)
 
-    def residual(self, u, weight):
-        misfit, continuity = self.parts(u, weight)
+    def residual(self, u, weighting):
+        misfit, continuity = self.parts(u, weighting)
         return jnp.concatenate([jnp.ravel(misfit), jnp.ravel(continuity)])
 
 
+class _Answer(eqx.Module):
+    """A stage's answer and what the result needs at it."""
+
+    u: jnp.ndarray
+    ok: jnp.ndarray
+    steps: jnp.ndarray
+    misfit: jnp.ndarray  # weighted, flat
+    j_data: jnp.ndarray
+    j_cont: jnp.ndarray
+    ys: jnp.ndarray  # `predictions`
+    values: jnp.ndarray  # the fitted parameters' values
+    g: jnp.ndarray  # d values / d theta
+
+
 @eqx.filter_jit
-def _least_squares(problem: _Problem, u0, weight, tol: float, max_iterations: int):
+def _stage(problem: _Problem, u0, weighting, tol: float, max_iterations: int) -> _Answer:
+    """One stage of the fit: Levenberg-Marquardt from `u0`, then, at its answer, the
+    weighted misfit, the Jacobians of the misfit and of the unweighted jumps, the
+    predictions and the parameters' values (one compiled program for the fit, its
+    covariance and its figures)."""
     sol = optx.least_squares(lambda u, w: problem.residual(u, w),
-                             optx.LevenbergMarquardt(rtol=tol, atol=tol), u0, weight,
+                             optx.LevenbergMarquardt(rtol=tol, atol=tol), u0, weighting,
                              options=dict(jac="fwd"), max_steps=max_iterations, throw=False)
-    return sol.value, sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
 
-
-@eqx.filter_jit
-def _jacobians(problem: _Problem, u):
     def split(v):
-        misfit, continuity = problem.parts(v, 1.0)
+        misfit, continuity = problem.parts(v, (weighting[0], 1.0))
         return jnp.ravel(misfit), jnp.ravel(continuity)
 
+    u = sol.value
     j_data, j_cont = jax.jacfwd(split)(u)
-    return split(u)[0], j_data, j_cont
+    theta, states, offsets = problem.unpack(u)
+    params = problem.unknowns.params(problem.base, theta)
+
+    def values(th):
+        return problem.unknowns.values(problem.base, th) if problem.unknowns.size \
+            else jnp.zeros(0)
+
+    return _Answer(u=u, ok=sol.result == optx.RESULTS.successful,
+                   steps=sol.stats["num_steps"], misfit=split(u)[0], j_data=j_data,
+                   j_cont=j_cont,
+                   ys=predictions(params, problem.windows, states, offsets, problem.flow),
+                   values=values(theta), g=jax.jacfwd(values)(theta))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -145,14 +176,20 @@ class Identification:
         entry), shape (P,).
     - `values`, `standard_errors`: their values and standard errors, shape (P,).
     - `covariance`, `correlation`: shape (P, P), from the Gauss-Newton covariance
-        s^2 (J^T J)^-1 of the fit with continuity imposed, s^2 the residual
-        variance (Bard, *Nonlinear Parameter Estimation* (1974), Ch. 7); the window
-        states and offsets are marginalised out.
+        s^2 (J^T J)^-1 of the fit with continuity imposed, the residuals weighed
+        by each column's noise and s^2 the variance factor (Bard, *Nonlinear
+        Parameter Estimation* (1974), Ch. 7); the window states and offsets are
+        marginalised out.
     - `offsets`, `offset_errors`: the sensor offsets, one per record, with
-        their standard errors, shape (R,); None without `offsets=True`.
-    - `sigma`: the residual standard deviation (an estimate of the noise).
-    - `rss`, `n_data`, `n_free`: residual sum of squares, measured values, free
-        unknowns (parameters, first states of each record, offsets).
+        their standard errors, shape (R,), relative to the first record's (0,
+        standard error 0); None without `offsets=True`.
+    - `sigma`: the residual standard deviation over all records (in their units).
+    - `noise`: per record, the noise of each measured displacement column, shape
+        (k,): the residual standard deviation by which the last stage weighs that
+        column (the noise may differ between records and sensors).
+    - `rss`, `n_data`, `n_free`: residual sum of squares (unweighted, in the
+        records' units), measured values, free unknowns (parameters, first states
+        of each record, offsets).
     - `aic`, `bic`: Akaike's and the Bayesian information criterion for Gaussian
         noise of unknown variance, n ln(rss/n) + 2k and n ln(rss/n) + k ln n.
     - `converged`: whether Levenberg-Marquardt met its tolerance in every stage.
@@ -171,6 +208,7 @@ class Identification:
     offsets: np.ndarray | None
     offset_errors: np.ndarray | None
     sigma: float
+    noise: tuple
     rss: float
     n_data: int
     n_free: int
@@ -271,7 +309,10 @@ def identify(records: list[Record], chain: ChainParams, fit=("mu_st", "mu_d", "v
     - `fit`: the names of the fitted parameters (`unknowns_of`).
     - `start`: starting values by name (floats, or arrays of the field's shape).
     - `offsets`: also fit one sensor offset per record (added to its measured
-        displacements).
+        displacements), relative to the first record's: an offset common to all
+        records is the same as a shift of the friction coefficient (x + c obeys
+        eq. (5) with F + c, and F = +mu while v_rel <= 0, as in stick-slip), so
+        only the differences are identifiable.
     - `options`: `IdentifyOptions`.
 
     **Returns:**
@@ -286,22 +327,29 @@ def identify(records: list[Record], chain: ChainParams, fit=("mu_st", "mu_d", "v
     """
     problem, u0 = _problem(records, chain, fit, start, offsets, options)
     u, converged, iterations = u0, True, 0
+    noise = np.ones((len(records), 2, chain.n_osc))
+    answer = None
     for weight in options.weights:
-        u, ok, steps = _least_squares(problem, u, jnp.asarray(weight), options.tol,
-                                      options.max_iterations)
-        converged &= bool(ok)
-        iterations += int(steps)
-    return _result(problem, records, chain, u, converged, iterations, options)
+        if answer is not None:  # weigh each column by its noise, from the stage before
+            scale = noise[np.asarray(problem.windows.record)][:, None]
+            misfit = np.reshape(np.asarray(answer.misfit), problem.windows.mask.shape) * scale
+            noise = column_noise(problem.windows, misfit, len(records))
+        weighting = (jnp.asarray(noise), jnp.asarray(weight / noise.min()))
+        answer = _stage(problem, u, weighting, options.tol, options.max_iterations)
+        u = answer.u
+        converged &= bool(answer.ok)
+        iterations += int(answer.steps)
+    return _result(problem, records, chain, answer, noise, converged, iterations, options)
 
 
 def _problem(records, chain, fit, start, offsets, options) -> tuple[_Problem, jnp.ndarray]:
     if not records:
         raise ValidationError("identify needs at least one record")
     unknowns = unknowns_of(chain, fit) if fit else Unknowns(names=(), sizes=(), kinds=())
-    windows = cut(records, chain.n_osc, options.window)
-    n_unknowns = unknowns.size + 2 * chain.n_osc * len(records) + (len(records) * offsets)
     for rec in records:
         rec.check(chain.n_osc, 0)
+    windows = cut(records, chain.n_osc, options.window)
+    n_unknowns = unknowns.size + 2 * chain.n_osc * len(records) + (len(records) - 1) * offsets
     total = sum(rec.n_samples for rec in records)
     if total < n_unknowns:
         raise ValidationError(f"{records[0].source}: {total} measured values for "
@@ -313,7 +361,7 @@ def _problem(records, chain, fit, start, offsets, options) -> tuple[_Problem, jn
     states = _start_states(records, windows, chain.n_osc)
     parts = [jnp.asarray(unknowns.theta(base)), jnp.ravel(states)]
     if offsets:
-        parts.append(jnp.zeros(len(records)))
+        parts.append(jnp.zeros(len(records) - 1))
     return problem, jnp.concatenate(parts)
 
 
@@ -353,26 +401,31 @@ def _start_states(records, windows: Windows, n_osc: int) -> np.ndarray:
     return states
 
 
-def _result(problem: _Problem, records, chain, u, converged, iterations,
-            options) -> Identification:
-    misfit, j_data, j_cont = (np.asarray(a) for a in _jacobians(problem, u))
-    mask = np.asarray(problem.windows.mask).reshape(-1)
+def _result(problem: _Problem, records, chain, answer: _Answer, noise, converged,
+            iterations, options) -> Identification:
+    u = answer.u
+    misfit, j_data, j_cont = (np.asarray(a) for a in (answer.misfit, answer.j_data,
+                                                      answer.j_cont))
+    windows = problem.windows
+    mask = np.asarray(windows.mask)
+    scale = np.broadcast_to(noise[np.asarray(windows.record)][:, None], mask.shape)[mask]
+    mask = mask.reshape(-1)
     misfit, j_data = misfit[mask], j_data[mask]
-    rss = float(misfit @ misfit)
+    weighted = float(misfit @ misfit)
+    rss = float(np.sum((misfit * scale) ** 2))  # in the records' units
     n_data = int(mask.sum())
     # Continuity imposed: the unknowns move in the null space Z of its Jacobian.
     _, sv, vt = np.linalg.svd(j_cont, full_matrices=True)
     rank = int(np.sum(sv > sv.max(initial=0.0) * 1e-10)) if sv.size else 0
     z = vt[rank:].T
     n_free = z.shape[1]
-    s2 = rss / max(n_data - n_free, 1)
+    s2 = weighted / max(n_data - n_free, 1)  # the variance factor: about 1
     reduced = z.T @ j_data.T @ j_data @ z
     cov_u = s2 * z @ np.linalg.pinv(reduced, rcond=1e-14, hermitian=True) @ z.T
     p = problem.unknowns.size
     theta = np.asarray(u[:p])
     cov_theta = cov_u[:p, :p]
-    g = np.asarray(jax.jacfwd(lambda th: problem.unknowns.values(problem.base, th))(
-        jnp.asarray(theta))) if p else np.zeros((0, 0))
+    g = np.asarray(answer.g).reshape(p, p)
     cov = g @ cov_theta @ g.T
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
     corr = cov / np.outer(se, se) if p else cov
@@ -384,23 +437,23 @@ def _result(problem: _Problem, records, chain, u, converged, iterations,
         notes.extend(_conditioning(corr, problem.unknowns.labels, options.condition_limit))
     for note in notes:
         warnings.warn(note, stacklevel=3)
-    _, states, offsets = problem.unpack(u)
-    params = problem.unknowns.params(problem.base, jnp.asarray(theta))
-    ys = np.asarray(predictions(params, problem.windows, states, offsets, problem.flow))
-    fits = _stitch(records, problem.windows, ys)
-    values = np.asarray(problem.unknowns.values(problem.base, jnp.asarray(theta))) if p \
-        else np.zeros(0)
-    fitted = with_parameter(params, "eps", chain.eps)
+    _, _, offsets = problem.unpack(u)
+    fits = _stitch(records, problem.windows, np.asarray(answer.ys))
+    values = np.asarray(answer.values)
+    fitted = with_parameter(problem.unknowns.params(problem.base, jnp.asarray(theta)), "eps",
+                            chain.eps)
     log_term = n_data * np.log(max(rss, 1e-300) / n_data)
     off, off_se = None, None
     if problem.offsets:
-        k = len(records)
-        off = np.asarray(u[-k:])
-        off_se = np.sqrt(np.maximum(np.diag(cov_u)[-k:], 0.0))
+        k = len(records) - 1
+        off = np.asarray(offsets)
+        off_se = np.concatenate([[0.0], np.sqrt(np.maximum(np.diag(cov_u)[cov_u.shape[0] - k:],
+                                                           0.0))])
     return Identification(
         chain=fitted, labels=problem.unknowns.labels, values=values, standard_errors=se,
         covariance=cov, correlation=corr, offsets=off, offset_errors=off_se,
-        sigma=float(np.sqrt(s2)), rss=rss, n_data=n_data, n_free=n_free,
+        sigma=float(np.sqrt(rss / max(n_data - n_free, 1))),
+        noise=_record_noise(records, noise), rss=rss, n_data=n_data, n_free=n_free,
         aic=float(log_term + 2 * n_free), bic=float(log_term + n_free * np.log(n_data)),
         converged=converged, iterations=iterations, fits=fits, warnings=tuple(notes),
         unknowns=problem.unknowns, theta=theta, theta_covariance=cov_theta,
@@ -424,6 +477,12 @@ def _conditioning(corr: np.ndarray, labels, limit: float) -> list[str]:
             f"the records hardly determine the direction {named} (relative to the "
             "standard errors); fix one of them, or measure more (other belt speeds, "
             "velocities, more oscillators)"]
+
+
+def _record_noise(records, noise: np.ndarray) -> tuple:
+    """Each record's noise estimate per measured displacement column, shape (k,)."""
+    return tuple(noise[r, 0, np.asarray(rec.oscillators) - 1]
+                 for r, rec in enumerate(records))
 
 
 def _stitch(records, windows: Windows, ys: np.ndarray) -> tuple:

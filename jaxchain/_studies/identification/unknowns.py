@@ -10,7 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._errors import ValidationError
-from ..._physics.params import ChainParams, parameter_names, parameter_value, with_parameter
+from ..._physics.params import (ChainParams, parameter_lens, parameter_names,
+                                parameter_value, revalidated, with_fields)
 
 #: Fields of `ChainParams` a fit may take: each is >= 0 or > 0 (log-parametrised).
 #: `v_d` is each record's own, and `eps` is the smoothing, not the rig.
@@ -59,24 +60,27 @@ class Unknowns(eqx.Module):
                 lower = np.asarray(parameter_value(params, kind[6:]), dtype=float)
                 p = p - lower.reshape(-1)
             if kind != "free":
-                p = np.log(np.maximum(p, _FLOOR * np.maximum(np.abs(p).max(), 1.0)))
+                p = np.log(np.where(p > 0, p, _FLOOR))
             parts.append(p)
-        return np.concatenate(parts)
+        return np.concatenate(parts) if parts else np.zeros(0)
 
     def params(self, base: ChainParams, theta) -> ChainParams:
-        """`base` with the fitted parameters set from `theta` (traceable): the
-        parameters above another are set last, over its new value."""
+        """`base` with the fitted parameters set from `theta` (traceable), all at
+        once and then validated, so that no intermediate law is out of order; a
+        parameter above another is set over that one's new value."""
         values = self.split(theta)
-        order = sorted(range(len(self.names)), key=lambda i: self.kinds[i].startswith("above:"))
-        params = base
-        for i in order:
-            name, kind, shape = self.names[i], self.kinds[i], np.shape(
-                parameter_value(base, self.names[i]))
+        new = {}
+        for i in sorted(range(len(self.names)), key=lambda i: self.kinds[i].startswith("above:")):
+            name, kind = self.names[i], self.kinds[i]
             value = values[i] if kind == "free" else jnp.exp(values[i])
             if kind.startswith("above:"):
-                value = jnp.reshape(parameter_value(params, kind[6:]), (-1,)) + value
-            params = with_parameter(params, name, jnp.reshape(value, shape))
-        return params
+                lower = new.get(kind[6:], parameter_value(base, kind[6:]))
+                value = jnp.reshape(lower, (-1,)) + value
+            new[name] = jnp.reshape(value, np.shape(parameter_value(base, name)))
+        changed = base
+        for name, value in new.items():
+            changed = eqx.tree_at(parameter_lens(name, base), changed, value)
+        return with_fields(changed, friction=revalidated(changed.friction))
 
     def values(self, base: ChainParams, theta) -> jnp.ndarray:
         """The fitted parameters' values (traceable) as one vector, in the order of

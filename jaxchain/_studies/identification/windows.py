@@ -140,18 +140,33 @@ def predictions(params: ChainParams, windows: Windows, states, offsets,
 
     ys = jax.vmap(one)(states, windows.times, windows.v_d)
     shift = jnp.asarray(offsets)[windows.record] if offsets is not None else 0.0
-    shift = jnp.reshape(shift, (-1, 1))
+    shift = jnp.reshape(shift, (-1, 1, 1))
     return ys.at[:, :-1, 0, :].add(shift)
 
 
-def residuals(params: ChainParams, windows: Windows, states, offsets, weight,
+def residuals(params: ChainParams, windows: Windows, states, offsets, noise, weight,
               options: FlowOptions):
-    """(misfit, continuity): the model minus the measured values, 0 where not
-    measured, shape (W, K, 2, n_osc); and `weight` times the jump of the state
-    from each window's end to the next window's start, 0 between records, shape
-    (W, 2, n_osc)."""
+    """(misfit, continuity): the model minus the measured values divided by each
+    record's `noise` (standard deviation per measured column, shape (R, 2,
+    n_osc)), 0 where not measured, shape (W, K, 2, n_osc); and `weight` times the
+    jump of the state from each window's end to the next window's start, 0
+    between records, shape (W, 2, n_osc)."""
     ys = predictions(params, windows, states, offsets, options)
-    misfit = jnp.where(windows.mask, ys[:, :-1] - windows.data, 0.0)
+    scale = noise[windows.record][:, None]
+    misfit = jnp.where(windows.mask, (ys[:, :-1] - windows.data) / scale, 0.0)
     jump = ys[:, -1] - jnp.roll(states, -1, axis=0)
     continuity = weight * jnp.where(windows.linked[:, None, None], jump, 0.0)
     return misfit, continuity
+
+
+def column_noise(windows: Windows, misfit, n_records: int) -> np.ndarray:
+    """The root mean square of each record's unweighted misfit per measured column,
+    shape (R, 2, n_osc); 1 where a column is not measured."""
+    misfit, mask = np.asarray(misfit), np.asarray(windows.mask)
+    record = np.asarray(windows.record)
+    squares = np.zeros((n_records,) + misfit.shape[2:])
+    counts = np.zeros_like(squares)
+    np.add.at(squares, record, np.sum(np.where(mask, misfit**2, 0.0), axis=1))
+    np.add.at(counts, record, np.sum(mask, axis=1))
+    rms = np.sqrt(squares / np.maximum(counts, 1))
+    return np.where(counts > 0, np.maximum(rms, 1e-12), 1.0)

@@ -1,0 +1,165 @@
+"""Identification against the event-driven non-smooth reference: records made by the
+exact switch model (a different code path from the smoothed fit) with known
+parameters, refitted; the fit's Jacobian against finite differences; the choice
+between friction laws; the parametrisation that keeps a law valid."""
+
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import jaxchain as jc
+from helpers import internal
+
+#: The rig of the tests: eq. (1) with parameters away from the defaults (which are
+#: the fit's starting values where the records say nothing), one oscillator.
+TRUE = {"mu_st": 1.1, "mu_d": 0.6, "v0": 0.35, "xi": 0.04}
+SPEEDS = (0.4, 0.7, 1.0)
+RIG = jc.ChainParams(n_osc=1, xi=TRUE["xi"], friction=jc.ExponentialDecay(
+    mu_st=TRUE["mu_st"], mu_d=TRUE["mu_d"], v0=TRUE["v0"]))
+#: Short records, for a cheap fit: 20 time units (about three stick-slip cycles)
+#: sampled every 0.2, two windows each.
+T_END, DT = 20.0, 0.2
+
+
+@pytest.fixture(scope="module")
+def clean_records():
+    jc.configure()
+    return [jc.reference_record(RIG, v_d, T_END, DT) for v_d in SPEEDS]
+
+
+def _noisy(records, rng, noise=0.005, offsets=(0.0, 0.0, 0.0)):
+    out = []
+    for rec, offset in zip(records, offsets):
+        amplitude = 0.5 * (rec.x.max(axis=0) - rec.x.min(axis=0))
+        x = rec.x + noise * amplitude * rng.standard_normal(rec.x.shape) + offset
+        out.append(jc.Record(t=rec.t, x=x, oscillators=rec.oscillators, v=None,
+                             v_d=rec.v_d, source=rec.source))
+    return out
+
+
+def _fit(records, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return jc.identify(records, jc.ChainParams(n_osc=1), offsets=True, **kw)
+
+
+def test_the_reference_trajectory_is_the_reference_run():
+    """Sampled event by event, the reference's state at t_end is that of
+    `simulate_nonsmooth` (another program, both at rtol 1e-12: agreement to 1e-8),
+    and in stick the oscillator moves with the belt exactly."""
+    jc.configure()
+    params = jc.with_parameter(RIG, "v_d", 0.7)
+    ts = np.arange(0.0, 30.0001, 0.25)
+    ys = np.asarray(jc.nonsmooth_trajectory(params, np.zeros((2, 1)), ts))
+    run = jc.simulate_nonsmooth(params, np.zeros((2, 1)), jc.NonsmoothOptions(
+        t_end=30.0, transient=15.0, chunk_length=5.0))
+    np.testing.assert_allclose(ys[-1], np.asarray(run.y_final), atol=1e-8)
+    sticking = np.abs(ys[:, 1, 0] - 0.7) < 1e-12
+    assert 0.1 < sticking.mean() < 0.9  # stick-slip, with stick phases
+    with pytest.raises(ValueError, match="increasing"):
+        jc.nonsmooth_trajectory(params, np.zeros((2, 1)), ts[::-1])
+
+
+@settings(max_examples=40, deadline=None)
+@given(theta=st.lists(st.floats(-8.0, 3.0), min_size=4, max_size=4))
+def test_every_unknown_gives_a_valid_law_and_back(theta):
+    """For any unknowns, mu_st > mu_d > 0, v0 > 0 and xi > 0 (by the
+    parametrisation, not by clipping), and the unknowns come back from the law."""
+    jc.configure()
+    unknowns = jc.unknowns_of(RIG, ("mu_st", "mu_d", "v0", "xi"))
+    params = unknowns.params(RIG, jnp.asarray(theta))
+    law = params.friction
+    assert float(law.mu_st) > float(law.mu_d) > 0 and float(law.v0) > 0
+    assert float(params.xi) > 0
+    np.testing.assert_allclose(unknowns.theta(params), theta, rtol=1e-9, atol=1e-9)
+
+
+def test_bad_fit_names_are_refused():
+    jc.configure()
+    for fit, says in [((), "at least one"), (("v_d",), "cannot be fitted"),
+                      (("mu_s",), "unknown parameter"), (("xi", "xi"), "twice")]:
+        with pytest.raises(jc.ValidationError, match=says):
+            jc.unknowns_of(RIG, fit)
+
+
+def test_the_jacobian_of_the_misfit_is_that_of_finite_differences(clean_records):
+    """Forward-mode through diffrax against central differences of the same
+    residual, on one record of two windows at tight tolerances (rtol 1e-10, atol
+    1e-12): the differences' truncation (h^2) and the integration's noise
+    (atol / h) are both below 1e-5 with h = 1e-4, so they agree to 1e-4 of the
+    Jacobian's largest entry, and an error in a single entry would show."""
+    jc.configure()
+    options = jc.IdentifyOptions(rtol=1e-10, atol=1e-12)
+    problem, u0 = internal("identification problem")(
+        clean_records[1:2], jc.ChainParams(n_osc=1), ("mu_st", "mu_d", "v0", "xi"),
+        None, True, options)
+    weighting = (jnp.ones((1, 2, 1)), jnp.asarray(3.0))
+    residual = jax.jit(lambda u: problem.residual(u, weighting))
+    u = u0 + 0.01 * jnp.sin(jnp.arange(u0.size))  # off the data, every entry in play
+    exact = np.asarray(jax.jacfwd(residual)(u))
+    h = 1e-4
+    columns = [(residual(u + h * e) - residual(u - h * e)) / (2 * h)
+               for e in np.eye(u.size)]
+    approx = np.stack([np.asarray(c) for c in columns], axis=1)
+    assert np.abs(exact).max() > 1.0
+    np.testing.assert_allclose(exact, approx, rtol=0, atol=1e-4 * np.abs(exact).max())
+
+
+def test_noise_free_records_give_the_parameters_and_offsets(clean_records):
+    """Without noise the parameters come back within the smoothing's bias, which
+    is linear in eps (2.1 %, 0.26 %, 0.03 % of xi at eps = 1e-3, 1e-4, 1e-5 on
+    60-unit records): 1e-3 relative at the default eps = 1e-5. The sensor
+    offsets (0, 0.2, -0.1), relative to the first record's, are found within
+    1e-3."""
+    offsets = (0.0, 0.2, -0.1)
+    records = _noisy(clean_records, np.random.default_rng(0), noise=0.0, offsets=offsets)
+    result = _fit(records)
+    assert result.converged
+    for label, value in zip(result.labels, result.values):
+        assert value == pytest.approx(TRUE[label], rel=1e-3), label
+    np.testing.assert_allclose(result.offsets, offsets, atol=1e-3)
+
+
+def test_standard_errors_cover_the_truth_as_often_as_they_should(clean_records):
+    """Ten noise draws (0.5 % of the amplitude) of the same records, four
+    parameters and two offsets each: 60 intervals of +-2 standard errors, which
+    should cover the true value 95.4 % of the time (57.3 of 60; binomial standard
+    deviation 1.6, more as the intervals of one draw are correlated). The test
+    asks for at least 50 (4.5 binomial standard deviations below), and for the
+    z-scores' root mean square (1 for honest errors) to lie in [0.6, 1.5]: too
+    small standard errors fail the first, too large the second."""
+    rng = np.random.default_rng(2026)
+    z = []
+    for _ in range(10):
+        result = _fit(_noisy(clean_records, rng))
+        truth = np.array([TRUE[label] for label in result.labels])
+        z.extend((result.values - truth) / result.standard_errors)
+        z.extend(result.offsets[1:] / result.offset_errors[1:])
+    z = np.asarray(z)
+    assert np.sum(np.abs(z) < 2) >= 50, z
+    assert 0.6 <= np.sqrt(np.mean(z**2)) <= 1.5, z
+
+
+def test_stribeck_records_are_attributed_to_the_stribeck_law():
+    """Records made with a Stribeck law of Gaussian decay (delta = 2), which the
+    exponential law cannot take: on a held-out record the Stribeck fit's residual
+    is the smaller, and its information criteria too."""
+    jc.configure()
+    law = jc.Stribeck(mu_s=1.0, mu_c=0.55, v_s=0.45, delta=2.0, viscous=0.0)
+    rig = jc.ChainParams(n_osc=1, xi=0.04, friction=law)
+    rng = np.random.default_rng(7)
+    records = _noisy([jc.reference_record(rig, v, T_END, DT) for v in (0.4, 0.7, 1.0)],
+                     rng)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rows = jc.compare_laws(records[::2], records[1:2], jc.ChainParams(n_osc=1),
+                               ["exponential", "stribeck"])
+    by_law = {row["law"]: row for row in rows}
+    assert by_law["stribeck"]["best"] and not by_law["exponential"]["best"]
+    assert by_law["stribeck"]["held_out_rms"] < 0.5 * by_law["exponential"]["held_out_rms"]
+    assert by_law["stribeck"]["aic"] < by_law["exponential"]["aic"]
