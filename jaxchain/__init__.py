@@ -97,6 +97,7 @@ from ._studies.mistuning.study import (
     mistuning_study as mistuning_study, study_chains as study_chains,
 )
 from ._nonsmooth.existence import (
+    differentiable_existence_limit as differentiable_existence_limit,
     stick_slip_existence_limit as stick_slip_existence_limit,
 )
 from ._nonsmooth.options import NonsmoothOptions as NonsmoothOptions
@@ -175,6 +176,9 @@ from ._plots.dynamics import (
     plot_phase_portraits as plot_phase_portraits,
     plot_states_and_orbits as plot_states_and_orbits,
     plot_time_delays as plot_time_delays, plot_time_series as plot_time_series,
+)
+from ._plots.identification import (
+    plot_friction_band as plot_friction_band, plot_record_fits as plot_record_fits,
 )
 from ._plots.localized import plot_localized_states as plot_localized_states
 from ._plots.mistuning import (

@@ -41,6 +41,9 @@ SMALL = {
     "08_brake_pad.ipynb":
         ("ROWS, COLS = 2, 2\nV_D = 1.5\nT_END, TRANSIENT = 700.0, 200.0\nMAX_POINTS = 3\n"
          "START_T_END = 700.0\nSTARTS = ('corner',)\nRING = False", "kept"),
+    "09_identification.ipynb":
+        ("T_END = 20.0\nDT = 0.2\nSPEEDS = (0.3, 0.5, 0.7)\nNOISE = 0.005",
+         "within their stated uncertainty"),
     "07_snaking.ipynb":
         ("N_OSC = 4\nSITES = (1,)\nMAX_POINTS = 5\nSTART_T_END = 1500.0\nCHECK = False",
          "trivial multiplier error"),
@@ -52,7 +55,8 @@ PLOTTING = re.compile(r"\bplt\.show\(|\bjc\.plot_\w+\(")
 #: Notebooks that take more than about 30 s even at reduced size, on 2 cores with a
 #: cold compilation cache (each kernel compiles its programs afresh).
 SLOW = {"03_dynamics_of_localized_states.ipynb", "04_basin_stability.ipynb",
-        "06_anderson_meets_friction.ipynb", "07_snaking.ipynb", "08_brake_pad.ipynb"}
+        "06_anderson_meets_friction.ipynb", "07_snaking.ipynb", "08_brake_pad.ipynb",
+        "09_identification.ipynb"}
 
 
 @pytest.mark.parametrize("name", [

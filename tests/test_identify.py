@@ -48,6 +48,7 @@ def _fit(records, **kw):
         return jc.identify(records, jc.ChainParams(n_osc=1), offsets=True, **kw)
 
 
+@pytest.mark.numerics
 def test_the_reference_trajectory_is_the_reference_run():
     """Sampled event by event, the reference's state at t_end is that of
     `simulate_nonsmooth` (another program, both at rtol 1e-12: agreement to 1e-8),
@@ -87,6 +88,7 @@ def test_bad_fit_names_are_refused():
             jc.unknowns_of(RIG, fit)
 
 
+@pytest.mark.numerics
 def test_the_jacobian_of_the_misfit_is_that_of_finite_differences(clean_records):
     """Forward-mode through diffrax against central differences of the same
     residual, on one record of two windows at tight tolerances (rtol 1e-10, atol
@@ -110,6 +112,7 @@ def test_the_jacobian_of_the_misfit_is_that_of_finite_differences(clean_records)
     np.testing.assert_allclose(exact, approx, rtol=0, atol=1e-4 * np.abs(exact).max())
 
 
+@pytest.mark.numerics
 def test_noise_free_records_give_the_parameters_and_offsets(clean_records):
     """Without noise the parameters come back within the smoothing's bias, which
     is linear in eps (2.1 %, 0.26 %, 0.03 % of xi at eps = 1e-3, 1e-4, 1e-5 on
@@ -125,6 +128,8 @@ def test_noise_free_records_give_the_parameters_and_offsets(clean_records):
     np.testing.assert_allclose(result.offsets, offsets, atol=1e-3)
 
 
+@pytest.mark.numerics
+@pytest.mark.slow
 def test_standard_errors_cover_the_truth_as_often_as_they_should(clean_records):
     """Ten noise draws (0.5 % of the amplitude) of the same records, four
     parameters and two offsets each: 60 intervals of +-2 standard errors, which
@@ -145,6 +150,8 @@ def test_standard_errors_cover_the_truth_as_often_as_they_should(clean_records):
     assert 0.6 <= np.sqrt(np.mean(z**2)) <= 1.5, z
 
 
+@pytest.mark.numerics
+@pytest.mark.slow
 def test_stribeck_records_are_attributed_to_the_stribeck_law():
     """Records made with a Stribeck law of Gaussian decay (delta = 2), which the
     exponential law cannot take: on a held-out record the Stribeck fit's residual

@@ -3,6 +3,7 @@ model: the belt speed at which the slip arc that leaves stick just grazes v_rel 
 
 import diffrax
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import optimistix as optx
 
@@ -33,6 +34,7 @@ def _slip_arc_peak(v_d, args):
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=rtol),
         event=diffrax.Event(acceleration, optx.Bisection(rtol=0.0, atol=1e-14),
                             direction=False),
+        adjoint=diffrax.ForwardMode(),  # forward-differentiable: `existence_limit_tangent`
     )
     return sol.ys[0][-1, 1, 0] - v_d
 
@@ -116,3 +118,29 @@ def stick_slip_existence_limit(params: ChainParams | None = None,
     if sol.result not in (optx.RESULTS.successful, optx.RESULTS.nonlinear_max_steps_reached):
         raise RuntimeError(f"bisection for the existence limit failed: {sol.result}")
     return float(sol.value)
+
+
+def differentiable_existence_limit(params: ChainParams, limit: float):
+    """The existence limit as a traceable function of the parameters near `limit`,
+    the limit that `stick_slip_existence_limit` computed for `params`: limit -
+    peak(limit; params) / (d peak / d v_d), whose value is `limit` and whose
+    derivative in any parameter is that of the limit, -(d peak/d p) / (d peak/d v_d)
+    (the implicit function theorem on the grazing condition peak = 0), both
+    derivatives by forward-mode differentiation through the slip arc. For
+    `jax.jacfwd` and the propagation of uncertainty (`Identification.propagate`).
+
+    **Arguments:** `params`: one oscillator (n_osc = 1); `limit`: its existence
+    limit.
+
+    **Returns:** a scalar, `limit` in value.
+
+    **Raises:** `ValidationError` for n_osc != 1.
+    """
+    if params.n_osc != 1:
+        raise ValidationError(f"the existence limit is that of one oscillator (n_osc = 1), got "
+                              f"n_osc = {params.n_osc}; see single_oscillator")
+    v = jnp.asarray(limit, dtype=float)
+    args = (params, 1e-12)
+    slope = jax.jacfwd(_slip_arc_peak)(jax.lax.stop_gradient(v),
+                                       jax.lax.stop_gradient(args))
+    return v - _slip_arc_peak(v, args) / jax.lax.stop_gradient(slope)

@@ -6,6 +6,7 @@ from collections.abc import Callable
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
@@ -253,6 +254,7 @@ def single_oscillator(params: ChainParams, index: int = 0) -> ChainParams:
     """Oscillator `index` of the chain on its own: n_osc = 1 on the ring (no
     coupling), with that oscillator's xi, stiffness, load and friction law, the
     chain's v_d and eps. The single oscillator of Fig. 3(a) for the paper's ring.
+    Traceable in the parameters' values (`jax.jacfwd` through it).
 
     **Raises:**
 
@@ -261,9 +263,8 @@ def single_oscillator(params: ChainParams, index: int = 0) -> ChainParams:
     if not 0 <= index < params.n_osc:
         raise ValidationError(f"index must lie in [0, {params.n_osc}), got {index!r}")
 
-    def pick(value):
-        a = np.asarray(value, dtype=float)
-        return a if a.ndim == 0 else a[index]
+    def pick(value):  # traceable: for derivatives with respect to the chain
+        return value if jnp.ndim(value) == 0 else jnp.asarray(value)[index]
 
     law = params.friction
     tables = law.table_names()

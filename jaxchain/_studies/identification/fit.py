@@ -21,7 +21,8 @@ from ..._physics.params import ChainParams, parameter_value, with_parameter
 from .records import Record
 from .starts import breakaway_start, local_slopes
 from .unknowns import Unknowns, unknowns_of
-from .windows import FlowOptions, Windows, column_noise, cut, predictions, residuals
+from .windows import (FlowOptions, Windows, column_noise, cut, residuals, window_flow,
+                      with_offsets)
 
 
 class IdentifyOptions(eqx.Module):
@@ -97,7 +98,7 @@ class _Problem(eqx.Module):
     windows: Windows
     n_records: int = eqx.field(static=True)
     offsets: bool = eqx.field(static=True)
-    flow: FlowOptions = eqx.field(static=True)
+    flow_options: FlowOptions = eqx.field(static=True)
 
     def unpack(self, u):
         p = self.unknowns.size
@@ -108,17 +109,61 @@ class _Problem(eqx.Module):
             else None
         return u[:p], states, offsets
 
+    def flow(self, theta, state, times, v_d):
+        """One window: the states at `times` from `state`, at belt speed `v_d`."""
+        params = with_parameter(self.unknowns.params(self.base, theta), "v_d", v_d)
+        return window_flow(params, state, times, self.flow_options)
+
+    def predictions(self, u):
+        """The model at every window's times, offsets included, shape (W, K + 1, 2,
+        n_osc) (`with_offsets`)."""
+        theta, states, offsets = self.unpack(u)
+        return with_offsets(_flows(theta, states, self), self.windows, offsets)
+
     def parts(self, u, weighting):
         """(misfit, continuity) of `residuals`; `weighting` is (noise of each
         record's columns, shape (R, 2, n_osc); weight of the continuity)."""
-        theta, states, offsets = self.unpack(u)
-        params = self.unknowns.params(self.base, theta)
         noise, weight = weighting
-        return residuals(params, self.windows, states, offsets, noise, weight, self.flow)
+        return residuals(self.predictions(u), self.windows, self.unpack(u)[1], noise, weight)
 
     def residual(self, u, weighting):
         misfit, continuity = self.parts(u, weighting)
         return jnp.concatenate([jnp.ravel(misfit), jnp.ravel(continuity)])
+
+
+def _flows_plain(theta, states, problem: _Problem):
+    return jax.vmap(problem.flow, in_axes=(None, 0, 0, 0))(
+        theta, states, problem.windows.times, problem.windows.v_d)
+
+
+@eqx.filter_custom_jvp
+def _flows(theta, states, problem: _Problem):
+    """Every window's states, shape (W, K + 1, 2, n_osc), with a JVP that uses the
+    structure of multiple shooting: window w depends on theta and on its own state
+    only, so its Jacobian has P + 2 n_osc columns, not those of every unknown. The
+    Jacobians are computed once (forward mode, per window, vmapped) and every
+    tangent is a product with them: a Levenberg-Marquardt Jacobian costs P + 2 n_osc
+    tangent integrations per window instead of P + 2 n_osc W."""
+    return _flows_plain(theta, states, problem)
+
+
+@_flows.def_jvp
+def _flows_jvp(primals, tangents):
+    theta, states, problem = primals
+    t_theta, t_states, _ = tangents
+
+    def one(th, state, times, v_d):
+        ys = problem.flow(th, state, times, v_d)
+        return ys, ys
+
+    jac = jax.vmap(jax.jacfwd(one, argnums=(0, 1), has_aux=True), in_axes=(None, 0, 0, 0))
+    (j_theta, j_state), ys = jac(theta, states, problem.windows.times, problem.windows.v_d)
+    out = jnp.zeros_like(ys)
+    if t_theta is not None:
+        out = out + jnp.einsum("wkabp,p->wkab", j_theta, t_theta)
+    if t_states is not None:
+        out = out + jnp.einsum("wkabcd,wcd->wkab", j_state, t_states)
+    return ys, out
 
 
 class _Answer(eqx.Module):
@@ -151,8 +196,7 @@ def _stage(problem: _Problem, u0, weighting, tol: float, max_iterations: int) ->
 
     u = sol.value
     j_data, j_cont = jax.jacfwd(split)(u)
-    theta, states, offsets = problem.unpack(u)
-    params = problem.unknowns.params(problem.base, theta)
+    theta = problem.unpack(u)[0]
 
     def values(th):
         return problem.unknowns.values(problem.base, th) if problem.unknowns.size \
@@ -161,7 +205,7 @@ def _stage(problem: _Problem, u0, weighting, tol: float, max_iterations: int) ->
     return _Answer(u=u, ok=sol.result == optx.RESULTS.successful,
                    steps=sol.stats["num_steps"], misfit=split(u)[0], j_data=j_data,
                    j_cont=j_cont,
-                   ys=predictions(params, problem.windows, states, offsets, problem.flow),
+                   ys=problem.predictions(u),
                    values=values(theta), g=jax.jacfwd(values)(theta))
 
 
@@ -357,7 +401,7 @@ def _problem(records, chain, fit, start, offsets, options) -> tuple[_Problem, jn
     base = _start_chain(records, with_parameter(chain, "eps", options.eps), unknowns,
                         start or {})
     problem = _Problem(base=base, unknowns=unknowns, windows=windows,
-                       n_records=len(records), offsets=offsets, flow=options.flow)
+                       n_records=len(records), offsets=offsets, flow_options=options.flow)
     states = _start_states(records, windows, chain.n_osc)
     parts = [jnp.asarray(unknowns.theta(base)), jnp.ravel(states)]
     if offsets:

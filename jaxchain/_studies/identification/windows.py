@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import diffrax
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
@@ -21,7 +20,7 @@ from ..._engine.checks import as_solver
 from ..._engine.simulate import terms
 from ..._engine.solver.controller import step_size_controller
 from ..._errors import ValidationError
-from ..._physics.params import ChainParams, with_parameter
+from ..._physics.params import ChainParams
 from .records import Record
 
 
@@ -129,29 +128,23 @@ def window_flow(params: ChainParams, y0, times, options: FlowOptions):
     return jnp.where(diffrax.is_successful(sol.result), sol.ys, jnp.nan)
 
 
-def predictions(params: ChainParams, windows: Windows, states, offsets,
-                options: FlowOptions):
-    """The model's states at every window's times, shape (W, K + 1, 2, n_osc), each
-    window from its state `states[w]` at its own belt speed, with the sensor
-    `offsets` (one per record, on the displacements) added to the displacements
-    (not to the last column, the next window's start)."""
-    def one(y0, times, v_d):
-        return window_flow(with_parameter(params, "v_d", v_d), y0, times, options)
-
-    ys = jax.vmap(one)(states, windows.times, windows.v_d)
-    shift = jnp.asarray(offsets)[windows.record] if offsets is not None else 0.0
-    shift = jnp.reshape(shift, (-1, 1, 1))
+def with_offsets(ys, windows: Windows, offsets):
+    """The window states `ys` (shape (W, K + 1, 2, n_osc)) with the sensor `offsets`
+    (one per record, or None) added to the displacements, not to the last column
+    (the next window's start)."""
+    if offsets is None:
+        return ys
+    shift = jnp.reshape(jnp.asarray(offsets)[windows.record], (-1, 1, 1))
     return ys.at[:, :-1, 0, :].add(shift)
 
 
-def residuals(params: ChainParams, windows: Windows, states, offsets, noise, weight,
-              options: FlowOptions):
-    """(misfit, continuity): the model minus the measured values divided by each
-    record's `noise` (standard deviation per measured column, shape (R, 2,
-    n_osc)), 0 where not measured, shape (W, K, 2, n_osc); and `weight` times the
-    jump of the state from each window's end to the next window's start, 0
-    between records, shape (W, 2, n_osc)."""
-    ys = predictions(params, windows, states, offsets, options)
+def residuals(ys, windows: Windows, states, noise, weight):
+    """(misfit, continuity) of the predictions `ys` (`with_offsets`): the model
+    minus the measured values divided by each record's `noise` (standard
+    deviation per measured column, shape (R, 2, n_osc)), 0 where not measured,
+    shape (W, K, 2, n_osc); and `weight` times the jump of the state from each
+    window's end to the next window's start `states`, 0 between records, shape
+    (W, 2, n_osc)."""
     scale = noise[windows.record][:, None]
     misfit = jnp.where(windows.mask, (ys[:, :-1] - windows.data) / scale, 0.0)
     jump = ys[:, -1] - jnp.roll(states, -1, axis=0)
