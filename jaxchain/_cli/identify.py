@@ -3,6 +3,7 @@ with their standard errors, and the choice between friction laws."""
 
 import argparse
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,7 @@ import numpy as np
 from .._physics.params import parameter_names
 from .._physics.record import chain_record
 from .._studies.identification.fit import IdentifyOptions
+from .._studies.identification.unknowns import CHAIN_FITTABLE
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RunsFailed, UsageError, add_output_options, add_solver_options,
                      comma_list, note, Outputs,
@@ -133,15 +135,22 @@ def run(args) -> None:
                       figures=["identification_fits", "identified_friction"])
     start = time.perf_counter()
     comparison = []
-    if args.laws:
-        chain_fit = [n for n in args.fit if n in ("xi", "eta_c", "stiffness", "load", "mass")]
-        comparison = compare_laws(records, held_out, params, args.laws, fit_chain=chain_fit,
-                                  offsets=args.offsets, options=options)
-        result = next(row["fit"] for row in comparison if row["best"])
-    else:
-        result = identify(records, params, args.fit, start=args.start,
-                          offsets=args.offsets, options=options)
+    with warnings.catch_warnings():  # each fit keeps its warnings: printed below
+        warnings.simplefilter("ignore")
+        if args.laws:
+            chain_fit = [n for n in args.fit if n in CHAIN_FITTABLE]
+            comparison = compare_laws(records, held_out, params, args.laws,
+                                      fit_chain=chain_fit, offsets=args.offsets,
+                                      options=options)
+            result = next(row["fit"] for row in comparison if row["best"])
+        else:
+            result = identify(records, params, args.fit, start=args.start,
+                              offsets=args.offsets, options=options)
     wall = time.perf_counter() - start
+    for row in comparison:
+        if not row["best"]:
+            for text in row["fit"].warnings:
+                note(f"{row['law']}: warning: {text}")
 
     from .._sweeps.chain_files import write_chain_file
 
@@ -152,7 +161,9 @@ def run(args) -> None:
     outputs.figure(plot_friction_band(result), "identified_friction")
 
     rows = [{"law": r["law"], "sigma": r["sigma"], "aic": r["aic"], "bic": r["bic"],
-             "held_out_rms": r["held_out_rms"], "best": r["best"]} for r in comparison]
+             "held_out_rms": r["held_out_rms"], "best": r["best"],
+             "parameters": r["fit"].to_dict()["parameters"],
+             "warnings": list(r["fit"].warnings)} for r in comparison]
     if args.json:
         print_json(result.to_dict() | {"laws": rows, "chain": chain_record(result.chain),
                                        "records": [str(f) for f in files],
