@@ -59,7 +59,7 @@ from ._studies.crosscheck import crosscheck as crosscheck
 from ._studies.identification.choice import compare_laws as compare_laws
 from ._studies.identification.fit import (
     Identification as Identification, IdentifyOptions as IdentifyOptions,
-    identify as identify,
+    held_out_rms as held_out_rms, identify as identify,
 )
 from ._studies.identification.synthetic import (
     reference_record as reference_record, write_record as write_record,

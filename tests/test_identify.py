@@ -160,11 +160,11 @@ def test_stribeck_records_are_attributed_to_the_stribeck_law():
     law = jc.Stribeck(mu_s=1.0, mu_c=0.55, v_s=0.45, delta=2.0, viscous=0.0)
     rig = jc.ChainParams(n_osc=1, xi=0.04, friction=law)
     rng = np.random.default_rng(7)
-    records = _noisy([jc.reference_record(rig, v, T_END, DT) for v in (0.4, 0.7, 1.0)],
-                     rng)
+    records = _noisy([jc.reference_record(rig, v, T_END, DT)
+                      for v in (0.4, 0.55, 0.7, 1.0)], rng, offsets=(0.0,) * 4)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        rows = jc.compare_laws(records[::2], records[1:2], jc.ChainParams(n_osc=1),
+        rows = jc.compare_laws(records[::2], records[1::2], jc.ChainParams(n_osc=1),
                                ["exponential", "stribeck"])
     by_law = {row["law"]: row for row in rows}
     assert by_law["stribeck"]["best"] and not by_law["exponential"]["best"]

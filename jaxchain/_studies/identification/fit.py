@@ -99,6 +99,7 @@ class _Problem(eqx.Module):
     n_records: int = eqx.field(static=True)
     offsets: bool = eqx.field(static=True)
     flow_options: FlowOptions = eqx.field(static=True)
+    frozen: jnp.ndarray  # bool: the parameters held at their start (`held_out_rms`)
 
     def unpack(self, u):
         p = self.unknowns.size
@@ -107,12 +108,15 @@ class _Problem(eqx.Module):
         # the first record's sensor zero is the reference (offset 0), see `identify`
         offsets = jnp.concatenate([jnp.zeros(1), u[p + 2 * n * w:]]) if self.offsets \
             else None
-        return u[:p], states, offsets
+        # frozen: no derivative, so that Levenberg-Marquardt leaves them where they
+        # are; traced, so that a frozen fit runs the program of the free one
+        theta = jnp.where(self.frozen, jax.lax.stop_gradient(u[:p]), u[:p])
+        return theta, states, offsets
 
     def flow(self, theta, state, times, v_d):
         """One window: the states at `times` from `state`, at belt speed `v_d`."""
         params = with_parameter(self.unknowns.params(self.base, theta), "v_d", v_d)
-        return window_flow(params, state, times, self.flow_options)
+        return _window_flow(params, state, times, self.flow_options)
 
     def predictions(self, u):
         """The model at every window's times, offsets included, shape (W, K + 1, 2,
@@ -129,6 +133,11 @@ class _Problem(eqx.Module):
     def residual(self, u, weighting):
         misfit, continuity = self.parts(u, weighting)
         return jnp.concatenate([jnp.ravel(misfit), jnp.ravel(continuity)])
+
+
+#: Jitted, so that the integration is traced once (a jaxpr that vmap and the JVPs
+#: transform) rather than at every trace of the residual by the least-squares solver.
+_window_flow = eqx.filter_jit(window_flow)
 
 
 def _flows_plain(theta, states, problem: _Problem):
@@ -370,6 +379,24 @@ def identify(records: list[Record], chain: ChainParams, fit=("mu_st", "mu_d", "v
     (`Record.check`), a bad name in `fit` or `start`, or a window too short.
     """
     problem, u0 = _problem(records, chain, fit, start, offsets, options)
+    return _solve(problem, u0, records, chain, options)
+
+
+def held_out_rms(records: list[Record], fit: Identification, *, offsets: bool = False,
+                 options: IdentifyOptions = IdentifyOptions()) -> float:
+    """The root mean square residual of the fitted model on records it was not
+    fitted to: only the windows' states (and offsets) are fitted, with the
+    parameters of `fit` held, by the compiled program of a fit of the same shapes.
+
+    **Raises:** as `identify`."""
+    problem, u0 = _problem(records, fit.chain, fit.unknowns.names, None, offsets, options,
+                           frozen=True)
+    check = _solve(problem, u0, records, fit.chain, options)
+    return float(np.sqrt(check.rss / check.n_data))
+
+
+def _solve(problem: "_Problem", u0, records, chain, options) -> Identification:
+    """The stages of the fit (`identify`) from `u0`, and the result."""
     u, converged, iterations = u0, True, 0
     noise = np.ones((len(records), 2, chain.n_osc))
     answer = None
@@ -386,7 +413,8 @@ def identify(records: list[Record], chain: ChainParams, fit=("mu_st", "mu_d", "v
     return _result(problem, records, chain, answer, noise, converged, iterations, options)
 
 
-def _problem(records, chain, fit, start, offsets, options) -> tuple[_Problem, jnp.ndarray]:
+def _problem(records, chain, fit, start, offsets, options, frozen: bool = False
+             ) -> tuple[_Problem, jnp.ndarray]:
     if not records:
         raise ValidationError("identify needs at least one record")
     unknowns = unknowns_of(chain, fit) if fit else Unknowns(names=(), sizes=(), kinds=())
@@ -398,15 +426,17 @@ def _problem(records, chain, fit, start, offsets, options) -> tuple[_Problem, jn
     if total < n_unknowns:
         raise ValidationError(f"{records[0].source}: {total} measured values for "
                               f"{n_unknowns} unknowns: a fit needs more samples")
-    base = _start_chain(records, with_parameter(chain, "eps", options.eps), unknowns,
-                        start or {})
+    base = with_parameter(chain, "eps", options.eps)
+    if not frozen:
+        base = _start_chain(records, base, unknowns, start or {})
     problem = _Problem(base=base, unknowns=unknowns, windows=windows,
-                       n_records=len(records), offsets=offsets, flow_options=options.flow)
+                       n_records=len(records), offsets=offsets, flow_options=options.flow,
+                       frozen=jnp.asarray(frozen))
     states = _start_states(records, windows, chain.n_osc)
-    parts = [jnp.asarray(unknowns.theta(base)), jnp.ravel(states)]
+    parts = [unknowns.theta(base), np.ravel(states)]
     if offsets:
-        parts.append(jnp.zeros(len(records) - 1))
-    return problem, jnp.concatenate(parts)
+        parts.append(np.zeros(len(records) - 1))
+    return problem, jnp.asarray(np.concatenate(parts))
 
 
 def _start_chain(records, chain: ChainParams, unknowns: Unknowns, start: dict) -> ChainParams:
@@ -447,7 +477,7 @@ def _start_states(records, windows: Windows, n_osc: int) -> np.ndarray:
 
 def _result(problem: _Problem, records, chain, answer: _Answer, noise, converged,
             iterations, options) -> Identification:
-    u = answer.u
+    u = np.asarray(answer.u)
     misfit, j_data, j_cont = (np.asarray(a) for a in (answer.misfit, answer.j_data,
                                                       answer.j_cont))
     windows = problem.windows
@@ -481,16 +511,16 @@ def _result(problem: _Problem, records, chain, answer: _Answer, noise, converged
         notes.extend(_conditioning(corr, problem.unknowns.labels, options.condition_limit))
     for note in notes:
         warnings.warn(note, stacklevel=3)
-    _, _, offsets = problem.unpack(u)
     fits = _stitch(records, problem.windows, np.asarray(answer.ys))
     values = np.asarray(answer.values)
-    fitted = with_parameter(problem.unknowns.params(problem.base, jnp.asarray(theta)), "eps",
-                            chain.eps)
+    # NumPy from here: an eager JAX operation would compile a program of its own
+    fitted = problem.unknowns.with_values(with_parameter(problem.base, "eps", chain.eps),
+                                          values)
     log_term = n_data * np.log(max(rss, 1e-300) / n_data)
     off, off_se = None, None
     if problem.offsets:
         k = len(records) - 1
-        off = np.asarray(offsets)
+        off = np.concatenate([[0.0], np.asarray(u)[len(u) - k:]])
         off_se = np.concatenate([[0.0], np.sqrt(np.maximum(np.diag(cov_u)[cov_u.shape[0] - k:],
                                                            0.0))])
     return Identification(

@@ -6,6 +6,7 @@ hold for every value of the unknowns, with no clipping."""
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -76,10 +77,20 @@ class Unknowns(eqx.Module):
             if kind.startswith("above:"):
                 lower = new.get(kind[6:], parameter_value(base, kind[6:]))
                 value = jnp.reshape(lower, (-1,)) + value
-            new[name] = jnp.reshape(value, np.shape(parameter_value(base, name)))
+            new[name] = value
+        return self.with_values(base, new)
+
+    def with_values(self, base: ChainParams, values) -> ChainParams:
+        """`base` with the fitted parameters set to `values` (a dict by name, or one
+        vector in the order of `labels`), all at once and then validated."""
+        if not isinstance(values, dict):
+            values = dict(zip(self.names, self.split(values)))
         changed = base
-        for name, value in new.items():
-            changed = eqx.tree_at(parameter_lens(name, base), changed, value)
+        for name, value in values.items():
+            shape = np.shape(parameter_value(base, name))
+            changed = eqx.tree_at(parameter_lens(name, base), changed,
+                                  jnp.reshape(value, shape) if isinstance(value, jax.Array)
+                                  else np.reshape(np.asarray(value, dtype=float), shape))
         return with_fields(changed, friction=revalidated(changed.friction))
 
     def values(self, base: ChainParams, theta) -> jnp.ndarray:
