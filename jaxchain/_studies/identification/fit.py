@@ -218,6 +218,17 @@ def _stage(problem: _Problem, u0, weighting, tol: float, max_iterations: int) ->
                    values=values(theta), g=jax.jacfwd(values)(theta))
 
 
+@eqx.filter_jit
+def _value_and_jacobian(quantity, unknowns: Unknowns, base: ChainParams, theta):
+    """quantity(params(theta)) and its Jacobian in theta, in one compiled program."""
+    def q(th):
+        value = jnp.asarray(quantity(unknowns.params(base, th)))
+        return value, value
+
+    g, value = jax.jacfwd(q, has_aux=True)(theta)
+    return value, g
+
+
 @dataclasses.dataclass(frozen=True)
 class Identification:
     """The result of `identify`.
@@ -287,18 +298,12 @@ class Identification:
         `jax.jacfwd` (a Hopf point, an existence limit, mu on a grid of speeds).
 
         **Returns:** (value, standard error), arrays of the quantity's shape."""
-        eps = self.chain.eps
-
-        def q(theta):
-            params = with_parameter(self.unknowns.params(self.base, theta), "eps", eps)
-            return jnp.ravel(jnp.asarray(quantity(params)))
-
-        theta = jnp.asarray(self.theta)
-        value = np.asarray(q(theta))
-        g = np.asarray(jax.jacfwd(q)(theta)).reshape(value.size, -1)
+        base = with_parameter(self.base, "eps", self.chain.eps)
+        value, g = _value_and_jacobian(quantity, self.unknowns, base, jnp.asarray(self.theta))
+        value = np.asarray(value)
+        g = np.asarray(g).reshape(value.size, -1)
         var = np.einsum("ij,jk,ik->i", g, self.theta_covariance, g)
-        shape = jax.eval_shape(quantity, self.chain).shape
-        return value.reshape(shape), np.sqrt(np.maximum(var, 0.0)).reshape(shape)
+        return value, np.sqrt(np.maximum(var, 0.0)).reshape(value.shape)
 
     def to_dict(self) -> dict:
         """The result as plain numbers, for `--json`."""
