@@ -35,19 +35,13 @@ def breakaway_positions(record: Record, column: int = 0, min_samples: int = 3) -
     dt = np.median(np.diff(t))
     error = noise_level(x) / dt if record.v is None else noise_level(record.v[:, column])
     stick = np.abs(slope - record.v_d) < max(3 * error, 0.02 * record.v_d)
+    # the runs of stick samples [i, j], from the rises and falls of the mask
+    edges = np.diff(np.concatenate([[0], stick.astype(int), [0]]))
     ends = []
-    i = 0
-    while i < stick.size:
-        if not stick[i]:
-            i += 1
-            continue
-        j = i
-        while j + 1 < stick.size and stick[j + 1]:
-            j += 1
+    for i, j in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1):
         if j - i + 1 >= min_samples and j + 1 < stick.size:
             z = x[i:j + 1] - record.v_d * t[i:j + 1]  # constant in stick
             ends.append(np.median(z) + record.v_d * 0.5 * (t[j] + t[j + 1]))
-        i = j + 1
     return np.asarray(ends)
 
 
