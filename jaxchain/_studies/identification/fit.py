@@ -96,7 +96,6 @@ class _Problem(eqx.Module):
     base: ChainParams
     unknowns: Unknowns = eqx.field(static=True)
     windows: Windows
-    n_records: int = eqx.field(static=True)
     offsets: bool = eqx.field(static=True)
     flow_options: FlowOptions = eqx.field(static=True)
     frozen: jnp.ndarray  # bool: the parameters held at their start (`held_out_rms`)
@@ -435,7 +434,7 @@ def _problem(records, chain, fit, start, offsets, options, frozen: bool = False
     if not frozen:
         base = _start_chain(records, base, unknowns, start or {})
     problem = _Problem(base=base, unknowns=unknowns, windows=windows,
-                       n_records=len(records), offsets=offsets, flow_options=options.flow,
+                       offsets=offsets, flow_options=options.flow,
                        frozen=jnp.asarray(frozen))
     states = _start_states(records, windows, chain.n_osc)
     parts = [unknowns.theta(base), np.ravel(states)]
