@@ -139,11 +139,6 @@ class _Problem(eqx.Module):
 _window_flow = eqx.filter_jit(window_flow)
 
 
-def _flows_plain(theta, states, problem: _Problem):
-    return jax.vmap(problem.flow, in_axes=(None, 0, 0, 0))(
-        theta, states, problem.windows.times, problem.windows.v_d)
-
-
 @eqx.filter_custom_jvp
 def _flows(theta, states, problem: _Problem):
     """Every window's states, shape (W, K + 1, 2, n_osc), with a JVP that uses the
@@ -152,7 +147,8 @@ def _flows(theta, states, problem: _Problem):
     Jacobians are computed once (forward mode, per window, vmapped) and every
     tangent is a product with them: a Levenberg-Marquardt Jacobian costs P + 2 n_osc
     tangent integrations per window instead of P + 2 n_osc W."""
-    return _flows_plain(theta, states, problem)
+    return jax.vmap(problem.flow, in_axes=(None, 0, 0, 0))(
+        theta, states, problem.windows.times, problem.windows.v_d)
 
 
 @_flows.def_jvp

@@ -53,11 +53,6 @@ class Windows(eqx.Module):
     def n_windows(self) -> int:
         return int(self.times.shape[0])
 
-    @property
-    def n_data(self) -> int:
-        """The number of measured values."""
-        return int(np.sum(np.asarray(self.mask)))
-
 
 def cut(records: list[Record], n_osc: int, window: float) -> Windows:
     """The records cut into windows of about `window` time units (equal numbers of
