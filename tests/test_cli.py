@@ -181,8 +181,9 @@ def test_installed_command_table_and_usage_error(localized_small, tmp_path):
                              capture_output=True, text=True, env=env)
         assert run.returncode == 0, run.stderr
         results.append(xr.load_dataset(next((tmp_path / folder).glob("*.nc"))))
-        if folder == "cold":  # the traced program is kept beside the compiled one
-            assert len(list((cache / "traced").glob("*.jaxexport"))) == 1
+        if folder == "cold":  # the traced programs are kept beside the compiled ones:
+            # the integration and the lanes' start (initial states, steady sliding)
+            assert len(list((cache / "traced").glob("*.jaxexport"))) == 2
             assert any(p.name.startswith("jit_call") for p in cache.iterdir())
             kept = {p: p.stat().st_mtime_ns for p in (cache / "traced").iterdir()}
     # the warm start read the kept program back: it wrote nothing new

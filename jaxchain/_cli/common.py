@@ -421,6 +421,11 @@ def prefetch(*modules: str) -> None:
     thread.start()
 
 
+#: What writing a command's results imports: xarray, which imports dask.array at its
+#: first variable when Dask is installed (0.3-0.9 s), the netCDF engine and
+#: matplotlib. A command prefetches them (`prefetch`) while its run goes on.
+RESULT_MODULES = ("xarray", "dask.array", "h5netcdf", "matplotlib.pyplot")
+
 #: The prefetch threads started by this process's command, joined when it returns.
 _PREFETCHING: list[threading.Thread] = []
 

@@ -11,7 +11,7 @@ from .._physics.initial import FAMILIES, localized_family
 from .._engine.status import status_names
 from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (Outputs, RunsFailed, add_model_options, add_output_options,
+from .common import (RESULT_MODULES, Outputs, RunsFailed, add_model_options, add_output_options,
                      add_run_options, note, prefetch, print_json, show_progress,
                      simulation_options, speeds_of_chain)
 
@@ -46,7 +46,7 @@ def add_parser(sub):
 
 
 def run(args) -> None:
-    prefetch("xarray", "matplotlib.pyplot")
+    prefetch(*RESULT_MODULES)
     params = chain_params(args, args.n_osc, v_d=args.vd[0], eps=args.eps)
     args.vd = speeds_of_chain(args, params)
     options = simulation_options(args)

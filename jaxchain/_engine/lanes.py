@@ -24,7 +24,8 @@ from jaxtyping import ArrayLike, Float
 from tqdm.auto import tqdm
 
 from .options import SimulationOptions
-from .programs import kept_program
+from .programs import compiled, kept_program
+from .._physics.initial import AbstractInitialCondition, initial_states
 from .._physics.model import steady_sliding
 from .._physics.params import ChainParams, parameter_lens, with_parameter
 from .observers.base import AbstractObserver
@@ -152,14 +153,28 @@ def expected_cost(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"]
     distance of its initial state from steady sliding at its belt speed. Lanes that
     start far from it (more oscillators excited) stick and slip more, and take more
     steps. `params` holds each lane's parameters (`lane_params`)."""
-    x0 = np.asarray(_steady_sliding_lanes(params))[:, 0]
-    y0 = np.asarray(y0)
+    return distance_from(np.asarray(compiled(lanes_steady_sliding, params)), y0)
+
+
+def distance_from(steady: Float[ArrayLike, "lanes 2 n_osc"],
+                  y0: Float[ArrayLike, "lanes 2 n_osc"]) -> Float[np.ndarray, " lanes"]:
+    """`expected_cost` from each lane's steady sliding `steady` and initial state
+    `y0`: the Euclidean distance between them (displacements and velocities)."""
+    x0, y0 = np.asarray(steady)[:, 0], np.asarray(y0)
     return np.sqrt(np.sum((y0[:, 0] - x0) ** 2 + y0[:, 1] ** 2, -1))
 
 
-#: Steady sliding of each lane, compiled: about 0.2 s per new lane count, against
-#: 0.9 s op by op for the 20 lanes of the Fig. 4 scene.
-_steady_sliding_lanes = eqx.filter_jit(eqx.filter_vmap(steady_sliding))
+def lanes_steady_sliding(params: ChainParams) -> Float[jax.Array, "lanes 2 n_osc"]:
+    """Steady sliding (`steady_sliding`) of each lane of `params` (`lane_params`)."""
+    return eqx.filter_vmap(steady_sliding)(params)
+
+
+def lane_starts(params: ChainParams, ics: AbstractInitialCondition
+                ) -> tuple[Float[jax.Array, "lanes 2 n_osc"], Float[jax.Array, "lanes 2 n_osc"]]:
+    """The initial state (`initial_states`) and the steady sliding of each lane, in
+    one program (`compiled`): what an ensemble needs before its run, y0 and the
+    lanes' `expected_cost` (`distance_from`)."""
+    return initial_states(params, ics), lanes_steady_sliding(params)
 
 
 def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
@@ -167,7 +182,8 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
               engine: str | None = None, devices: Sequence | None = None,
               batch_size: int = 4096, block: int | None = None,
               progress: bool | tqdm = False,
-              observers: Sequence[AbstractObserver] | None = None
+              observers: Sequence[AbstractObserver] | None = None,
+              costs: Float[ArrayLike, " lanes"] | None = None
               ) -> Observables | dict:
     """Run one trajectory of eq. (5) for each lane, in parallel over the devices:
     `run` (its `Observables`), or `run_observers` with the given observers only.
@@ -194,6 +210,8 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
     - `progress`: a tqdm bar over trajectories, or a tqdm bar to advance (by the
         trajectories of each finished task, or of each vmapped batch).
     - `observers`: what to observe (`run_observers`); None for the `Observables` of `run`.
+    - `costs`: each lane's expected cost, shape (lanes,), `expected_cost` by
+        default; only the order of the lanes depends on it, not their results.
 
     **Returns:**
 
@@ -227,7 +245,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
         starts = range(0, n_lanes, size)
         # The costliest lanes first (longest processing time first): the short ones
         # at the end then fill the gaps, and no device is left with a long tail.
-        by_cost = np.argsort(-expected_cost(params, y0), kind="stable")
+        by_cost = np.argsort(-_costs(params, y0, costs), kind="stable")
 
         # Trace once, here: the device threads then find the program traced and only
         # compile it for their device (or load it from the cache), rather than
@@ -239,10 +257,11 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
         if program is None:
             _run_block.lower(*example)
             program = _run_block
+        home = shared_device(devices)
 
         def task(i, device):
             pick = by_cost[np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)]
-            inputs = jax.device_put((take_lanes(params, pick), y0[pick]), device)
+            inputs = jax.device_put((take_lanes(params, pick), y0[pick]), home(device))
             out = program(*inputs, solver, options, observers)
             return jax.tree_util.tree_map(lambda x: np.asarray(x)[:len(pick)], out)
 
@@ -250,7 +269,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
                             sizes=[min(size, n_lanes - s) for s in starts])
         obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x)[:n_lanes], *blocks)
         return jax.tree_util.tree_map(lambda x: x[np.argsort(by_cost)], obs)
-    by_cost = np.argsort(expected_cost(params, y0), kind="stable")
+    by_cost = np.argsort(_costs(params, y0, costs), kind="stable")
     mesh = Mesh(np.array(devices), ("lanes",))
     parts = []
     with _bar(progress, n_lanes, "trajectories") as bar:
@@ -265,6 +284,35 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
             bar.update(len(batch))
     obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x), *parts)
     return jax.tree_util.tree_map(lambda x: x[np.argsort(by_cost)], obs)
+
+
+def shared_device(devices: Sequence) -> Callable:
+    """Where the queue's worker for each device runs its tasks: on a CPU, every
+    worker on the first device; elsewhere each on its own.
+
+    XLA's CPU client runs executions of one compiled program from several threads
+    at once, each on the thread that calls it, so the cores are kept busy by the
+    workers whichever CPU device they name. One device then needs the program
+    compiled, or read from the persistent cache, once instead of once per device
+    (a compiled program is bound to its device; `benchmarks/fixed_cost.py`). The
+    result is the same program's, bitwise."""
+    first = devices[0]
+    if first.platform == "cpu":
+        return lambda device: first
+    return lambda device: device
+
+
+def _costs(params, y0, costs) -> np.ndarray:
+    """`costs` checked against the lanes, or `expected_cost` when None.
+
+    **Raises:** `ValidationError` when `costs` is not of shape (lanes,)."""
+    if costs is None:
+        return expected_cost(params, y0)
+    costs = np.asarray(costs, dtype=float)
+    if costs.shape != (len(y0),):
+        raise ValidationError(f"costs: one value per lane, shape ({len(y0)},), got "
+                              f"{costs.shape}")
+    return costs
 
 
 @contextlib.contextmanager

@@ -21,18 +21,28 @@ PACKAGES = ("jax", "jaxlib", "diffrax", "equinox", "lineax", "optimistix")
 
 @functools.cache
 def code_identity() -> dict:
-    """The SHA-256 of jaxchain's source files and the versions of `PACKAGES`: a kept
-    program is reused only by the code that traced it."""
-    root = Path(__file__).resolve().parent
+    """The identity of jaxchain's source files and the versions of `PACKAGES`: a
+    kept program is reused only by the code that traced it.
+
+    The source files are known by their names, sizes and modification times (in
+    nanoseconds), which a change of their content changes too: reading their
+    stat costs a few milliseconds, where hashing their content cost 0.1 s of
+    every command's start (`benchmarks/fixed_cost.py`). A file rewritten with its
+    old size and time forced back is the one change this misses."""
+    package = Path(__file__).resolve().parents[1]
     digest = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        digest.update(str(path.relative_to(root)).encode())
-        digest.update(path.read_bytes())
+    for path in sorted(package.rglob("*.py")):
+        stat = path.stat()
+        digest.update(f"{path.relative_to(package)}:{stat.st_size}:{stat.st_mtime_ns};".encode())
     return {"jaxchain": digest.hexdigest()} | {
         name: importlib.metadata.version(name) for name in PACKAGES}
 
 
 _folder: list[Path | None] = [None]
+
+#: The kept programs loaded by this process, by folder and key: a second call (the
+#: next batch of a sweep) runs the program compiled for the first.
+_loaded: dict[tuple[Path, str], Callable | None] = {}
 
 
 def keep_programs(folder: Path | str | None) -> None:
@@ -40,8 +50,10 @@ def keep_programs(folder: Path | str | None) -> None:
     keeps them in the folder `traced` of its persistent compilation cache
     (`jaxchain._cli.main.compilation_cache`); the library keeps none unless asked,
     as the key names a user's own friction law or observer by its class, not by its
-    code."""
+    code. The programs this process loaded are forgotten: the next call of
+    `kept_program` reads its program from the folder again."""
     _folder[0] = None if folder is None else Path(folder)
+    _loaded.clear()
 
 
 def program_folder() -> Path | None:
@@ -93,6 +105,14 @@ def kept_program(fn: Callable, *example) -> Callable | None:
         key = program_key(fn, static, treedef, leaves)
     except TypeError:
         return None
+    if (folder, key) not in _loaded:
+        _loaded[folder, key] = _load(fn, folder, key, static, treedef, leaves)
+    return _loaded[folder, key]
+
+
+def _load(fn, folder, key, static, treedef, leaves):
+    """The kept program `key` of `fn`, read from `folder` or traced and written
+    there; None when it cannot be exported (`kept_program`)."""
     program, tree = folder / f"{key}.jaxexport", folder / f"{key}.tree"
     try:
         exported = jax.export.deserialize(bytearray(program.read_bytes()))
@@ -115,6 +135,38 @@ def kept_program(fn: Callable, *example) -> Callable | None:
             out_tree, call(*jax.tree_util.tree_leaves(eqx.filter(args, eqx.is_array))))
 
     return run
+
+
+@functools.cache
+def _jitted(fn: Callable) -> Callable:
+    return eqx.filter_jit(fn)
+
+
+def compiled(fn: Callable, *args):
+    """`fn(*args)` run as one compiled program: its kept program (`kept_program`)
+    where programs are kept, so that a warm start neither traces nor compiles it,
+    else `eqx.filter_jit(fn)`. For the small programs that prepare a run (the
+    initial states of the lanes, their steady sliding): called op by op, each of
+    their operations is compiled on its own, 72 programs and about 2 s for the
+    initial states of a small ensemble (`benchmarks/fixed_cost.py`).
+
+    **Arguments:**
+
+    - `fn`: a function defined at a module's top level (its name is part of the
+        key), of arrays and static values (`eqx.filter_jit`).
+    - `args`: its arguments.
+
+    **Returns:**
+
+    What `fn(*args)` returns, its arrays as JAX arrays.
+
+    **Raises:**
+
+    What `fn` raises while it is traced (for example a `ValidationError` of a
+    shape), as `fn(*args)` would.
+    """
+    program = kept_program(fn, *args)
+    return (program or _jitted(fn))(*args)
 
 
 def _export(fn, static, treedef, leaves):

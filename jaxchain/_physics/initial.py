@@ -125,12 +125,12 @@ class OutOfPhaseExcitation(AbstractInitialCondition):
     @classmethod
     def eq8(cls, excited) -> "OutOfPhaseExcitation":
         """Eq. (8) of the paper: at rest, unexcited oscillators at steady sliding."""
-        return cls(excited=jnp.asarray(excited, dtype=bool), velocity=0.0, base_sign=-1.0)
+        return cls(excited=np.asarray(excited, dtype=bool), velocity=0.0, base_sign=-1.0)
 
     @classmethod
     def eq10(cls, excited) -> "OutOfPhaseExcitation":
         """Eq. (10) of the paper: x_n'(0) = 0.56, base displacement F(+v_d)."""
-        return cls(excited=jnp.asarray(excited, dtype=bool), velocity=0.56, base_sign=1.0)
+        return cls(excited=np.asarray(excited, dtype=bool), velocity=0.56, base_sign=1.0)
 
     def __call__(self, params: ChainParams) -> State:
         excited = jnp.asarray(self.excited)
@@ -249,8 +249,8 @@ def localized_family(n_osc: int, family: str = "eq8", boundary: str | Graph = "r
     masks = np.stack([excited_block(n_osc, k, boundary) for k in range(1, n_osc + 1)])
     one = FAMILIES[family](masks[0])
     return OutOfPhaseExcitation(
-        excited=jnp.asarray(masks),
-        velocity=jnp.full((n_osc,), one.velocity),
+        excited=masks,
+        velocity=np.full((n_osc,), one.velocity),
         base_sign=one.base_sign,
     )
 

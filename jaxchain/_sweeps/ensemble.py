@@ -10,10 +10,11 @@ from jaxtyping import ArrayLike, Float
 
 from .._physics.record import check_recordable
 from .._engine.checks import check_run
-from .._physics.initial import AbstractInitialCondition, batch_length, initial_states
-from .._engine.lanes import lane_params, run_lanes, take_lanes
+from .._physics.initial import AbstractInitialCondition, batch_length
+from .._engine.lanes import distance_from, lane_params, lane_starts, run_lanes, take_lanes
+from .._engine.programs import compiled
 from .._engine.options import SimulationOptions
-from .._physics.params import ChainParams, with_parameter
+from .._physics.params import ChainParams
 from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._errors import ValidationError
 
@@ -70,12 +71,13 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     n_ic = batch_length(ics)
     if n_ic == 0:
         raise ValidationError("ics must hold at least one initial condition, got 0")
-    ics_first = take_lanes(ics, 0)
-    ics_first(with_parameter(params, "v_d", v_d[0]))  # shape check, may raise
     lanes_vd, lanes_ic = np.repeat(v_d, n_ic), np.tile(np.arange(n_ic), v_d.size)
     lanes = lane_params(params, lanes_vd.size, v_d=lanes_vd)
-    y0 = initial_states(lanes, take_lanes(ics, lanes_ic))
-    obs = run_lanes(lanes, y0, solver, options, engine=engine, progress=progress)
+    # One compiled program (its shape checks raise while it is traced), not one
+    # per operation: 2 s of a small run (benchmarks/fixed_cost.py).
+    y0, steady = compiled(lane_starts, lanes, take_lanes(ics, lanes_ic))
+    obs = run_lanes(lanes, y0, solver, options, engine=engine, progress=progress,
+                    costs=distance_from(steady, y0))
     obs = jax.tree_util.tree_map(lambda x: x.reshape(v_d.size, n_ic, *x.shape[1:]), obs)
     from .datasets import to_dataset  # xarray, imported once the run is done
 

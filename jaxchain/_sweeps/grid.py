@@ -9,6 +9,7 @@ import numpy as np
 from .._physics.initial import (AbstractInitialCondition, OutOfPhaseExcitation, batch_length,
                         initial_states)
 from .._engine.lanes import lane_params, take_lanes
+from .._engine.programs import compiled
 from .._physics.params import ChainParams, parameter_name, with_parameter
 from .._errors import ValidationError
 
@@ -55,8 +56,8 @@ class SweepGrid:
         grid = cls(params, name, values, families)
         for family in families.values():  # shapes checked before anything runs
             batch_length(family)
-            initial_states(lane_params(params, 1, **{name: values[:1]}),
-                            take_lanes(family, np.array([0])))
+            compiled(initial_states, lane_params(params, 1, **{name: values[:1]}),
+                     take_lanes(family, np.array([0])))
         return grid
 
     @property
@@ -98,7 +99,7 @@ class SweepGrid:
         for family, n in zip(self.families.values(), self.sizes):
             here = (ic >= first) & (ic < first + n)
             if here.any():
-                y0[here] = np.asarray(initial_states(take_lanes(params, here),
-                                                      take_lanes(family, ic[here] - first)))
+                y0[here] = np.asarray(compiled(initial_states, take_lanes(params, here),
+                                               take_lanes(family, ic[here] - first)))
             first += n
         return params, y0
