@@ -2,7 +2,8 @@
 the CPU device count (one per core; the test processes use one, `conftest.py`): the work
 queue over every device, and the lanes of `FIVE_LANES` on one device, on two, and
 vmapped. Writes `<out>.npz` with the device and core counts, the devices that
-`on_devices` used, and every field of the three runs."""
+`on_devices` used, the compilations of the queue's program for one device and
+then for two, and every field of the three runs."""
 
 import os
 import sys
@@ -51,11 +52,18 @@ def main(out: str) -> None:
     params, y0 = five_lanes()
     solver = jc.SOLVERS[jc.DEFAULT_SOLVER]()
     devices = jax.devices()
-    runs = {"one": jc.run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:1]),
-            "two": jc.run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:2]),
-            "vmap": jc.run_lanes(params, y0, solver, TIGHT, engine="vmap", devices=devices[:2])}
+    compiles = []  # XLA compilations (JAX's events), by the program's name
+    jax.monitoring.register_event_time_span_listener(
+        lambda event, start, end, **kw: compiles.append(kw.get("fun_name", ""))
+        if event == "/jax/core/compile/backend_compile_duration" else None)
+    runs = {"one": jc.run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:1])}
+    before = len(compiles)
+    runs["two"] = jc.run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:2])
+    two_compiles = sum("run_block" in name for name in compiles[before:])
+    runs["vmap"] = jc.run_lanes(params, y0, solver, TIGHT, engine="vmap", devices=devices[:2])
     np.savez(out, n_devices=len(jax.devices("cpu")), cores=len(os.sched_getaffinity(0)),
-             used=devices_at_a_barrier(),
+             used=devices_at_a_barrier(), two_compiles=two_compiles,
+             one_compiles=sum("run_block" in name for name in compiles[:before]),
              **{f"{run}_{f}": np.asarray(getattr(obs, f)) for run, obs in runs.items()
                 for f in FIELDS})
 

@@ -92,6 +92,36 @@ def test_one_device_two_devices_and_both_engines_give_the_same_results(every_dev
                             [one["num_steps"], vmapped["num_steps"]], field)
 
 
+def test_the_queue_compiles_its_program_once_for_every_cpu_device(every_device):
+    """On a CPU the queue's workers all run the program compiled for the first
+    device (XLA's CPU client runs it from several threads at once): after the run
+    on one device, the run on two compiles nothing more, and its lanes are the
+    same bits (above)."""
+    if every_device["n_devices"] < 2:
+        pytest.skip("needs two devices (two cores)")
+    assert every_device["one_compiles"] >= 1  # the events are seen at all
+    assert every_device["two_compiles"] == 0
+
+
+@pytest.mark.numerics
+def test_given_costs_only_order_the_lanes():
+    """The lanes' costs (`costs=`, as an ensemble computes them with the initial
+    states) change the order in which the queue takes the lanes, not their results:
+    the same program, bitwise the same fields in the order given. Costs of the
+    wrong shape are refused, naming them."""
+    p = jc.ChainParams(n_osc=2)
+    v_d = np.array([1.3, 1.5, 1.7])
+    y0 = np.stack([jc.OutOfPhaseExcitation.eq8([True, k > 0])(jc.ChainParams(n_osc=2, v_d=v))
+                   for k, v in enumerate(v_d)])
+    lanes, solver = lane_params(p, 3, v_d=v_d), SOLVERS[DEFAULT_SOLVER]()
+    default = run_lanes(lanes, y0, solver, TIGHT)
+    reordered = run_lanes(lanes, y0, solver, TIGHT, costs=[1.0, 3.0, 2.0])
+    for field in ("amplitudes", "y_final", "num_steps", "n_halc"):
+        assert np.array_equal(getattr(default, field), getattr(reordered, field)), field
+    with pytest.raises(jc.ValidationError, match="costs"):
+        run_lanes(lanes, y0, solver, TIGHT, costs=[1.0, 2.0])
+
+
 def test_compiled_run_holds_no_callback_custom_call_or_scatter():
     """The optimised program of the queue engine's run holds no host callback (it
     could not be cached, and the loop would run op by op), no custom call (LAPACK)

@@ -74,10 +74,12 @@ def compilation_cache() -> str | None:
     skips compilation: in the folder named by the environment variable
     JAXCHAIN_CACHE_DIR, or else in the user's cache folder
     (platformdirs.user_cache_dir("jaxchain")/xla). JAXCHAIN_CACHE_DIR set to an
-    empty string turns it off. Programs are cached when their compilation took
-    0.5 s or more; jaxchain's compiled runs hold no host callbacks, which JAX
-    never caches. The traced integration is kept beside them, in the folder
-    `traced` (`keep_programs`), so that a warm start neither traces nor compiles it.
+    empty string turns it off. Every compiled program is cached, however short
+    its compilation: the small programs that prepare a run (`compiled`) cost a
+    warm start their compilation otherwise. jaxchain's compiled runs hold no host
+    callbacks, which JAX never caches. The traced programs are kept beside them,
+    in the folder `traced` (`keep_programs`), so that a warm start neither traces
+    nor compiles them.
 
     **Returns:**
 
