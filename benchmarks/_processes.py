@@ -166,7 +166,7 @@ def _jaxchain_command() -> list[str]:
     exe = Path(sys.executable).with_name("jaxchain")
     if exe.exists():
         return [str(exe)]
-    return [sys.executable, "-c", "from jaxchain._cli.main import command; command()"]
+    return [sys.executable, "-c", "from jaxchain._cli.warm import command; command()"]
 
 
 def _cli_twice(args: list[str], env: dict, start: float, label: str) -> dict:

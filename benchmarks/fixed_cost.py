@@ -27,7 +27,9 @@ does, with timestamps around its phases:
   small functions (JAX's compile events outside the run), with their count.
 
 The table gives the median of the warm runs of each phase, before and now, and
-their ratio (before / now, > 1: faster now), and the whole process cold. It is
+their ratio (before / now, > 1: faster now), the whole process cold, and the
+whole process of the console script when the warm process of the command line
+(`jaxchain._cli.warm`, which the phases above leave off) runs the command. It is
 written to `<out>/fixed_cost.md` with the JSON numbers of both trees, which must
 agree (the results are unchanged).
 """
@@ -36,6 +38,7 @@ import argparse
 import json
 import os
 import shutil
+import signal
 import statistics
 import subprocess
 import sys
@@ -157,9 +160,11 @@ def child(argv: list[str]) -> None:
 
     cli.main = timed_main
     sys.argv = ["jaxchain", *argv]
-    if hasattr(cli, "command"):  # the console script's entry, as it ends the process
-        cli.command()
-    sys.exit(cli.main())
+    try:  # the console script's entry, as it ends the process (JAXCHAIN_SERVER=0: here)
+        from jaxchain._cli.warm import command
+    except ImportError:  # before the warm process
+        command = getattr(cli, "command", lambda: sys.exit(cli.main()))
+    command()
 
 
 # -- the parent: phases from the spans ------------------------------------------------
@@ -223,6 +228,7 @@ def run_case(tree: Path | None, args: list[str], cache: Path, folder: Path) -> d
     env["JAXCHAIN_CACHE_DIR"] = str(cache)
     spans_file = folder / "spans.json"
     env["FIXED_COST_SPANS"] = str(spans_file)
+    env["JAXCHAIN_SERVER"] = "0"  # the phases of a command that runs in its own process
     if tree is not None:
         env["PYTHONPATH"] = str(tree)
     out = folder / "out"
@@ -244,7 +250,8 @@ def run_case(tree: Path | None, args: list[str], cache: Path, folder: Path) -> d
 
 def measure(tree: Path | None, name: str, args: list[str], repeats: int, work: Path,
             say) -> dict:
-    """The cold run (empty cache) and `repeats` warm runs of one case for one tree."""
+    """The cold run (empty cache) and `repeats` warm runs of one case for one tree;
+    for this tree, also `repeats` runs handed to the warm process (`served`)."""
     folder = work / f"{name.replace(' ', '_')}-{'before' if tree else 'now'}"
     folder.mkdir()
     (folder / "mychain.toml").write_text(SMALL_CHAIN)
@@ -255,7 +262,53 @@ def measure(tree: Path | None, name: str, args: list[str], repeats: int, work: P
     for _ in range(repeats):
         warm.append(run_case(tree, args, cache, folder))
         say(f"  {name}, {'before' if tree else 'now'}: warm {warm[-1]['wall']:.2f} s")
-    return {"cold": cold, "warm": warm}
+    served = [] if tree is not None else served_runs(args, cache, folder, repeats, say, name)
+    return {"cold": cold, "warm": warm, "served": served}
+
+
+def served_runs(args: list[str], cache: Path, folder: Path, repeats: int, say, name: str
+                ) -> list[dict]:
+    """`repeats` whole processes of the `jaxchain` console script handed to the warm
+    process (`jaxchain._cli.warm`), which a first command starts: their wall times
+    and JSON numbers. The warm process lives in a temporary folder of its own and
+    is stopped at the end."""
+    exe = Path(sys.executable).with_name("jaxchain")
+    command = [str(exe)] if exe.exists() else [
+        sys.executable, "-c", "from jaxchain._cli.warm import command; command()"]
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    env.update(JAXCHAIN_CACHE_DIR=str(cache), JAXCHAIN_SERVER="1", TMPDIR=str(folder / "t"),
+               JAXCHAIN_SERVER_IDLE="300")
+    (folder / "t").mkdir()
+    sockets = folder / "t" / f"jaxchain-{os.getuid()}"
+
+    def one() -> dict:
+        started = time.time()
+        proc = subprocess.run([*command, *args, "--out", str(folder / "served"), "--overwrite"],
+                              cwd=folder, env=env, capture_output=True, text=True)
+        wall = time.time() - started
+        if proc.returncode != 0:
+            raise RuntimeError(f"jaxchain {' '.join(args)} failed: {proc.stderr.strip()}")
+        result = json.loads(proc.stdout)
+        return {"wall": wall, "numbers": [{k: r[k] for k in ("n_halc", "energy", "amplitudes",
+                                                            "num_steps", "status")}
+                                           for r in result["runs"]]}
+
+    one()  # in its own process: it starts the warm process
+    end = time.time() + 120
+    while not list(sockets.glob("*.sock")) and time.time() < end:
+        time.sleep(0.2)
+    runs = []
+    try:
+        for _ in range(repeats):
+            runs.append(one())
+            say(f"  {name}, now: served by the warm process {runs[-1]['wall']:.2f} s")
+    finally:
+        for pid in sockets.glob("*.pid"):
+            try:
+                os.kill(int(pid.read_text()), signal.SIGTERM)
+            except (ProcessLookupError, ValueError):
+                pass
+    return runs
 
 
 def _median_phase(runs, key):
@@ -292,12 +345,16 @@ def table(name: str, before: dict | None, now: dict) -> list[str]:
     bc = before["cold"]["wall"] if before else None
     lines.append(f"| **whole process, cold (empty cache)** | {fmt(bc)} | "
                  f"{fmt(now['cold']['wall'])} | {ratio(bc, now['cold']['wall'])} |")
+    if now.get("served"):
+        sw = statistics.median(r["wall"] for r in now["served"])
+        lines.append(f"| **whole process, warm, handed to the warm process** | | {fmt(sw)} | "
+                     f"{ratio(bw, sw)} |")
     return lines + [""]
 
 
 def same_numbers(before: dict, now: dict) -> bool:
     """Whether both trees' runs give the same JSON numbers (every run, warm and cold)."""
-    runs = [before["cold"], *before["warm"], now["cold"], *now["warm"]]
+    runs = [before["cold"], *before["warm"], now["cold"], *now["warm"], *now["served"]]
     return all(r["numbers"] == runs[0]["numbers"] for r in runs)
 
 
@@ -352,8 +409,9 @@ def main() -> None:
         lines += table(name, r["before"], r["now"])
         if r["before"]:
             same = same_numbers(r["before"], r["now"])
-            lines += [f"Same JSON numbers before and now (n_halc, energy, amplitudes, "
-                      f"num_steps, status): **{'yes' if same else 'NO'}**", ""]
+            lines += [f"Same JSON numbers before and now, in its own process and in the "
+                      f"warm process (n_halc, energy, amplitudes, num_steps, status): "
+                      f"**{'yes' if same else 'NO'}**", ""]
     text = "\n".join(lines)
     print(text)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -1,11 +1,13 @@
 """The process set-up that jaxchain needs, made only when asked (`configure`):
-importing jaxchain changes nothing global."""
+importing jaxchain changes nothing global. This module imports JAX only inside
+the functions that use it, so that the command line's client
+(`jaxchain._cli.warm`) can read the version and the source identity without it."""
 
 import contextlib
+import hashlib
 import os
 from importlib.metadata import PackageNotFoundError, version
-
-import jax
+from pathlib import Path
 
 
 def _installed_version() -> str:
@@ -39,6 +41,8 @@ def device_count_chosen() -> bool:
     """Whether the CPU device count was chosen before `configure`: by
     `jax.config.update("jax_num_cpu_devices", n)`, the environment variable
     JAX_NUM_CPU_DEVICES, or `--xla_force_host_platform_device_count` in XLA_FLAGS."""
+    import jax
+
     return (jax.config.jax_num_cpu_devices != -1
             or "xla_force_host_platform_device_count" in os.environ.get("XLA_FLAGS", ""))
 
@@ -71,6 +75,8 @@ def configure(devices: int | None = None) -> None:
 
     `ValidationError` if `devices` is not a positive integer.
     """
+    import jax
+
     from ._errors import ValidationError
 
     if devices is not None and (not isinstance(devices, int) or devices < 1):
@@ -91,8 +97,27 @@ def check_float64() -> None:
 
     `RuntimeError` naming `jaxchain.configure()`, when `jax_enable_x64` is off.
     """
+    import jax
+
     if not jax.config.jax_enable_x64:
         raise RuntimeError(
             "jaxchain needs float64 in JAX: call jaxchain.configure() once, before "
             "anything else (it also gives JAX one CPU device per core), or "
             "jax.config.update('jax_enable_x64', True)")
+
+
+def source_identity() -> str:
+    """The identity of jaxchain's source files (`*.py` and `*.pyi` of the package):
+    the SHA-256 of their names, sizes and modification times (in nanoseconds),
+    which a change of their content changes too. Reading their stat costs a few
+    milliseconds, where hashing their content cost 0.1 s of every command's start
+    (`benchmarks/fixed_cost.py`); a file rewritten with its old size and time
+    forced back is the one change this misses. Part of the key of a kept program
+    (`jaxchain._engine.programs.code_identity`) and of the warm process that serves
+    the command line (`jaxchain._cli.warm`)."""
+    package = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for path in sorted([*package.rglob("*.py"), *package.rglob("*.pyi")]):
+        stat = path.stat()
+        digest.update(f"{path.relative_to(package)}:{stat.st_size}:{stat.st_mtime_ns};".encode())
+    return digest.hexdigest()

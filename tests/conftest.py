@@ -23,6 +23,10 @@ if _CACHE_OWNER:
 # Dask worker sets its own (one device per thread).
 os.environ["JAX_NUM_CPU_DEVICES"] = "1"
 
+# Every command that the tests start runs in its own process: no warm process is
+# started behind them (`jaxchain._cli.warm`; test_warm.py starts one of its own).
+os.environ["JAXCHAIN_SERVER"] = "0"
+
 import jax  # noqa: E402
 
 # The command line's own persistent compilation cache stays off in the tests (one

@@ -1,7 +1,6 @@
 """Entry point of the `jaxchain` command. Every subcommand's failure ends here, as one
 line on stderr and an exit status; no command handles its own."""
 
-import atexit
 import gc
 import importlib
 import os
@@ -36,6 +35,9 @@ def build_parser(commands=COMMANDS) -> Parser:
                "compilation cache, in the folder named by JAXCHAIN_CACHE_DIR (an "
                "empty value turns it off) or else in the user's cache folder "
                "(platformdirs.user_cache_dir('jaxchain')/xla). "
+               "After a first command, a warm process keeps JAX loaded and runs the "
+               "next commands of the same environment (600 idle seconds, "
+               "JAXCHAIN_SERVER_IDLE; JAXCHAIN_SERVER=0 turns it off). "
                "JAXCHAIN_TRACEBACK=1 shows a failure's traceback.")
     parser.add_argument("--version", action="version", version=f"jaxchain {VERSION}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
@@ -143,30 +145,19 @@ def main(argv=None) -> int:
     return status
 
 
-def command() -> None:
-    """The `jaxchain` console script: `main` in a process tuned for a short life.
-
-    - Python's cyclic garbage collector leaves alone what the imports made
-        (`gc.freeze`) and runs less often: JAX's tracing makes many objects, and
-        full collections walking the imported modules took 0.4 s of a small warm
-        run. Cycles are still collected.
-    - The process ends without the interpreter's teardown: freeing every module
-        and the JAX runtime's objects one by one took 0.7 s and serves nothing,
-        as every file is written and closed by then. The exit functions (`atexit`:
-        logging, JAX, Dask) still run, and standard output and error are flushed.
-
-    (`benchmarks/fixed_cost.py`.)"""
+def run_here(argv=None) -> int:
+    """`main` in this process, tuned for a command's short life: Python's cyclic
+    garbage collector leaves alone what the imports made (`gc.freeze`) and runs
+    less often. JAX's tracing makes many objects, and full collections walking
+    the imported modules took 0.4 s of a small warm run (`benchmarks/fixed_cost.py`);
+    cycles are still collected. The console script (`jaxchain._cli.warm.command`)
+    calls it when no warm process takes the command."""
     gc.freeze()
     gc.set_threshold(50_000, 50, 100)
-    status = main()
-    try:
-        atexit._run_exitfuncs()
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except BrokenPipeError:  # the reader of our output went away: nothing to say
-        pass
-    os._exit(status)
+    return main(argv)
 
 
 if __name__ == "__main__":
+    from .warm import command
+
     command()

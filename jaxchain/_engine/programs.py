@@ -14,6 +14,7 @@ import equinox as eqx
 import jax
 
 from .hashes import canonical
+from .._setup import source_identity
 
 #: The packages whose code is part of a traced program, besides jaxchain's own.
 PACKAGES = ("jax", "jaxlib", "diffrax", "equinox", "lineax", "optimistix")
@@ -21,20 +22,9 @@ PACKAGES = ("jax", "jaxlib", "diffrax", "equinox", "lineax", "optimistix")
 
 @functools.cache
 def code_identity() -> dict:
-    """The identity of jaxchain's source files and the versions of `PACKAGES`: a
-    kept program is reused only by the code that traced it.
-
-    The source files are known by their names, sizes and modification times (in
-    nanoseconds), which a change of their content changes too: reading their
-    stat costs a few milliseconds, where hashing their content cost 0.1 s of
-    every command's start (`benchmarks/fixed_cost.py`). A file rewritten with its
-    old size and time forced back is the one change this misses."""
-    package = Path(__file__).resolve().parents[1]
-    digest = hashlib.sha256()
-    for path in sorted(package.rglob("*.py")):
-        stat = path.stat()
-        digest.update(f"{path.relative_to(package)}:{stat.st_size}:{stat.st_mtime_ns};".encode())
-    return {"jaxchain": digest.hexdigest()} | {
+    """The identity of jaxchain's source files (`source_identity`) and the versions
+    of `PACKAGES`: a kept program is reused only by the code that traced it."""
+    return {"jaxchain": source_identity()} | {
         name: importlib.metadata.version(name) for name in PACKAGES}
 
 
@@ -50,10 +40,13 @@ def keep_programs(folder: Path | str | None) -> None:
     keeps them in the folder `traced` of its persistent compilation cache
     (`jaxchain._cli.main.compilation_cache`); the library keeps none unless asked,
     as the key names a user's own friction law or observer by its class, not by its
-    code. The programs this process loaded are forgotten: the next call of
-    `kept_program` reads its program from the folder again."""
-    _folder[0] = None if folder is None else Path(folder)
-    _loaded.clear()
+    code. Another folder (or None) forgets the programs this process loaded: the
+    next call of `kept_program` reads its program from the folder again; the same
+    folder keeps them (the command line's warm process runs many commands)."""
+    folder = None if folder is None else Path(folder)
+    if folder != _folder[0]:
+        _loaded.clear()
+    _folder[0] = folder
 
 
 def program_folder() -> Path | None:
