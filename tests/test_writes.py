@@ -234,6 +234,7 @@ _WRITERS = {
     "_sweeps/result_store.py": {"open": 2},
     "_engine/programs.py": {"write_bytes": 1},
     "_sweeps/zarr_store.py": {"to_zarr": 3},
+    "_cli/warm.py": {"write_text": 1},  # the warm process's pid file, renamed into place
 }
 
 

@@ -38,6 +38,7 @@ import sys
 import tempfile
 import threading
 import time
+from pathlib import Path
 
 from .._setup import source_identity
 
@@ -270,11 +271,16 @@ def serve(base: str) -> None:
     import contextlib
 
     path = f"{base}.sock"
-    with open(f"{base}.pid", "w") as f:  # first: whoever started it can stop it
-        f.write(str(os.getpid()))
+    # First, so that whoever started it can stop it; renamed into place whole.
+    partial = Path(f"{base}.pid.{os.getpid()}.tmp")
+    partial.write_text(str(os.getpid()))
+    os.replace(partial, f"{base}.pid")
     # Stopped (SIGTERM): the loop ends at its next wait. An exception raised by
     # the handler could land in a callback whose exceptions Python ignores.
     signal.signal(signal.SIGTERM, lambda *_: _stopped.set())
+    # Ctrl-C in a command reaches the command here as SIGINT (`_run_one`), even
+    # where the process that started this one ignored it (a background job).
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         _listen(base, path)
     finally:
@@ -330,7 +336,6 @@ def _listen(base: str, path: str) -> None:
 def _run_one(conn: socket.socket, main) -> None:
     """Run one command from `conn` in this process, with its environment, working
     directory and output streams, and send its exit status."""
-    import _thread
     import contextlib
 
     frame = _receive(conn)
@@ -340,11 +345,13 @@ def _run_one(conn: socket.socket, main) -> None:
     _send(conn, b"a", b"")
     lock, done = threading.Lock(), threading.Event()
 
+    main_thread = threading.main_thread().ident
+
     def watch():  # the command went away (Ctrl-C): interrupt it here too
         with contextlib.suppress(OSError):
             conn.recv(1)
-        if not done.is_set():
-            _thread.interrupt_main()
+        if not done.is_set():  # a signal, which also wakes a thread waiting on a lock
+            signal.pthread_kill(main_thread, signal.SIGINT)
 
     threading.Thread(target=watch, daemon=True).start()
     saved_env, saved_cwd = dict(os.environ), os.getcwd()

@@ -345,7 +345,8 @@ def on_devices(task: Callable, n_tasks: int, desc: str, progress: bool | tqdm = 
 
     **Raises:**
 
-    The first exception raised by a task, after the running tasks finish.
+    The first exception raised by a task, after the running tasks finish. When the
+    caller is interrupted (Ctrl-C) while it waits, no further task is started.
     """
     todo: queue.Queue = queue.Queue()
     for i in range(n_tasks):
@@ -374,8 +375,12 @@ def on_devices(task: Callable, n_tasks: int, desc: str, progress: bool | tqdm = 
                    for d in list(devices or jax.local_devices())[:max(1, n_tasks)]]
         for t in threads:
             t.start()
-        for t in threads:
-            t.join()
+        try:
+            for t in threads:
+                t.join()
+        except BaseException as err:  # interrupted: the workers take no further task
+            errors.append(err)
+            raise
     if errors:
         raise errors[0]
     return results
