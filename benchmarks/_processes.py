@@ -175,7 +175,9 @@ def _cli_twice(args: list[str], env: dict, start: float, label: str) -> dict:
     with tempfile.TemporaryDirectory(prefix="jaxchain-bench-") as tmp:
         cache = Path(tmp) / "cache"
         cache.mkdir()
-        e = dict(_without_xla_flags(env), JAXCHAIN_CACHE_DIR=str(cache))
+        # In its own process each time: the warm process of the command line
+        # (jaxchain._cli.warm) is measured by benchmarks/fixed_cost.py.
+        e = dict(_without_xla_flags(env), JAXCHAIN_CACHE_DIR=str(cache), JAXCHAIN_SERVER="0")
         walls, errors = [], []
         for attempt in ("cold", "warm"):
             out_dir = Path(tmp) / f"out-{attempt}"

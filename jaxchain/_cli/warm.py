@@ -19,10 +19,12 @@ This module imports only the standard library and `jaxchain._setup` (no JAX), so
 that a command handed over costs about 0.1 s of its own.
 
 Protocol, over a Unix socket in a folder of the user's own (mode 0700): frames of
-one byte of kind, four bytes of length and the payload. The command sends "r" with
-its request (JSON: argv, cwd, env, whether its output streams are terminals); the
-warm process answers "a" (accepted), then "o" and "e" with bytes of standard output
-and error, and "s" with the exit status (JSON).
+one byte of kind, four bytes of length and the payload. The warm process sends "a"
+when it accepts a command (within `ACCEPT_S`, or the command runs in its own
+process and sends nothing); the command then sends "r" with its request (JSON:
+argv, cwd, env, whether its output streams are terminals); the warm process
+answers "o" and "e" with bytes of standard output and error, and "s" with the exit
+status (JSON).
 """
 
 import atexit
@@ -132,13 +134,15 @@ def forward(argv: list[str], env: dict) -> int | None:
         conn = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         conn.settimeout(ACCEPT_S)
         conn.connect(path)
+        # Accepted first, then the request: a command that gave up waiting (busy)
+        # has sent nothing, so the warm process never runs it a second time.
+        first = _receive(conn)
+        if first is None or first[0] != b"a":
+            return None
         request = {"argv": argv, "cwd": os.getcwd(), "env": env,
                    "tty": [_isatty(sys.stdout), _isatty(sys.stderr)]}
         _send(conn, b"r", json.dumps(request).encode())
-        first = _receive(conn)
     except OSError:  # no warm process, a stale socket, or busy past ACCEPT_S
-        return None
-    if first is None or first[0] != b"a":
         return None
     conn.settimeout(None)
     try:
@@ -338,11 +342,13 @@ def _run_one(conn: socket.socket, main) -> None:
     directory and output streams, and send its exit status."""
     import contextlib
 
+    _send(conn, b"a", b"")
+    conn.settimeout(5.0)  # the request follows at once, or the command went away
     frame = _receive(conn)
+    conn.settimeout(None)
     if frame is None or frame[0] != b"r":
         return
     request = json.loads(frame[1])
-    _send(conn, b"a", b"")
     lock, done = threading.Lock(), threading.Event()
 
     main_thread = threading.main_thread().ident
