@@ -196,10 +196,10 @@ def phases(record: dict, wall: float, started: float) -> dict:
     devices = one.get("devices")
     threads = {th for lab, s, e, th in spans if th != main}
     if devices:
-        inside = [max((sum(e - s for lab, s, e, t in spans if t == th and lab == "compile")
-                       for th in threads), default=0.0)]
-        out["executables"] = inside[0]
-        out["integration"] = devices[1] - devices[0] - inside[0]
+        slowest = max((sum(e - s for lab, s, e, t in spans if t == th and lab == "compile")
+                       for th in threads), default=0.0)
+        out["executables"] = slowest
+        out["integration"] = devices[1] - devices[0] - slowest
     out["traced"] = _total(spans, "traced", main)
     ens, runs = one.get("ensemble"), one.get("run_lanes")
     if ens and runs:
