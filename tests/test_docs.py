@@ -1,8 +1,11 @@
 """The front door: the README stays short and keeps its two commands, every public
 name has an entry in the API reference, the README's layout lists the package's
-folders, and the executed notebooks of the documentation hold the code of the
-notebooks in examples/."""
+folders, every file of the repository that the documentation names is there, the
+executed notebooks of the documentation hold the code of the notebooks in examples/
+and show no path of the machine that ran them, and the home page reads without
+MathJax (which comes from a CDN)."""
 
+import ast
 import re
 from pathlib import Path
 
@@ -43,6 +46,100 @@ def test_readme_layout_lists_the_package_folders():
     assert listed == folders
     modules = {p.name for p in (ROOT / "jaxchain").glob("*.py")}
     assert set(re.findall(r"\b(_?\w+\.py)\b", listing)) == modules
+
+
+#: The pages of the documentation site.
+PAGES = sorted((ROOT / "docs").rglob("*.md"))
+#: Code in Markdown: a fenced block or an inline span.
+CODE = re.compile(r"```.*?```|`[^`\n]+`", re.DOTALL)
+#: A relative path to a file (`tests/helpers.py`) or a folder (`examples/chains/`), as
+#: the repository's paths are written: lower case, and not inside a URL, an absolute
+#: path, `~/...` or a placeholder such as `DIR/sweep.zarr`.
+RELATIVE_PATH = re.compile(r"(?<![\w.:/~$-])([a-z_][\w.-]*(?:/[\w.-]+)*(?:/[\w-]+\.\w+|/))"
+                           r"(?![\w/])")
+
+
+def test_every_file_the_docs_name_is_in_the_repository():
+    """Each relative path to a file in the code of a page, and each path to a folder
+    that starts at a folder of the repository, exists in the repository (a folder in a
+    listing, such as `_physics/` under `jaxchain/`, is not one)."""
+    folders = {p.name for p in ROOT.iterdir() if p.is_dir()}
+    named, missing = 0, []
+    for page in PAGES:
+        for code in CODE.findall(page.read_text()):
+            for path in RELATIVE_PATH.findall(code):
+                if path.endswith("/") and path.split("/")[0] not in folders:
+                    continue
+                named += 1
+                if not (ROOT / path).exists():
+                    missing.append(f"{page.relative_to(ROOT)}: {path}")
+    assert named > 0
+    assert missing == []
+
+
+def test_the_file_the_docs_say_holds_the_public_names_holds_them():
+    said = {}
+    for page in PAGES:
+        text = " ".join(page.read_text().split())
+        for path in re.findall(r"public names\b[^.`]*`([\w/.]+\.pyi?)`", text):
+            said.setdefault(path, []).append(page.name)
+    assert said, "the developers' page says where the public names are"
+    for path, pages in said.items():
+        tree = ast.parse((ROOT / path).read_text())
+        bound = {alias.asname or alias.name for node in ast.walk(tree)
+                 if isinstance(node, ast.ImportFrom) for alias in node.names}
+        assert sorted(set(jc.__all__) - bound) == [], f"{pages} say {path} holds them"
+
+
+def test_the_home_page_reads_without_mathjax():
+    """MathJax comes from a CDN: a formula left to it is raw TeX to a reader offline.
+    The home page's formulas are text and HTML, so that arithmatex (the extension
+    that hands formulas to MathJax) finds none."""
+    import markdown
+
+    html = markdown.markdown((ROOT / "docs" / "index.md").read_text(),
+                             extensions=["pymdownx.arithmatex", "pymdownx.superfences"],
+                             extension_configs={"pymdownx.arithmatex": {"generic": True}})
+    assert "arithmatex" not in html
+    prose = re.sub(r"<code>.*?</code>", "", html, flags=re.DOTALL)
+    assert re.findall(r"\$|\\[A-Za-z]+", prose) == []  # no TeX left either
+
+
+#: The notebooks of examples/ and their executed copies that the site shows.
+NOTEBOOKS = sorted([*(ROOT / "examples").glob("*.ipynb"),
+                    *(ROOT / "docs" / "notebooks").glob("*.ipynb")])
+#: An absolute path (of a checkout, a Python installation, a temporary or a home
+#: folder), not a URL's path.
+ABSOLUTE_PATH = re.compile(r"(?<![\w.:/<~-])/[A-Za-z_][\w.-]*/[\w.-]")
+
+
+def _output_texts(nb):
+    """(cell index, text) of every text that the outputs of `nb` show."""
+    for i, cell in enumerate(nb.cells):
+        for output in cell.get("outputs", []):
+            texts = [output.get("text", ""), *output.get("traceback", [])]
+            texts += [v for k, v in output.get("data", {}).items()
+                      if isinstance(v, str) and not k.startswith("image/")]
+            yield from ((i, text) for text in texts if text)
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_stored_outputs_show_no_path_of_the_machine_that_ran_them(path):
+    """Neither an absolute path, nor the site-packages of an installation, nor tqdm's
+    warning that its widget bar is missing (which names the path of its file)."""
+    for i, text in _output_texts(nbformat.read(path, as_version=4)):
+        for bad in (ABSOLUTE_PATH.search(text), "site-packages" in text,
+                    "TqdmWarning" in text):
+            assert not bad, f"{path.name}, cell {i}: {text[:300]}"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_stored_outputs_show_a_progress_bar_once(path):
+    """Each redraw of a progress bar arrives as an output of its own; the stored copy
+    keeps what a terminal shows at the end (docs/execute_notebooks.py:
+    compact_streams), not every state of the bar one under the other."""
+    for i, text in _output_texts(nbformat.read(path, as_version=4)):
+        assert "\r" not in text, f"{path.name}, cell {i}: {text[:300]!r}"
 
 
 @pytest.mark.parametrize("name", sorted(p.name for p in (ROOT / "examples").glob("*.ipynb")))

@@ -1,6 +1,7 @@
 """Every notebook in examples/ runs, at reduced size, so that none breaks silently,
 and shows its figures. Its first code cell holds the size parameters; the test
-replaces it."""
+replaces it. In a notebook, jaxchain's progress bars are text, with no widget
+library and no warning about one."""
 
 import re
 from pathlib import Path
@@ -79,3 +80,35 @@ def test_notebook_runs_small_and_shows_its_figures(name, tmp_path, monkeypatch):
     for cell in plotting:
         assert any("image/png" in o.get("data", {}) for o in cell.outputs), \
             f"no figure shown by the cell:\n{cell.source}"
+
+
+#: A notebook cell that imports every module of jaxchain and shows a bar, recording
+#: the warnings: tqdm.auto's notebook bar warns (TqdmWarning, with the path of its
+#: file) in a kernel without ipywidgets, once, when a module imports it.
+BAR_CELL = """\
+import importlib, pkgutil, warnings
+from tqdm import TqdmWarning
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    import jaxchain
+    for module in pkgutil.walk_packages(jaxchain.__path__, "jaxchain."):
+        importlib.import_module(module.name)
+    from jaxchain._engine.progress import progress_bar
+    with progress_bar(3, "a bar in a notebook", True) as bar:
+        bar.update(3)
+        bar.refresh()
+print("TqdmWarnings:", [str(w.message) for w in caught if issubclass(w.category, TqdmWarning)])
+"""
+
+
+def test_progress_bars_in_a_notebook_are_text_without_a_warning(tmp_path):
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(BAR_CELL)])
+    NotebookClient(nb, timeout=300, kernel_name="python3",
+                   resources={"metadata": {"path": str(tmp_path)}}).execute()
+    outputs = nb.cells[0].outputs
+    printed = "".join(o.text for o in outputs if o.output_type == "stream" and o.name == "stdout")
+    assert "TqdmWarnings: []" in printed, printed
+    assert [o.output_type for o in outputs if o.output_type != "stream"] == [], "a widget"
+    bar = "".join(o.text for o in outputs if o.output_type == "stream" and o.name == "stderr")
+    assert "a bar in a notebook: 100%|" in bar and "| 3/3 [" in bar  # tqdm's text bar
+    assert "TqdmWarning" not in bar

@@ -47,7 +47,10 @@ STUDIES = {
 CLUSTER = ("jaxchain._engine.cluster", "connect")
 
 #: The smallest command line of each command (beside --out): its defaults.
-ARGV = {command: [command] for command in COMMANDS} | {"figure": ["figure", "4"],
+#: The commands that compute (`server` shows and stops warm processes: test_warm.py).
+COMPUTING = [command for command in COMMANDS if command != "server"]
+
+ARGV = {command: [command] for command in COMPUTING} | {"figure": ["figure", "4"],
                                                       "identify": ["identify", RECORD]}
 
 
@@ -83,7 +86,7 @@ def _run(argv: list[str]) -> tuple[int | str, list[str]]:
 
 
 def test_every_command_is_covered():
-    assert set(STUDIES) == set(COMMANDS) == set(ARGV)
+    assert set(STUDIES) == set(COMPUTING) == set(ARGV)
 
 
 @pytest.mark.parametrize("argv", [*ARGV.values(), ["mistuning", "--design"],
@@ -98,7 +101,7 @@ def test_a_default_command_line_reaches_its_study(argv, tmp_path, monkeypatch):
     assert status == "reached", err
 
 
-@pytest.mark.parametrize("command", COMMANDS)
+@pytest.mark.parametrize("command", COMPUTING)
 @pytest.mark.parametrize("error", [ValueError("boom from numpy: operands could not be "
                                               "broadcast together\nwith shapes (3,) (4,)"),
                                    RuntimeError("boom in a solve"),
@@ -133,7 +136,7 @@ REFUSED = [
 
 
 def test_every_command_has_a_refused_line():
-    assert {argv[0] for argv, _ in REFUSED} == set(COMMANDS) - {"stress"}  # no library check
+    assert {argv[0] for argv, _ in REFUSED} == set(COMPUTING) - {"stress"}  # no library check
 
 
 @pytest.mark.parametrize("argv, says", REFUSED)
@@ -226,7 +229,7 @@ def _command_argv(command: str):
         lambda t: [command, *t[0], *(s for item in t[1] for s in item)])
 
 
-@pytest.mark.parametrize("command", COMMANDS)
+@pytest.mark.parametrize("command", COMPUTING)
 @settings(max_examples=30, deadline=None)
 @given(data=st.data())
 def test_fuzzed_command_lines_exit_2_in_one_line_or_reach_the_study(command, data):

@@ -1,8 +1,10 @@
-"""The warm process of the command line (`jaxchain._cli.warm`): the first command
-runs in its own process and starts it; a later command is handed to it, without
-importing JAX, and gets the same results, output and exit statuses as in its own
-process. The other tests run every command in its own process (JAXCHAIN_SERVER=0,
-`conftest.py`)."""
+"""The warm process of the command line (`jaxchain._cli.warm`, `warm_process`): the
+first command runs in its own process and starts it; later commands are handed to
+it, without importing JAX, and behave as in a process of their own (results,
+output, exit status, standard input, working directory, environment). It is
+visible and stoppable (`jaxchain server`), bounded in memory, never stale, and
+stops its work on Ctrl-C. The other tests run every command in its own process
+(JAXCHAIN_SERVER=0, `conftest.py`)."""
 
 import json
 import os
@@ -21,36 +23,65 @@ from test_cli import SCRIPT, SMALL
 pytestmark = pytest.mark.skipif(SCRIPT is None or not hasattr(os, "getuid"),
                                 reason="the console script on a POSIX system")
 
+RUN = ["localized", *SMALL, "--json", "--overwrite"]
 
-@pytest.fixture
-def warm_env():
-    """The environment of commands with a warm process, whose socket lives in a
-    temporary folder of its own (short: a socket's path is limited to about 100
-    characters). The warm process is stopped at the end."""
+#: A chain file of three oscillators on a line.
+CHAIN = 'n_osc = 3\nboundary = "free"\n'
+
+
+def _new_env(**extra) -> dict:
+    """The environment of commands with a warm process of their own, whose socket
+    lives in a temporary folder (short: a socket's path is limited to about 100
+    characters)."""
     tmp = tempfile.mkdtemp(prefix="jc")
-    env = dict(os.environ, JAXCHAIN_SERVER="1", TMPDIR=tmp, JAXCHAIN_SERVER_IDLE="120")
-    yield env
-    for pid in Path(tmp).glob("jaxchain-*/*.pid"):
-        try:
-            os.kill(int(pid.read_text()), signal.SIGTERM)
-        except (ProcessLookupError, ValueError):
-            pass
-    # it removes its files as it stops: within a few seconds
-    end = time.monotonic() + 30
-    while list(Path(tmp).glob("jaxchain-*/*.pid")) and time.monotonic() < end:
-        time.sleep(0.2)
-    shutil.rmtree(tmp, ignore_errors=True)
+    return dict(os.environ, JAXCHAIN_SERVER="1", TMPDIR=tmp, JAXCHAIN_SERVER_IDLE="120",
+                **extra)
 
 
-def _wait_for_socket(env, timeout=120.0) -> Path:
-    folder = Path(env["TMPDIR"]) / f"jaxchain-{os.getuid()}"
+def _stop_all(env) -> None:
+    """Stop the warm processes of `env` (`jaxchain server stop`) and remove its folder."""
+    subprocess.run([SCRIPT, "server", "stop"], env=env, capture_output=True, timeout=60)
+    shutil.rmtree(env["TMPDIR"], ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def warm_env():
+    """A warm process started by a first command (in its own process), shared by
+    the tests of this module, stopped at the end."""
+    env = _new_env()
+    folder = Path(tempfile.mkdtemp(prefix="jcw"))
+    first = subprocess.run([SCRIPT, *RUN, "--out", "first"], env=env, cwd=folder,
+                           capture_output=True, text=True, timeout=600)
+    assert first.returncode == 0, first.stderr
+    assert "warm process" in first.stderr  # it says that it started one
+    _server(env)
+    yield env, folder, json.loads(first.stdout)
+    _stop_all(env)
+    shutil.rmtree(folder, ignore_errors=True)
+
+
+def _states(env) -> list[dict]:
+    run = subprocess.run([SCRIPT, "server", "status", "--json"], env=env, capture_output=True,
+                         text=True, timeout=60)
+    assert run.returncode == 0, run.stderr
+    return json.loads(run.stdout)
+
+
+def _server(env, timeout=120.0, not_pid=None) -> dict:
+    """The state of the one warm process of `env` once it listens (and is not
+    `not_pid`)."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
-        sockets = list(folder.glob("*.sock"))
-        if sockets:
-            return sockets[0]
+        found = [s for s in _states(env) if s["state"] == "idle" and s["pid"] != not_pid]
+        if found:
+            return found[0]
         time.sleep(0.2)
-    raise AssertionError(f"no warm process listened in {folder} within {timeout} s")
+    raise AssertionError(f"no warm process listened within {timeout} s")
+
+
+def _command(args, env, cwd, **kwargs) -> subprocess.CompletedProcess:
+    return subprocess.run([SCRIPT, *args], env=env, cwd=cwd, capture_output=True, text=True,
+                          timeout=600, **kwargs)
 
 
 def _forward(argv, env, cwd) -> tuple[int, bool, str, str]:
@@ -67,39 +98,167 @@ def _forward(argv, env, cwd) -> tuple[int, bool, str, str]:
     return status, jax_imported, "\n".join(out), run.stderr
 
 
-def test_a_later_command_runs_in_the_warm_process_with_the_same_results(warm_env, tmp_path):
-    args = ["localized", *SMALL, "--json", "--overwrite"]
-    first = subprocess.run([SCRIPT, *args, "--out", "first"], env=warm_env, cwd=tmp_path,
-                           capture_output=True, text=True, timeout=600)
-    assert first.returncode == 0, first.stderr
-    assert "warm process" in first.stderr  # it says that it started one
-    _wait_for_socket(warm_env)
-
+def test_commands_back_to_back_are_served_warm_with_the_same_results(warm_env):
+    env, folder, first = warm_env
+    before = _server(env)
     # handed over: the command's process never imports JAX, and gets the same
     # numbers (the same compiled programs), with its files in its own folder
-    status, jax_imported, out, err = _forward([*args, "--out", "second"], warm_env, tmp_path)
+    status, jax_imported, out, err = _forward([*RUN, "--out", "second"], env, folder)
     assert status == 0 and not jax_imported, err
-    runs = [json.loads(text)["runs"] for text in (first.stdout, out)]
-    assert runs[0] == runs[1]
-    assert all((tmp_path / "second" / f"localized_vd1.5.{ext}").exists() for ext in ("nc", "png"))
-
-    # a usage error: status 2 and one line, as in the command's own process
-    status, jax_imported, out, err = _forward(["localized", "--eps", "x"], warm_env, tmp_path)
-    assert (status, jax_imported, out) == (2, False, "")
-    assert err.strip().splitlines() == ["jaxchain localized: error: argument --eps: expected "
-                                        "a number, got 'x'"]
-
-    # the console script itself, handed over: the same, and no second warm process
-    again = subprocess.run([SCRIPT, *args, "--out", "third"], env=warm_env, cwd=tmp_path,
-                           capture_output=True, text=True, timeout=600)
-    assert again.returncode == 0 and "warm process" not in again.stderr, again.stderr
-    assert json.loads(again.stdout)["runs"] == runs[0]
-    assert len(list((Path(warm_env["TMPDIR"]) / f"jaxchain-{os.getuid()}").glob("*.sock"))) == 1
+    assert json.loads(out)["runs"] == first["runs"]
+    assert all((folder / "second" / f"localized_vd1.5.{ext}").exists() for ext in ("nc", "png"))
+    # three commands back to back, as a user's loop runs them: each served by the
+    # same warm process (its own count), none starting another
+    for i in range(3):
+        again = _command([*RUN, "--out", f"loop{i}"], env, folder)
+        assert again.returncode == 0 and "warm process" not in again.stderr, again.stderr
+        assert json.loads(again.stdout)["runs"] == first["runs"]
+    after = _server(env)
+    assert after["pid"] == before["pid"] and after["served"] == before["served"] + 4
+    log = Path(env["TMPDIR"], f"jaxchain-{os.getuid()}", f"{after['key']}.log").read_text()
+    assert sum(f'"loop{i}"' in line for line in log.splitlines() for i in range(3)) == 3
 
 
-def test_no_warm_process_when_turned_off(tmp_path):
-    """JAXCHAIN_SERVER=0: `forward` declines at once, and nothing is started."""
-    env = dict(os.environ, JAXCHAIN_SERVER="0", TMPDIR=str(tmp_path))
-    status, jax_imported, out, err = _forward(["localized", "--eps", "x"], env, tmp_path)
+def test_exit_status_stdin_cwd_and_environment_as_in_a_process_of_its_own(warm_env, tmp_path):
+    env, _, _ = warm_env
+    pid = _server(env)["pid"]
+    # exit statuses: 2 and one line for a usage error, 1 for a failed run
+    usage = _command(["localized", "--eps", "x"], env, tmp_path)
+    assert (usage.returncode, usage.stdout) == (2, "")
+    assert usage.stderr.strip().splitlines() == ["jaxchain localized: error: argument --eps: "
+                                                 "expected a number, got 'x'"]
+    failed = _command([*RUN, "--max-steps", "1", "--out", "failed"], env, tmp_path)
+    assert failed.returncode == 1 and "trajectories failed" in failed.stderr
+    # standard input: a chain file read from it gives the results of the same file
+    # named, and --out lands in the command's working directory
+    (tmp_path / "chain.toml").write_text(CHAIN)
+    named = _command([*RUN, "--chain", "chain.toml", "--out", "named"], env, tmp_path)
+    piped = _command([*RUN, "--chain", "/dev/stdin", "--out", "piped"], env, tmp_path,
+                     input=CHAIN)
+    assert named.returncode == piped.returncode == 0, piped.stderr
+    runs = json.loads(piped.stdout)["runs"]
+    assert runs == json.loads(named.stdout)["runs"] and len(runs[0]["n_halc"]) == 3
+    assert (tmp_path / "piped" / "localized_vd1.5.nc").exists()
+    # the command's environment, not the warm process's: argparse wraps --help at
+    # the command's COLUMNS, as in a process of its own, and the next command's
+    # COLUMNS is its own again
+    narrow = _command(["localized", "--help"], dict(env, COLUMNS="50"), tmp_path)
+    wide = _command(["localized", "--help"], dict(env, COLUMNS="200"), tmp_path)
+    own = _command(["localized", "--help"], dict(env, COLUMNS="50", JAXCHAIN_SERVER="0"),
+                   tmp_path)
+    assert narrow.stdout == own.stdout != wide.stdout
+    assert _server(env)["pid"] == pid  # all of it served by the one warm process
+
+
+def test_ctrl_c_stops_the_work_in_the_warm_process(warm_env, tmp_path):
+    """SIGINT to the command (as Ctrl-C at a terminal) ends it with status 130, and
+    the warm process stops the trajectory it was integrating (a run of minutes)."""
+    env, _, _ = warm_env
+    pid = _server(env)["pid"]
+    long_run = ["localized", "--n-osc", "20", "--t-end", "1e7", "--transient", "10",
+                "--json", "--out", "long"]
+    proc = subprocess.Popen([SCRIPT, *long_run], env=env, cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    end = time.monotonic() + 60
+    while not any(s["state"] == "busy" for s in _states(env)) and time.monotonic() < end:
+        time.sleep(0.1)
+    time.sleep(1.0)  # into the integration
+    assert proc.poll() is None
+    proc.send_signal(signal.SIGINT)
+    interrupted = time.monotonic()
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130 and err.strip().endswith("interrupted"), err
+    # no longer busy: idle again, or replaced by a fresh process
+    while any(s["state"] == "busy" for s in _states(env)) and time.monotonic() - interrupted < 30:
+        time.sleep(0.1)
+    stopped = time.monotonic() - interrupted
+    assert stopped < 10, f"the warm process still worked {stopped:.1f} s after Ctrl-C"
+    state = _server(env)
+    assert state["pid"] != pid or state["state"] == "idle"
+
+
+def test_an_edited_source_file_is_used_by_the_next_command(tmp_path):
+    """A copy of jaxchain (PYTHONPATH) whose warm process runs; a source file of the
+    copy is changed: the next command runs the changed code, and the warm process
+    of the old code stops by itself."""
+    copy = tmp_path / "copy"
+    shutil.copytree(Path(__import__("jaxchain").__file__).parent, copy / "jaxchain",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    env = _new_env(PYTHONPATH=str(copy))
+    try:
+        start = subprocess.run([sys.executable, "-c", "import os; from jaxchain._cli.warm "
+                                "import start; start(dict(os.environ))"],
+                               env=env, capture_output=True, text=True, timeout=60)
+        assert start.returncode == 0, start.stderr
+        old = _server(env)["pid"]
+        before = _command(["localized", "--help"], env, tmp_path)
+        assert before.returncode == 0 and "EDITED" not in before.stdout
+        assert _server(env)["served"] == 1  # served by the warm process of the copy
+
+        module = copy / "jaxchain" / "_cli" / "localized.py"
+        module.write_text(module.read_text().replace("Reproduce the staircase",
+                                                     "EDITED Reproduce the staircase"))
+        after = _command(["localized", "--help"], env, tmp_path)
+        assert after.returncode == 0 and "EDITED Reproduce" in after.stdout
+        end = time.monotonic() + 30
+        while any(s["pid"] == old for s in _states(env)) and time.monotonic() < end:
+            time.sleep(0.2)
+        assert all(s["pid"] != old for s in _states(env))  # the stale one stopped itself
+    finally:
+        _stop_all(env)
+
+
+def test_over_its_memory_bound_it_replaces_itself_and_stop_ends_it(tmp_path):
+    env = _new_env(JAXCHAIN_SERVER_MAX_MB="1")  # every process is over 1 MiB
+    try:
+        subprocess.run([sys.executable, "-c", "import os; from jaxchain._cli.warm import "
+                        "start; start(dict(os.environ))"], env=env, check=True, timeout=60)
+        old = _server(env)
+        assert old["max_mb"] == 1 and old["served"] == 0
+        assert _command(["localized", "--help"], env, tmp_path).returncode == 0
+        new = _server(env, not_pid=old["pid"])  # a fresh process in its place
+        assert new["served"] == 0 and len(_states(env)) == 1
+        assert _command(["localized", "--help"], env, tmp_path).returncode == 0
+        assert _server(env, not_pid=new["pid"])["served"] == 0  # replaced again
+
+        stop = _command(["server", "stop", "--json"], env, tmp_path)
+        assert stop.returncode == 0 and len(json.loads(stop.stdout)["stopped"]) == 1
+        assert _states(env) == []
+        bad = _command(["server", "stop", "--pid", "999999999"], env, tmp_path)
+        assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1
+        shown = _command(["server", "status"], env, tmp_path)
+        assert shown.returncode == 0 and "no warm process" in shown.stdout
+    finally:
+        _stop_all(env)
+
+
+def test_no_warm_process_under_ci_or_a_batch_scheduler_unless_asked(tmp_path):
+    from jaxchain._cli.warm import enabled
+
+    assert enabled({}) and not enabled({"JAXCHAIN_SERVER": "0"})
+    for name in ("CI", "SLURM_JOB_ID", "PBS_JOBID", "LSB_JOBID"):
+        assert not enabled({name: "1"}) and enabled({name: "1", "JAXCHAIN_SERVER": "1"})
+    env = {k: v for k, v in os.environ.items() if k != "JAXCHAIN_SERVER"}
+    env.update(CI="true", TMPDIR=str(tmp_path))
+    status, jax_imported, _, _ = _forward(["localized", "--eps", "x"], env, tmp_path)
     assert (status, jax_imported) == (None, False)
     assert not (tmp_path / f"jaxchain-{os.getuid()}").exists()
+
+
+def test_the_key_follows_the_installed_packages(tmp_path):
+    """An upgrade of a dependency in the venv (its dist-info renamed) or its
+    reinstall (made anew) gives another key: the next command does not run in a
+    warm process that imported the old one."""
+    from jaxchain._cli.warm import key
+
+    site = tmp_path / "site-packages"
+    (site / "jax-0.10.2.dist-info").mkdir(parents=True)
+    first = key({}, [str(site)])
+    assert key({}, [str(site)]) == first
+    (site / "jax-0.10.2.dist-info").rename(site / "jax-0.10.3.dist-info")
+    upgraded = key({}, [str(site)])
+    shutil.rmtree(site / "jax-0.10.3.dist-info")
+    time.sleep(0.01)
+    (site / "jax-0.10.3.dist-info").mkdir()
+    os.utime(site / "jax-0.10.3.dist-info", ns=(1, 1))
+    assert len({first, upgraded, key({}, [str(site)])}) == 3

@@ -234,7 +234,7 @@ _WRITERS = {
     "_sweeps/result_store.py": {"open": 2},
     "_engine/programs.py": {"write_bytes": 1},
     "_sweeps/zarr_store.py": {"to_zarr": 3},
-    "_cli/warm.py": {"write_text": 1},  # the warm process's pid file, renamed into place
+    "_cli/warm_process.py": {"open": 1},  # the warm process's log, appended
 }
 
 
@@ -264,3 +264,50 @@ def test_every_file_written_goes_through_the_writers():
         if calls:
             found[str(path.relative_to(root))] = calls
     assert found == _WRITERS
+
+
+def test_a_command_run_twice_replaces_its_own_results_and_nothing_else(tmp_path, capsys):
+    """The same command with the same settings into the same folder: exit 0 both
+    times, one set of results (a note says they were written again). Other
+    settings, or a file the command did not make, are refused in one line and
+    change nothing; --overwrite still replaces."""
+    out = tmp_path / "out"
+    args = ["localized", "--n-osc", "3", "--t-end", "400", "--transient", "200", "--json",
+            "--no-progress", "--out", str(out)]
+    assert jc.main(args) == 0
+    first = _snapshot(out)
+    capsys.readouterr()
+    assert jc.main(args) == 0
+    assert "same settings" in capsys.readouterr().err
+    again = _snapshot(out)
+    assert sorted(again) == sorted(first)
+    assert again["localized_vd1.5.nc"] != first["localized_vd1.5.nc"]  # written anew
+
+    for other in (["--eps", "0.002"], ["--t-end", "500"]):
+        assert jc.main([*args, *other]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "other settings" in err and "--overwrite" in err
+        assert _snapshot(out) == again
+    assert jc.main([*args, "--eps", "0.002", "--overwrite"]) == 0
+    assert jc.main(args) == 2  # now these are the other settings
+
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "localized_vd1.5.nc").write_bytes(b"a user's own file")
+    assert jc.main([*args[:-1], str(mine)]) == 2
+    assert (mine / "localized_vd1.5.nc").read_bytes() == b"a user's own file"
+
+
+def test_a_sweep_run_twice_keeps_its_store(tmp_path, capsys):
+    """A sweep run again with the same settings reuses its finished store (no batch
+    run again); with other settings it is refused and the store is unchanged."""
+    out = tmp_path / "out"
+    args = [*sweep_cli("1.5"), "--json", "--out", str(out)]
+    assert jc.main(args) == 0
+    capsys.readouterr()
+    assert jc.main(args) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["batches_run"] == 0
+    before = _snapshot(out / "sweep.zarr")
+    assert jc.main([*sweep_cli("1.5,1.6"), "--json", "--out", str(out)]) == 2
+    assert _snapshot(out / "sweep.zarr") == before

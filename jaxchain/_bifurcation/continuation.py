@@ -10,8 +10,8 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
-from tqdm.auto import tqdm
 
+from .._engine.progress import tqdm
 from .._physics.params import ChainParams, parameter_value, with_parameter
 from .._errors import ValidationError
 from .._engine.status import Status

@@ -20,6 +20,7 @@ from .._engine.solver.controller import CONTROLLERS
 from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams
 from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
+from .parser import Parser, UsageError  # noqa: F401  (for the commands)
 
 
 #: Field names in error messages, as the options a user typed.
@@ -45,21 +46,9 @@ def param_default(name: str) -> float:
     return float(getattr(ChainParams(), name))
 
 
-class UsageError(Exception):
-    """A bad option or value, found by a command's own checks: reported in one line,
-    exit status 2, as the library's `ValidationError`."""
-
-
 class RunsFailed(Exception):
     """Some runs failed; the others' results are written and the failed ones marked.
     Raised by a command after its output: reported in one line, exit status 1."""
-
-
-class Parser(argparse.ArgumentParser):
-    """An ArgumentParser whose errors are one line on stderr and exit status 2."""
-
-    def error(self, message):
-        self.exit(2, f"{self.prog}: error: {message}\n")
 
 
 def positive_float(text: str) -> float:
@@ -269,27 +258,54 @@ class Outputs:
     """The files a command writes under --out: claimed before it computes, written
     whole or not at all, and listed by name in its JSON (`as_json`).
 
-    A claimed file that exists already is refused (`UsageError`, exit status 2)
-    unless --overwrite, or --resume where the command resumes: no result is lost
-    silently.
+    Each file written is recorded in the folder's `MANIFEST` with the command and
+    the digest of its settings (`settings_digest`). A claimed file that exists is
+    replaced when the manifest says that this command made it with the same
+    settings (a command run twice; `again` is then True, and a note says so);
+    otherwise it is refused (`UsageError`, exit status 2) unless --overwrite, or
+    --resume where the command resumes: no result is lost silently.
     """
 
     def __init__(self, args, data: Sequence[str] = (), figures: Sequence[str] = ()):
         self.folder = Path(args.out)
         self.formats = getattr(args, "format", ["png"])
         self.written: dict[str, Path] = {}
+        self.made_by = {"command": getattr(args, "command", None),
+                        "settings": settings_digest(args)}
         claimed = list(data) + [f"{stem}.{fmt}" for stem in figures for fmt in self.formats]
         writable_folder(self.folder)
-        if not (getattr(args, "overwrite", False) or getattr(args, "resume", False)):
-            existing = [name for name in claimed if (self.folder / name).exists()]
-            if existing:
-                again = " (or --resume to continue it)" if hasattr(args, "resume") else ""
-                raise UsageError(f"--out {self.folder}: {existing[0]} exists; give "
-                                 f"--overwrite to replace it{again}")
+        existing = [name for name in claimed if (self.folder / name).exists()]
+        made = self._manifest()
+        self.again = bool(existing) and all(made.get(n) == self.made_by for n in existing)
+        if getattr(args, "overwrite", False) or getattr(args, "resume", False):
+            return
+        if self.again:
+            note(f"jaxchain {self.made_by['command']}: --out {self.folder} holds this "
+                 f"command's results with the same settings: they are written again (a store's "
+                 f"finished batches kept)")
+        elif existing:
+            other = [n for n in existing if n not in made]
+            why = ("" if other else
+                   " (made by another command or with other settings)")
+            name = (other or existing)[0]
+            again = " (or --resume to continue it)" if hasattr(args, "resume") else ""
+            raise UsageError(f"--out {self.folder}: {name} exists{why}; give "
+                             f"--overwrite to replace it{again}")
+
+    def _manifest(self) -> dict:
+        try:
+            return json.loads((self.folder / MANIFEST).read_text())
+        except (OSError, ValueError):
+            return {}
 
     def path(self, name: str) -> Path:
-        """Where `name` goes, recorded as written (a store the library writes)."""
+        """Where `name` goes, recorded as written (a store the library writes), and
+        in the folder's manifest as this command's with these settings."""
+        from .._sweeps.atomic import write_text
+
         self.written[name] = self.folder / name
+        made = self._manifest() | {name: self.made_by}
+        write_text(self.folder / MANIFEST, json.dumps(made, indent=1, sort_keys=True))
         return self.written[name]
 
     def dataset(self, ds, name: str) -> Path:
@@ -319,6 +335,32 @@ class Outputs:
     def summary(self) -> str:
         """The written files, for the note on standard error."""
         return "wrote " + ", ".join(str(p) for p in self.written.values())
+
+
+#: The file in an output folder that names, for each result in it, the command and
+#: the digest of the settings that made it (`Outputs`).
+MANIFEST = ".jaxchain-results.json"
+
+#: Options that change how a command shows its results, not what they are.
+_PRESENTATION = ("run", "command", "out", "overwrite", "resume", "json", "no_progress",
+                 "format")
+
+
+def settings_digest(args) -> str:
+    """The digest of a command's settings: every option but those of `_PRESENTATION`,
+    and the content of each file an option names (a chain file edited is other
+    settings)."""
+    import hashlib
+
+    chosen = {}
+    for name, value in sorted(vars(args).items()):
+        if name in _PRESENTATION:
+            continue
+        if isinstance(value, Path) and value.is_file():
+            value = [str(value), hashlib.sha256(value.read_bytes()).hexdigest()]
+        chosen[name] = value
+    text = json.dumps(chosen, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 
 def print_json(payload: dict, outputs: Outputs) -> None:

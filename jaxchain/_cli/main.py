@@ -17,7 +17,7 @@ from .common import (Parser, RunsFailed, UsageError, finish_prefetch, one_line,
 
 #: The subcommands, each a module of this package with `add_parser(sub)`.
 COMMANDS = ("localized", "sweep", "figure", "crosscheck", "work-precision", "boundaries",
-            "stress", "basin", "snake", "mistuning", "identify")
+            "stress", "basin", "snake", "mistuning", "identify", "server")
 
 
 def build_parser(commands=COMMANDS) -> Parser:
@@ -36,8 +36,8 @@ def build_parser(commands=COMMANDS) -> Parser:
                "empty value turns it off) or else in the user's cache folder "
                "(platformdirs.user_cache_dir('jaxchain')/xla). "
                "After a first command, a warm process keeps JAX loaded and runs the "
-               "next commands of the same environment (600 idle seconds, "
-               "JAXCHAIN_SERVER_IDLE; JAXCHAIN_SERVER=0 turns it off). "
+               "next commands of the same environment ('jaxchain server status' shows "
+               "it, 'jaxchain server stop' ends it, JAXCHAIN_SERVER=0 turns it off). "
                "JAXCHAIN_TRACEBACK=1 shows a failure's traceback.")
     parser.add_argument("--version", action="version", version=f"jaxchain {VERSION}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
@@ -150,14 +150,8 @@ def run_here(argv=None) -> int:
     garbage collector leaves alone what the imports made (`gc.freeze`) and runs
     less often. JAX's tracing makes many objects, and full collections walking
     the imported modules took 0.4 s of a small warm run (`benchmarks/fixed_cost.py`);
-    cycles are still collected. The console script (`jaxchain._cli.warm.command`)
+    cycles are still collected. The console script (`jaxchain._cli.console.command`)
     calls it when no warm process takes the command."""
     gc.freeze()
     gc.set_threshold(50_000, 50, 100)
     return main(argv)
-
-
-if __name__ == "__main__":
-    from .warm import command
-
-    command()

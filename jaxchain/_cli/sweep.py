@@ -93,7 +93,7 @@ def run(args) -> None:
     start = time.perf_counter()
     with cluster_client(args) as client:
         ds = sweep(params, args.vd, ics, args.solver, options,
-                   batch_size=args.batch_size, store=store, resume=args.resume,
+                   batch_size=args.batch_size, store=store, resume=args.resume or outputs.again,
                    overwrite=args.overwrite, client=client,
                    progress=show_progress(args)).load()
     wall = time.perf_counter() - start

@@ -1,51 +1,57 @@
-"""The warm process of the command line: the `jaxchain` console script hands its
-command to a process that has JAX and jaxchain imported and the programs of the
-earlier commands loaded, so that a small command costs its own work, not the
-start of Python, JAX and the libraries that write its results.
+"""The warm process of the command line, as its commands see it: which warm process
+may run a command (`key`), handing a command to it (`forward`), starting one
+(`start`) and reading what each one says of itself (`states`). The warm process's
+own side is `jaxchain._cli.warm_process`; `jaxchain server` shows and stops them.
 
 - The first command runs in its own process, as always, and then starts the warm
   process in the background (one line on standard error says so). It stops after
-  `IDLE_S` seconds without a command (JAXCHAIN_SERVER_IDLE, in seconds).
-- A later command with the same Python, the same jaxchain source files
-  (`source_identity`) and the same environment variables that set JAX, XLA,
-  jaxchain, matplotlib, threads and paths (`key`) is run there, in its own
-  working directory and with its whole environment; its standard output, standard
-  error and exit status come back to the command as if it had run itself.
-- One command at a time: a command that finds the warm process busy runs in its
-  own process. Ctrl-C in the command interrupts it in the warm process too.
-- JAXCHAIN_SERVER=0 turns it off (the tests do). It lives on POSIX systems only.
+  `IDLE_S` seconds without a command (JAXCHAIN_SERVER_IDLE, in seconds), when its
+  code or its installed packages change, and on `jaxchain server stop`.
+- A later command with the same Python, the same installed packages
+  (`installed_state`), the same jaxchain source files (`source_identity`) and the
+  same environment variables that set JAX, XLA, jaxchain, matplotlib, threads and
+  paths (`key`) runs there, with its own standard input, output and error (their
+  file descriptors are passed over the socket), working directory, environment
+  and umask; its exit status comes back to the command.
+- One command at a time: a command that finds the warm process running another
+  one runs in its own process; one that finds it finishing the previous command,
+  or starting, waits for it.
+- JAXCHAIN_SERVER=0 turns it off and JAXCHAIN_SERVER=1 on. Unset, it is on except
+  under CI (CI set) or a batch scheduler (SLURM_JOB_ID, PBS_JOBID, LSB_JOBID set),
+  where a process left behind does harm. It lives on POSIX systems only.
 
 This module imports only the standard library and `jaxchain._setup` (no JAX), so
 that a command handed over costs about 0.1 s of its own.
 
 Protocol, over a Unix socket in a folder of the user's own (mode 0700): frames of
-one byte of kind, four bytes of length and the payload. The warm process sends "a"
-when it accepts a command (within `ACCEPT_S`, or the command runs in its own
-process and sends nothing); the command then sends "r" with its request (JSON:
-argv, cwd, env, whether its output streams are terminals); the warm process
-answers "o" and "e" with bytes of standard output and error, and "s" with the exit
-status (JSON).
+one byte of kind, four bytes of length and the payload. The warm process answers
+a connection at once (a thread of its own listens): "a" when it will run the
+command, "b" when it runs another one, "w" when it is replacing itself. After
+"a" the command sends "r" with its request (JSON: argv, cwd, env, umask) and its
+standard input, output and error; the warm process answers "s" with the exit
+status (JSON) once the command's output is written and closed.
 """
 
-import atexit
+import array
+import contextlib
 import hashlib
-import io
 import json
 import os
-import signal
 import socket
 import struct
 import subprocess
 import sys
 import tempfile
-import threading
 import time
-from pathlib import Path
 
 from .._setup import source_identity
 
 #: Seconds a warm process waits for a command before it stops (JAXCHAIN_SERVER_IDLE).
 IDLE_S = 600.0
+
+#: The memory a warm process may hold between commands, in MiB
+#: (JAXCHAIN_SERVER_MAX_MB): above it after a command, it replaces itself.
+MAX_MB = 1024
 
 #: The environment variables that are part of the key: a command whose values of
 #: these differ from the warm process's starts (or finds) a warm process of its own.
@@ -53,32 +59,73 @@ KEY_PREFIXES = ("JAX", "XLA", "TF_", "CUDA", "NVIDIA", "MPL", "PYTHON", "OMP_", 
                 "OPENBLAS_", "XDG_", "DASK_", "TQDM_", "LD_")
 KEY_NAMES = ("HOME", "TMPDIR")
 
-#: Switches of the warm process itself, not part of the key.
-SWITCHES = ("JAXCHAIN_SERVER", "JAXCHAIN_SERVER_IDLE")
+#: Switches of the warm process itself (JAXCHAIN_SERVER, JAXCHAIN_SERVER_IDLE,
+#: JAXCHAIN_SERVER_MAX_MB), not part of the key.
+SWITCH_PREFIX = "JAXCHAIN_SERVER"
 
-#: Seconds a command waits to be accepted before it runs in its own process (the
-#: warm process is busy with another command).
-ACCEPT_S = 0.5
+#: Where a lingering process does harm: continuous integration and batch schedulers.
+#: The warm process does not start there unless JAXCHAIN_SERVER=1.
+NO_SERVER_WHERE = ("CI", "SLURM_JOB_ID", "PBS_JOBID", "LSB_JOBID")
+
+#: Seconds a command waits for the warm process's answer. It answers at once from
+#: a thread of its own; only a stopped or hung process makes a command wait this
+#: long, and then run in its own process.
+ANSWER_S = 5.0
+
+#: Seconds a command waits for a warm process that is starting (or replacing
+#: itself) before it runs in its own process.
+START_S = 30.0
 
 _HEADER = struct.Struct(">cI")
 
 
 def enabled(env=os.environ) -> bool:
-    """Whether commands use a warm process: unless JAXCHAIN_SERVER=0, on systems
-    with Unix sockets and user ids."""
-    return (env.get("JAXCHAIN_SERVER", "1") != "0" and hasattr(socket, "AF_UNIX")
-            and hasattr(os, "getuid"))
+    """Whether commands use a warm process: JAXCHAIN_SERVER=1 turns it on, =0 off;
+    unset, on unless one of `NO_SERVER_WHERE` is set. Only on systems with Unix
+    sockets and user ids."""
+    if not (hasattr(socket, "AF_UNIX") and hasattr(os, "getuid")):
+        return False
+    switch = env.get("JAXCHAIN_SERVER", "")
+    if switch in ("0", "1"):
+        return switch == "1"
+    return not any(env.get(name) for name in NO_SERVER_WHERE)
 
 
-def key(env=os.environ) -> str:
+def installed_state(paths=None) -> list:
+    """The installed distributions on `paths` (by default the site-packages folders
+    of `sys.path`, not the working directory or the script's): each `*.dist-info`
+    and `*.egg-info` entry's name (which holds the version) and its modification
+    time (a reinstall of the same version makes it anew), and the `.pth` files
+    (editable installs). An upgrade of JAX in the venv changes it."""
+    if paths is None:
+        paths = [p for p in sys.path if os.path.basename(p) in ("site-packages", "dist-packages")]
+    found = []
+    for path in paths:
+        try:
+            entries = os.scandir(path or ".")
+        except OSError:
+            continue
+        with entries:
+            for entry in entries:
+                if entry.name.endswith((".dist-info", ".egg-info", ".pth")):
+                    try:
+                        found.append([path, entry.name, entry.stat().st_mtime_ns])
+                    except OSError:
+                        continue
+    return sorted(found)
+
+
+def key(env=os.environ, paths=None) -> str:
     """The key of the warm process that may run a command from `env`: Python and
-    its environment (`sys.prefix`: the venv, so its installed packages), the source
-    files of jaxchain and the environment variables of `KEY_PREFIXES` and
-    `KEY_NAMES` (`SWITCHES` aside)."""
+    its environment (`sys.prefix`), the installed packages (`installed_state` of
+    `paths`), the source files of jaxchain (`source_identity`) and the environment
+    variables of `KEY_PREFIXES` and `KEY_NAMES` (the switches aside)."""
     chosen = {k: v for k, v in env.items()
-              if (k.startswith(KEY_PREFIXES) or k in KEY_NAMES) and k not in SWITCHES}
+              if (k.startswith(KEY_PREFIXES) or k in KEY_NAMES)
+              and not k.startswith(SWITCH_PREFIX)}
     data = {"prefix": sys.prefix, "python": os.path.realpath(sys.executable),
-            "version": sys.version, "source": source_identity(), "env": chosen}
+            "version": sys.version, "source": source_identity(),
+            "installed": installed_state(paths), "env": chosen}
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:24]
 
 
@@ -95,24 +142,38 @@ def folder() -> str:
     return path
 
 
-def _send(conn: socket.socket, kind: bytes, payload: bytes) -> None:
-    conn.sendall(_HEADER.pack(kind, len(payload)) + payload)
+def send(conn: socket.socket, kind: bytes, payload: bytes = b"", fds=()) -> None:
+    """Send one frame, with the file descriptors `fds` (SCM_RIGHTS)."""
+    data = _HEADER.pack(kind, len(payload)) + payload
+    if fds:
+        sent = conn.sendmsg([data], [(socket.SOL_SOCKET, socket.SCM_RIGHTS,
+                                      array.array("i", fds))])
+        data = data[sent:]
+    conn.sendall(data)
 
 
-def _receive(conn: socket.socket) -> tuple[bytes, bytes] | None:
-    """The next frame (kind, payload), or None at the end of the stream."""
-    header = _exactly(conn, _HEADER.size)
+def receive(conn: socket.socket, fds: list | None = None) -> tuple[bytes, bytes] | None:
+    """The next frame (kind, payload), or None at the end of the stream; file
+    descriptors that came with it are appended to `fds`."""
+    header = _exactly(conn, _HEADER.size, fds)
     if header is None:
         return None
     kind, length = _HEADER.unpack(header)
-    payload = _exactly(conn, length)
+    payload = _exactly(conn, length, fds)
     return None if payload is None else (kind, payload)
 
 
-def _exactly(conn: socket.socket, n: int) -> bytes | None:
+def _exactly(conn: socket.socket, n: int, fds: list | None) -> bytes | None:
     chunks, left = [], n
     while left:
-        chunk = conn.recv(min(left, 1 << 16))
+        if fds is None:
+            chunk = conn.recv(min(left, 1 << 16))
+        else:  # only the first bytes carry descriptors; `recvmsg` takes them
+            chunk, ancillary, _, _ = conn.recvmsg(min(left, 1 << 16),
+                                                 socket.CMSG_SPACE(8 * 4))
+            for level, kind, data in ancillary:
+                if level == socket.SOL_SOCKET and kind == socket.SCM_RIGHTS:
+                    fds.extend(array.array("i", data[:len(data) - len(data) % 4]))
         if not chunk:
             return None
         chunks.append(chunk)
@@ -120,57 +181,98 @@ def _exactly(conn: socket.socket, n: int) -> bytes | None:
     return b"".join(chunks)
 
 
-# -- the command's side ------------------------------------------------------------
+# -- a command handed to the warm process ------------------------------------------
 
 def forward(argv: list[str], env: dict) -> int | None:
     """Run `jaxchain argv` in the warm process of the environment `env` (this
-    process's, as it started): its exit status, with its output written to this
-    process's standard output and error; None when there is no warm process, or
-    it is busy (then run it here)."""
+    process's, as it started), with this process's standard streams: its exit
+    status; None when there is no warm process, or it runs another command (then
+    run it here)."""
     if not enabled(env):
         return None
     try:
-        path = os.path.join(folder(), f"{key(env)}.sock")
-        conn = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        conn.settimeout(ACCEPT_S)
-        conn.connect(path)
-        # Accepted first, then the request: a command that gave up waiting (busy)
-        # has sent nothing, so the warm process never runs it a second time.
-        first = _receive(conn)
-        if first is None or first[0] != b"a":
-            return None
-        request = {"argv": argv, "cwd": os.getcwd(), "env": env,
-                   "tty": [_isatty(sys.stdout), _isatty(sys.stderr)]}
-        _send(conn, b"r", json.dumps(request).encode())
-    except OSError:  # no warm process, a stale socket, or busy past ACCEPT_S
+        base = os.path.join(folder(), key(env))
+    except OSError:
+        return None
+    conn = _accepted(base)
+    if conn is None:
+        return None
+    umask = os.umask(0o022)
+    os.umask(umask)
+    request = {"argv": argv, "cwd": os.getcwd(), "env": env, "umask": umask}
+    try:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        send(conn, b"r", json.dumps(request).encode(), fds=(0, 1, 2))
+    except OSError:  # it went away before the request: nothing ran there
+        conn.close()
         return None
     conn.settimeout(None)
     try:
-        while (frame := _receive(conn)) is not None:
-            kind, payload = frame
-            if kind == b"s":
-                return int(json.loads(payload))
-            stream = sys.stdout if kind == b"o" else sys.stderr
-            stream.buffer.write(payload)
-            stream.flush()
+        frame = receive(conn)
     except KeyboardInterrupt:  # closing the socket interrupts the command there
         conn.close()
         print(f"jaxchain {_command_name(argv)}: error: interrupted", file=sys.stderr)
         return 130
+    except OSError:
+        frame = None
+    conn.close()
+    if frame is not None and frame[0] == b"s":
+        return int(json.loads(frame[1]))
     print(f"jaxchain {_command_name(argv)}: error: the warm process ended during the "
           f"command (JAXCHAIN_SERVER=0 runs commands in their own process)", file=sys.stderr)
     return 1
 
 
+def _accepted(base: str) -> socket.socket | None:
+    """A connection to the warm process at `base` that has accepted a command, or
+    None (none there, or it runs another command). A warm process that is starting
+    or replacing itself (`<base>.starting` names a live process) is waited for."""
+    end = time.monotonic() + START_S
+    while True:
+        conn = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        conn.settimeout(ANSWER_S)
+        try:
+            conn.connect(f"{base}.sock")
+            answer = receive(conn)
+        except OSError:  # no socket yet, refused (gone), or no answer (stopped)
+            answer = None
+        if answer is not None and answer[0] == b"a":
+            return conn
+        conn.close()
+        if answer is not None and answer[0] == b"b":
+            return None
+        if time.monotonic() > end or not _starting(base):
+            return None
+        time.sleep(0.05)
+
+
+def _starting(base: str) -> bool:
+    """Whether a warm process is starting at `base`: its marker holds the id of a
+    live process (or is younger than 5 s, before the id is written)."""
+    marker = f"{base}.starting"
+    try:
+        text = open(marker).read().strip()
+        age = time.time() - os.stat(marker).st_mtime
+    except OSError:
+        return False
+    if not text:
+        return age < 5
+    return _alive_pid(int(text)) and age < 120
+
+
+def _alive_pid(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def _command_name(argv: list[str]) -> str:
     return next((a for a in argv if not a.startswith("-")), "").strip() or "command"
-
-
-def _isatty(stream) -> bool:
-    try:
-        return bool(stream.isatty())
-    except (AttributeError, ValueError):
-        return False
 
 
 def start(env: dict) -> None:
@@ -178,207 +280,74 @@ def start(env: dict) -> None:
     one runs or is starting; say so in one line on standard error."""
     try:
         base = os.path.join(folder(), key(env))
-        if _alive(f"{base}.sock"):
+        if os.path.exists(f"{base}.sock") or _starting(base):
             return
-        marker = f"{base}.starting"
-        try:  # one starter at a time; a marker older than a minute is a failed start
-            if time.time() - os.stat(marker).st_mtime < 60:
-                return
-            os.unlink(marker)
-        except FileNotFoundError:
-            pass
-        os.close(os.open(marker, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
-        subprocess.Popen([sys.executable, "-m", "jaxchain._cli.warm", base],
-                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                         stderr=subprocess.DEVNULL, start_new_session=True, close_fds=True,
-                         cwd=os.path.dirname(base), env=env)
-    except OSError:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(f"{base}.starting")  # a failed start
+        spawn(base, env)
+    except (OSError, ValueError):
         return
     idle = env.get("JAXCHAIN_SERVER_IDLE", f"{IDLE_S:g}")
     print(f"jaxchain: a warm process keeps JAX loaded for the next commands (it stops "
-          f"after {idle} idle seconds; JAXCHAIN_SERVER=0 turns it off)", file=sys.stderr)
+          f"after {idle} idle seconds; 'jaxchain server status' shows it, "
+          f"JAXCHAIN_SERVER=0 turns it off)", file=sys.stderr)
 
 
-def _alive(path: str) -> bool:
-    """Whether a warm process listens at `path`; a socket left by one that was
-    killed is removed."""
-    probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+def spawn(base: str, env: dict) -> None:
+    """Start the warm process at `base` with the environment `env`, its id in
+    `<base>.starting` until it listens.
+
+    **Raises:** `FileExistsError` when another one is starting."""
+    marker = os.open(f"{base}.starting", os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
     try:
-        probe.connect(path)
-        return True
-    except FileNotFoundError:
-        return False
-    except OSError:  # refused: nobody listens there any more
-        try:
-            os.unlink(path)
-        except FileNotFoundError:
-            pass
-        return False
+        process = subprocess.Popen(
+            [sys.executable, "-m", "jaxchain._cli.warm_process", base],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            start_new_session=True, close_fds=True, cwd=os.path.dirname(base), env=env)
+        os.write(marker, str(process.pid).encode())
     finally:
-        probe.close()
+        os.close(marker)
 
 
-def command() -> None:
-    """The `jaxchain` console script: the command in the warm process (`forward`),
-    or here (`jaxchain._cli.main.run_here`), after which the warm process is
-    started for the next commands (`start`). The process then ends without the
-    interpreter's teardown (`os._exit`, after the exit functions and a flush of
-    standard output and error): freeing every module and the JAX runtime's
-    objects one by one took 0.7 s and serves nothing, as every file is written
-    and closed by then (`benchmarks/fixed_cost.py`)."""
-    argv, env = sys.argv[1:], dict(os.environ)  # the environment before the command's set-up
-    status = forward(argv, env)
-    if status is None:
-        from .main import run_here
+# -- what the warm processes say of themselves -------------------------------------
 
-        status = run_here(argv)
-        if enabled(env) and status in (0, 1) and argv and not argv[0].startswith("-"):
-            start(env)
+def states() -> list[dict]:
+    """Each warm process of this user (`<key>.json`, written by it): its process
+    id, version, environment, state, idle seconds and memory (read now where the
+    system tells, else as it was after its last command). The files of processes
+    that are gone are removed."""
     try:
-        atexit._run_exitfuncs()
-        sys.stdout.flush()
-        sys.stderr.flush()
-    except BrokenPipeError:  # the reader of our output went away: nothing to say
-        pass
-    os._exit(status)
-
-
-# -- the warm process's side --------------------------------------------------------
-
-class _Stream(io.TextIOBase):
-    """Standard output or error of the command being served: text sent to it in
-    frames of `kind`, a terminal if the command's own stream is one."""
-
-    def __init__(self, conn, kind: bytes, tty: bool, lock: threading.Lock):
-        self._conn, self._kind, self._tty, self._lock = conn, kind, tty, lock
-
-    def write(self, text: str) -> int:
-        with self._lock:
-            try:
-                _send(self._conn, self._kind, text.encode())
-            except OSError:  # the command went away; its interrupt follows
-                pass
-        return len(text)
-
-    def isatty(self) -> bool:
-        return self._tty
-
-    @property
-    def encoding(self) -> str:
-        return "utf-8"
-
-
-def serve(base: str) -> None:
-    """Be the warm process at `<base>.sock`: import what the commands use, listen,
-    and run each command as `run_here` would, until `IDLE_S` seconds pass without
-    one (or SIGTERM). Its process id is in `<base>.pid` from its start."""
-    import contextlib
-
-    path = f"{base}.sock"
-    # First, so that whoever started it can stop it; renamed into place whole.
-    partial = Path(f"{base}.pid.{os.getpid()}.tmp")
-    partial.write_text(str(os.getpid()))
-    os.replace(partial, f"{base}.pid")
-    # Stopped (SIGTERM): the loop ends at its next wait. An exception raised by
-    # the handler could land in a callback whose exceptions Python ignores.
-    signal.signal(signal.SIGTERM, lambda *_: _stopped.set())
-    # Ctrl-C in a command reaches the command here as SIGINT (`_run_one`), even
-    # where the process that started this one ignored it (a background job).
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        _listen(base, path)
-    finally:
-        for name in (path, f"{base}.pid", f"{base}.starting"):
-            with contextlib.suppress(OSError):
-                os.unlink(name)
-
-
-#: Set by SIGTERM: the warm process stops at its next wait for a command.
-_stopped = threading.Event()
-
-
-def _listen(base: str, path: str) -> None:
-    import gc
-
-    from .common import RESULT_MODULES
-    from .main import main
-    from .._setup import configure
-
-    configure()
-    for name in RESULT_MODULES:  # what writing results imports, once for all commands
-        __import__(name)
-    gc.freeze()  # what the imports made: never collected
-    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    server.bind(f"{path}.{os.getpid()}")
-    os.replace(f"{path}.{os.getpid()}", path)  # appears whole, ready to accept
-    if os.path.exists(f"{base}.starting"):
-        os.unlink(f"{base}.starting")
-    server.listen(8)
-    server.settimeout(1.0)  # waits of a second, to see `_stopped` and the idle time
-    idle = float(os.environ.get("JAXCHAIN_SERVER_IDLE", IDLE_S))
-    last = time.monotonic()
-    while True:
-        try:
-            conn, _ = server.accept()
-        except TimeoutError:
-            if time.monotonic() - last > idle or _stopped.is_set():
-                return
+        place = folder()
+    except OSError:
+        return []
+    found = []
+    for name in sorted(os.listdir(place)):
+        if not name.endswith(".json"):
             continue
-        last = time.monotonic()
+        path = os.path.join(place, name)
         try:
-            _run_one(conn, main)
-        except (KeyboardInterrupt, OSError):  # an interrupt after its command; a lost command
-            pass
-        finally:
-            conn.close()
-        gc.collect()  # the command's cycles, after its status went back
-        last = time.monotonic()
-        if _stopped.is_set():
-            return
+            state = json.loads(open(path).read())
+        except (OSError, ValueError):
+            continue
+        if not _alive_pid(state["pid"]):
+            for suffix in (".json", ".sock", ".pid", ".log"):
+                with contextlib.suppress(OSError):
+                    os.unlink(path[:-5] + suffix)
+            continue
+        rss = rss_mb(state["pid"])
+        state["rss_mb"] = state.get("rss_mb") if rss is None else rss
+        state["idle_s"] = None if state["state"] != "idle" else time.time() - state["since"]
+        state["key"] = name[:-5]
+        found.append(state)
+    return found
 
 
-def _run_one(conn: socket.socket, main) -> None:
-    """Run one command from `conn` in this process, with its environment, working
-    directory and output streams, and send its exit status."""
-    import contextlib
-
-    _send(conn, b"a", b"")
-    conn.settimeout(5.0)  # the request follows at once, or the command went away
-    frame = _receive(conn)
-    conn.settimeout(None)
-    if frame is None or frame[0] != b"r":
-        return
-    request = json.loads(frame[1])
-    lock, done = threading.Lock(), threading.Event()
-
-    main_thread = threading.main_thread().ident
-
-    def watch():  # the command went away (Ctrl-C): interrupt it here too
-        with contextlib.suppress(OSError):
-            conn.recv(1)
-        if not done.is_set():  # a signal, which also wakes a thread waiting on a lock
-            signal.pthread_kill(main_thread, signal.SIGINT)
-
-    threading.Thread(target=watch, daemon=True).start()
-    saved_env, saved_cwd = dict(os.environ), os.getcwd()
-    out, err = (_Stream(conn, kind, tty, lock) for kind, tty in zip((b"o", b"e"), request["tty"]))
+def rss_mb(pid: int | None = None) -> float | None:
+    """The resident memory of process `pid` (this one by default) in MiB, where the
+    system tells it (/proc on Linux); None elsewhere."""
     try:
-        os.environ.clear()
-        os.environ.update(request["env"])
-        os.chdir(request["cwd"])
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            try:
-                status = main(request["argv"])
-            except SystemExit as exit_:  # --help, --version
-                status = exit_.code if isinstance(exit_.code, int) else int(exit_.code is not None)
-    finally:
-        done.set()
-        os.environ.clear()
-        os.environ.update(saved_env)
-        os.chdir(saved_cwd)
-    with lock:
-        _send(conn, b"s", json.dumps(status).encode())
-
-
-if __name__ == "__main__":
-    serve(sys.argv[1])
+        with open(f"/proc/{pid or 'self'}/statm") as f:
+            pages = int(f.read().split()[1])
+    except (OSError, ValueError, IndexError):
+        return None
+    return pages * os.sysconf("SC_PAGE_SIZE") / 2**20

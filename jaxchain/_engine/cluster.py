@@ -18,8 +18,8 @@ import jax
 import numpy as np
 from distributed import Client, LocalCluster, WorkerPlugin, as_completed
 from distributed.comm.core import CommClosedError
-from tqdm.auto import tqdm
 
+from .progress import tqdm
 from .programs import keep_programs, program_folder
 from .._errors import ValidationError
 from .._setup import configure

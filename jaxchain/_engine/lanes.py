@@ -21,8 +21,8 @@ import numpy as np
 from jax.sharding import Mesh
 from jax.sharding import PartitionSpec as P
 from jaxtyping import ArrayLike, Float
-from tqdm.auto import tqdm
 
+from .progress import tqdm
 from .options import SimulationOptions
 from .programs import compiled, kept_program
 from .._physics.initial import AbstractInitialCondition, initial_states

@@ -1,4 +1,11 @@
-"""A tqdm progress bar fed from inside compiled code, one tick per integrated chunk.
+"""The progress bars of jaxchain, and one fed from inside compiled code, one tick per
+integrated chunk.
+
+Every bar is tqdm's text bar (`tqdm.std`) on stderr, in a terminal and in a Jupyter
+notebook alike, where Jupyter redraws it in place. `tqdm.auto` would pick the
+notebook's widget bar instead, which needs ipywidgets and, without them, prints a
+TqdmWarning that names the path of the installed tqdm; the functions of jaxchain
+make their bars with the `tqdm` of this module.
 
 Runs compiled with `progress=True` call `tick` (a host callback) after each chunk.
 Such programs are compiled apart from those without a bar, and JAX's persistent
@@ -7,7 +14,7 @@ compilation cache does not keep them."""
 import contextlib
 
 import jax
-from tqdm.auto import tqdm
+from tqdm.std import tqdm as tqdm  # the text bar, for every bar of jaxchain
 
 _bar: list = [None]
 

@@ -15,8 +15,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from tqdm.auto import tqdm
 
+from .._engine.progress import tqdm
 from .._engine.checks import check_options, check_run
 from .._physics.initial import FAMILIES, excited_block
 from .._nonsmooth.options import NonsmoothOptions

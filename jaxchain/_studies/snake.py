@@ -13,8 +13,8 @@ import diffrax
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from tqdm.auto import tqdm
 
+from .._engine.progress import tqdm
 from .._bifurcation.bifurcations import locate_bifurcations
 from .._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
 from .._bifurcation.limit_cycles import limit_cycle_problem

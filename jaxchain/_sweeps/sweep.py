@@ -15,8 +15,8 @@ import diffrax
 import jax
 import numpy as np
 from jaxtyping import ArrayLike, Float
-from tqdm.auto import tqdm
 
+from .._engine.progress import tqdm
 from .._physics.record import check_recordable
 from .._engine.checks import as_solver, check_options, check_params
 from .._physics.initial import AbstractInitialCondition

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
-from tqdm.auto import tqdm
 
+from ..._engine.progress import tqdm
 from ..._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
 from ..._bifurcation.fold import FoldPoint, fold_point
 from ..._bifurcation.limit_cycles import limit_cycle_problem

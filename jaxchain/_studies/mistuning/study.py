@@ -11,8 +11,8 @@ import math
 from pathlib import Path
 
 import numpy as np
-from tqdm.auto import tqdm
 
+from ..._engine.progress import tqdm
 from ..._physics.chain import require_line
 from ..._physics.record import check_recordable
 from ..basin.basin import _key, _key_data
