@@ -108,7 +108,8 @@ def run(args) -> None:
     with cluster_client(args) as client:
         ds = basin_stability(params, v_d, samples, box, args.sample_seed,
                              solver=args.solver, options=options, n_check=args.check,
-                             store=outputs.path("basin.zarr"), resume=args.resume or outputs.again,
+                             store=outputs.path("basin.zarr"),
+                             resume=args.resume or outputs.again,
                              overwrite=args.overwrite, client=client,
                              progress=show_progress(args))
     wall = time.perf_counter() - start

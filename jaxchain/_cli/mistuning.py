@@ -128,7 +128,8 @@ def run(args) -> None:
             options=simulation_options(args),
             edge_options=SimulationOptions(t_end=args.edge_t_end,
                                            transient=0.8 * args.edge_t_end),
-            out=args.out, resume=args.resume, overwrite=args.overwrite, client=client,
+            out=args.out, resume=args.resume or outputs.again,
+            overwrite=args.overwrite, client=client,
             progress=show_progress(args))
     table = localization_table(float(params.eta_c), TABLE_SIGMAS, THETAS)
     wall = time.perf_counter() - start
