@@ -295,3 +295,19 @@ def test_work_precision_failed_runs_exit_1(tmp_path, monkeypatch, capsys):
     err = captured.err.strip()
     assert len(err.splitlines()) == 1 and "1 of 3 runs failed" in err
     assert (tmp_path / "work_precision_single.png").stat().st_size > 0
+
+
+def test_the_snake_summary_prints_a_check_without_a_growth_and_an_end_without_a_speed(capsys):
+    """A simulation check that agrees carries no expected growth (None in the
+    summary), and a stable range may end where no speed was found: the table is
+    printed (the command failed with a TypeError once)."""
+    from jaxchain._cli.snake import _print_summary
+
+    check = {"v_d": 1.3, "side": "inside", "end": "fold", "persists": True, "agrees": True,
+             "expected_growth": None}
+    branch = {"label": "k=1", "sites": 1, "stable_ranges": [[1.2, 1.4]], "connects_to": [],
+              "stable_range_ends": [[{"type": "fold", "v_d": None}]],
+              "simulation_check": [check, check | {"agrees": None, "expected_growth": 0.25}]}
+    _print_summary({"branches": [branch], "not_periodic": []})
+    out = capsys.readouterr().out
+    assert "fold at -" in out and "(agrees)" in out and "undecided: growth 0.25" in out

@@ -140,12 +140,19 @@ def _print_summary(s: dict) -> None:
         print(f"{b['label']} excited: {b['sites']} on the HALC where stable; stable on "
               f"{ranges}; connects to {', '.join(b['connects_to']) or 'nothing found'}")
         for r in b["stable_range_ends"]:
-            print("   ends: " + "; ".join(f"{e['type']} at {e['v_d']:.5f}" for e in r))
+            print("   ends: " + "; ".join(f"{e['type']} at {_number(e['v_d'], '.5f')}"
+                                          for e in r))
         for c in b.get("simulation_check", []):
-            print(f"   simulation at v_d = {c['v_d']:.4f} ({c['side']} the {c['end']}): "
-                  f"{'persists' if c['persists'] else 'lost'} ("
-                  + {True: "agrees", False: "DISAGREES",
-                     None: f"undecided: growth {c['expected_growth']:.3g} over the horizon"}
-                  [c["agrees"]] + ")")
+            verdict = ("agrees" if c["agrees"] else "DISAGREES" if c["agrees"] is False else
+                       f"undecided: growth {_number(c['expected_growth'], '.3g')} over the "
+                       "horizon")
+            print(f"   simulation at v_d = {_number(c['v_d'], '.4f')} ({c['side']} the "
+                  f"{c['end']}): {'persists' if c['persists'] else 'lost'} ({verdict})")
     for f in s["not_periodic"]:
         print(f"k={f['excited']} excited: {f['reason']}")
+
+
+def _number(value, spec: str) -> str:
+    """`value` in the format `spec`, or "-" where the study found none (None, a
+    non-finite number in the JSON)."""
+    return "-" if value is None else format(value, spec)

@@ -18,9 +18,10 @@ then runs the commands handed to it, one at a time, until it is idle for
 - **Never stale.** Every two seconds while idle it computes its key again
   (`jaxchain._cli.warm.key`: jaxchain's sources, the installed packages); when
   it changed, it stops, and the next command runs the code installed now.
-- **Stoppable.** A command that goes away (Ctrl-C) interrupts its work here; a
-  computation that does not return to Python within `GRACE_S` seconds (a long
-  trajectory in XLA) ends the process, and a fresh one replaces it.
+- **Stoppable.** A command that goes away (Ctrl-C) interrupts its work here, and
+  a fresh process replaces this one (an interrupt can leave JAX's caches half
+  written); work that does not return to Python within `GRACE_S` seconds (a long
+  trajectory in XLA) ends this process at once.
 - **Visible.** `<key>.json` says what it is and does (`jaxchain server status`),
   `<key>.log` has one line per command.
 """
@@ -108,8 +109,8 @@ class _Warm:
     # -- the main thread -------------------------------------------------------------
 
     def loop(self, main) -> str:
-        """Run the accepted commands until idle, stopped, stale or over the memory
-        bound: which of these ended it."""
+        """Run the accepted commands until idle, stopped, stale, over the memory
+        bound or interrupted: which of these ended it."""
         last = checked = time.monotonic()
         self.state("idle")
         while True:
@@ -126,15 +127,20 @@ class _Warm:
                     if key(self.env, self.paths) != self.key:
                         return "stale"
                 continue
-            over = self.serve_one(conn, main)
+            try:
+                ended = self.serve_one(conn, main)
+            except KeyboardInterrupt:  # a command that went away as it ended
+                ended = "interrupted"
+            if ended:
+                return ended
             gc.collect()  # the command's cycles, after its status went back
-            if over:
-                return "memory"
             last = time.monotonic()
 
-    def serve_one(self, conn: socket.socket, main) -> bool:
-        """Run one command from `conn` and answer its exit status: whether this
-        process is now above its memory bound (and answers "w" from now on)."""
+    def serve_one(self, conn: socket.socket, main) -> str | None:
+        """Run one command from `conn` and answer its exit status: why this process
+        must now be replaced (and answers "w" from then on), or None. An
+        interrupted command may have left JAX's caches half written; a process
+        above its memory bound keeps it."""
         fds: list[int] = []
         try:
             conn.settimeout(5.0)  # the request follows at once, or the command went away
@@ -148,19 +154,21 @@ class _Warm:
             with self.lock:
                 self.busy = False
             conn.close()
-            return False
+            return None
         request = json.loads(frame[1])
         self.state("busy", command=request["argv"])
         started = time.monotonic()
         done = threading.Event()
+        done.interrupted = False  # set by `watch`
         threading.Thread(target=self.watch, args=(conn, done), daemon=True).start()
         status = _run(main, request, fds, done)
-        over = self.over_bound()
+        ended = ("interrupted" if status == 130 or done.interrupted
+                 else "memory" if self.over_bound() else None)
         with self.lock:
             self.served += 1
-            if over:
+            if ended:
                 self.closing = b"w"
-        self.state("replacing" if over else "idle")  # before the status: a command's
+        self.state("replacing" if ended else "idle")  # before the status: a command's
         with self.lock:                               # next step sees it served
             self.busy = False
         with contextlib.suppress(OSError):
@@ -171,7 +179,7 @@ class _Warm:
         self.log(f"served pid={os.getpid()} status={status} "
                  f"seconds={time.monotonic() - started:.2f} rss_mb={rss_mb() or 0:.0f} "
                  f"argv={json.dumps(request['argv'])}")
-        return over
+        return ended
 
     def over_bound(self) -> bool:
         """Whether the memory held after a command is above the bound, once its
@@ -196,6 +204,7 @@ class _Warm:
             conn.recv(1)
         if done.is_set():
             return
+        done.interrupted = True
         null = os.open(os.devnull, os.O_RDWR)
         for fd in (0, 1, 2):
             os.dup2(null, fd)
@@ -222,8 +231,9 @@ class _Warm:
         command that comes meanwhile waits for it."""
         with contextlib.suppress(OSError):
             os.unlink(f"{self.base}.starting")
-        with contextlib.suppress(OSError):
-            spawn(self.base, self.env)
+        if key(self.env, self.paths) == self.key:  # not for code that changed since
+            with contextlib.suppress(OSError):
+                spawn(self.base, self.env)
         self.remove_files()
         os._exit(0)
 
@@ -269,9 +279,14 @@ def serve(base: str) -> None:
     and run each command as `run_here` would, until idle, stopped, stale or over
     its memory bound (then replaced). Its process id is in `<base>.pid`."""
     warm = _Warm(base)
+    if warm.key != os.path.basename(base):  # the code changed since it was started
+        with contextlib.suppress(OSError):
+            os.unlink(f"{base}.starting")
+        return
     write_text(f"{base}.pid", str(os.getpid()))
     with contextlib.suppress(OSError):
-        os.unlink(f"{base}.log")  # the log of this process's life, not its predecessors'
+        if os.stat(f"{base}.log").st_size > 2**20:  # the log of the last commands only
+            os.unlink(f"{base}.log")
     # Stopped (SIGTERM): the loop ends at its next wait. An exception raised by
     # the handler could land in a callback whose exceptions Python ignores.
     signal.signal(signal.SIGTERM, lambda *_: warm.stopped.set())
@@ -303,7 +318,7 @@ def serve(base: str) -> None:
         warm.log(f"ended pid={os.getpid()}: {ended}")
         with warm.lock:
             warm.closing = warm.closing or b"b"
-        if ended == "memory":
+        if ended in ("memory", "interrupted"):
             warm.replace()
         with contextlib.suppress(OSError):
             server.shutdown(socket.SHUT_RDWR)  # wakes the listener thread
