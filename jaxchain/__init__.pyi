@@ -150,9 +150,8 @@ from ._physics.record import (
 )
 from ._sweeps.chain_files import write_chain_file as write_chain_file
 from ._physics.stick import STICK_BAND as STICK_BAND, sticks as sticks
-from ._physics.units import (
-    Scales as Scales, from_physical as from_physical, to_physical as to_physical,
-)
+from ._physics.scales import Scales as Scales
+from ._physics.units import from_physical as from_physical, to_physical as to_physical
 from ._plots.basin import (
     plot_basin_stability as plot_basin_stability,
     plot_halc_histogram as plot_halc_histogram,

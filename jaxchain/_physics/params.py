@@ -11,7 +11,7 @@ import numpy as np
 from jaxtyping import ArrayLike
 
 from .chain import Graph, Mistuning, as_graph
-from .units import Scales
+from .scales import Scales
 from .friction import AbstractFrictionLaw, ExponentialDecay, as_parameter, check_values
 from .._errors import ValidationError
 from .._setup import check_float64

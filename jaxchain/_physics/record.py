@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 
 from .chain import Graph, Mistuning
-from .units import Scales
+from .scales import Scales
 from .friction import FRICTION_LAWS
 from .params import ChainParams, _chain_fields
 from .._errors import ValidationError

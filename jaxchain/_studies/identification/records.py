@@ -11,7 +11,7 @@ import equinox as eqx
 import numpy as np
 
 from ..._errors import ValidationError
-from ..._physics.units import Scales
+from ..._physics.scales import Scales
 
 #: The columns of a record: t, x<n> and v<n> (oscillator n, from 1, as in the
 #: paper), and v_d.
