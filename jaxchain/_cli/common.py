@@ -8,6 +8,7 @@ import importlib
 import json
 import logging
 import math
+import os
 import sys
 import tempfile
 import threading
@@ -348,17 +349,28 @@ _PRESENTATION = ("run", "command", "out", "overwrite", "resume", "json", "no_pro
 
 def settings_digest(args) -> str:
     """The digest of a command's settings: every option but those of `_PRESENTATION`,
-    and the content of each file an option names (a chain file edited is other
-    settings)."""
+    with the content of each file an option names (a chain file, a friction table,
+    records; in lists too): an edited input is other settings. An input that is not
+    a regular file (standard input, a folder) makes the digest unique: a command
+    that reads one never counts as run again with the same settings."""
     import hashlib
 
-    chosen = {}
-    for name, value in sorted(vars(args).items()):
-        if name in _PRESENTATION:
-            continue
-        if isinstance(value, Path) and value.is_file():
-            value = [str(value), hashlib.sha256(value.read_bytes()).hexdigest()]
-        chosen[name] = value
+    def identity(value):
+        if isinstance(value, (list, tuple)):
+            return [identity(v) for v in value]
+        if isinstance(value, str) and value.startswith("table:"):
+            return ["table:", identity(Path(value[6:]))]
+        if isinstance(value, (str, Path)) and str(value) and len(str(value)) < 4096:
+            path = Path(value)
+            with contextlib.suppress(OSError):
+                if path.is_file() and not str(path).startswith("/dev/"):
+                    return [str(value), hashlib.sha256(path.read_bytes()).hexdigest()]
+                if isinstance(value, Path) and path.exists():
+                    return [str(value), os.urandom(8).hex()]
+        return value
+
+    chosen = {name: identity(value) for name, value in sorted(vars(args).items())
+              if name not in _PRESENTATION}
     text = json.dumps(chosen, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 

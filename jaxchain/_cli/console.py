@@ -25,7 +25,11 @@ def command() -> None:
 
         status = run_alone(argv)
     else:
-        status = forward(argv, env)
+        try:
+            status = forward(argv, env)
+        except KeyboardInterrupt:  # while waiting for a warm process to start
+            print("jaxchain: error: interrupted", file=sys.stderr)
+            status = 130
         if status is None:
             from .main import run_here
 

@@ -56,7 +56,7 @@ MAX_MB = 1024
 #: The environment variables that are part of the key: a command whose values of
 #: these differ from the warm process's starts (or finds) a warm process of its own.
 KEY_PREFIXES = ("JAX", "XLA", "TF_", "CUDA", "NVIDIA", "MPL", "PYTHON", "OMP_", "MKL_",
-                "OPENBLAS_", "XDG_", "DASK_", "TQDM_", "LD_")
+                "OPENBLAS_", "XDG_", "DASK_", "TQDM_", "LD_", "LC_", "LANG")
 KEY_NAMES = ("HOME", "TMPDIR")
 
 #: Switches of the warm process itself (JAXCHAIN_SERVER, JAXCHAIN_SERVER_IDLE,
@@ -133,11 +133,15 @@ def folder() -> str:
     """The folder of the warm processes' sockets, the user's own: made with mode
     0700 if missing.
 
-    **Raises:** `OSError` when it belongs to another user or others may enter it."""
+    **Raises:** `OSError` when it is a link, belongs to another user or others may
+    enter it."""
+    import stat
+
     path = os.path.join(tempfile.gettempdir(), f"jaxchain-{os.getuid()}")
     os.makedirs(path, mode=0o700, exist_ok=True)
-    info = os.stat(path)
-    if info.st_uid != os.getuid() or info.st_mode & 0o077:
+    info = os.lstat(path)  # a link planted by another user is refused, not followed
+    if (not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid()
+            or info.st_mode & 0o077):
         raise OSError(f"{path} is not private to this user")
     return path
 
@@ -149,7 +153,8 @@ def send(conn: socket.socket, kind: bytes, payload: bytes = b"", fds=()) -> None
         sent = conn.sendmsg([data], [(socket.SOL_SOCKET, socket.SCM_RIGHTS,
                                       array.array("i", fds))])
         data = data[sent:]
-    conn.sendall(data)
+    if data:  # sendall of nothing fails on a socket the other end has closed
+        conn.sendall(data)
 
 
 def receive(conn: socket.socket, fds: list | None = None) -> tuple[bytes, bytes] | None:
@@ -210,8 +215,8 @@ def forward(argv: list[str], env: dict) -> int | None:
     conn.settimeout(None)
     try:
         frame = receive(conn)
-    except KeyboardInterrupt:  # closing the socket interrupts the command there
-        conn.close()
+    except KeyboardInterrupt:  # the end of the stream interrupts the command there
+        _interrupt(conn)
         print(f"jaxchain {_command_name(argv)}: error: interrupted", file=sys.stderr)
         return 130
     except OSError:
@@ -222,6 +227,18 @@ def forward(argv: list[str], env: dict) -> int | None:
     print(f"jaxchain {_command_name(argv)}: error: the warm process ended during the "
           f"command (JAXCHAIN_SERVER=0 runs commands in their own process)", file=sys.stderr)
     return 1
+
+
+def _interrupt(conn: socket.socket) -> None:
+    """Interrupt the command that `conn` runs (the end of its stream), and wait, at
+    most `ANSWER_S`, until the warm process stopped it: an immediate rerun then
+    finds it free, not still writing."""
+    with contextlib.suppress(OSError, KeyboardInterrupt):
+        conn.shutdown(socket.SHUT_WR)
+        conn.settimeout(ANSWER_S)
+        while receive(conn) is not None:
+            pass
+    conn.close()
 
 
 def _accepted(base: str) -> socket.socket | None:
@@ -242,7 +259,8 @@ def _accepted(base: str) -> socket.socket | None:
         conn.close()
         if answer is not None and answer[0] == b"b":
             return None
-        if time.monotonic() > end or not _starting(base):
+        replacing = answer is not None and answer[0] == b"w"
+        if time.monotonic() > end or not (replacing or _starting(base)):
             return None
         time.sleep(0.05)
 
@@ -280,7 +298,7 @@ def start(env: dict) -> None:
     one runs or is starting; say so in one line on standard error."""
     try:
         base = os.path.join(folder(), key(env))
-        if os.path.exists(f"{base}.sock") or _starting(base):
+        if _listening(f"{base}.sock") or _starting(base):
             return
         with contextlib.suppress(FileNotFoundError):
             os.unlink(f"{base}.starting")  # a failed start
@@ -293,13 +311,33 @@ def start(env: dict) -> None:
           f"JAXCHAIN_SERVER=0 turns it off)", file=sys.stderr)
 
 
-def spawn(base: str, env: dict) -> None:
+def _listening(path: str) -> bool:
+    """Whether a warm process listens at `path`; a socket left by one that was
+    killed (nobody listens: refused) is removed."""
+    probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        probe.connect(path)
+        return True
+    except ConnectionRefusedError:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+        return False
+    except OSError:
+        return False
+    finally:
+        probe.close()
+
+
+def spawn(base: str, env: dict, before=None) -> None:
     """Start the warm process at `base` with the environment `env`, its id in
-    `<base>.starting` until it listens.
+    `<base>.starting` until it listens; `before()` is called once the marker is
+    there (a process that replaces itself removes its files).
 
     **Raises:** `FileExistsError` when another one is starting."""
     marker = os.open(f"{base}.starting", os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600)
     try:
+        if before is not None:
+            before()
         process = subprocess.Popen(
             [sys.executable, "-m", "jaxchain._cli.warm_process", base],
             stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,

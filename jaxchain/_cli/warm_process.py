@@ -36,6 +36,8 @@ import socket
 import sys
 import threading
 import time
+import traceback
+import warnings
 
 from .._setup import VERSION
 from .._sweeps.atomic import write_text
@@ -64,6 +66,7 @@ class _Warm:
         self.closing = b""  # b"w" replacing itself, b"b" stopping: the answer from now on
         self.commands: queue.Queue = queue.Queue()
         self.stopped = threading.Event()
+        self.replacing = threading.Lock()
         self.served = 0
         self.started = time.time()
 
@@ -115,25 +118,28 @@ class _Warm:
         self.state("idle")
         while True:
             try:
-                conn = self.commands.get(timeout=0.5)
-            except queue.Empty:
-                now = time.monotonic()
-                if self.stopped.is_set():
-                    return "stopped"
-                if now - last > self.idle_s:
-                    return "idle"
-                if now - checked > STALE_CHECK_S:
-                    checked = now
-                    if key(self.env, self.paths) != self.key:
-                        return "stale"
-                continue
-            try:
+                try:
+                    conn = self.commands.get(timeout=0.5)
+                except queue.Empty:
+                    now = time.monotonic()
+                    reason = ("stopped" if self.stopped.is_set() else
+                              "idle" if now - last > self.idle_s else None)
+                    if reason is None and now - checked > STALE_CHECK_S:
+                        checked = now
+                        reason = "stale" if key(self.env, self.paths) != self.key else None
+                    if reason is None:
+                        continue
+                    with self.lock:  # no command accepted now is left unserved
+                        if self.busy:
+                            continue
+                        self.closing = b"b"
+                    return reason
                 ended = self.serve_one(conn, main)
+                if ended:
+                    return ended
+                gc.collect()  # the command's cycles, after its status went back
             except KeyboardInterrupt:  # a command that went away as it ended
-                ended = "interrupted"
-            if ended:
-                return ended
-            gc.collect()  # the command's cycles, after its status went back
+                return "interrupted"
             last = time.monotonic()
 
     def serve_one(self, conn: socket.socket, main) -> str | None:
@@ -160,6 +166,7 @@ class _Warm:
         started = time.monotonic()
         done = threading.Event()
         done.interrupted = False  # set by `watch`
+        done.lock = threading.Lock()  # `watch` interrupts only a command not done
         threading.Thread(target=self.watch, args=(conn, done), daemon=True).start()
         status = _run(main, request, fds, done)
         ended = ("interrupted" if status == 130 or done.interrupted
@@ -202,13 +209,15 @@ class _Warm:
         replaces it."""
         with contextlib.suppress(OSError):
             conn.recv(1)
-        if done.is_set():
-            return
-        done.interrupted = True
-        null = os.open(os.devnull, os.O_RDWR)
-        for fd in (0, 1, 2):
-            os.dup2(null, fd)
-        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+        with done.lock:
+            if done.is_set():
+                return
+            done.interrupted = True
+            null = os.open(os.devnull, os.O_RDWR)
+            for fd in (0, 1, 2):
+                os.dup2(null, fd)
+            os.close(null)
+            signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
         if not done.wait(GRACE_S):
             self.log(f"interrupted pid={os.getpid()}: the work did not stop within "
                      f"{GRACE_S} s; replaced")
@@ -228,12 +237,15 @@ class _Warm:
     def replace(self) -> None:
         """End this process at once, a fresh one started in its place with the
         environment this one was started with: its marker first, so that a
-        command that comes meanwhile waits for it."""
+        command that comes meanwhile waits for it, then this process's files
+        removed, then the new process started. Once: a second caller (the main
+        thread and `watch`) waits here for the end of the process."""
+        self.replacing.acquire()
         with contextlib.suppress(OSError):
             os.unlink(f"{self.base}.starting")
         if key(self.env, self.paths) == self.key:  # not for code that changed since
             with contextlib.suppress(OSError):
-                spawn(self.base, self.env)
+                spawn(self.base, self.env, before=self.remove_files)
         self.remove_files()
         os._exit(0)
 
@@ -255,13 +267,23 @@ def _run(main, request: dict, fds: list[int], done: threading.Event) -> int:
         os.environ.update(request["env"])
         os.chdir(request["cwd"])
         try:
-            return main(request["argv"])
+            with warnings.catch_warnings():  # each command's warnings its own, as shown once
+                return main(request["argv"])
         except SystemExit as exit_:  # --help, --version, a usage error of argparse
             return exit_.code if isinstance(exit_.code, int) else int(exit_.code is not None)
         except KeyboardInterrupt:  # interrupted after `main` returned, or before it ran
             return 130
+        except BaseException:  # JAXCHAIN_TRACEBACK=1, a working directory gone: as its own
+            traceback.print_exc()  # process would show it, and this one goes on
+            return 1
     finally:
-        done.set()
+        while True:  # `watch` interrupts nothing once this is set
+            try:
+                with done.lock:
+                    done.set()
+                break
+            except KeyboardInterrupt:
+                continue
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(OSError, ValueError):
                 stream.flush()
@@ -289,7 +311,7 @@ def serve(base: str) -> None:
             os.unlink(f"{base}.log")
     # Stopped (SIGTERM): the loop ends at its next wait. An exception raised by
     # the handler could land in a callback whose exceptions Python ignores.
-    signal.signal(signal.SIGTERM, lambda *_: warm.stopped.set())
+    signal.signal(signal.SIGTERM, lambda *_: warm.stopped.set())  # the loop closes
     # Ctrl-C in a command reaches the command here as SIGINT (`_Warm.watch`), even
     # where the process that started this one ignored it (a background job).
     signal.signal(signal.SIGINT, signal.default_int_handler)
