@@ -10,7 +10,10 @@ import pytest
 import jaxchain as jc
 from helpers import EXAMPLE_RECORD, internal
 
-build_parser, COMMANDS = internal("command-line parser"), internal("commands")
+build_parser, ALL_COMMANDS = internal("command-line parser"), internal("commands")
+#: The commands that compute and write results (`server` shows and stops the warm
+#: process: test_warm.py).
+COMMANDS = [command for command in ALL_COMMANDS if command != "server"]
 belt_speeds, one_belt_speed = internal("belt speeds"), internal("one belt speed")
 
 #: Each command as the tests name it (figure needs a NAME), and the first file it
@@ -80,7 +83,7 @@ def test_a_command_of_one_belt_speed_refuses_a_list(capsys):
     assert "--vd" in line and "one belt speed" in line
 
 
-@pytest.mark.parametrize("command", COMMANDS)
+@pytest.mark.parametrize("command", ALL_COMMANDS)
 def test_help_names_no_issue_and_no_measured_time(command):
     """Measured times live on the documentation's Performance page, and issue
     numbers in the history, never in --help."""
