@@ -273,6 +273,7 @@ class Outputs:
         self.written: dict[str, Path] = {}
         self.made_by = {"command": getattr(args, "command", None),
                         "settings": settings_digest(args)}
+        _OUTPUTS.append(self)
         claimed = list(data) + [f"{stem}.{fmt}" for stem in figures for fmt in self.formats]
         writable_folder(self.folder)
         existing = [name for name in claimed if (self.folder / name).exists()]
@@ -300,14 +301,19 @@ class Outputs:
             return {}
 
     def path(self, name: str) -> Path:
-        """Where `name` goes, recorded as written (a store the library writes), and
-        in the folder's manifest as this command's with these settings."""
-        from .._sweeps.atomic import write_text
-
+        """Where `name` goes, recorded as written (a store the library writes); in
+        the folder's manifest once the command has run (`record_outputs`)."""
         self.written[name] = self.folder / name
-        made = self._manifest() | {name: self.made_by}
-        write_text(self.folder / MANIFEST, json.dumps(made, indent=1, sort_keys=True))
         return self.written[name]
+
+    def record(self) -> None:
+        """Name this command and its settings in the folder's manifest for each
+        file it wrote, written beside it and renamed into place."""
+        made = self._manifest() | {name: self.made_by for name, path in self.written.items()
+                                   if path.exists()}
+        partial = self.folder / f"{MANIFEST}.{os.getpid()}.partial"
+        partial.write_text(json.dumps(made, indent=1, sort_keys=True))
+        os.replace(partial, self.folder / MANIFEST)
 
     def dataset(self, ds, name: str) -> Path:
         """Write `ds` to netCDF (`save_dataset`)."""
@@ -373,6 +379,23 @@ def settings_digest(args) -> str:
               if name not in _PRESENTATION}
     text = json.dumps(chosen, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+#: The outputs of the command that runs, recorded in their folders' manifests
+#: when it ends (`record_outputs`).
+_OUTPUTS: list[Outputs] = []
+
+
+def record_outputs(ran: bool) -> None:
+    """At the end of a command: when it ran (its results written, some runs failed
+    perhaps), record its files in their folders' manifests; when it was refused or
+    failed before its results, record nothing, so that a folder it refused is left
+    as it was."""
+    while _OUTPUTS:
+        outputs = _OUTPUTS.pop()
+        if ran:
+            with contextlib.suppress(OSError):
+                outputs.record()
 
 
 def print_json(payload: dict, outputs: Outputs) -> None:

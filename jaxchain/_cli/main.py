@@ -13,7 +13,7 @@ from .._errors import ValidationError
 from .._engine.programs import keep_programs
 from .._setup import VERSION, configure
 from .common import (Parser, RunsFailed, UsageError, finish_prefetch, one_line,
-                     usage_message)
+                     record_outputs, usage_message)
 
 #: The subcommands, each a module of this package with `add_parser(sub)`.
 COMMANDS = ("localized", "sweep", "figure", "crosscheck", "work-precision", "boundaries",
@@ -128,16 +128,20 @@ def main(argv=None) -> int:
         if "matplotlib" in sys.modules:
             sys.modules["matplotlib"].use("Agg")
     compilation_cache()
+    ran = False
     try:
         args.run(args)
+        ran = True
         return 0
     except KeyboardInterrupt:
         status, message = 130, "interrupted"
     except Exception as err:
+        ran = isinstance(err, RunsFailed)  # its results written, the failed runs marked
         if os.environ.get("JAXCHAIN_TRACEBACK"):
             raise
         status, message = exit_status(err)
     finally:
+        record_outputs(ran)
         finish_prefetch()
         if set_backend:
             del os.environ["MPLBACKEND"]
