@@ -30,14 +30,14 @@ XLA_FLAGS = ("--xla_backend_extra_options="
              "xla_cpu_small_while_loop_byte_threshold=1000000000")
 
 
-def usable_cores() -> int:
+def _usable_cores() -> int:
     """The cores this process may run on (its CPU affinity where the system has one)."""
     if hasattr(os, "sched_getaffinity"):
         return max(1, len(os.sched_getaffinity(0)))
     return max(1, os.cpu_count() or 1)
 
 
-def device_count_chosen() -> bool:
+def _device_count_chosen() -> bool:
     """Whether the CPU device count was chosen before `configure`: by
     `jax.config.update("jax_num_cpu_devices", n)`, the environment variable
     JAX_NUM_CPU_DEVICES, or `--xla_force_host_platform_device_count` in XLA_FLAGS."""
@@ -84,10 +84,10 @@ def configure(devices: int | None = None) -> None:
     jax.config.update("jax_enable_x64", True)
     if "XLA_FLAGS" not in os.environ:
         os.environ["XLA_FLAGS"] = XLA_FLAGS
-    if devices is None and device_count_chosen():
+    if devices is None and _device_count_chosen():
         return
     with contextlib.suppress(RuntimeError):  # backends already started
-        jax.config.update("jax_num_cpu_devices", devices or usable_cores())
+        jax.config.update("jax_num_cpu_devices", devices or _usable_cores())
 
 
 def check_float64() -> None:

@@ -15,7 +15,7 @@ from .._engine.status import Status
 CLASSES = (PERIODIC, IRREGULAR, UNDECIDED, STEADY_SLIDING, FAILED)
 
 
-def lyapunov_class(exponent: float, error: float) -> str:
+def _lyapunov_class(exponent: float, error: float) -> str:
     """"irregular" when the largest Lyapunov exponent is positive beyond its stated
     error (a chaotic state), "periodic" when it is not (a regular one: 0 within
     the error on a limit cycle or a torus, negative on an equilibrium), and
@@ -33,8 +33,8 @@ def classify(peak_times, on_halc, n_halc: int, status: int, lyapunov: float,
     - **The time delays** (the paper's criterion, Section 3.3): `delay_spread` of
         the HALC oscillators' delays to the reference (`reference_oscillator`)
         and of the reference's own periods, over the peaks after `t_from`.
-    - **The largest Lyapunov exponent** against its stated error
-        (`lyapunov_class`).
+    - **The largest Lyapunov exponent** against its stated error: irregular when
+        it is positive beyond the error, undecided when the error is unknown.
 
     When they agree, that is the class; when they disagree, "undecided" (both
     verdicts are returned). A chain at rest (n_halc = 0) is "steady sliding"; a
@@ -65,7 +65,7 @@ def classify(peak_times, on_halc, n_halc: int, status: int, lyapunov: float,
     others[ref] = False
     spread, period = delay_spread(tau_ref, phi[others], t_from, tolerances.max_period)
     by_delays = PERIODIC if spread <= tolerances.delay else IRREGULAR
-    by_lyapunov = lyapunov_class(lyapunov, lyapunov_error)
+    by_lyapunov = _lyapunov_class(lyapunov, lyapunov_error)
     if n_halc == 0:
         verdict = STEADY_SLIDING
     else:

@@ -56,7 +56,7 @@ def _null_vector(problem: ContinuationProblem, z):
     return jnp.linalg.svd(jac)[2][-1]
 
 
-def fold_start(problem: ContinuationProblem, z: Float[Array, " n+1"]) -> Float[Array, " 2n+1"]:
+def _fold_start(problem: ContinuationProblem, z: Float[Array, " n+1"]) -> Float[Array, " 2n+1"]:
     """Starting unknowns (u, p, w) of `solve_fold` from a point z = (u, p) near the
     fold: w is the right singular vector of G_u for its smallest singular value."""
     return jnp.concatenate([z, _null_vector(problem, z)])
@@ -116,7 +116,7 @@ def fold_point(problem: ContinuationProblem, near: Branch | Float[Array, " n+1"]
         z = jnp.concatenate([near.u[i], near.p[i][None]])
     else:
         z = jnp.asarray(near, dtype=float)
-    solution, ok = solve_fold(problem, fold_start(problem, z), tol)
+    solution, ok = solve_fold(problem, _fold_start(problem, z), tol)
     n = problem.u0.size
     u, p, w = solution[:n], solution[n], solution[n + 1:]
     if throw and not bool(ok):

@@ -25,7 +25,7 @@ def _require_ring(params: ChainParams, what: str) -> None:
                               "any chain")
 
 
-def fourier_blocks(params: ChainParams) -> Complex[Array, "n_osc 2 2"]:
+def _fourier_blocks(params: ChainParams) -> Complex[Array, "n_osc 2 2"]:
     """The Jacobian of eq. (5) at steady sliding (`jacobian`, by `jax.jacfwd`),
     block-diagonalised by the discrete Fourier transform of the ring.
 
@@ -67,7 +67,7 @@ def mode_eigenvalues(params: ChainParams) -> Complex[Array, "n_osc 2"]:
 
     Shape (n_osc, 2), complex, the larger real part first.
     """
-    blocks = fourier_blocks(params)
+    blocks = _fourier_blocks(params)
     half_trace = 0.5 * (blocks[:, 0, 0] + blocks[:, 1, 1])
     det = blocks[:, 0, 0] * blocks[:, 1, 1] - blocks[:, 0, 1] * blocks[:, 1, 0]
     root = jnp.sqrt(half_trace**2 - det)
@@ -215,7 +215,7 @@ def critical_mode(params: ChainParams, mode: int = 0):
     Theory*, Sect. 3.5).
 
     On the homogeneous ring, Fourier mode `mode` (0 in phase or N/2 anti-phase, a
-    real mode shape), from its 2x2 block (`fourier_blocks`); on any other chain the
+    real mode shape), from its 2x2 block (`_fourier_blocks`); on any other chain the
     eigenvalue of the Jacobian with the largest real part and positive imaginary
     part (`mode` must be 0).
 
@@ -243,7 +243,7 @@ def critical_mode(params: ChainParams, mode: int = 0):
         if mode not in (0, n / 2):
             raise ValidationError(f"mode must be 0 or N/2 = {n / 2} (a real mode shape), "
                                   f"got {mode!r}")
-        block = fourier_blocks(params)[mode]
+        block = _fourier_blocks(params)[mode]
         values, right = jnp.linalg.eig(block)
         i = jnp.argmax(values.imag)
         omega = values[i].imag
@@ -275,7 +275,7 @@ def _hopf_leading(params: ChainParams, guess, rtol, atol):
     return (*(jnp.atleast_1d(a) for a in fields), sol.result)
 
 
-def hopf_modes(params: ChainParams, guess, rtol: float = 1e-12, atol: float = 1e-12):
+def _hopf_roots(params: ChainParams, guess, rtol: float = 1e-12, atol: float = 1e-12):
     """(v_d, omega, slope, residual, steps, result) of the Hopf point: per Fourier
     mode on the homogeneous ring (`_hopf_modes`), of the leading eigenvalue
     otherwise (`_hopf_leading`), each of shape (modes,) (result: () or (modes,),
@@ -332,7 +332,7 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
         a = real_array(value, name)
         if a.ndim != 0 or not (np.isfinite(a) and a > 0):
             raise ValidationError(f"{name} must be a finite {what} > 0, got {a.tolist()!r}")
-    v, omega, slope, residual, steps, result = hopf_modes(params, guess, rtol, atol)
+    v, omega, slope, residual, steps, result = _hopf_roots(params, guess, rtol, atol)
     found = (result == optx.RESULTS.successful) & (v > 0)
     if not throw:
         v = jnp.where(found, v, jnp.nan)

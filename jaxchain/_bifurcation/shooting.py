@@ -152,9 +152,9 @@ def floquet_multipliers(params: ChainParams, y0: State, period, options: Shootin
     return values[order], jnp.argmax(order == values.size - 1)
 
 
-def orbit_extrema(params: ChainParams, y0: State, period, options: ShootingOptions
-                  ) -> tuple[Float[Array, " n_osc"], Float[Array, " n_osc"],
-                             Float[Array, " n_osc"]]:
+def _orbit_extrema(params: ChainParams, y0: State, period, options: ShootingOptions
+                   ) -> tuple[Float[Array, " n_osc"], Float[Array, " n_osc"],
+                              Float[Array, " n_osc"]]:
     """(x_max, x_min, smallest slip speed |x' - v_d|) of each oscillator over one
     period, from `options.n_samples` dense-output samples."""
     ts = period * jnp.linspace(0.0, 1.0, options.n_samples)
@@ -208,7 +208,7 @@ def describe_orbit(params: ChainParams, u: Float[Array, " 2n+1"], options: Shoot
     """The `PeriodicOrbit` of the shooting unknowns `u` (traceable)."""
     y0, period = unpack(u)
     multipliers, trivial = floquet_multipliers(params, y0, period, options)
-    x_max, x_min, slip_speed = orbit_extrema(params, y0, period, options)
+    x_max, x_min, slip_speed = _orbit_extrema(params, y0, period, options)
     amplitudes = 0.5 * (x_max - x_min)
     others = jnp.where(jnp.arange(multipliers.size) == trivial, 0.0, jnp.abs(multipliers))
     residual = jnp.max(jnp.abs(shooting_residual(u, params, options)))

@@ -39,7 +39,7 @@ distribution of n_HALC at the belt speed nearest 1.5). --quick: one oscillator,
 v_d = 0.8:2.2:8, 200 samples, t_end 500."""
 
 
-def pair(text: str) -> tuple[float, float]:
+def _pair(text: str) -> tuple[float, float]:
     """An argparse type: LO,HI with LO < HI, both finite."""
     try:
         lo, hi = (float(v) for v in text.split(","))
@@ -59,10 +59,10 @@ def add_parser(sub):
                    help="oscillators on the ring (default 20; --quick 1)")
     p.add_argument("--samples", type=positive_int, default=None, metavar="S",
                    help="initial states per belt speed (default 1000; --quick 200)")
-    p.add_argument("--x-range", type=pair, default=box.x, metavar="LO,HI",
+    p.add_argument("--x-range", type=_pair, default=box.x, metavar="LO,HI",
                    help=f"box of x_n(0) (default {box.x[0]:g},{box.x[1]:g}; write "
                         "--x-range=-3,3 when LO is negative)")
-    p.add_argument("--v-range", type=pair, default=box.v, metavar="LO,HI",
+    p.add_argument("--v-range", type=_pair, default=box.v, metavar="LO,HI",
                    help=f"box of x_n'(0) (default {box.v[0]:g},{box.v[1]:g})")
     p.add_argument("--check", type=int, default=None, metavar="C",
                    help="samples of the convergence check, run again to 2 t_end "

@@ -6,7 +6,8 @@ from pathlib import Path
 
 from .._physics.chain import BOUNDARIES, Graph
 from .._physics.friction import FRICTION_LAWS, Tabulated
-from .._physics.params import ChainParams, mistune
+from .._physics.mistuning import mistune
+from .._physics.params import ChainParams
 from .._errors import ValidationError
 from .._physics.record import chain_from_file
 from .common import UsageError
@@ -77,7 +78,7 @@ def _non_negative(text: str) -> float:
     return value
 
 
-def parse_friction(text: str | None):
+def _parse_friction(text: str | None):
     """The friction law of `--friction NAME:key=value,...` (None: eq. (1)).
 
     **Raises:**
@@ -126,7 +127,7 @@ def chain_params(args, n_osc: int, **fields) -> ChainParams:
         topology = {"n_osc": n_osc, "boundary": args.boundary}
     else:
         topology = {"graph": Graph.lattice(*lattice, args.boundary)}
-    base = ChainParams(**topology, friction=parse_friction(args.friction), **fields)
+    base = ChainParams(**topology, friction=_parse_friction(args.friction), **fields)
     params = base
     if args.chain is not None:
         try:

@@ -225,7 +225,7 @@ def add_tolerance_options(g, rtol: float = DEFAULTS.rtol, atol: float = DEFAULTS
 FIGURE_FORMATS = ("png", "pdf", "svg")
 
 
-def figure_formats(text: str) -> list[str]:
+def _figure_formats(text: str) -> list[str]:
     """An argparse type: a comma-separated list of `FIGURE_FORMATS`."""
     names = [v.strip().lower() for v in text.split(",") if v.strip()]
     unknown = [v for v in names if v not in FIGURE_FORMATS]
@@ -247,7 +247,7 @@ def add_output_options(p: argparse.ArgumentParser, *, resume: str | None = None,
     if resume is not None:
         g.add_argument("--resume", action="store_true", help=f"continue {resume}")
     if figures:
-        g.add_argument("--format", type=figure_formats, default=["png"], metavar="FMT,...",
+        g.add_argument("--format", type=_figure_formats, default=["png"], metavar="FMT,...",
                        help=f"figure formats, of {','.join(FIGURE_FORMATS)} (default png)")
     g.add_argument("--json", action="store_true",
                    help="print one JSON document on stdout, with the paths of the "
@@ -260,7 +260,7 @@ class Outputs:
     whole or not at all, and listed by name in its JSON (`as_json`).
 
     Each file written is recorded in the folder's `MANIFEST` with the command and
-    the digest of its settings (`settings_digest`). A claimed file that exists is
+    the digest of its settings (`_settings_digest`). A claimed file that exists is
     replaced when the manifest says that this command made it with the same
     settings (a command run twice; `again` is then True, and a note says so);
     otherwise it is refused (`UsageError`, exit status 2) unless --overwrite, or
@@ -272,10 +272,10 @@ class Outputs:
         self.formats = getattr(args, "format", ["png"])
         self.written: dict[str, Path] = {}
         self.made_by = {"command": getattr(args, "command", None),
-                        "settings": settings_digest(args)}
+                        "settings": _settings_digest(args)}
         _OUTPUTS.append(self)
         claimed = list(data) + [f"{stem}.{fmt}" for stem in figures for fmt in self.formats]
-        writable_folder(self.folder)
+        _writable_folder(self.folder)
         existing = [name for name in claimed if (self.folder / name).exists()]
         made = self._manifest()
         self.again = bool(existing) and all(made.get(n) == self.made_by for n in existing)
@@ -353,7 +353,7 @@ _PRESENTATION = ("run", "command", "out", "overwrite", "resume", "json", "no_pro
                  "format")
 
 
-def settings_digest(args) -> str:
+def _settings_digest(args) -> str:
     """The digest of a command's settings: every option but those of `_PRESENTATION`,
     with the content of each file an option names (a chain file, a friction table,
     records; in lists too): an edited input is other settings. An input that is not
@@ -470,7 +470,7 @@ def usage_message(err: Exception) -> str:
     return text
 
 
-def writable_folder(path: Path) -> None:
+def _writable_folder(path: Path) -> None:
     """Create the output folder now, before any computation.
 
     **Raises:**

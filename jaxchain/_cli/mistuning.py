@@ -111,7 +111,7 @@ def add_parser(sub):
 
 def run(args) -> None:
     if args.design:
-        return run_design(args)
+        return _run_design(args)
     if not 0 <= args.transient < args.t_end:
         raise UsageError(f"--transient must lie in [0, t_end = {args.t_end:g}), got "
                          f"{args.transient:g}")
@@ -173,7 +173,7 @@ def _print_summary(s: dict) -> None:
           f"homogeneous chain (period {s['state_period']:.4f})")
 
 
-def run_design(args) -> None:
+def _run_design(args) -> None:
     """`--design`: `design_study`, its JSON and figure."""
     from .._studies.mistuning.design_study import design_study
     from .._plots.mistuning import plot_mistuning_design

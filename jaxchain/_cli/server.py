@@ -27,7 +27,7 @@ is off under CI or a batch scheduler (CI, SLURM_JOB_ID, PBS_JOBID, LSB_JOBID).
                              commands served, version, environment
   jaxchain server stop       stop them all (--pid PID: one)"""
 
-#: Seconds `stop` waits for a warm process to end on SIGTERM (it finishes the
+#: Seconds `_stop` waits for a warm process to end on SIGTERM (it finishes the
 #: command it runs) before it kills it.
 STOP_S = 10.0
 
@@ -50,10 +50,10 @@ def add_parser(sub):
 
 
 def run(args) -> None:
-    (show if args.action == "status" else stop)(args)
+    (_show if args.action == "status" else _stop)(args)
 
 
-def show(args) -> None:
+def _show(args) -> None:
     """Print each warm process of this user (`jaxchain._cli.warm.states`)."""
     found = states()
     if args.json:
@@ -72,7 +72,7 @@ def show(args) -> None:
               f"{s['version']:<8} {s['prefix']}")
 
 
-def stop(args) -> None:
+def _stop(args) -> None:
     """Stop this user's warm processes (or the one of --pid): SIGTERM, which ends
     one after the command it runs, then SIGKILL after `STOP_S` seconds.
 

@@ -46,7 +46,7 @@ shaded (the paper's red dashed lines). A failed trajectory is marked in the stor
 and the exit status is 1."""
 
 
-def families(text: str) -> list[str]:
+def _families(text: str) -> list[str]:
     """An argparse type: a comma-separated list of initial-condition families."""
     names = [v.strip() for v in text.split(",") if v.strip()]
     unknown = [v for v in names if v not in FAMILIES]
@@ -61,7 +61,7 @@ def add_parser(sub):
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     g = p.add_argument_group("grid (eq. (5) of the paper; other parameters eq. (7))")
     add_vd_option(g, belt_speeds("1.0:2.0:21"), "belt speeds")
-    g.add_argument("--ics", type=families, default=["eq8"], metavar="eq8,eq10",
+    g.add_argument("--ics", type=_families, default=["eq8"], metavar="eq8,eq10",
                    help="initial-condition families, each with k = 1..N excited "
                         "oscillators around oscillator N//2+1 (default eq8)")
     add_ring_options(g)

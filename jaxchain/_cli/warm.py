@@ -8,7 +8,7 @@ own side is `jaxchain._cli.warm_process`; `jaxchain server` shows and stops them
   `IDLE_S` seconds without a command (JAXCHAIN_SERVER_IDLE, in seconds), when its
   code or its installed packages change, and on `jaxchain server stop`.
 - A later command with the same Python, the same installed packages
-  (`installed_state`), the same jaxchain source files (`source_identity`) and the
+  (`_installed_state`), the same jaxchain source files (`source_identity`) and the
   same environment variables that set JAX, XLA, jaxchain, matplotlib, threads and
   paths (`key`) runs there, with its own standard input, output and error (their
   file descriptors are passed over the socket), working directory, environment
@@ -91,7 +91,7 @@ def enabled(env=os.environ) -> bool:
     return not any(env.get(name) for name in NO_SERVER_WHERE)
 
 
-def installed_state(paths=None) -> list:
+def _installed_state(paths=None) -> list:
     """The installed distributions on `paths` (by default the site-packages folders
     of `sys.path`, not the working directory or the script's): each `*.dist-info`
     and `*.egg-info` entry's name (which holds the version) and its modification
@@ -117,7 +117,7 @@ def installed_state(paths=None) -> list:
 
 def key(env=os.environ, paths=None) -> str:
     """The key of the warm process that may run a command from `env`: Python and
-    its environment (`sys.prefix`), the installed packages (`installed_state` of
+    its environment (`sys.prefix`), the installed packages (`_installed_state` of
     `paths`), the source files of jaxchain (`source_identity`) and the environment
     variables of `KEY_PREFIXES` and `KEY_NAMES` (the switches aside)."""
     chosen = {k: v for k, v in env.items()
@@ -125,7 +125,7 @@ def key(env=os.environ, paths=None) -> str:
               and not k.startswith(SWITCH_PREFIX)}
     data = {"prefix": sys.prefix, "python": os.path.realpath(sys.executable),
             "version": sys.version, "source": source_identity(),
-            "installed": installed_state(paths), "env": chosen}
+            "installed": _installed_state(paths), "env": chosen}
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:24]
 
 

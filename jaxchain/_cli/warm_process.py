@@ -296,7 +296,7 @@ def _run(main, request: dict, fds: list[int], done: threading.Event) -> int:
         os.umask(umask)
 
 
-def serve(base: str) -> None:
+def _serve(base: str) -> None:
     """Be the warm process at `<base>.sock`: import what the commands use, listen,
     and run each command as `run_here` would, until idle, stopped, stale or over
     its memory bound (then replaced). Its process id is in `<base>.pid`."""
@@ -350,4 +350,4 @@ def serve(base: str) -> None:
 
 
 if __name__ == "__main__":
-    serve(sys.argv[1])
+    _serve(sys.argv[1])

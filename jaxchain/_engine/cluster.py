@@ -176,7 +176,7 @@ _free_devices: queue.Queue = queue.Queue()
 _worker_devices: list = []
 
 
-def on_a_free_device(task: Callable, *args):
+def _on_a_free_device(task: Callable, *args):
     """`task(*args, devices=[device])` on a device of this worker that no other of
     its tasks is using, waiting for one if all are busy: the body of each task of
     `run_tasks`."""
@@ -192,7 +192,7 @@ def run_tasks(client, task: Callable, shared, arguments: Sequence[tuple],
               ) -> None:
     """Run `task(shared, *arguments[i], devices=[device])` for every i on the
     cluster of `client`, each on a device of its worker that none of its other
-    tasks is using (`on_a_free_device`), as a task named `names[i]` (unique: the
+    tasks is using (`_on_a_free_device`), as a task named `names[i]` (unique: the
     scheduler hands back the result of a key it holds without running the task
     again). `shared` (the plan of the whole run) is sent to every worker once, not
     with every task. `bar` advances by one as each task finishes, whichever worker
@@ -213,7 +213,7 @@ def run_tasks(client, task: Callable, shared, arguments: Sequence[tuple],
                                              else np.zeros(len(arguments)))))
     client.register_plugin(JaxWorker.of_this_process(client, (task.__module__,)))
     plan = client.scatter(shared, broadcast=True, hash=False)
-    futures = [client.submit(on_a_free_device, task, plan, *args, key=name,
+    futures = [client.submit(_on_a_free_device, task, plan, *args, key=name,
                              priority=-int(r))
                for args, name, r in zip(arguments, names, rank)]
     try:

@@ -107,7 +107,7 @@ def lane_params(params: ChainParams, n_lanes: int, **per_lane) -> ChainParams:
     return lanes
 
 
-def as_lanes(params: ChainParams, n_lanes: int) -> ChainParams:
+def _as_lanes(params: ChainParams, n_lanes: int) -> ChainParams:
     """`params` as lanes: a batch (from `lane_params` or `stack_chains`, v_d of shape
     (n_lanes,)) as it is, one chain broadcast by `lane_params`.
 
@@ -153,7 +153,7 @@ def expected_cost(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"]
     distance of its initial state from steady sliding at its belt speed. Lanes that
     start far from it (more oscillators excited) stick and slip more, and take more
     steps. `params` holds each lane's parameters (`lane_params`)."""
-    return distance_from(np.asarray(compiled(lanes_steady_sliding, params)), y0)
+    return distance_from(np.asarray(compiled(_lanes_steady_sliding, params)), y0)
 
 
 def distance_from(steady: Float[ArrayLike, "lanes 2 n_osc"],
@@ -164,7 +164,7 @@ def distance_from(steady: Float[ArrayLike, "lanes 2 n_osc"],
     return np.sqrt(np.sum((y0[:, 0] - x0) ** 2 + y0[:, 1] ** 2, -1))
 
 
-def lanes_steady_sliding(params: ChainParams) -> Float[jax.Array, "lanes 2 n_osc"]:
+def _lanes_steady_sliding(params: ChainParams) -> Float[jax.Array, "lanes 2 n_osc"]:
     """Steady sliding (`steady_sliding`) of each lane of `params` (`lane_params`)."""
     return eqx.filter_vmap(steady_sliding)(params)
 
@@ -174,7 +174,7 @@ def lane_starts(params: ChainParams, ics: AbstractInitialCondition
     """The initial state (`initial_states`) and the steady sliding of each lane, in
     one program (`compiled`): what an ensemble needs before its run, y0 and the
     lanes' `expected_cost` (`distance_from`)."""
-    return initial_states(params, ics), lanes_steady_sliding(params)
+    return initial_states(params, ics), _lanes_steady_sliding(params)
 
 
 def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
@@ -226,7 +226,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
     **Raises:**
 
     `ValidationError` for an unknown engine, an empty list of lanes, or lane parameters
-    that do not lead with (lanes,) (`as_lanes`); see also `check_observers`.
+    that do not lead with (lanes,); see also `check_observers`.
     """
     if observers is not None:
         observers = check_observers(observers)
@@ -234,7 +234,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
     n_lanes = y0.shape[0]
     if n_lanes == 0:
         raise ValidationError("run_lanes needs at least one lane, got 0")
-    params = as_lanes(params, n_lanes)
+    params = _as_lanes(params, n_lanes)
     devices = list(devices or jax.local_devices())[:n_lanes]
     if engine is None:
         engine = "queue" if devices[0].platform == "cpu" else "vmap"
@@ -257,7 +257,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
         if program is None:
             _run_block.lower(*example)
             program = _run_block
-        home = shared_device(devices)
+        home = _shared_device(devices)
 
         def task(i, device):
             pick = by_cost[np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)]
@@ -286,7 +286,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
     return jax.tree_util.tree_map(lambda x: x[np.argsort(by_cost)], obs)
 
 
-def shared_device(devices: Sequence) -> Callable:
+def _shared_device(devices: Sequence) -> Callable:
     """Where the queue's worker for each device runs its tasks: on a CPU, every
     worker on the first device; elsewhere each on its own.
 

@@ -71,7 +71,7 @@ def turning_directions(params, y, modes, tol):
     return jnp.where(modes == 0, 0.0, sigma)
 
 
-def guard_values(params, y, modes, sigma, observe, tol):
+def _guard_values(params, y, modes, sigma, observe, tol):
     """Per-oscillator guards (switch, turning), each > 0 while nothing happens; +inf
     where a guard does not apply.
 
@@ -92,7 +92,7 @@ def guard(t, y, args, **kwargs):
     """The event function: the smallest guard, a scalar (see the module docstring).
     `y` is the (state, work) pair of `mode_field`; `args` is (params, modes, sigma,
     observe, tol)."""
-    switch, turning = guard_values(args[0], y[0], *args[1:])
+    switch, turning = _guard_values(args[0], y[0], *args[1:])
     return jnp.minimum(jnp.min(switch), jnp.min(turning))
 
 
@@ -107,7 +107,7 @@ def switch(params, y, modes, sigma, observe, tol):
     - slip ends (s_n (x_n' - v_d) <= tol, decelerating): stick if |f_n| < mu_st;
       otherwise the force needed to stick exceeds static friction, and slip
       reverses to direction -sign(f_n), through v_rel = 0;
-    - a turning point (its guard of `guard_values` within tol of zero,
+    - a turning point (its guard of `_guard_values` within tol of zero,
       decelerating) gives an extremum.
 
     Switching oscillators get x_n' = v_d exactly (a change of at most `tol`), so
@@ -124,7 +124,7 @@ def switch(params, y, modes, sigma, observe, tol):
     x, v = y
     a = mode_field(0.0, (y, None), (params, modes))[0][1]
     f = stick_force(params, x)
-    switch_guard, turning_guard = guard_values(params, y, modes, sigma, observe, tol)
+    switch_guard, turning_guard = _guard_values(params, y, modes, sigma, observe, tol)
     stick = modes == 0
     due = switch_guard <= tol
     leaves = stick & due & (jnp.sign(f) * _stick_force_rate(params, v) >= 0)

@@ -1,11 +1,11 @@
 """The chain's topology: which oscillators the coupling springs eta_c join (a
 `Graph`: a ring, eq. (5) of the paper, an open line, a 2-D lattice or any list of
-links) and mistuning. The coupling force of the springs is in `forces`."""
+links). The coupling force of the springs is in `forces`; a random stiffness
+mistuning is in `mistuning`."""
 
 import functools
 
 import equinox as eqx
-import jax
 import numpy as np
 
 from .._errors import ValidationError
@@ -330,40 +330,3 @@ def neighbours(boundary: str, n_osc: int) -> tuple[np.ndarray, np.ndarray]:
     if boundary != "ring":
         left[0], right[-1] = -1, -1
     return left, right
-
-
-class Mistuning(eqx.Module):
-    """The record of a random stiffness mistuning: deviations delta_n of eq. (5)
-    drawn from a normal distribution of standard deviation `sigma` with the JAX key
-    `jax.random.key(seed)`, so that the chain can be rebuilt from the record.
-
-    **Arguments:**
-
-    - `sigma`: standard deviation of delta_n (>= 0, dimensionless).
-    - `seed`: integer seed of the key.
-
-    **Raises:**
-
-    `ValidationError` for a negative or non-finite sigma, or a seed that is not an
-    integer.
-    """
-
-    sigma: float = eqx.field(static=True)
-    seed: int = eqx.field(static=True)
-
-    def __check_init__(self):
-        if not (isinstance(self.sigma, (int, float, np.floating, np.integer))
-                and np.isfinite(self.sigma) and self.sigma >= 0):
-            raise ValidationError(f"Mistuning.sigma must be a finite number >= 0, got "
-                                  f"{self.sigma!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
-            raise ValidationError(f"Mistuning.seed must be an integer, got {self.seed!r}")
-
-    def deviations(self, n_osc: int) -> np.ndarray:
-        """delta_n, shape (n_osc,): sigma times standard normal draws of the key."""
-        draws = jax.random.normal(jax.random.key(int(self.seed)), (n_osc,), dtype=float)
-        return float(self.sigma) * np.asarray(draws)
-
-    def stiffness(self, n_osc: int) -> np.ndarray:
-        """1 + delta_n, shape (n_osc,) (the ground stiffness k_n / k of eq. (5))."""
-        return 1.0 + self.deviations(n_osc)

@@ -81,8 +81,8 @@ def _lattice_stiffnesses(params: ChainParams):
             jnp.reshape(eta[split:], (cols, -1)).T)
 
 
-def link_extensions(params: ChainParams, x: Float[Array, " n_osc"]
-                    ) -> Float[Array, " n_links"]:
+def _link_extensions(params: ChainParams, x: Float[Array, " n_osc"]
+                     ) -> Float[Array, " n_links"]:
     """The extension of each coupling spring, x_right - x_left (the ground's
     displacement is 0), in the link order of the chain's `Graph`.
 
@@ -138,7 +138,7 @@ def coupling_force(params: ChainParams, x: Float[Array, " n_osc"]
     if graph.kind == "ring" and jnp.ndim(params.eta_c) == 0:
         return params.eta_c * (2 * x - jnp.roll(x, 1) - jnp.roll(x, -1))
     if graph.is_line:
-        tension = params.eta_c * link_extensions(params, x)
+        tension = params.eta_c * _link_extensions(params, x)
         if graph.kind == "ring":  # link n pulls oscillator n forward, n+1 back
             return jnp.roll(tension, 1) - tension
         if graph.kind == "free":
@@ -154,7 +154,7 @@ def coupling_force(params: ChainParams, x: Float[Array, " n_osc"]
         force = (_force_along(eta_along * _extensions_along(grid, along, 1), along, 1)
                  + _force_along(eta_across * _extensions_along(grid, across, 0), across, 0))
         return jnp.reshape(force, (-1,))
-    tension = params.eta_c * link_extensions(params, x)
+    tension = params.eta_c * _link_extensions(params, x)
     return jnp.asarray(graph.incidence()).T @ tension
 
 
@@ -163,7 +163,7 @@ def coupling_energy(params: ChainParams, x: Float[Array, " n_osc"]
     """The elastic energy of each coupling spring, eta_l (extension)^2 / 2, shape
     (n_links,), dimensionless (in units of P x_0). Its gradient in x is
     `coupling_force`."""
-    return 0.5 * params.eta_c * link_extensions(params, x) ** 2
+    return 0.5 * params.eta_c * _link_extensions(params, x) ** 2
 
 
 def stiffness_matrix(params: ChainParams) -> Float[Array, "n_osc n_osc"]:

@@ -52,7 +52,7 @@ def excited_block(n_osc: int, n_excited: int, boundary: str | Graph = "ring"
     graph = as_graph(boundary, n_osc)
     mask = np.zeros(n_osc, dtype=bool)
     if not graph.is_line:
-        mask[patch_order(graph)[:n_excited]] = True
+        mask[_patch_order(graph)[:n_excited]] = True
         return mask
     centre = n_osc // 2  # 0-based index of oscillator N//2 + 1
     start = centre - (n_excited - 1) // 2
@@ -71,14 +71,14 @@ def centre_site(graph: Graph) -> int:
     return graph.n_osc // 2
 
 
-def patch_order(graph: Graph) -> np.ndarray:
+def _patch_order(graph: Graph) -> np.ndarray:
     """The oscillators by graph distance from `centre_site`, ties by index: the
     first k form the excited patch of k sites."""
     distance = graph.distances()[centre_site(graph)]
     return np.lexsort((np.arange(graph.n_osc), distance))
 
 
-def alternating_signs(graph: Graph) -> np.ndarray:
+def _alternating_signs(graph: Graph) -> np.ndarray:
     """The signs of the out-of-phase excitation of eq. (8), shape (n_osc,): (-1)^n
     (n from 1) on a line or any links, the checkerboard (-1)^(r + c + 1) on a
     lattice (which is (-1)^n along a single row)."""
@@ -140,7 +140,7 @@ class OutOfPhaseExcitation(AbstractInitialCondition):
             )
         base = -self.base_sign * steady_sliding(params)[0]
         if params.graph.kind == "lattice":
-            signs = jnp.asarray(alternating_signs(params.graph))
+            signs = jnp.asarray(_alternating_signs(params.graph))
         else:  # as eq. (8) reads
             signs = (-1.0) ** jnp.arange(1, params.n_osc + 1)
         x = base + jnp.where(excited, 2.0 * signs, 0.0)

@@ -10,7 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
-from .chain import Graph, Mistuning, as_graph
+from .chain import Graph, as_graph
+from .mistuning import Mistuning
 from .scales import Scales
 from .friction import AbstractFrictionLaw, ExponentialDecay, as_parameter, check_values
 from .._errors import ValidationError
@@ -223,33 +224,6 @@ def _shape_message(name, shape, shapes) -> str:
     return f"{name} must have shape {allowed}, got {shape}{hint}"
 
 
-def mistune(params: ChainParams, sigma: float, seed: int) -> ChainParams:
-    """`params` with random stiffness mistuning: k_n = 1 + delta_n, delta_n drawn
-    from a normal distribution of standard deviation `sigma` with the JAX key
-    `jax.random.key(seed)`, and the `Mistuning` record kept in `params.mistuning`
-    (it rebuilds the same chain). sigma = 0 leaves the stiffness as it is (the
-    homogeneous chain, bit for bit).
-
-    **Arguments:**
-
-    - `params`: the chain parameters.
-    - `sigma`: standard deviation of delta_n (>= 0, dimensionless).
-    - `seed`: integer seed.
-
-    **Returns:**
-
-    A new `ChainParams`.
-
-    **Raises:**
-
-    `ValidationError` for a negative sigma or a seed that is not an integer, or when the
-    draw gives a stiffness <= 0 (sigma too large).
-    """
-    record = Mistuning(sigma=sigma, seed=seed)
-    stiffness = params.stiffness if sigma == 0 else record.stiffness(params.n_osc)
-    return with_fields(params, stiffness=stiffness, mistuning=record)
-
-
 def single_oscillator(params: ChainParams, index: int = 0) -> ChainParams:
     """Oscillator `index` of the chain on its own: n_osc = 1 on the ring (no
     coupling), with that oscillator's xi, stiffness, load and friction law, the
@@ -457,10 +431,10 @@ def is_homogeneous_ring(params: ChainParams) -> bool:
     block-circulant (the Fourier route of `mode_eigenvalues`)."""
     if params.boundary != "ring" or params.mass is not None:
         return False
-    return all(np.ndim(leaf) == 0 for leaf in per_oscillator_leaves(params))
+    return all(np.ndim(leaf) == 0 for leaf in _per_oscillator_leaves(params))
 
 
-def per_oscillator_leaves(params: ChainParams) -> list:
+def _per_oscillator_leaves(params: ChainParams) -> list:
     """The fields that may hold one value per oscillator or per link: stiffness,
     load, xi, eta_c, mass (unless None) and the friction law's parameters."""
     mass = [] if params.mass is None else [params.mass]

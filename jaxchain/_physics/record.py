@@ -5,7 +5,8 @@ import dataclasses
 
 import numpy as np
 
-from .chain import Graph, Mistuning
+from .chain import Graph
+from .mistuning import Mistuning
 from .scales import Scales
 from .friction import FRICTION_LAWS
 from .params import ChainParams, _chain_fields
@@ -21,13 +22,13 @@ def _plain(value):
     return a.item() if a.ndim == 0 else a.tolist()
 
 
-def law_names(law) -> list[str]:
+def _law_names(law) -> list[str]:
     """Every field of a friction law (class or instance), static ones included (the
     speeds of a `Tabulated` law): what rebuilds it."""
     return [f.name for f in dataclasses.fields(law)]
 
 
-def graph_record(graph: Graph) -> dict:
+def _graph_record(graph: Graph) -> dict:
     """The graph as plain data: `boundary` (a line's name; for a lattice one name,
     or "ACROSS,ALONG" when its directions differ; "links" otherwise), with
     `lattice` = [rows, cols] or `links` = [left_0, right_0, left_1, ...] (0-based,
@@ -40,8 +41,8 @@ def graph_record(graph: Graph) -> dict:
     return {"boundary": "links", "links": [int(e) for link in graph.links for e in link]}
 
 
-def graph_from_record(record: dict, n_osc: int) -> Graph:
-    """The graph of a record's `boundary`, `lattice` and `links` (`graph_record`;
+def _graph_from_record(record: dict, n_osc: int) -> Graph:
+    """The graph of a record's `boundary`, `lattice` and `links` (`_graph_record`;
     a chain file may also give `links` as a list of pairs).
 
     **Raises:** `ValidationError` for a lattice that is not two sizes or whose size is
@@ -73,10 +74,11 @@ def graph_from_record(record: dict, n_osc: int) -> Graph:
 
 def chain_record(params: ChainParams) -> dict:
     """Every setting of the chain as flat plain data: `n_osc`, the graph
-    (`graph_record`), `friction` (the law's name in `FRICTION_LAWS`), each array
-    field of `ChainParams` (`mass` only when given) and each field of the law by
-    name (a number, or a list of one value per oscillator or link, or a table), and
-    `mistuning_sigma`, `mistuning_seed` when the stiffness was drawn by `mistune`.
+    (`boundary`, with `lattice` or `links`), `friction` (the law's name in
+    `FRICTION_LAWS`), each array field of `ChainParams` (`mass` only when given) and
+    each field of the law by name (a number, or a list of one value per oscillator
+    or link, or a table), and `mistuning_sigma`, `mistuning_seed` when the stiffness
+    was drawn by `mistune`.
     `chain_from_record` rebuilds the chain from it.
 
     **Raises:**
@@ -85,11 +87,11 @@ def chain_record(params: ChainParams) -> dict:
     be rebuilt by name). `check_recordable` raises it before a run.
     """
     law = type(params.friction)
-    out = {"n_osc": params.n_osc} | graph_record(params.graph)
+    out = {"n_osc": params.n_osc} | _graph_record(params.graph)
     out["friction"] = check_recordable(params)
     out |= {name: _plain(getattr(params, name)) for name in _chain_fields()
             if getattr(params, name) is not None}
-    out |= {name: _plain(getattr(params.friction, name)) for name in law_names(law)}
+    out |= {name: _plain(getattr(params.friction, name)) for name in _law_names(law)}
     if params.mistuning is not None:
         out |= {"mistuning_sigma": float(params.mistuning.sigma),
                 "mistuning_seed": int(params.mistuning.seed)}
@@ -121,7 +123,7 @@ def chain_settings(mapping: dict) -> list[str]:
     """The keys of `mapping` (for example a Dataset's attributes) that belong to the
     chain's record (`chain_record`), for the friction law it names."""
     law = FRICTION_LAWS.get(mapping.get("friction"), FRICTION_LAWS["exponential"])
-    keys = set(_META) | set(_chain_fields()) | set(law_names(law))
+    keys = set(_META) | set(_chain_fields()) | set(_law_names(law))
     return [k for k in mapping if k in keys]
 
 
@@ -144,7 +146,7 @@ def chain_from_record(record: dict, base: ChainParams | None = None) -> ChainPar
         raise ValidationError(f"friction must be one of {', '.join(FRICTION_LAWS)}, "
                               f"got {unknown_law!r}")
     law = FRICTION_LAWS[record.pop("friction")] if "friction" in record else type(base.friction)
-    names = law_names(law)
+    names = _law_names(law)
     allowed = set(_META) | set(_chain_fields()) | set(names)
     unknown = sorted(set(record) - allowed)
     if unknown:
@@ -168,7 +170,7 @@ def chain_from_record(record: dict, base: ChainParams | None = None) -> ChainPar
         fields["n_osc"] = int(np.prod([int(v) for v in size]))
     n_osc = fields.setdefault("n_osc", base.n_osc)
     if topology:
-        fields["graph"] = graph_from_record(topology, n_osc)
+        fields["graph"] = _graph_from_record(topology, n_osc)
     elif n_osc == base.n_osc:
         fields["graph"] = base.graph
     else:
@@ -245,7 +247,7 @@ def chain_from_file(path, base: ChainParams | None = None) -> ChainParams:
             raise ValidationError(f"units must be \"SI\" or \"dimensionless\", got {units!r}")
         si = {k: record.pop(k) for k in SI_KEYS if k in record}
         law = FRICTION_LAWS[record.pop("friction", "exponential")]
-        law = law(**{k: record.pop(k) for k in law_names(law) if k in record})
+        law = law(**{k: record.pop(k) for k in _law_names(law) if k in record})
         topology = {k: record.pop(k) for k in ("boundary", "lattice", "links") if k in record}
         n_osc = record.pop("n_osc", None)
         if record:
@@ -256,7 +258,7 @@ def chain_from_file(path, base: ChainParams | None = None) -> ChainParams:
             size = topology.get("lattice")
             n = n_osc if size is None else int(np.prod(
                 size.lower().split("x") if isinstance(size, str) else size, dtype=int))
-            topology = {"graph": graph_from_record(topology, int(n))}
+            topology = {"graph": _graph_from_record(topology, int(n))}
         si.setdefault("belt_speed", 1.0)
         return from_physical(friction=law, n_osc=n_osc, **topology, **si)
     except (ValueError, TypeError) as err:

@@ -19,7 +19,7 @@ SI_UNITS = {"mass": "kg", "stiffness": "N/m", "damping": "N*s/m", "normal_load":
             "coupling_stiffness": "N/m", "belt_speed": "m/s"}
 
 
-def si_value(name: str, value) -> np.ndarray:
+def _si_value(name: str, value) -> np.ndarray:
     """An argument of `from_physical` as a float array in its SI unit (`SI_UNITS`):
     a number or array is taken as SI already; a `pint` quantity is converted.
 
@@ -83,7 +83,7 @@ def from_physical(*, mass, stiffness, normal_load, friction, belt_speed, damping
     that is not finite, a non-positive mass, stiffness or load, a reference outside
     the chain, or what `ChainParams` refuses.
     """
-    values = {name: si_value(name, value) for name, value in (
+    values = {name: _si_value(name, value) for name, value in (
         ("mass", mass), ("stiffness", stiffness), ("normal_load", normal_load),
         ("damping", damping), ("coupling_stiffness", coupling_stiffness),
         ("belt_speed", belt_speed))}

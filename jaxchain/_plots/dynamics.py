@@ -20,7 +20,7 @@ CLASS_COLOURS = {"periodic": "tab:blue", "irregular": "tab:red", "undecided": "t
                  "steady sliding": "tab:gray", "failed": "k"}
 
 
-def solution_delays(ds: xr.Dataset, i: int):
+def _solution_delays(ds: xr.Dataset, i: int):
     """The time delays of solution i (by position) of a classified scene:
     (tau_ref, phi of the HALC oscillators, the reference's own 0 included, their
     1-based numbers, the 1-based reference)."""
@@ -109,7 +109,7 @@ def plot_time_delays(ds: xr.Dataset, fig=None):
         if i >= ds.sizes["solution"]:
             ax.set_visible(False)
             continue
-        tau, phi, numbers, ref = solution_delays(ds, i)
+        tau, phi, numbers, ref = _solution_delays(ds, i)
         for row, n in zip(phi, numbers):
             ax.plot(tau, row, ".", ms=0.8, label=str(n))
         if start is not None:
@@ -175,7 +175,7 @@ def plot_orbit_diagram(ds: xr.Dataset, ax=None):
     start = float(ds.attrs.get("classify_from", ds.attrs["transient"]))
     for i in range(ds.sizes["solution"]):
         row = ds.isel(solution=i)
-        tau, phi, _, _ = solution_delays(ds, i)
+        tau, phi, _, _ = _solution_delays(ds, i)
         values = phi[:, tau >= start].ravel()
         values = values[np.isfinite(values)]
         colour = CLASS_COLOURS.get(str(row["class"].values), "k")

@@ -18,7 +18,8 @@ def plot_snake(datasets: dict, sweep=None, title: str = "", ax=None):
 
     **Arguments:**
 
-    - `datasets`: label -> a joined branch (`follow_branch`), dims (point,).
+    - `datasets`: label -> a joined branch (the datasets of `localized_branches`), dims
+        (point,).
     - `sweep`: an `xarray.Dataset` of a sweep (dims (v_d, ic)) or None.
     - `title`: the axes' title.
     - `ax`: a matplotlib Axes to draw on; a new figure if None.

@@ -46,8 +46,8 @@ def _multipliers(orbit) -> list[float]:
     return [float(m) for m in np.sort(np.abs(np.asarray(orbit.multipliers)))[::-1][:2]]
 
 
-def design_check(params: ChainParams, design: DampingDesign, target: float,
-                 margin: float = 0.05) -> dict:
+def _design_check(params: ChainParams, design: DampingDesign, target: float,
+                  margin: float = 0.05) -> dict:
     """Direct simulation on both sides of the design: at v_d = v_d,H(xi) + target
     the stick-slip cycle must survive for xi = (1 - margin) xi* (window wider than
     the target) and die for (1 + margin) xi* (narrower). Starts far outside the
@@ -227,7 +227,7 @@ def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
                    "hopf_vd": design.hopf_vd, "fold_vd": design.fold_vd,
                    "d_window_d_xi": design.d_window, "optax_iterations": len(design.history),
                    "converged": design.converged,
-                   "simulation_check": design_check(single, design, target)},
+                   "simulation_check": _design_check(single, design, target)},
     }
     if exponential:
         summary |= {

@@ -228,9 +228,9 @@ def _branch_dataset(k: int, problem, branch, bifurcations) -> xr.Dataset:
                    for b in bifurcations])})
 
 
-def follow_branch(orbit, options: ShootingOptions, continuation_options: ContinuationOptions,
-                  algorithm: PseudoArclength = PseudoArclength(), *, k: int = 0,
-                  progress: bool = False) -> xr.Dataset:
+def _follow_branch(orbit, options: ShootingOptions, continuation_options: ContinuationOptions,
+                   algorithm: PseudoArclength = PseudoArclength(), *, k: int = 0,
+                   progress: bool = False) -> xr.Dataset:
     """Continue the branch of periodic orbits through `orbit` over v_d both ways
     (pseudo-arclength, `continuation`), join the two halves in the order of the
     branch, and locate its bifurcations (`locate_bifurcations`).
@@ -302,7 +302,7 @@ def stable_ranges(branch: xr.Dataset) -> list[dict]:
     return out
 
 
-def connections(branches: dict, tol: float = 1e-3) -> dict:
+def _connections(branches: dict, tol: float = 1e-3) -> dict:
     """Which branches meet: two branches connect when a point of one matches a point
     of the other at the same belt speed (within `tol`), with the same period (within
     `tol`, relative) and the same amplitudes sorted by size (within 10 `tol`): a
@@ -340,12 +340,12 @@ def _phase_lags(params: ChainParams, y, sites, options: ShootingOptions) -> np.n
     return np.mod((first - first[0]) / period, 1.0)
 
 
-def check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, *,
-                        delta: float = 0.03, perturbation: float = 1e-3, seed: int = 0,
-                        shooting: ShootingOptions = SNAKE_SHOOTING,
-                        options: SimulationOptions = SimulationOptions(t_end=5000.0,
-                                                                       transient=4500.0),
-                        solver=DEFAULT_SOLVER) -> list[dict]:
+def _check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, *,
+                         delta: float = 0.03, perturbation: float = 1e-3, seed: int = 0,
+                         shooting: ShootingOptions = SNAKE_SHOOTING,
+                         options: SimulationOptions = SimulationOptions(t_end=5000.0,
+                                                                        transient=4500.0),
+                         solver=DEFAULT_SOLVER) -> list[dict]:
     """Direct simulation just inside and just outside each end of a stable segment
     that a bifurcation ends, each from an orbit of the branch with its positions
     perturbed by `perturbation`:
@@ -461,9 +461,9 @@ def _unstable_point(v, stable, growth, beyond, last, end, delta, perturbation
 _multipliers = eqx.filter_jit(floquet_multipliers)
 
 
-def multiplier_accuracy(params: ChainParams, branch: xr.Dataset, points,
-                        shooting: ShootingOptions = SNAKE_SHOOTING, factor: float = 100.0
-                        ) -> dict:
+def _multiplier_accuracy(params: ChainParams, branch: xr.Dataset, points,
+                         shooting: ShootingOptions = SNAKE_SHOOTING, factor: float = 100.0
+                         ) -> dict:
     """How accurate the branch's Floquet multipliers are: at the given points, the
     multipliers again from the same orbits with the flow's tolerances divided by
     `factor`; the difference estimates the error at the branch's tolerances.
@@ -507,8 +507,8 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     `params.v_d` (eq. (8) with k excited, for k in `sites`), refined by shooting,
     continued over v_d both ways by pseudo-arclength through its folds, with its
     Floquet multipliers, bifurcations (`locate_bifurcations`), stable ranges, the
-    branches it meets (`connections`) and, optionally, direct simulation just inside
-    and outside each end of each stable range (`check_by_simulation`).
+    branches it meets and, optionally, direct simulation just inside and outside each
+    end of each stable range.
 
     **Arguments:**
 
@@ -522,7 +522,7 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     - `start_options`: `SimulationOptions` of the starting simulations.
     - `solver`: the solver of the simulations, the starts and the checks
         (`SOLVERS`); shooting has its own (`shooting.solver`).
-    - `simulation_check`: run `check_by_simulation` on every stable range.
+    - `simulation_check`: check every stable range by direct simulation.
     - `out`: a folder: each branch is stored there as `branch_k<k>.nc` (or
         `branch_<name>.nc`) with the key
         of its settings (`write_dataset`) as it finishes, and read back on a later
@@ -568,8 +568,8 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
             opts = dataclasses.replace(
                 shooting, phase_oscillator=int(np.argmax(np.asarray(orbit.amplitudes))))
             mask = start_mask(params.graph, k)
-            ds = follow_branch(orbit, opts, continuation_options, k=int(mask.sum()),
-                               progress=progress)
+            ds = _follow_branch(orbit, opts, continuation_options, k=int(mask.sum()),
+                                progress=progress)
             ds = ds.assign_attrs(start=_start_label(k),
                                  start_sites=np.flatnonzero(mask).tolist(),
                                  start_vd=float(params.v_d),
@@ -579,7 +579,7 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
                 Path(out).mkdir(parents=True, exist_ok=True)
                 write_dataset(ds, paths[k], "snake branch", k=k, **settings)
             datasets[_start_label(k)] = ds
-    links = connections(datasets)
+    links = _connections(datasets)
     branches = []
     bar = tqdm(total=len(datasets), desc="simulation check", disable=not (progress and
                                                                            simulation_check))
@@ -603,12 +603,12 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
                      ds["trivial_multiplier_error"].max())}
         ends = [i for r in ranges for pair in r["points"] for i in pair if i is not None]
         start = int(np.argmin(np.abs(ds["v_d"].values - ds.attrs["start_vd"])))
-        entry["multiplier_accuracy"] = multiplier_accuracy(params, ds, ends + [start],
-                                                           shooting)
+        entry["multiplier_accuracy"] = _multiplier_accuracy(params, ds, ends + [start],
+                                                            shooting)
         if simulation_check:
             entry["simulation_check"] = [c for r in ranges for c in
-                                         check_by_simulation(params, ds, r, shooting=shooting,
-                                                             solver=solver)]
+                                         _check_by_simulation(params, ds, r, shooting=shooting,
+                                                              solver=solver)]
         branches.append(entry)
         bar.update()
     bar.close()

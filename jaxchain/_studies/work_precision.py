@@ -73,7 +73,7 @@ REFERENCE_RTOL = 1e-12
 SCIPY_SAMPLE_DT = 0.05
 
 #: Columns of the CSV, one row per (scene, method, eps, rtol). `key` is the
-#: `settings_key` of everything that determines the row (`row_settings`).
+#: `settings_key` of everything that determines the row (`_row_settings`).
 COLUMNS = ("scene", "method", "eps", "rtol", "atol", "status", "wall_s", "compile_s",
            "num_steps", "amplitude_error", "energy_error", "trajectory_error",
            "amplitude_max", "key")
@@ -202,8 +202,8 @@ class _OutOfTime(Exception):
     pass
 
 
-def scipy_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: float,
-                budget_s: float) -> dict:
+def _scipy_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: float,
+                 budget_s: float) -> dict:
     """One smoothed run of `scene` with `scipy.integrate.solve_ivp`, the extrema
     taken from samples spaced `SCIPY_SAMPLE_DT` as in `simulate`. A run longer than
     `budget_s` is stopped and recorded as such."""
@@ -242,8 +242,8 @@ def scipy_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: flo
     return row | errors(ref, amplitudes, end.y[:, -1].reshape(2, n))
 
 
-def row_settings(scene: Scene, method: str, eps: float, rtol: float, *,
-                 max_steps: int, scipy_budget_s: float) -> dict:
+def _row_settings(scene: Scene, method: str, eps: float, rtol: float, *,
+                  max_steps: int, scipy_budget_s: float) -> dict:
     """Everything that determines a row of the study, the settings of its `key`
     (`settings_key`): the scene (every field), its initial state and the options
     of the reference that errors are measured against; then, by method, the
@@ -288,11 +288,11 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
     append each result to the CSV at `path` as soon as it is known, so that an
     interrupted study resumes.
 
-    Each row carries the key of everything that determines it (`row_settings`,
-    `settings_key`). A row in the CSV is reused only when its key equals that of
-    the row asked for; rows of other settings (another `max_steps`, another scene
-    definition, another solver configuration) stay in the file but are never
-    read back, and the row is computed anew. A CSV of an older layout, without
+    Each row carries the key of everything that determines it (`settings_key`). A
+    row in the CSV is reused only when its key equals that of the row asked for;
+    rows of other settings (another `max_steps`, another scene definition, another
+    solver configuration) stay in the file but are never read back, and the row is
+    computed anew. A CSV of an older layout, without
     keys, is rewritten with an empty key column.
 
     A failed run is recorded with its status. Once a (solver, eps) pair reaches
@@ -420,8 +420,8 @@ def _scene(store: CsvStore, rows: list[dict], scene: Scene, solvers, rtols, eps,
     def point(method, e, r, atol, run: Callable[[], dict], **extra) -> dict:
         """The row of (method, e, r), stored or computed by `run`. A skipped row
         has its reason in `extra`, and so its own key."""
-        settings = row_settings(scene, method, e, r, max_steps=max_steps,
-                                scipy_budget_s=scipy_budget_s)
+        settings = _row_settings(scene, method, e, r, max_steps=max_steps,
+                                 scipy_budget_s=scipy_budget_s)
         row = {"scene": scene.name, "method": method, "eps": e, "rtol": r, "atol": atol,
                "key": settings_key("work-precision row", **settings, **extra)}
 
@@ -462,7 +462,7 @@ def _scene(store: CsvStore, rows: list[dict], scene: Scene, solvers, rtols, eps,
             for e in SCIPY_EPS:
                 for r in SCIPY_RTOLS:
                     point(f"scipy {method}", e, r, r / 100,
-                          lambda: scipy_point(scene, ref(), method, e, r, scipy_budget_s))
+                          lambda: _scipy_point(scene, ref(), method, e, r, scipy_budget_s))
 
 
 def _ok(rows, scene):

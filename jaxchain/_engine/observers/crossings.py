@@ -85,14 +85,14 @@ def append(buffer, count, values, mask):
     return jnp.where(take, new[src], buffer), end
 
 
-def ordered(buffer, count):
+def _ordered(buffer, count):
     """The ring buffer's events, oldest first; unfilled slots stay NaN."""
     capacity = buffer.shape[0]
     return jnp.roll(buffer, -jnp.where(count > capacity, jnp.mod(count, capacity), 0),
                     axis=0)
 
 
-def default_capacity(start: float, options) -> int:
+def _default_capacity(start: float, options) -> int:
     """Room for two events per natural period 2 pi of the single oscillator over
     [start, t_end]: every peak of a chain whose frequencies are near 1."""
     return math.ceil((options.t_end - start) / math.pi) + 2
@@ -108,7 +108,7 @@ class PeakTimes(AbstractObserver):
     - `oscillators`: 0-based indices of the oscillators to observe; all if None.
     - `t_start`: start of the window, `options.transient` by default.
     - `capacity`: peaks kept per oscillator (the last ones); by default two per
-        natural period 2 pi over the window (`default_capacity`).
+        natural period 2 pi over the window.
 
     **Results:**
 
@@ -126,7 +126,7 @@ class PeakTimes(AbstractObserver):
 
     def _size(self, options):
         start = window_start(self.t_start, options)
-        return self.capacity or default_capacity(start, options)
+        return self.capacity or _default_capacity(start, options)
 
     def _pick(self, ys):
         x, v = ys[:, 0], ys[:, 1]
@@ -151,7 +151,7 @@ class PeakTimes(AbstractObserver):
 
     def result(self, state, args, options):
         buffer, count = state
-        return {"peak_times": jax.vmap(ordered)(buffer, count), "n_peaks": count}
+        return {"peak_times": jax.vmap(_ordered)(buffer, count), "n_peaks": count}
 
     def dims(self, options):
         return {"peak_times": ("peak_osc", "peak"), "n_peaks": ("peak_osc",)}
@@ -182,8 +182,8 @@ class PoincareSection(AbstractObserver):
     capacity: int | None = eqx.field(static=True, default=None)
 
     def init(self, y0, args, options):
-        size = self.capacity or default_capacity(window_start(self.t_start, options),
-                                                 options)
+        size = self.capacity or _default_capacity(window_start(self.t_start, options),
+                                                  options)
         return (jnp.full((size,), jnp.nan), jnp.full((size, *y0.shape), jnp.nan),
                 jnp.array(0))
 
@@ -205,8 +205,8 @@ class PoincareSection(AbstractObserver):
 
     def result(self, state, args, options):
         times, states, count = state
-        return {"section_times": ordered(times, count),
-                "section_states": ordered(states, count), "n_section": count}
+        return {"section_times": _ordered(times, count),
+                "section_states": _ordered(states, count), "n_section": count}
 
     def dims(self, options):
         return {"section_times": ("section",),

@@ -58,7 +58,7 @@ def _key_data(key) -> list[int]:
     return np.asarray(key).ravel().tolist()
 
 
-def doubled(options: SimulationOptions) -> SimulationOptions:
+def _doubled(options: SimulationOptions) -> SimulationOptions:
     """The options of the convergence check: t_end doubled, the window of the same
     length at its end."""
     t_end = 2 * options.t_end
@@ -194,7 +194,7 @@ def _convergence(params, v, states, index, solver, options, progress) -> dict:
     if states.shape[0] == 0:
         return {"changed_fraction": ("v_d", nan), "periodic_fraction": ("v_d", nan),
                 "periodic_ci_low": ("v_d", nan), "periodic_ci_high": ("v_d", nan)}
-    longer = doubled(options)
+    longer = _doubled(options)
     run = _check_run(params, v, states, solver, longer, progress)
     index2 = class_index(run["n_halc"], run["status"], params.n_osc)
     changed = (index2 != index).mean(-1)

@@ -11,7 +11,7 @@ from ..._physics.params import ChainParams, with_fields
 from .fit import IdentifyOptions, held_out_rms, identify
 
 
-def law_chain(chain: ChainParams, law: str) -> ChainParams:
+def _law_chain(chain: ChainParams, law: str) -> ChainParams:
     """`chain` with the friction law named `law` (of `FRICTION_LAWS`) at its
     defaults; the chain's own law if it is that law already (a table keeps its
     speeds).
@@ -47,7 +47,7 @@ def compare_laws(records, held_out, chain: ChainParams, laws, *, fit_chain=("xi"
     **Arguments:**
 
     - `records`, `held_out`: lists of `Record`s (held_out may not be empty).
-    - `chain`: the chain; its law is replaced by each law in turn (`law_chain`).
+    - `chain`: the chain; its law is replaced by each law in turn.
     - `laws`: names of `FRICTION_LAWS`.
     - `fit_chain`, `offsets`, `options`: as in `identify`.
 
@@ -65,7 +65,7 @@ def compare_laws(records, held_out, chain: ChainParams, laws, *, fit_chain=("xi"
         raise ValidationError("model choice needs at least one held-out record")
     rows = []
     for law in laws:
-        trial = law_chain(chain, law)
+        trial = _law_chain(chain, law)
         names = tuple(type(trial.friction).parameter_names()) + tuple(fit_chain)
         fit = identify(records, trial, names, offsets=offsets, options=options)
         rows.append({"law": law, "fit": fit, "sigma": fit.sigma, "aic": fit.aic,

@@ -15,7 +15,7 @@ def local_slopes(t: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.gradient(x, t, axis=0)
 
 
-def noise_level(x: np.ndarray) -> float:
+def _noise_level(x: np.ndarray) -> float:
     """The standard deviation of white measurement noise on a smooth signal, from the
     median absolute second difference (which is pure noise, variance 6 sigma^2,
     where the signal is linear, as in stick): median |d2x| / (0.6745 sqrt 6)."""
@@ -23,7 +23,7 @@ def noise_level(x: np.ndarray) -> float:
     return float(np.median(d2) / (0.6745 * np.sqrt(6.0)))
 
 
-def breakaway_positions(record: Record, column: int = 0, min_samples: int = 3) -> np.ndarray:
+def _breakaway_positions(record: Record, column: int = 0, min_samples: int = 3) -> np.ndarray:
     """The positions at which the measured oscillator leaves stick: the ends of the
     runs of samples that move with the belt (x' = v_d within three standard errors
     of the slope, for at least `min_samples` samples), each at the middle of its
@@ -33,7 +33,7 @@ def breakaway_positions(record: Record, column: int = 0, min_samples: int = 3) -
     t, x = record.t, record.x[:, column]
     slope = local_slopes(t, x) if record.v is None else record.v[:, column]
     dt = np.median(np.diff(t))
-    error = noise_level(x) / dt if record.v is None else noise_level(record.v[:, column])
+    error = _noise_level(x) / dt if record.v is None else _noise_level(record.v[:, column])
     stick = np.abs(slope - record.v_d) < max(3 * error, 0.02 * record.v_d)
     # the runs of stick samples [i, j], from the rises and falls of the mask
     edges = np.diff(np.concatenate([[0], stick.astype(int), [0]]))
@@ -58,7 +58,7 @@ def breakaway_start(records: list[Record], params: ChainParams) -> dict:
     shows stick."""
     speeds, positions = [], []
     for rec in records:
-        ends = breakaway_positions(rec)
+        ends = _breakaway_positions(rec)
         if ends.size:
             speeds.append(rec.v_d)
             positions.append(float(np.median(ends)))

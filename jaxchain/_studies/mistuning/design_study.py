@@ -28,7 +28,7 @@ def _exact(d: np.ndarray, budget: float) -> np.ndarray:
     return np.arctanh(np.asarray(d) / (2 * budget))
 
 
-def random_patterns(n_osc: int, budget: float, n: int, seed: int = 0) -> np.ndarray:
+def _random_patterns(n_osc: int, budget: float, n: int, seed: int = 0) -> np.ndarray:
     """`n` random mistunings of the same budget: uniform on [-budget, budget], the
     mean removed and scaled back into the budget, shape (n, n_osc)."""
     d = np.random.default_rng(seed).uniform(-budget, budget, (n, n_osc))
@@ -58,9 +58,9 @@ def _vibrates(obs, threshold: float = 0.1) -> bool:
                 and float(np.max(np.asarray(obs.amplitudes))) > threshold)
 
 
-def fold_by_simulation(problem, solution, delta: np.ndarray, site: int, *,
-                       offset: float = 5e-4,
-                       options: SimulationOptions = CHECK_OPTIONS) -> dict:
+def _fold_by_simulation(problem, solution, delta: np.ndarray, site: int, *,
+                        offset: float = 5e-4,
+                        options: SimulationOptions = CHECK_OPTIONS) -> dict:
     """Direct simulation on both sides of a fold of the single-site state, on the
     ring with deviations `delta` (the state at `site`, on the pattern rolled to the
     problem's site): at v_d = fold - offset from the stable cycle there (shooting
@@ -109,14 +109,13 @@ def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
                  progress: bool = True) -> dict:
     """Intentional mistuning by gradient (`intentional_mistuning`) on a ring of
     `params.n_osc` (one period of the pattern), against the alternating A-B
-    pattern and `n_random` random draws of the same budget (`random_patterns`):
+    pattern and `n_random` random draws of the same budget:
 
     - "lower" (zero mean), "retune" (lower, mean free) and "raise" (zero mean)
       designs, each with its highest single-site fold;
     - every fold by shooting, followed from the homogeneous ring (`pattern_folds`);
     - the gradient at each optimum against central finite differences;
-    - each optimum's critical fold by direct simulation on both sides
-      (`fold_by_simulation`);
+    - each optimum's critical fold by direct simulation on both sides;
     - the patterns tiled on a ring of `chain_n_osc` and their upper edges by
       simulation (`upper_edges`), with random draws of that ring's length.
 
@@ -148,7 +147,7 @@ def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
             "history": np.asarray(d.history).tolist(),
             "gradient_check": _gradient_check(problem, list(d.solutions), d.theta, budget,
                                               zero_mean),
-            "simulation": fold_by_simulation(problem, d.solutions[site], pattern, site)}
+            "simulation": _fold_by_simulation(problem, d.solutions[site], pattern, site)}
         tiled[name] = np.tile(pattern, chain_n_osc // n)
     ab = budget * (-1.0) ** np.arange(n)
     theta_ab = _exact(ab, budget)
@@ -156,14 +155,14 @@ def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
     out["ab"] = {"pattern": ab.tolist(), "folds": folds.tolist(), "edge": float(folds.max())}
     tiled["ab"] = np.tile(ab, chain_n_osc // n)
     draws = []
-    for d in random_patterns(n, budget, n_random):
+    for d in _random_patterns(n, budget, n_random):
         folds, _, _, ok = pattern_folds(problem, solutions, np.zeros(n), _exact(d, budget),
                                         2 * budget, False)
         draws.append({"pattern": d.tolist(), "folds": folds.tolist(),
                       "edge": float(folds.max()) if ok.all() else None})
     out["random"] = draws
     names = list(tiled) + [f"random {i}" for i in range(n_random)]
-    patterns = list(tiled.values()) + list(random_patterns(chain_n_osc, budget, n_random, 1))
+    patterns = list(tiled.values()) + list(_random_patterns(chain_n_osc, budget, n_random, 1))
     chains = [_ring_like(params, chain_n_osc, 1.0 + p) for p in patterns]
     edges = upper_edges(chains, SOLVERS[DEFAULT_SOLVER](), steps=8, progress=progress)
     out["chain_edges"] = {"n_osc": chain_n_osc, "resolution": edges.attrs["resolution"],

@@ -39,7 +39,7 @@ EDGE_OPTIONS = SimulationOptions(t_end=1000.0, transient=800.0)
 KIND = "mistuning-edges"
 
 
-def site_excitation(n_osc: int, sites) -> OutOfPhaseExcitation:
+def _site_excitation(n_osc: int, sites) -> OutOfPhaseExcitation:
     """Eq. (8) with one oscillator excited, at each of `sites` (0-based): a batch
     of `len(sites)` initial conditions."""
     sites = np.asarray(sites, dtype=int)
@@ -55,7 +55,7 @@ def _vibrates(chains, v, solver, options, bar) -> np.ndarray:
     n_chains, n_osc = v.shape
     lanes = stack_chains([with_parameter(c, "v_d", float(v[i, j]))
                           for i, c in enumerate(chains) for j in range(n_osc)])
-    y0 = initial_states(lanes, site_excitation(n_osc, np.tile(np.arange(n_osc), n_chains)))
+    y0 = initial_states(lanes, _site_excitation(n_osc, np.tile(np.arange(n_osc), n_chains)))
     out = run_lanes(lanes, np.asarray(y0), solver, options, progress=bar)
     status = np.asarray(out.status).reshape(n_chains, n_osc)
     n_halc = np.asarray(out.n_halc).reshape(n_chains, n_osc)

@@ -55,7 +55,7 @@ def _solve(problem, start, theta, shift, budget, zero_mean):
 @eqx.filter_jit
 def _tangent(problem, solution, theta, shift, step, budget, zero_mean):
     """d solution / d theta along `step` (forward mode through optimistix's
-    ImplicitAdjoint): the predictor of `track_fold`."""
+    ImplicitAdjoint): the predictor of `_track_fold`."""
     return jax.jvp(lambda th: _solve_at(problem, solution, th, shift, budget, zero_mean)[0],
                    (theta,), (step,))[1]
 
@@ -69,8 +69,8 @@ def _gradient(problem, solution, theta, shift, budget, zero_mean):
                                            zero_mean)[0][2 * n + 1])(theta)
 
 
-def track_fold(problem, solution, theta_from, theta_to, shift, budget: float,
-               zero_mean: bool, *, min_step: float = 2.0**-14, max_jump: float = 2e-3):
+def _track_fold(problem, solution, theta_from, theta_to, shift, budget: float,
+                zero_mean: bool, *, min_step: float = 2.0**-14, max_jump: float = 2e-3):
     """Follow a fold's extended-system solution from the pattern `theta_from` to
     `theta_to` along the straight path: a tangent predictor (`_tangent`) and
     Newton's corrector, the step halved where Newton's method fails and doubled
@@ -138,7 +138,7 @@ class MistuningDesign(eqx.Module):
 
 def pattern_folds(problem, solutions, theta_from, theta_to, budget, zero_mean):
     """The fold of the single-site state at each oscillator j of the ring at the
-    pattern `theta_to`, followed from its solution at `theta_from` (`track_fold`;
+    pattern `theta_to`, followed from its solution at `theta_from` (`_track_fold`;
     the state at j is the problem's state at its site c on the pattern rolled by
     c - j), and their gradients in theta: (folds (n,), gradients (n, n),
     solutions, reached (n,))."""
@@ -147,8 +147,8 @@ def pattern_folds(problem, solutions, theta_from, theta_to, budget, zero_mean):
     folds, grads, sols, ok = [], [], [], []
     for j, solution in enumerate(solutions):
         shift = jnp.asarray(centre - j)
-        sol, reached = track_fold(problem, solution, theta_from, theta_to, shift, budget,
-                                  zero_mean)
+        sol, reached = _track_fold(problem, solution, theta_from, theta_to, shift, budget,
+                                   zero_mean)
         sols.append(sol)
         ok.append(reached)
         folds.append(float(sol[2 * n + 1]))
@@ -173,9 +173,9 @@ def intentional_mistuning(params: ChainParams | None = None, *, budget: float = 
 
     The fold of the state at each site is located by Newton's method on its
     Moore-Spence extended system (`solve_fold`), followed from the previous
-    pattern (`track_fold`), and differentiated in the design variables by implicit
-    differentiation (optimistix's `ImplicitAdjoint`, forward mode: never through
-    Newton's iterations). The objective, the smooth maximum t log sum
+    pattern, and differentiated in the design variables by implicit differentiation
+    (optimistix's `ImplicitAdjoint`, forward mode: never through Newton's
+    iterations). The objective, the smooth maximum t log sum
     exp(fold_j / t) of the folds, is minimised (maximised to raise) by optax's Adam
     over theta, d = budget tanh(theta), with the mean removed (`zero_mean`); the
     best iterate is returned.

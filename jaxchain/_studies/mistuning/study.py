@@ -24,8 +24,8 @@ from ..._engine.status import Status
 from ..._physics.initial import GivenState, excited_block, localized_family
 from ..._analysis.localization import damped_decay, localization_factor, passband_frequency
 from ..._physics.model import jacobian, steady_sliding
-from ..._physics.params import (ChainParams, mistune, single_oscillator, with_fields,
-                               with_parameter)
+from ..._physics.mistuning import mistune
+from ..._physics.params import ChainParams, single_oscillator, with_fields, with_parameter
 from ..._sweeps.datasets import run_attributes, save_dataset
 from ..._engine.solver.registry import DEFAULT_SOLVER
 from ..._sweeps.result_store import CsvStore, settings_key

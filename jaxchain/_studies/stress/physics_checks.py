@@ -31,7 +31,7 @@ BALANCE_RTOLS = 100.0
 RATE_ATOL, RATE_RTOL = 2e-3, 0.05
 
 #: A Hopf check applies when the linear growth rate of steady sliding is within
-#: HOPF_RATE of zero. It starts NUDGE from steady sliding, or twice the `resolution`
+#: HOPF_RATE of zero. It starts NUDGE from steady sliding, or twice the `_resolution`
 #: of the tolerances where that is larger (the growth rate is fitted only where the
 #: deviation is resolved), and small enough to stay linear.
 HOPF_RATE, NUDGE = 1e-3, 1e-3
@@ -65,7 +65,7 @@ def _balance_field(t, z, params):
     return sum(_balance_parts(t, z, params))
 
 
-def balance_terms(solver: diffrax.AbstractSolver):
+def _balance_terms(solver: diffrax.AbstractSolver):
     """The terms of eq. (5) with the work integrals added: a state of shape
     (4, n_osc), rows x, x', W (the work done by friction and damping on each
     oscillator) and the integral of its absolute power. The work rows go to the
@@ -77,7 +77,7 @@ def balance_terms(solver: diffrax.AbstractSolver):
     return diffrax.ODETerm(_balance_field)
 
 
-def resolution(params, options) -> jnp.ndarray:
+def _resolution(params, options) -> jnp.ndarray:
     """The smallest deviation from steady sliding that the error control resolves:
     100 times its tolerance rtol |y_ss| + atol at steady sliding (max over the
     components)."""
@@ -92,7 +92,7 @@ def _friction_derivatives(params) -> tuple[jnp.ndarray, jnp.ndarray]:
     return jnp.abs(jax.grad(mu)(v_d)), jnp.abs(jax.grad(jax.grad(mu))(v_d))
 
 
-def linear_regime(params) -> jnp.ndarray:
+def _linear_regime(params) -> jnp.ndarray:
     """The largest deviation a from steady sliding that is still linear: the friction
     law (eq. (1)) departs from its tangent at v_d by at most |mu''| a^2 / 2, kept
     below 1 % of the linear damping (2 xi + |mu'|) a; and a <= v_d / 10, far from
@@ -106,7 +106,7 @@ class SlidingDeviation(AbstractObserver):
     max_n |y_n - y_ss,n| over x and x', and the least-squares slope of log D
     against t, D the mechanical energy (`mechanical_energy`) of y - y_ss, over the
     samples where the deviation is resolved by the error control and linear
-    (`resolution` < a < `linear_regime`). Half that slope is the decay (or growth)
+    (`_resolution` < a < `_linear_regime`). Half that slope is the decay (or growth)
     rate of the ring near steady sliding. Memory: 7 numbers."""
 
     def init(self, y0, args, options):
@@ -120,7 +120,7 @@ class SlidingDeviation(AbstractObserver):
         dev = chunk.ys[:, :2] - steady_sliding(args)[None]
         d = jax.vmap(lambda y: mechanical_energy(args, y))(dev)
         a = jnp.max(jnp.abs(dev), axis=(1, 2))
-        used = ((a > resolution(args, options)) & (a < linear_regime(args))
+        used = ((a > _resolution(args, options)) & (a < _linear_regime(args))
                 & jnp.isfinite(d) & (d > 0))
         log_d = jnp.log(jnp.where(used, d, 1.0))
         t = jnp.where(used, chunk.ts, 0.0)
@@ -143,7 +143,7 @@ _integrate = eqx.filter_jit(integrate)
 
 
 def balance_run(params, y0, solver, options) -> dict:
-    """Integrate the case with its work integrals (`balance_terms`) and observe its
+    """Integrate the case with its work integrals (`_balance_terms`) and observe its
     deviation from steady sliding (`SlidingDeviation`), with the solver and options
     of the run under test.
 
@@ -156,7 +156,7 @@ def balance_run(params, y0, solver, options) -> dict:
     """
     z0 = jnp.concatenate([y0, jnp.zeros_like(y0)])
     from_start = dataclasses.replace(options, transient=0.0)  # same steps, sampled
-    (dev,), z, _, status = _integrate(balance_terms(solver), solver, z0, params,
+    (dev,), z, _, status = _integrate(_balance_terms(solver), solver, z0, params,
                                       from_start, (SlidingDeviation(),))
     e0, e1 = mechanical_energy(params, y0), mechanical_energy(params, z[:2])
     work, through = jnp.sum(z[2]), jnp.sum(z[3])
@@ -172,7 +172,7 @@ def linear_rate(params) -> float:
     return float(jnp.max(growth_rates(params)))
 
 
-def sliding_expected(params) -> str:
+def _sliding_expected(params) -> str:
     """Why every trajectory must end at steady sliding, or "" when none of the known
     reasons holds: friction that does not weaken with speed (mu_st = mu_d: no
     negative damping feeds a vibration), or a belt faster than the single
@@ -195,7 +195,7 @@ def sliding_expected(params) -> str:
     return ""
 
 
-def friction_slope(params) -> float:
+def _friction_slope(params) -> float:
     """|d mu / d v_rel| at steady sliding, eq. (1): (mu_st - mu_d)/v0 exp(-v_d/v0)."""
     return float(_friction_derivatives(params)[0])
 
@@ -213,7 +213,7 @@ def physics_checks(params, y0, solver, options, observed, exactly_sliding: bool
     **Returns:**
 
     A list of (bool, str): the energy balance always; the end at steady sliding
-    when it is expected (`sliding_expected`); the decay rate against the linear
+    when it is expected (`_sliding_expected`); the decay rate against the linear
     one (`linear_rate`, which is -xi when friction is constant) whenever the run
     ends at steady sliding; staying at steady sliding from it; the growth rate at
     the Hopf point, from a start `NUDGE` away from steady sliding.
@@ -226,9 +226,9 @@ def physics_checks(params, y0, solver, options, observed, exactly_sliding: bool
                f"energy balance |dE - W| = {balance['residual']:.1e} of the energy "
                f"through the ring (<= {tol:.0e})")]
     rate_ref = linear_rate(params)
-    constant = friction_slope(params) < 1e-9
+    constant = _friction_slope(params) < 1e-9
     reference = f"-xi = {-float(params.xi):.4g}" if constant else f"linear {rate_ref:.4g}"
-    reason = sliding_expected(params)
+    reason = _sliding_expected(params)
     rate = balance["decay_rate"]
     if reason:
         checks.append((int(observed.n_halc) == 0
@@ -238,17 +238,17 @@ def physics_checks(params, y0, solver, options, observed, exactly_sliding: bool
                        f"{int(observed.n_halc)}, decay rate {rate:.4g} (fit over "
                        f"{balance['rate_samples']} samples) vs {reference}"))
     if exactly_sliding:
-        bound = float(resolution(params, options)) / 100 * np.exp(max(rate_ref, 0.0)
-                                                                  * options.t_end)
+        bound = float(_resolution(params, options)) / 100 * np.exp(max(rate_ref, 0.0)
+                                                                   * options.t_end)
         checks.append((balance["deviation_end"] <= bound,
                        f"stays at steady sliding: deviation {balance['deviation_end']:.1e}"
                        f" <= the tolerance {bound:.0e}"))
     if abs(rate_ref) < HOPF_RATE:
-        size = max(NUDGE, 2 * float(resolution(params, options)))
+        size = max(NUDGE, 2 * float(_resolution(params, options)))
         nudge = steady_sliding(params).at[0].add(
             size * (-1.0) ** np.arange(1, params.n_osc + 1))
         near = balance_run(params, nudge, solver, options)
-        checks.append((near["status"] == Status.ok and size < float(linear_regime(params))
+        checks.append((near["status"] == Status.ok and size < float(_linear_regime(params))
                        and abs(near["decay_rate"] - rate_ref) <= RATE_ATOL,
                        f"Hopf point: growth rate {near['decay_rate']:.2e} from steady "
                        f"sliding + {size:.1e} vs linear {rate_ref:.2e}"))

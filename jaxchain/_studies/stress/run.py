@@ -34,7 +34,7 @@ COLUMNS = ("what", "value", "solver", "outcome", "status", "check", "hint", "num
 IMEX_LIMITS = {"n_osc": 20, "eps": 1e-5}
 
 
-def too_costly(case: StressCase, solver) -> str:
+def _too_costly(case: StressCase, solver) -> str:
     """Why `solver` is not run on `case` (its cost is out of proportion: see
     `IMEX_LIMITS`), or ""."""
     if not isinstance(solver, SPLIT_SOLVERS) or isinstance(solver, Ros34PW2):
@@ -64,7 +64,7 @@ def run_case(case: StressCase, solver: str) -> dict:
     """
     start = time.perf_counter()
     solve = as_solver(solver)
-    reason = too_costly(case, solve)
+    reason = _too_costly(case, solve)
     if reason:
         return {"what": case.what, "value": case.value, "solver": solver, "num_steps": 0,
                 "outcome": "failed", "status": f"{Status.not_run}: too costly", "check": "",
@@ -97,7 +97,7 @@ def run_case(case: StressCase, solver: str) -> dict:
 CHECKS_VERSION = 2
 
 
-def row_key(case: StressCase, solver: str) -> str:
+def _row_key(case: StressCase, solver: str) -> str:
     """The key of a stored row: everything that determines it (`settings_key`)."""
     return settings_key("stress row", what=case.what, value=case.value,
                         params=case.params, y0=case.y0, options=case.options,
@@ -115,7 +115,7 @@ def stress(cases: Sequence[StressCase] | None = None, solvers: Sequence[str] = P
     - `cases`: the cases; by default the whole `MATRIX` (or `QUICK_MATRIX`).
     - `solvers`: solver names (`SOLVERS`), `PATHS` by default.
     - `path`: a CSV file that rows are written to as they are done; a row stored
-        there under the same key (`row_key`: the same case, options and solver) is
+        there under the same key (the same case, options and solver) is
         read back instead of run again.
     - `progress`: a tqdm bar, one tick per case and solver.
     - `on_row`: called with each row as it is done or read back.
@@ -136,7 +136,7 @@ def stress(cases: Sequence[StressCase] | None = None, solvers: Sequence[str] = P
             progress_bar(len(cases) * len(solvers), "stress", progress) as bar:
         for case in cases:
             for name in solvers:
-                row = {"key": row_key(case, name)}
+                row = {"key": _row_key(case, name)}
                 rows.append(_typed(store.fetch(row, lambda c=case, n=name: run_case(c, n))))
                 if on_row is not None:
                     on_row(rows[-1])
