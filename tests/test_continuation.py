@@ -1,6 +1,7 @@
 """Continuation of the single oscillator's limit cycles from the Hopf point through
 the fold, the fold's extended system and its parameter derivatives, against the
-non-smooth existence limit and finite differences."""
+non-smooth existence limit and finite differences; the fold located by bisection
+along the branch against the extended (Moore-Spence) system."""
 
 import json
 from pathlib import Path
@@ -54,6 +55,17 @@ def test_fold_is_near_the_nonsmooth_existence_limit(branch):
     assert abs(float(fold.p) - limit) < 0.01
     multipliers = np.sort(np.abs(np.asarray(fold.record.multipliers)))[::-1]
     assert np.all(np.abs(multipliers[:2] - 1) < 1e-3)  # trivial and critical at +1
+
+
+@pytest.mark.numerics
+def test_bisection_along_the_branch_finds_the_fold_of_the_extended_system(branch):
+    """On the single oscillator's branch from the Hopf point, the fold located by
+    bisection on dp/ds agrees with the Moore-Spence fold to 1e-6."""
+    problem, found, reference = branch
+    folds = [b for b in jc.locate_bifurcations(problem, found) if b.kind == "fold"]
+    assert len(folds) == 1
+    assert abs(float(folds[0].p) - float(reference.p)) < 1e-6
+    assert abs(complex(folds[0].multiplier) - 1) < 1e-3
 
 
 @pytest.mark.numerics

@@ -17,7 +17,10 @@ EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 #: the kernel finds the programs that test compiled in the session's persistent
 #: compilation cache (tests/conftest.py), or leaves its own there for the test: 01
 #: test_cli.py's `localized` run, 03 the `figure --quick` scenes of test_dynamics.py
-#: (jaxchain/_cli/figure.py: QUICK), 06 test_mistuning.py's study. In 08 the ensemble
+#: (jaxchain/_cli/figure.py: QUICK), 06 test_mistuning.py's study, 07 test_snake.py's
+#: ring of 4 started as `localized_branches` starts it by default (SNAKE_START: the
+#: window [11500, 12000], a fraction of a second on 4 oscillators, cheaper than a
+#: program of its own). In 08 the ensemble
 #: and the branch's starting simulation share their options (T_END, TRANSIENT =
 #: START_T_END, START_T_END - 500), so that they share one program.
 SMALL = {
@@ -46,7 +49,7 @@ SMALL = {
         ("T_END = 20.0\nDT = 0.2\nSPEEDS = (0.3, 0.5, 0.7)\nNOISE = 0.005",
          "within their stated uncertainty"),
     "07_snaking.ipynb":
-        ("N_OSC = 4\nSITES = (1,)\nMAX_POINTS = 5\nSTART_T_END = 1500.0\nCHECK = False",
+        ("N_OSC = 4\nSITES = (1,)\nMAX_POINTS = 5\nSTART_T_END = 12000.0\nCHECK = False",
          "trivial multiplier error"),
 }
 #: A cell that draws: it calls one of jaxchain's plot functions or plt.show().

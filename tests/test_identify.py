@@ -52,13 +52,14 @@ def _fit(records, **kw):
 def test_the_reference_trajectory_is_the_reference_run():
     """Sampled event by event, the reference's state at t_end is that of
     `simulate_nonsmooth` (another program, both at rtol 1e-12: agreement to 1e-8),
-    and in stick the oscillator moves with the belt exactly."""
+    and in stick the oscillator moves with the belt exactly. The samples of the
+    records (`T_END`, `DT`), so that the sampled run is the records' program."""
     jc.configure()
     params = jc.with_parameter(RIG, "v_d", 0.7)
-    ts = np.arange(0.0, 30.0001, 0.25)
+    ts = np.arange(int(round(T_END / DT)) + 1) * DT
     ys = np.asarray(jc.nonsmooth_trajectory(params, np.zeros((2, 1)), ts))
     run = jc.simulate_nonsmooth(params, np.zeros((2, 1)), jc.NonsmoothOptions(
-        t_end=30.0, transient=15.0, chunk_length=5.0))
+        t_end=T_END, transient=T_END / 2, chunk_length=5.0))
     np.testing.assert_allclose(ys[-1], np.asarray(run.y_final), atol=1e-8)
     sticking = np.abs(ys[:, 1, 0] - 0.7) < 1e-12
     assert 0.1 < sticking.mean() < 0.9  # stick-slip, with stick phases

@@ -105,7 +105,8 @@ def test_existence_limit_rejects_a_bad_bracket():
 
 
 def test_failures_are_a_status_or_an_error():
-    opt = jc.NonsmoothOptions(t_end=50.0, transient=0.0)
+    # the options of the single oscillator's cycle above: its compiled run
+    opt = jc.NonsmoothOptions(t_end=200.0, transient=100.0)
     bad = jnp.full((2, 1), jnp.nan)
     obs = jc.simulate_nonsmooth(ONE, bad, opt, throw=False)
     assert obs.status == jc.Status.non_finite_state and int(obs.n_halc) == -1

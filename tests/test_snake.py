@@ -1,6 +1,5 @@
 """The snake on a small ring: shooting from simulated chain states, Floquet
-multipliers against their closed-form estimate, bifurcations located along a branch
-against the extended (Moore-Spence) system, stable ends against direct simulation,
+multipliers against their closed-form estimate, stable ends against direct simulation,
 the stored branches read back, and the command line."""
 
 import json
@@ -41,22 +40,6 @@ def test_shooting_from_simulation_gives_the_simulated_state_and_its_multipliers(
     quiet = np.exp(-(2 * RING.xi - slope) * float(orbit.period) / 2)
     others = np.delete(np.abs(m), int(orbit.trivial))
     assert abs(others[0] / quiet - 1) < 0.02  # the largest: a quiet oscillator's pair
-
-
-@pytest.mark.numerics
-def test_bisection_along_the_branch_finds_the_fold_of_the_extended_system():
-    """On the single oscillator's branch from the Hopf point, the fold located by
-    bisection on dp/ds agrees with the Moore-Spence fold to 1e-6."""
-    orbit = jc.hopf_cycle(jc.ChainParams(n_osc=1))
-    problem = jc.limit_cycle_problem(orbit)
-    branch = jc.continuation(problem, options=jc.ContinuationOptions(
-        ds=0.01, ds_max=0.1, p_min=1.0, p_max=2.5, max_points=50))
-    found = jc.locate_bifurcations(problem, branch)
-    folds = [b for b in found if b.kind == "fold"]
-    assert len(folds) == 1
-    reference = jc.fold_point(problem, branch)
-    assert abs(float(folds[0].p) - float(reference.p)) < 1e-6
-    assert abs(complex(folds[0].multiplier) - 1) < 1e-3
 
 
 @pytest.mark.numerics

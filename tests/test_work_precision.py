@@ -1,6 +1,7 @@
 """The work-precision study: its error measures, resumption and command."""
 
 import dataclasses
+import inspect
 import json
 
 import numpy as np
@@ -11,6 +12,8 @@ from helpers import flat, internal_module, scipy_stick_slip_cycle
 
 #: The study's module: its scenes, columns and helpers are tested here.
 wp = internal_module("work-precision reference")
+#: The step budget of `wp.work_precision` by default (static in the compiled runs).
+STUDY_MAX_STEPS = inspect.signature(wp.work_precision).parameters["max_steps"].default
 
 
 @pytest.mark.numerics
@@ -126,12 +129,14 @@ def test_max_steps_is_recorded_and_tighter_rtols_skipped(tmp_path):
 def test_work_precision_command(tmp_path, capsys, monkeypatch):
     """The command end to end: the study with its reference points (one tolerance
     here: each is a timed non-smooth run, and those at 1e-8 and 1e-10 cost most of
-    the study while running the same code), its CSV and its figure."""
+    the study while running the same code), its CSV and its figure. The step budget
+    of `wp.work_precision`'s default (the command's is `SimulationOptions`'), so that
+    its smoothed runs are the programs `test_study_errors_fall_with_eps...` compiled."""
     monkeypatch.setattr(wp, "REFERENCE_RTOLS", wp.REFERENCE_RTOLS[:1])
     out = tmp_path / "out"
     code = jc.main(["work-precision", "--scenes", "single", "--solver", "tsit5",
-                 "--rtol", "1e-6", "--eps", "1e-2", "--no-scipy", "--json",
-                 "--no-progress", "--out", str(out)])
+                 "--rtol", "1e-6", "--eps", "1e-2", "--max-steps", str(STUDY_MAX_STEPS),
+                 "--no-scipy", "--json", "--no-progress", "--out", str(out)])
     assert code == 0
     report = json.loads(capsys.readouterr().out)
     assert set(report["outputs"]) == {"work_precision.csv", "work_precision_single.png"}
