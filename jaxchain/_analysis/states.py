@@ -6,6 +6,7 @@ import math
 
 import equinox as eqx
 
+from .._checks import check_count
 from .._errors import ValidationError
 
 #: The chain at rest on the belt: no oscillator on the HALC (n_HALC = 0).
@@ -79,7 +80,4 @@ class ClassTolerances(eqx.Module):
                     and math.isfinite(value) and value > 0):
                 raise ValidationError(f"ClassTolerances.{name} must be a finite number > 0, "
                                       f"got {value!r}")
-        if isinstance(self.max_period, bool) or not isinstance(self.max_period, int) \
-                or self.max_period < 1:
-            raise ValidationError(f"ClassTolerances.max_period must be an integer >= 1, got "
-                                  f"{self.max_period!r}")
+        check_count("ClassTolerances.max_period", self.max_period)

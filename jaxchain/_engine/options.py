@@ -1,10 +1,10 @@
 """Options of a simulation run: horizon, tolerances and how observables are sampled."""
 
 import equinox as eqx
-import numpy as np
 
 from .horizon import AbstractHorizon, positive
 from .solver.controller import CONTROLLERS
+from .._checks import check_count
 from .._errors import ValidationError
 
 
@@ -73,7 +73,5 @@ class SimulationOptions(AbstractHorizon):
         if self.controller not in CONTROLLERS:
             raise ValidationError(f"SimulationOptions.controller must be one of "
                                   f"{', '.join(CONTROLLERS)}, got {self.controller!r}")
-        if isinstance(self.max_steps, bool) or not isinstance(self.max_steps, (int, np.integer)):
-            raise ValidationError(f"SimulationOptions.max_steps must be an integer >= 1, got "
-                                  f"{self.max_steps!r}")
+        check_count("SimulationOptions.max_steps", self.max_steps)
         self.check_horizon()

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from .._physics.forces import static_friction
-from .._physics.params import ChainParams, with_parameter
+from .._physics.params import chain_or_default, ChainParams, with_parameter
 from .switching import mode_field
 from .._errors import ValidationError
 
@@ -83,8 +83,7 @@ def stick_slip_existence_limit(params: ChainParams | None = None,
     `ValidationError`) when steady sliding has no Hopf point to start from and
     `lower` is not given, or when the bracket does not contain the limit.
     """
-    if params is None:  # built on call: a chain needs `configure` first
-        params = ChainParams(n_osc=1)
+    params = chain_or_default(params, n_osc=1)
     if params.n_osc != 1:
         raise ValidationError(f"the existence limit is that of one oscillator (n_osc = 1), got "
                               f"n_osc = {params.n_osc}; see single_oscillator")

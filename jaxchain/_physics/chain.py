@@ -8,6 +8,7 @@ import functools
 import equinox as eqx
 import numpy as np
 
+from .._checks import check_count
 from .._errors import ValidationError
 
 #: The boundaries of a line of oscillators (`Graph.line`):
@@ -267,8 +268,7 @@ def require_line(params, what: str) -> None:
 
 
 def _check_size(name: str, value) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise ValidationError(f"{name} must be an integer >= 1, got {value!r}")
+    check_count(name, value)
 
 
 def _line_links(n: int, boundary: str) -> list[tuple[int, int]]:

@@ -9,6 +9,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from .._checks import is_count
 from .._errors import ValidationError
 
 
@@ -36,7 +37,7 @@ class Mistuning(eqx.Module):
                 and np.isfinite(self.sigma) and self.sigma >= 0):
             raise ValidationError(f"Mistuning.sigma must be a finite number >= 0, got "
                                   f"{self.sigma!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
+        if not is_count(self.seed):
             raise ValidationError(f"Mistuning.seed must be an integer, got {self.seed!r}")
 
     def deviations(self, n_osc: int) -> np.ndarray:

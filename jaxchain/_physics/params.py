@@ -14,6 +14,7 @@ from .chain import Graph, as_graph
 from .mistuning import Mistuning
 from .scales import Scales
 from .friction import AbstractFrictionLaw, ExponentialDecay, as_parameter, check_values
+from .._checks import check_count
 from .._errors import ValidationError
 from .._setup import check_float64
 
@@ -142,10 +143,7 @@ class ChainParams(eqx.Module):
         if n_osc is _ABSENT:
             n_osc = 20 if graph is None else graph.n_osc
         if graph is None:
-            if isinstance(n_osc, bool) or not isinstance(n_osc, (int, np.integer)):
-                raise ValidationError(f"ChainParams.n_osc must be an integer, got {n_osc!r}")
-            if n_osc < 1:
-                raise ValidationError(f"ChainParams.n_osc must be >= 1, got {n_osc!r}")
+            check_count("ChainParams.n_osc", n_osc)
             try:
                 graph = as_graph("ring" if boundary is _ABSENT else boundary, n_osc)
             except ValidationError as err:
@@ -214,6 +212,18 @@ class ChainParams(eqx.Module):
             if shape not in ((), (n,)):
                 raise ValidationError(_shape_message(f"{type(self.friction).__name__}.{name}",
                                                      shape, ((), (n,))))
+
+
+def chain_or_default(params: ChainParams | None, **defaults) -> ChainParams:
+    """`params`, or when it is None the chain `ChainParams(**defaults)` (the paper's
+    ring by default), built on call rather than as a default argument: a chain's
+    arrays need `configure` (float64) first.
+
+    **Raises:**
+
+    `ValidationError` for defaults that `ChainParams` refuses.
+    """
+    return ChainParams(**defaults) if params is None else params
 
 
 def _shape_message(name, shape, shapes) -> str:
@@ -317,7 +327,7 @@ def parameter_name(where: Callable | str, params: ChainParams | None = None) -> 
     if isinstance(where, str):
         parameter_lens(where, params)  # raises for an unknown name
         return where
-    base = ChainParams() if params is None else params
+    base = chain_or_default(params)
     leaves, treedef = jax.tree_util.tree_flatten(base)
     probe = jax.tree_util.tree_unflatten(
         treedef, [np.asarray(0.125 * (i + 1)) for i in range(len(leaves))])

@@ -20,7 +20,9 @@ from .._physics.initial import GivenState
 from .._nonsmooth.existence import stick_slip_existence_limit
 from .._engine.options import SimulationOptions
 from .._physics.friction import ExponentialDecay
-from .._physics.params import ChainParams, is_homogeneous_ring, single_oscillator, with_parameter
+from .._physics.params import (
+    chain_or_default, ChainParams, is_homogeneous_ring, single_oscillator, with_parameter,
+)
 from .._physics.record import chain_record
 from .._engine.simulate import simulate
 from .._engine.solver.registry import DEFAULT_SOLVER
@@ -173,8 +175,7 @@ def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
 
     `ValidationError` for target <= 0; `RuntimeError` if a computation fails.
     """
-    if params is None:  # built on call: a chain needs `configure` first
-        params = ChainParams()
+    params = chain_or_default(params)
     if not target > 0:
         raise ValidationError(f"target must be > 0, got {target!r}")
     options = ShootingOptions()

@@ -22,7 +22,7 @@ from .._physics.initial import FAMILIES, excited_block
 from .._nonsmooth.options import NonsmoothOptions
 from .._nonsmooth.solve import run_nonsmooth
 from .._engine.options import SimulationOptions
-from .._physics.params import ChainParams, with_parameter
+from .._physics.params import chain_or_default, ChainParams, with_parameter
 from .._physics.record import chain_record, check_recordable
 from .._engine.lanes import lane_params, on_devices, run_lanes
 from .._sweeps.datasets import PAPER, field_values
@@ -224,8 +224,7 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
     """
     import xarray as xr
 
-    if params is None:  # built on call: a chain needs `configure` first
-        params = ChainParams()
+    params = chain_or_default(params)
     if client is not None and checkpoint is None:
         raise ValidationError("checkpoint: a cross-check on a Dask cluster needs a checkpoint "
                               "folder its workers can reach")

@@ -22,7 +22,7 @@ from .._engine.observers.extrema import Extrema
 from .._engine.observers.lyapunov_exponent import LargestLyapunov
 from .._engine.observers.series import TimeSeries
 from .._engine.options import SimulationOptions
-from .._physics.params import ChainParams
+from .._physics.params import chain_or_default, ChainParams
 from .._sweeps.datasets import run_attributes
 from .._engine.simulate import check_observers
 from .._engine.status import flag_attributes
@@ -163,8 +163,7 @@ def time_series_scene(params: ChainParams | None = None, n_excited: int = 2,
 
     `ValidationError` for t_end <= 0, dt <= 0 or n_excited outside [1, n_osc].
     """
-    if params is None:  # built on call: a chain needs `configure` first
-        params = ChainParams(v_d=1.5)
+    params = chain_or_default(params, v_d=1.5)
     options = SimulationOptions(t_end=t_end, transient=0.0)
     return observe_solutions(params, [n_excited], (TimeSeries(dt=dt),), ics, solver,
                              options, progress=progress)
@@ -186,8 +185,7 @@ def time_delay_scene(params: ChainParams | None = None,
 
     `observe_solutions`'s Dataset, classified.
     """
-    if params is None:  # built on call: a chain needs `configure` first
-        params = ChainParams(v_d=1.5)
+    params = chain_or_default(params, v_d=1.5)
     start = options.transient
     run_options = dataclasses.replace(options, transient=0.0)
     observers = (Extrema(t_start=start), PeakTimes(t_start=0.0),
@@ -217,8 +215,7 @@ def phase_portrait_scene(params: ChainParams | None = None,
 
     `observe_solutions`'s Dataset: `series` (solution, time, component, series_osc).
     """
-    if params is None:  # built on call: a chain needs `configure` first
-        params = ChainParams(v_d=1.5)
+    params = chain_or_default(params, v_d=1.5)
     n = params.n_osc
     if oscillators is None:
         oscillators = tuple((n // 2 + i) % n for i in range(3))
@@ -246,8 +243,7 @@ def orbit_diagram_scene(params: ChainParams | None = None,
 
     `observe_solutions`'s Dataset, classified.
     """
-    if params is None:  # built on call: a chain needs `configure` first
-        params = ChainParams(v_d=1.5)
+    params = chain_or_default(params, v_d=1.5)
     if ics not in FAMILIES:
         raise ValidationError(f"ics must be one of {sorted(FAMILIES)}, got {ics!r}")
     observers = (Extrema(), PeakTimes(), LargestLyapunov())

@@ -25,7 +25,7 @@ from .._engine.options import SimulationOptions
 from .._engine.observers.crossings import downward_crossings
 from .._physics.chain import Graph
 from .._physics.initial import GivenState, OutOfPhaseExcitation, centre_site, excited_block
-from .._physics.params import ChainParams, with_parameter
+from .._physics.params import chain_or_default, ChainParams, with_parameter
 from .._physics.record import chain_record
 from .._engine.simulate import simulate
 from .._engine.solver.registry import DEFAULT_SOLVER
@@ -539,8 +539,7 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
 
     `ValidationError` for bad sites or options.
     """
-    if params is None:  # built on call: a chain needs `configure` first
-        params = ChainParams()
+    params = chain_or_default(params)
     sites = check_starts(params.graph, sites)
     datasets, starts, failed = {}, {}, {}
     settings = {"chain": chain_record(params), "shooting": shooting,

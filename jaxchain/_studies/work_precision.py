@@ -26,6 +26,7 @@ from .._engine.simulate import run
 from .._engine.status import Status
 from .._engine.solver.registry import SOLVERS
 from .._sweeps.result_store import CsvStore, settings_key
+from .._checks import check_count
 from .._errors import ValidationError
 
 
@@ -351,9 +352,7 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
                                   f"{sorted(CONTROLLERS)}, got {name!r}")
     rtols = _grid(rtols, "rtols", 1.0, "numbers in (0, 1)")
     eps = _grid(eps, "eps", math.inf, "finite numbers > 0")
-    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) \
-            or max_steps < 1:
-        raise ValidationError(f"max_steps must be an integer >= 1, got {max_steps!r}")
+    check_count("max_steps", max_steps)
     if isinstance(scipy_budget_s, bool) \
             or not isinstance(scipy_budget_s, (int, float, np.integer, np.floating)) \
             or not (math.isfinite(scipy_budget_s) and scipy_budget_s > 0):

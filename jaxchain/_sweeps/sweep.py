@@ -29,6 +29,7 @@ from .result_store import settings_json, settings_key
 from .._analysis.fronts import propagating_fronts
 from .grid import SweepGrid
 from .zarr_store import SweepStore
+from .._checks import check_count
 from .._errors import ValidationError
 
 if TYPE_CHECKING:  # heavy: imported where they are used
@@ -133,9 +134,7 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     solver = as_solver(solver, params=params)
     options = check_options(options)
     grid = SweepGrid.build(params, where, values, ics)
-    if isinstance(batch_size, bool) or not isinstance(batch_size, (int, np.integer)) \
-            or batch_size < 1:
-        raise ValidationError(f"batch_size must be an integer >= 1, got {batch_size!r}")
+    check_count("batch_size", batch_size)
     if resume and overwrite:
         raise ValidationError("resume and overwrite exclude each other")
     n, name = grid.n_trajectories, grid.name

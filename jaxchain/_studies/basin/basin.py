@@ -29,7 +29,7 @@ from ..._analysis.states import PERIODIC
 from ..._sweeps.sweep import sweep
 from .classes import class_index, class_names, halc_clusters, wilson_interval
 from .sampling import Box, sample_states
-from ..._errors import ValidationError
+from ..._checks import check_count
 from ..._engine.status import Status
 
 if TYPE_CHECKING:  # heavy: imported where they are used
@@ -135,16 +135,11 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
 
     params, solver, options, v = check_run(params, solver, options, v_d)
     check_recordable(params)
-    if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) \
-            or n_samples < 1:
-        raise ValidationError(f"n_samples must be an integer >= 1, got {n_samples!r}")
+    check_count("n_samples", n_samples)
     if not isinstance(box, Box):
         raise TypeError(f"box must be a jaxchain.Box, got {type(box).__name__}")
     n_check = min(n_samples, 50) if n_check is None else n_check
-    if isinstance(n_check, bool) or not isinstance(n_check, (int, np.integer)) \
-            or not 0 <= n_check <= n_samples:
-        raise ValidationError(f"n_check must be an integer in [0, n_samples = {n_samples}], "
-                              f"got {n_check!r}")
+    check_count("n_check", n_check, 0, n_samples)
     key = _key(key)
     n_osc = params.n_osc
     states = sample_states(key, box, int(n_samples), n_osc)

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..._physics.chain import require_line
 from ..._engine.options import SimulationOptions
-from ..._physics.params import ChainParams, with_fields, with_parameter
+from ..._physics.params import chain_or_default, ChainParams, with_fields, with_parameter
 from ..._bifurcation.shooting import periodic_orbit
 from ..._engine.simulate import simulate
 from ..._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
@@ -127,8 +127,7 @@ def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
 
     As `intentional_mistuning`.
     """
-    if params is None:  # built on call: a chain needs `configure` first
-        params = ChainParams(n_osc=4)
+    params = chain_or_default(params, n_osc=4)
     require_line(params, "the mistuning design")
     n = params.n_osc
     start = design_problems(params, budget)

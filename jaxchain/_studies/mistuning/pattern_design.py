@@ -14,7 +14,7 @@ from jaxtyping import Array, Float
 
 from ..._bifurcation.fold import solve_fold
 from ..._physics.initial import excited_block
-from ..._physics.params import ChainParams
+from ..._physics.params import chain_or_default, ChainParams
 from .edges import localized_fold
 from ..._errors import ValidationError
 
@@ -202,8 +202,7 @@ def intentional_mistuning(params: ChainParams | None = None, *, budget: float = 
     `ValidationError` for a chain that is not a homogeneous ring of at least 2, a bad
     budget or sense; `RuntimeError` when a fold cannot be followed.
     """
-    if params is None:  # built on call: a chain needs `configure` first
-        params = ChainParams(n_osc=4)
+    params = chain_or_default(params, n_osc=4)
     if sense not in ("lower", "raise"):
         raise ValidationError(f"sense must be 'lower' or 'raise', got {sense!r}")
     sign = 1.0 if sense == "lower" else -1.0

@@ -25,13 +25,16 @@ from ..._physics.initial import GivenState, excited_block, localized_family
 from ..._analysis.localization import damped_decay, localization_factor, passband_frequency
 from ..._physics.model import jacobian, steady_sliding
 from ..._physics.mistuning import mistune
-from ..._physics.params import ChainParams, single_oscillator, with_fields, with_parameter
+from ..._physics.params import (
+    chain_or_default, ChainParams, single_oscillator, with_fields, with_parameter,
+)
 from ..._sweeps.datasets import run_attributes, save_dataset
 from ..._engine.solver.registry import DEFAULT_SOLVER
 from ..._sweeps.result_store import CsvStore, settings_key
 from ..._sweeps.sweep import sweep
 from .edges import EDGE_OPTIONS, localized_fold, localized_orbit, upper_edges
 from .summary import envelope_decay
+from ..._checks import check_count
 from ..._errors import ValidationError
 
 if TYPE_CHECKING:  # heavy: imported where they are used
@@ -134,8 +137,7 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
     """
     import xarray as xr
 
-    if params is None:  # built on call: a chain needs `configure` first
-        params = ChainParams()
+    params = chain_or_default(params)
     params, solver, options, v = check_run(params, solver, options, v_d)
     require_line(params, "the mistuning study")
     check_recordable(params)
@@ -145,8 +147,7 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
         raise ValidationError(f"sigmas: give sigma / eta_c values >= 0, got {sigmas.tolist()}")
     for name, value, least in (("n_draws", n_draws, 1), ("n_samples", n_samples, 0),
                                ("n_folds", n_folds, 0)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
-            raise ValidationError(f"{name} must be an integer >= {least}, got {value!r}")
+        check_count(name, value, least)
     if resume and overwrite:
         raise ValidationError("resume and overwrite exclude each other")
     n = params.n_osc
