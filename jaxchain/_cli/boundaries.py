@@ -2,7 +2,6 @@
 for one oscillator and for the ring."""
 
 import argparse
-import json
 import time
 
 from .._studies.bistable_range import (BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES,
@@ -10,8 +9,8 @@ from .._studies.bistable_range import (BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
-                     add_solver_options, comma_list, json_ready, note, param_default,
-                     positive_float, print_json, show_progress, simulation_options)
+                     add_solver_options, comma_list, param_default,
+                     positive_float, report, show_progress, simulation_options)
 
 HELP = "Hopf and fold belt speeds of the bistable range (gradients, continuation)"
 DESCRIPTION = """\
@@ -96,13 +95,8 @@ def run(args) -> None:
     s |= {"wall_time_s": time.perf_counter() - start, "solver": args.solver}
     if sims is not None:
         s["simulation_energy"] = {"v_d": sims[0].tolist(), "energy": sims[1].tolist()}
-    outputs.text(json.dumps(json_ready(s), allow_nan=False), "boundaries.json")
+    report(s, outputs, "boundaries.json", args.json, _print_summary, s["wall_time_s"])
     missing = sum(f is None for c in curves for f in s[c]["fold_vd"])
-    if args.json:
-        print_json(s, outputs)
-    else:
-        _print_summary(s)
-        note(f"{s['wall_time_s']:.0f} s; {outputs.summary()}")
     if missing:
         raise RunsFailed(f"the fold was not found at {missing} points of the two-parameter "
                          f"curves (null in {outputs.path('boundaries.json')})")

@@ -12,7 +12,7 @@ import os
 import sys
 import tempfile
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -402,6 +402,20 @@ def print_json(payload: dict, outputs: Outputs) -> None:
     """Print the command's one JSON document on stdout: `payload` with the written
     files under "outputs" (non-finite numbers as null)."""
     print(json.dumps(json_ready(payload | {"outputs": outputs.as_json()}), allow_nan=False))
+
+
+def report(summary: dict, outputs: Outputs, name: str, as_json: bool,
+           table: Callable[[dict], None], wall: float) -> None:
+    """The end of a study's command: its `summary` written to the JSON file `name`
+    beside its other outputs, then shown: the one JSON document on stdout with
+    `--json` (`print_json`), otherwise `table`'s lines and a note of the wall time
+    and the files written."""
+    outputs.text(json.dumps(json_ready(summary), allow_nan=False), name)
+    if as_json:
+        print_json(summary, outputs)
+    else:
+        table(summary)
+        note(f"{wall:.0f} s; {outputs.summary()}")
 
 
 def note(text: str) -> None:

@@ -2,7 +2,6 @@
 (Anderson localization) does to the friction-localized states."""
 
 import argparse
-import json
 import time
 
 import numpy as np
@@ -17,7 +16,7 @@ from .._plots.mistuning import plot_mistuned_states, plot_mistuning_study, plot_
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_scheduler_option, add_solver_options, add_vd_option, cluster_client,
-                     comma_list, json_ready, note, positive_float, positive_int, print_json,
+                     comma_list, positive_float, positive_int, report,
                      show_progress, simulation_options)
 
 HELP = "random mistuning against the localized states (Anderson meets friction)"
@@ -140,12 +139,7 @@ def run(args) -> None:
     outputs.figure(plot_mistuned_states(study, shown, 0, 1.5), "mistuned_fig4")
     s = study_summary(study) | {"localization_factor": table, "chain": chain_record(params),
                                 "wall_time_s": wall, "solver": args.solver}
-    outputs.text(json.dumps(json_ready(s), allow_nan=False), "mistuning.json")
-    if args.json:
-        print_json(s, outputs)
-    else:
-        _print_summary(s)
-        note(f"{wall:.0f} s; {outputs.summary()}")
+    report(s, outputs, "mistuning.json", args.json, _print_summary, wall)
     failed = failed_runs(study)
     if failed:
         raise RunsFailed(f"{failed} runs failed; they are left out of the shares "
@@ -190,22 +184,23 @@ def _run_design(args) -> None:
                           progress=show_progress(args))
     result |= {"wall_time_s": time.perf_counter() - start, "chain": chain_record(params)}
     outputs.figure(plot_mistuning_design(result), "design")
-    outputs.text(json.dumps(json_ready(result), allow_nan=False), "design.json")
-    if args.json:
-        print_json(result, outputs)
-    else:
-        hom = result["homogeneous_fold"]
-        print(f"homogeneous ring of {params.n_osc}: highest single-site fold {hom:.6f}")
-        for name, d in result["designs"].items():
-            print(f"{name}: pattern {np.round(d['pattern'], 4).tolist()}, highest fold "
-                  f"{d['edge']:.6f} ({d['moved_by']:+.6f}); gradient vs finite differences "
-                  f"{d['gradient_check']['largest_difference']:.1e}; simulation "
-                  f"{'agrees' if d['simulation']['agrees'] else 'DISAGREES'}")
-        rand = [r["edge"] for r in result["random"] if r["edge"] is not None]
-        print(f"A-B: {result['ab']['edge']:.6f}; random draws: {min(rand):.6f} to "
-              f"{max(rand):.6f}; tiled on N = {args.n_osc} (simulation): "
-              + ", ".join(f"{k} {v:.4f}" for k, v in result["chain_edges"]["edge"].items()
-                          if not k.startswith("random")))
+    report(result, outputs, "design.json", args.json,
+           lambda r: _print_design(r, params.n_osc, args.n_osc), result["wall_time_s"])
     bad = [k for k, d in result["designs"].items() if not d["simulation"]["agrees"]]
     if bad:
         raise RunsFailed(f"direct simulation disagrees with the fold of {', '.join(bad)}")
+
+
+def _print_design(result: dict, ring: int, n_osc: int) -> None:
+    hom = result["homogeneous_fold"]
+    print(f"homogeneous ring of {ring}: highest single-site fold {hom:.6f}")
+    for name, d in result["designs"].items():
+        print(f"{name}: pattern {np.round(d['pattern'], 4).tolist()}, highest fold "
+              f"{d['edge']:.6f} ({d['moved_by']:+.6f}); gradient vs finite differences "
+              f"{d['gradient_check']['largest_difference']:.1e}; simulation "
+              f"{'agrees' if d['simulation']['agrees'] else 'DISAGREES'}")
+    rand = [r["edge"] for r in result["random"] if r["edge"] is not None]
+    print(f"A-B: {result['ab']['edge']:.6f}; random draws: {min(rand):.6f} to "
+          f"{max(rand):.6f}; tiled on N = {n_osc} (simulation): "
+          + ", ".join(f"{k} {v:.4f}" for k, v in result["chain_edges"]["edge"].items()
+                      if not k.startswith("random")))

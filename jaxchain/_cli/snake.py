@@ -3,7 +3,6 @@ belt speed, with their stability and bifurcations."""
 
 import argparse
 import dataclasses
-import json
 import time
 from pathlib import Path
 
@@ -12,8 +11,8 @@ from .._studies.snake import (SNAKE_CONTINUATION, SNAKE_START, check_starts, def
 from .._plots.snake import plot_snake
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
-                     add_solver_options, comma_list, json_ready, note, one_belt_speed,
-                     positive_float, positive_int, print_json, show_progress,
+                     add_solver_options, comma_list, one_belt_speed,
+                     positive_float, positive_int, report, show_progress,
                      simulation_options)
 
 HELP = "continuation of the localized periodic states (the snake), with stability"
@@ -118,12 +117,7 @@ def run(args) -> None:
                                     "unstable dashed"), "snake")
     s = found["summary"] | {"wall_time_s": time.perf_counter() - start,
                             "eps": args.eps, "n_osc": params.n_osc, "solver": args.solver}
-    outputs.text(json.dumps(json_ready(s), allow_nan=False), "snake.json")
-    if args.json:
-        print_json(s, outputs)
-    else:
-        _print_summary(s)
-        note(f"{s['wall_time_s']:.0f} s; {outputs.summary()}")
+    report(s, outputs, "snake.json", args.json, _print_summary, s["wall_time_s"])
     disagree = [c for b in s["branches"] for c in b.get("simulation_check", [])
                 if c["agrees"] is False]
     if not s["branches"]:
