@@ -4,6 +4,7 @@ of an orbit found by shooting, scipy, and the memory of a shorter run."""
 
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -20,17 +21,22 @@ def lorenz(t, y, args):
                       y[0] * y[1] - beta * y[2]])
 
 
+@jax.jit
+def _lorenz_exponent(y0):
+    """One jitted run for every start below: traced and compiled once."""
+    options = jc.SimulationOptions(t_end=20000.0, transient=50.0, chunk_length=10.0,
+                                   rtol=1e-8, atol=1e-8, sample_dt=10.0, max_steps=10**5)
+    return jc.integrate(diffrax.ODETerm(lorenz), diffrax.Tsit5(), y0, None, options,
+                        (jc.LargestLyapunov(),))
+
+
 @pytest.mark.numerics
 @pytest.mark.parametrize("shift", [0.0, 1e-3, -2e-3])
 def test_lorenz_largest_exponent_is_0_9056_within_its_stated_error(shift):
     """Lorenz-63 at sigma = 10, rho = 28, beta = 8/3: 0.9056 (Sprott, Chaos and Time
     Series Analysis, 2003). The start is perturbed: the trajectory is chaotic, so
     each start (and each CPU) gives another finite-time estimate."""
-    options = jc.SimulationOptions(t_end=20000.0, transient=50.0, chunk_length=10.0,
-                                   rtol=1e-8, atol=1e-8, sample_dt=10.0, max_steps=10**5)
-    (res,), _, _, status = jax.jit(lambda y0: jc.integrate(
-        diffrax.ODETerm(lorenz), diffrax.Tsit5(), y0, None, options,
-        (jc.LargestLyapunov(),)))(jnp.array([1.0 + shift, 1.0, 1.0]))
+    (res,), _, _, status = _lorenz_exponent(jnp.array([1.0 + shift, 1.0, 1.0]))
     assert status == jc.Status.ok
     error = float(res["lyapunov_error"])
     assert 0 < error < 0.03
@@ -58,18 +64,32 @@ def test_damped_linear_chain_has_every_exponent_at_minus_xi():
     assert abs(float(res["lyapunov"]) + xi) < float(res["lyapunov_error"]) < 2e-3
 
 
+#: A ring of 3 at v_d = 1.5, started at steady sliding.
+SLIDING = jc.ChainParams(n_osc=3, v_d=1.5)
+
+
+@pytest.fixture(scope="module")
+def steady_sliding_runs():
+    """`SLIDING` observed from steady sliding by each solver, the largest exponent and
+    the energy in one run (one compiled program per solver, for the two tests
+    below)."""
+    options = jc.SimulationOptions(t_end=1200.0, transient=200.0, chunk_length=50.0)
+    return {solver: jc.observe(SLIDING, jc.steady_sliding(SLIDING),
+                               [jc.LargestLyapunov(), jc.Energy()], jc.SOLVERS[solver](),
+                               options)
+            for solver in ("ros34pw2", "tsit5")}
+
+
 @pytest.mark.numerics
 @pytest.mark.parametrize("solver", ["ros34pw2", "tsit5"])
-def test_steady_sliding_exponent_is_half_the_effective_damping(solver):
+def test_steady_sliding_exponent_is_half_the_effective_damping(steady_sliding_runs, solver):
     """Linearised about steady sliding every mode has the damping 2 xi - mu'(v_d)
     (DESIGN.md): the largest exponent is -(2 xi - mu'(v_d)) / 2 above the Hopf point."""
-    params = jc.ChainParams(n_osc=3, v_d=1.5)
+    params = SLIDING
     law = params.friction
     slope = (law.mu_st - law.mu_d) / law.v0 * np.exp(-params.v_d / law.v0)
     expected = -(2 * params.xi - slope) / 2
-    options = jc.SimulationOptions(t_end=1200.0, transient=200.0, chunk_length=50.0)
-    out = jc.observe(params, jc.steady_sliding(params), [jc.LargestLyapunov()],
-                     jc.SOLVERS[solver](), options)
+    out = steady_sliding_runs[solver]
     assert abs(float(out["lyapunov"]) - expected) < float(out["lyapunov_error"]) < 2e-3
 
 
@@ -112,13 +132,22 @@ def test_peak_times_of_a_periodic_orbit_are_spaced_by_its_period(stick_slip_orbi
     assert abs(section[0, 0] - float(orbit.y0[0, 0])) < 1e-6
 
 
-@pytest.mark.numerics
-def test_time_series_match_scipy():
+@pytest.fixture(scope="module")
+def stick_slip_scene():
+    """A ring of 3 at v_d = 1.5 (eps = 1e-2) from eq. (8) with 2 excited, over [0, 60]
+    at tight tolerances: the time series and the energy in one run (one compiled
+    program, for the two tests against scipy below)."""
     params = jc.ChainParams(n_osc=3, v_d=1.5, eps=1e-2)
     y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 2))(params)
     options = jc.SimulationOptions(t_end=60.0, transient=10.0, rtol=1e-9, atol=1e-11)
-    out = jc.observe(params, y0, [jc.TimeSeries(oscillators=(0, 2), dt=0.5)],
+    out = jc.observe(params, y0, [jc.TimeSeries(oscillators=(0, 2), dt=0.5), jc.Energy()],
                      options=options)
+    return params, y0, out
+
+
+@pytest.mark.numerics
+def test_time_series_match_scipy(stick_slip_scene):
+    params, y0, out = stick_slip_scene
     t = np.asarray(out["series_t"])
     assert t[0] == 10.0 and t[-1] == 60.0 and t.size == 101
     ref = solve_ivp(reference_rhs(params), (0.0, 60.0), np.ravel(y0), method="DOP853",
@@ -138,19 +167,15 @@ def test_observers_are_checked():
 
 
 @pytest.mark.numerics
-def test_energy_at_steady_sliding_and_against_scipy():
+def test_energy_at_steady_sliding_and_against_scipy(steady_sliding_runs, stick_slip_scene):
     """At steady sliding x_n = mu(v_d), x_n' = 0: the energy is N mu(v_d)^2 / 2. On a
     stick-slip trajectory, the mean and maximum match scipy's dense solution."""
-    params = jc.ChainParams(n_osc=3, v_d=1.5)
-    options = jc.SimulationOptions(t_end=100.0, transient=50.0)
-    out = jc.observe(params, jc.steady_sliding(params), [jc.Energy()], options=options)
+    params = SLIDING
+    out = steady_sliding_runs["ros34pw2"]
     mu = float(jc.friction_coefficient(params, params.v_d))
     assert abs(float(out["energy_mean"]) - 1.5 * mu**2) < 1e-10
     assert abs(float(out["energy_max"]) - 1.5 * mu**2) < 1e-10
-    params = jc.ChainParams(n_osc=3, v_d=1.5, eps=1e-2)
-    y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 2))(params)
-    options = jc.SimulationOptions(t_end=60.0, transient=10.0, rtol=1e-9, atol=1e-11)
-    out = jc.observe(params, y0, [jc.Energy()], options=options)
+    params, y0, out = stick_slip_scene
     t = np.linspace(10.0, 60.0, 50001)
     y = solve_ivp(reference_rhs(params), (0.0, 60.0), np.ravel(y0), method="DOP853",
                   t_eval=t, rtol=1e-11, atol=1e-12).y.reshape(2, 3, -1)
@@ -182,8 +207,9 @@ def test_both_engines_observe_a_prescribed_stream_alike():
     those of NumPy over each half of the window."""
     from helpers import internal
 
-    observe_chunk, observe_sample = (internal("smoothed observation"),
-                                     internal("non-smooth observation"))
+    # jitted as the engines run them: one program each, not an op-by-op dispatch
+    observe_chunk, observe_sample = (eqx.filter_jit(internal("smoothed observation")),
+                                     eqx.filter_jit(internal("non-smooth observation")))
     params = jc.ChainParams(n_osc=4, v_d=1.5, eps=1e-3)
     options = jc.SimulationOptions(t_end=100.0, transient=40.0, chunk_length=15.0)
     ts = np.linspace(options.transient, options.t_end, 241)  # mid = 70 among them
