@@ -155,18 +155,20 @@ def test_standard_errors_cover_the_truth_as_often_as_they_should(clean_records):
 @pytest.mark.slow
 def test_stribeck_records_are_attributed_to_the_stribeck_law():
     """Records made with a Stribeck law of Gaussian decay (delta = 2), which the
-    exponential law cannot take: on a held-out record the Stribeck fit's residual
-    is the smaller, and its information criteria too."""
+    exponential law cannot take: on held-out records the Stribeck fit's residual
+    is the smaller, and its information criteria too. Three records fitted with
+    offsets, as in `_fit` (the fit of the exponential law is then the program that
+    `test_noise_free_records...` compiled), and three held out."""
     jc.configure()
     law = jc.Stribeck(mu_s=1.0, mu_c=0.55, v_s=0.45, delta=2.0, viscous=0.0)
     rig = jc.ChainParams(n_osc=1, xi=0.04, friction=law)
     rng = np.random.default_rng(7)
     records = _noisy([jc.reference_record(rig, v, T_END, DT)
-                      for v in (0.4, 0.55, 0.7, 1.0)], rng, offsets=(0.0,) * 4)
+                      for v in (0.4, 0.55, 0.7, 0.85, 1.0, 1.15)], rng, offsets=(0.0,) * 6)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         rows = jc.compare_laws(records[::2], records[1::2], jc.ChainParams(n_osc=1),
-                               ["exponential", "stribeck"])
+                               ["exponential", "stribeck"], offsets=True)
     by_law = {row["law"]: row for row in rows}
     assert by_law["stribeck"]["best"] and not by_law["exponential"]["best"]
     assert by_law["stribeck"]["held_out_rms"] < 0.5 * by_law["exponential"]["held_out_rms"]

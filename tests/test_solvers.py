@@ -18,10 +18,18 @@ from jaxchain._engine.solver.controller import CONTROLLERS, PIController
 from jaxchain._engine.solver.rosenbrock import Ros34PW2
 
 
+def _fixed_steps(split, y0, t1, n_steps, args=None, most=640):
+    """`n_steps` steps of ROS34PW2 over [0, t1]. The step is an array and the step
+    budget `most` + 1 for every count, so that every count runs one compiled program
+    (a Python float or int is static: each would compile its own)."""
+    assert n_steps <= most
+    return diffrax.diffeqsolve(split, Ros34PW2(), 0.0, t1, jnp.asarray(t1 / n_steps), y0,
+                               args, stepsize_controller=diffrax.ConstantStepSize(),
+                               max_steps=most + 1)
+
+
 def _fixed_step_error(split, y0, t1, exact, n_steps):
-    sol = diffrax.diffeqsolve(split, Ros34PW2(), 0.0, t1, t1 / n_steps, y0,
-                              stepsize_controller=diffrax.ConstantStepSize(),
-                              max_steps=n_steps + 1)
+    sol = _fixed_steps(split, y0, t1, n_steps)
     return float(jnp.max(jnp.abs(sol.ys[-1] - exact)))
 
 
@@ -59,11 +67,14 @@ def test_order_three_on_the_smooth_chain_against_dopri8():
     split = terms(Ros34PW2())
     errors = []
     for n in (80, 160, 320, 640):
-        sol = diffrax.diffeqsolve(split, Ros34PW2(), 0.0, 4.0, 4.0 / n, y0, p,
-                                  stepsize_controller=diffrax.ConstantStepSize(),
-                                  max_steps=n + 1)
+        sol = _fixed_steps(split, y0, 4.0, n, p)
         errors.append(float(jnp.max(jnp.abs(sol.ys[-1] - ref.ys[-1]))))
     assert np.all(np.abs(_orders(errors) - 3) < 0.3), (errors, _orders(errors))
+
+
+def _short(rtol, atol):
+    """`SHORT` with the tolerances as arrays (traced: one program for any values)."""
+    return dataclasses.replace(SHORT, rtol=jnp.asarray(rtol), atol=jnp.asarray(atol))
 
 
 @pytest.mark.numerics
@@ -73,13 +84,13 @@ def test_converges_to_the_nonsmooth_stick_slip_cycle_as_eps_shrinks():
     explicit solver would be stiffness-bound, and the cycle sticks at every eps.
     The velocity error allowed per step, about rtol v_d, must stay below the width
     eps of the stick band, so rtol is at most eps / 10 (the default 1e-5 down to
-    eps = 1e-4)."""
+    eps = 1e-4). The tolerances are arrays: one compiled program for every eps."""
     reference = scipy_stick_slip_cycle(jc.ChainParams(n_osc=1))[0]
     errors = []
     for eps in (1e-2, 1e-3, 1e-4, 1e-5):
         p = jc.ChainParams(n_osc=1, eps=eps)
         rtol = min(SHORT.rtol, eps / 10)
-        options = dataclasses.replace(SHORT, rtol=rtol, atol=rtol / 100)
+        options = _short(rtol, rtol / 100)
         obs = jc.simulate(p, jc.OutOfPhaseExcitation.eq8([True]), Ros34PW2(), options)
         assert int(obs.n_halc) == 1
         errors.append(abs(float(obs.amplitudes[0]) / reference - 1))
@@ -96,8 +107,9 @@ def test_steps_are_not_bound_by_stiffness():
     10 times as many."""
     p = jc.ChainParams(n_osc=1, eps=1e-5)
     ic = jc.OutOfPhaseExcitation.eq8([True])
-    rosw = jc.simulate(p, ic, Ros34PW2(), SHORT)
-    bosh = jc.simulate(p, ic, diffrax.Bosh3(), SHORT, throw=False)
+    options = _short(SHORT.rtol, SHORT.atol)  # ROS34PW2's program of the test above
+    rosw = jc.simulate(p, ic, Ros34PW2(), options)
+    bosh = jc.simulate(p, ic, diffrax.Bosh3(), options, throw=False)
     assert int(rosw.n_halc) == 1
     assert (bosh.status == jc.Status.max_steps_reached
             or int(bosh.num_steps) > 10 * int(rosw.num_steps))
