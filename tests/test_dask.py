@@ -169,9 +169,11 @@ def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_pro
 
 def test_basin_on_a_local_cluster_equals_basin_in_process(tmp_path, client):
     """`jaxchain basin --scheduler ADDRESS`, on the module's cluster of two spawned
-    workers, writes the basin.nc of the in-process command, to the last bit."""
-    args = ["basin", "--n-osc", "2", "--vd", "1.5", "--samples", "8", "--t-end", "400",
-            "--transient", "300", "--check", "2", "--no-progress", "--json"]
+    workers, writes the basin.nc of the in-process command, to the last bit. The ring
+    and window of notebook 04 (test_examples.py: SMALL), whose kernel then loads
+    these programs from the session's cache."""
+    args = ["basin", "--n-osc", "3", "--vd", "1.5", "--samples", "8", "--t-end", "300",
+            "--transient", "200", "--check", "2", "--no-progress", "--json"]
     assert jc.main([*args, "--out", str(tmp_path / "here")]) == 0
     assert jc.main([*args, "--out", str(tmp_path / "dask"), "--scheduler",
                     client.scheduler.address]) == 0
