@@ -107,7 +107,7 @@ def _fig4(args, jc) -> None:
         start = time.perf_counter()
         ds = jc.ensemble(jc.ChainParams(n_osc=args.n_osc, v_d=args.vd), [args.vd],
                          jc.localized_family(args.n_osc), solver, options,
-                         engine=args.engine, progress=False)
+                         schedule=args.engine, progress=False)
         walls.append(time.perf_counter() - start)
     row = ds.isel(v_d=0)
     print(json.dumps(dict(

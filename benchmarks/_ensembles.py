@@ -19,7 +19,7 @@ def _fig4(v_d: float, t_end: float, transient: float, engine: str):
     options = jc.SimulationOptions(t_end=t_end, transient=transient)
     start = time.perf_counter()
     ds = jc.ensemble(params, [v_d], jc.localized_family(N_OSC), options=options,
-                     engine=engine, progress=False)
+                     schedule=engine, progress=False)
     return ds, time.perf_counter() - start
 
 
@@ -113,7 +113,7 @@ def compare_sizes(settings: Settings, start: float) -> tuple[list[Row], dict]:
         for _ in range(2):
             t0 = time.perf_counter()
             obs = run_lanes(jc.lane_params(params, size, v_d=vd), y0, solver, options,
-                            engine="queue")
+                            schedule="queue")
             walls.append(time.perf_counter() - t0)
         failed = int(np.sum(np.asarray(obs.status) != 0))
         results.append(dict(size=size, wall_s=walls[1], first_s=walls[0], measured=True,
@@ -127,7 +127,7 @@ def compare_sizes(settings: Settings, start: float) -> tuple[list[Row], dict]:
         if predicted <= settings.big_size_budget_s:
             y0 = _lanes(size, rng)
             t0 = time.perf_counter()
-            obs = run_lanes(params, y0, solver, options, engine="queue")
+            obs = run_lanes(params, y0, solver, options, schedule="queue")
             wall = time.perf_counter() - t0
             results.append(dict(size=size, wall_s=wall, first_s=wall, measured=True,
                                 steps=int(np.sum(obs.num_steps)),
@@ -214,7 +214,7 @@ def compare_sweep(settings: Settings, engines_raw: dict | None, run_sweep: bool,
         options = jc.SimulationOptions(t_end=PAPER_T_END, transient=PAPER_TRANSIENT)
         t0 = time.perf_counter()
         ds = jc.ensemble(params, SWEEP_VDS, jc.localized_family(N_OSC), options=options,
-                         engine="queue", progress=False)
+                         schedule="queue", progress=False)
         wall = time.perf_counter() - t0
         failed = int(np.sum(ds["status"].values != 0))
         rows.append(Row("6. sweep 21 v_d x 20 ics, MEASURED (--sweep)",

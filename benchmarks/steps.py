@@ -31,7 +31,7 @@ import numpy as np
 
 import jaxchain as jc
 from jaxchain._physics.stick import STICK_BAND
-from jaxchain._engine.simulate import terms
+from jaxchain._engine.smoothed import terms
 
 jc.configure()  # float64, one CPU device per core, the XLA flags
 

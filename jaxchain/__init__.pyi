@@ -45,10 +45,13 @@ from ._physics.initial import (
 )
 
 # --- Simulating and observing: simulate, options, solvers, observers, statuses ---
-from ._engine.simulate import (
-    simulate as simulate, observe as observe, Observables as Observables,
-    integrate as integrate,
+from ._engine.simulate import simulate as simulate, observe as observe
+from ._engine.engines import (
+    AbstractEngine as AbstractEngine, Smoothed as Smoothed, Exact as Exact,
+    as_engine as as_engine, ENGINES as ENGINES,
 )
+from ._engine.observables import Observables as Observables
+from ._engine.smoothed import integrate as integrate
 from ._engine.options import SimulationOptions as SimulationOptions
 from ._engine.solver.registry import (
     SOLVERS as SOLVERS, DEFAULT_SOLVER as DEFAULT_SOLVER, auto_solver as auto_solver,
@@ -64,14 +67,14 @@ from ._engine.observers.base import AbstractObserver as AbstractObserver, Chunk 
 from ._engine.status import (
     Status as Status, failure_hint as failure_hint, flag_attributes as flag_attributes,
 )
-from ._nonsmooth.solve import (
+from ._engine.exact.solve import (
     simulate_nonsmooth as simulate_nonsmooth,
     nonsmooth_trajectory as nonsmooth_trajectory,
     NonsmoothObservables as NonsmoothObservables,
 )
-from ._nonsmooth.options import NonsmoothOptions as NonsmoothOptions
-from ._nonsmooth.switching import SWITCH_KINDS as SWITCH_KINDS
-from ._nonsmooth.existence import (
+from ._engine.exact.options import NonsmoothOptions as NonsmoothOptions
+from ._engine.exact.switching import SWITCH_KINDS as SWITCH_KINDS
+from ._bifurcation.existence import (
     stick_slip_existence_limit as stick_slip_existence_limit,
     differentiable_existence_limit as differentiable_existence_limit,
 )

@@ -294,7 +294,7 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "pattern folds": ("jaxchain._studies.mistuning.pattern_design", "pattern_folds"),
              "tasks on devices": ("jaxchain._engine.lanes", "on_devices"),
              "smoothed observation": ("jaxchain._engine.observers.base", "observe_chunk"),
-             "non-smooth observation": ("jaxchain._nonsmooth.solve", "observe_sample"),
+             "non-smooth observation": ("jaxchain._engine.exact.solve", "observe_sample"),
              "identification problem": ("jaxchain._studies.identification.fit", "_problem"),
              "command-line parser": ("jaxchain._cli.main", "build_parser"),
              "commands": ("jaxchain._cli.main", "COMMANDS"),

@@ -56,11 +56,11 @@ def main(out: str) -> None:
     jax.monitoring.register_event_time_span_listener(
         lambda event, start, end, **kw: compiles.append(kw.get("fun_name", ""))
         if event == "/jax/core/compile/backend_compile_duration" else None)
-    runs = {"one": jc.run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:1])}
+    runs = {"one": jc.run_lanes(params, y0, solver, TIGHT, schedule="queue", devices=devices[:1])}
     before = len(compiles)
-    runs["two"] = jc.run_lanes(params, y0, solver, TIGHT, engine="queue", devices=devices[:2])
+    runs["two"] = jc.run_lanes(params, y0, solver, TIGHT, schedule="queue", devices=devices[:2])
     two_compiles = sum("run_block" in name for name in compiles[before:])
-    runs["vmap"] = jc.run_lanes(params, y0, solver, TIGHT, engine="vmap", devices=devices[:2])
+    runs["vmap"] = jc.run_lanes(params, y0, solver, TIGHT, schedule="vmap", devices=devices[:2])
     np.savez(out, n_devices=len(jax.devices("cpu")), cores=len(os.sched_getaffinity(0)),
              used=devices_at_a_barrier(), two_compiles=two_compiles,
              one_compiles=sum("run_block" in name for name in compiles[:before]),

@@ -15,7 +15,7 @@ import jaxchain as jc
 import jaxchain._bifurcation.continuation as continuation_module
 import jaxchain._bifurcation.hopf as hopf_module
 import jaxchain._bifurcation.shooting as shooting_module
-import jaxchain._nonsmooth.existence as existence_module
+import jaxchain._bifurcation.existence as existence_module
 import jaxchain._engine.simulate as simulate_module
 from helpers import reference_rhs, scipy_slip_arc
 

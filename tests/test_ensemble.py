@@ -65,7 +65,7 @@ def test_good_lanes_are_kept_beside_failing_ones(engine):
     lanes = jnp.stack([sliding.at[1, 0].add(0.1), sliding.at[0, 0].set(jnp.nan),
                        jc.OutOfPhaseExcitation.eq8([True, True])(p), sliding])
     options = GOOD_AND_FAILING
-    ds = jc.ensemble(p, [1.5], jc.GivenState(lanes), options=options, engine=engine,
+    ds = jc.ensemble(p, [1.5], jc.GivenState(lanes), options=options, schedule=engine,
                      progress=False).isel(v_d=0)
     s = jc.Status
     assert ds["status"].values.tolist() == [s.ok, s.non_finite_state, s.max_steps_reached, s.ok]
@@ -75,7 +75,7 @@ def test_good_lanes_are_kept_beside_failing_ones(engine):
     assert int(ds["num_steps"][1]) == 0  # skipped, holding up no other lane
     for good in (0, 3):
         alone = jc.ensemble(p, [1.5], jc.GivenState(lanes[good:good + 1]), options=options,
-                            engine=engine, progress=False).isel(v_d=0, ic=0)
+                            schedule=engine, progress=False).isel(v_d=0, ic=0)
         assert int(ds["n_halc"][good]) == int(alone["n_halc"]) == 0
         steps = [int(ds["num_steps"][good]), int(alone["num_steps"])]
         for name in ("amplitudes", "energy", "y_final", "num_steps"):

@@ -130,7 +130,8 @@ def test_compiled_run_holds_no_callback_custom_call_or_scatter():
     p = jc.ChainParams(n_osc=3)
     y0 = np.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1))(p))[None]
     for name in (DEFAULT_SOLVER, "bosh3"):
-        compiled = _run_block.lower(lane_params(p, 1), y0, SOLVERS[name](), TIGHT).compile()
+        compiled = _run_block.lower(lane_params(p, 1), y0,
+                                    jc.Smoothed(SOLVERS[name](), TIGHT)).compile()
         ops = set(re.findall(r" ([a-z][a-z0-9-]*)\(", compiled.compiled.as_text()))
         assert "while" in ops and "tanh" in ops  # the step loop is there
         # a host callback is a custom call on the CPU
@@ -183,7 +184,7 @@ def test_memory_and_output_do_not_grow_with_t_end():
     sizes, outputs = [], []
     for t_end in (1500.0, 15000.0):
         options = jc.SimulationOptions(t_end=t_end, transient=t_end * 2 / 3)
-        args = (lane_params(p, 1), y0, jc.SOLVERS[jc.DEFAULT_SOLVER](), options,
+        args = (lane_params(p, 1), y0, jc.Smoothed(jc.SOLVERS[jc.DEFAULT_SOLVER](), options),
                 (jc.Extrema(),))
         memory = _run_block.lower(*args).compile().compiled.memory_analysis()
         sizes.append(memory.argument_size_in_bytes + memory.output_size_in_bytes
@@ -203,8 +204,9 @@ def test_observers_keep_the_compiled_run_free_of_callbacks_and_scatters():
     y0 = np.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1))(p))[None]
     observers = (jc.Extrema(), jc.Energy(), jc.PeakTimes(), jc.TimeSeries(dt=1.0),
                  jc.PoincareSection(), jc.LargestLyapunov())
-    compiled = _run_block.lower(lane_params(p, 1), y0, jc.SOLVERS[jc.DEFAULT_SOLVER](),
-                                SHORT, observers).compile()
+    compiled = _run_block.lower(lane_params(p, 1), y0,
+                                jc.Smoothed(jc.SOLVERS[jc.DEFAULT_SOLVER](), SHORT),
+                                observers).compile()
     ops = set(re.findall(r" ([a-z][a-z0-9-]*)\(", compiled.compiled.as_text()))
     assert "while" in ops and "tanh" in ops and "sort" in ops
     assert not ops & {"custom-call", "scatter", "send", "recv", "infeed", "outfeed"}

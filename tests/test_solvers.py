@@ -13,7 +13,7 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 from helpers import SHORT, flat, reference_rhs, scipy_stick_slip_cycle
-from jaxchain._engine.simulate import terms
+from jaxchain._engine.smoothed import terms
 from jaxchain._engine.solver.controller import CONTROLLERS, PIController
 from jaxchain._engine.solver.rosenbrock import Ros34PW2
 

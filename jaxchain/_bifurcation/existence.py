@@ -9,7 +9,7 @@ import optimistix as optx
 
 from .._physics.forces import static_friction
 from .._physics.params import chain_or_default, ChainParams, with_parameter
-from .switching import mode_field
+from .._engine.exact.switching import mode_field
 from .._errors import ValidationError
 
 
@@ -88,7 +88,7 @@ def stick_slip_existence_limit(params: ChainParams | None = None,
         raise ValidationError(f"the existence limit is that of one oscillator (n_osc = 1), got "
                               f"n_osc = {params.n_osc}; see single_oscillator")
     if lower is None:
-        from .._bifurcation.hopf import hopf_speed  # for a default
+        from .hopf import hopf_speed  # for a default
 
         lower = hopf_speed(params)
         if not lower > 0:

@@ -5,7 +5,7 @@ import argparse
 import time
 
 from .._studies.crosscheck import CROSSCHECK_ICS, CROSSCHECK_VD, crosscheck
-from .._nonsmooth.options import NonsmoothOptions
+from .._engine.exact.options import NonsmoothOptions
 from .common import simulation_options
 from .._engine.status import Status
 from .._physics.params import with_parameter

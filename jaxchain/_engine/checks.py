@@ -67,7 +67,7 @@ def real_array(value, name: str) -> np.ndarray:
     return a.astype(np.float64)
 
 
-def _belt_speeds(v_d, name: str = "v_d") -> np.ndarray:
+def belt_speeds(v_d, name: str = "v_d") -> np.ndarray:
     """Belt speeds as a non-empty 1-d float64 array.
 
     **Raises:**
@@ -87,7 +87,7 @@ def _belt_speeds(v_d, name: str = "v_d") -> np.ndarray:
 def check_run(params, solver, options, v_d) -> tuple:
     """The arguments that open every batched run (`ensemble`, `crosscheck`,
     `basin_stability`, `mistuning_study`), checked: (params, solver, options, v_d)
-    as `check_params`, `as_solver`, `check_options` and `_belt_speeds` return them.
+    as `check_params`, `as_solver`, `check_options` and `belt_speeds` return them.
 
     **Raises:**
 
@@ -95,4 +95,4 @@ def check_run(params, solver, options, v_d) -> tuple:
     checks, naming the argument.
     """
     params = check_params(params)
-    return params, as_solver(solver, params=params), check_options(options), _belt_speeds(v_d)
+    return params, as_solver(solver, params=params), check_options(options), belt_speeds(v_d)

@@ -23,43 +23,43 @@ from jax.sharding import PartitionSpec as P
 from jaxtyping import ArrayLike, Float
 
 from .progress import tqdm
-from .options import SimulationOptions
 from .programs import compiled, kept_program
 from .._physics.initial import AbstractInitialCondition, initial_states
 from .._physics.model import steady_sliding
 from .._physics.params import ChainParams, parameter_lens, with_parameter
 from .observers.base import AbstractObserver
-from .simulate import Observables, check_observers, run, run_observers
+from .engines import AbstractEngine, as_engine
+from .horizon import AbstractHorizon
+from .observables import Observables, check_observers
 from .._errors import ValidationError
 
 
-#: How `run_lanes` runs its lanes: "queue" (each device integrates one block of
+#: How `run_lanes` schedules its lanes: "queue" (each device integrates one block of
 #: trajectories at a time, taking the next block when it finishes; the default on
 #: CPUs) or "vmap" (all lanes of a batch in lockstep, one vmapped program per
 #: device; the default on GPUs).
-ENGINES = ("queue", "vmap")
+SCHEDULES = ("queue", "vmap")
 
 
-def _one(params, y0, solver, options, observers):
-    """One lane: `run` (the `Observables`), or `run_observers` with `observers`."""
+def _one(params, y0, engine: AbstractEngine, observers):
+    """One lane: the engine's `Observables`, or what `observers` saw."""
     if observers is None:
-        return run(params, y0, solver, options)
-    return run_observers(params, y0, solver, options, observers)
+        return engine.run(params, y0)
+    return engine.run_observers(params, y0, observers)
 
 
 @eqx.filter_jit
-def _run_block(params, y0, solver, options, observers=None):
+def _run_block(params, y0, engine, observers=None):
     """A block of trajectories, one after the other (`lax.map`): no lane waits for
     another, and the step loop stays one small while loop, which XLA's CPU backend
     compiles into one kernel (see `_setup.XLA_FLAGS`)."""
-    return jax.lax.map(lambda a: _one(a[0], a[1], solver, options, observers),
-                       (params, y0))
+    return jax.lax.map(lambda a: _one(a[0], a[1], engine, observers), (params, y0))
 
 
 @eqx.filter_jit
-def _run_vmapped(params, y0, solver, options, mesh, observers=None):
+def _run_vmapped(params, y0, engine, mesh, observers=None):
     def local(p, y):
-        return jax.vmap(lambda a, b: _one(a, b, solver, options, observers))(p, y)
+        return jax.vmap(lambda a, b: _one(a, b, engine, observers))(p, y)
 
     # check_vma=False: diffrax's loops carry unsharded initial values (solver state)
     # next to per-device ones, which the varying-axes check rejects.
@@ -178,15 +178,18 @@ def lane_starts(params: ChainParams, ics: AbstractInitialCondition
 
 
 def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
-              solver: diffrax.AbstractSolver, options: SimulationOptions, *,
-              engine: str | None = None, devices: Sequence | None = None,
+              solver: diffrax.AbstractSolver | str | None = None,
+              options: AbstractHorizon | None = None, *,
+              engine: AbstractEngine | str = "smoothed", schedule: str | None = None,
+              devices: Sequence | None = None,
               batch_size: int = 4096, block: int | None = None,
               progress: bool | tqdm = False,
               observers: Sequence[AbstractObserver] | None = None,
               costs: Float[ArrayLike, " lanes"] | None = None
               ) -> Observables | dict:
-    """Run one trajectory of eq. (5) for each lane, in parallel over the devices:
-    `run` (its `Observables`), or `run_observers` with the given observers only.
+    """Run one trajectory of eq. (5) for each lane, in parallel over the devices,
+    with either engine (`simulate`): its `Observables`, or what the given observers
+    saw.
 
     **Arguments:**
 
@@ -195,12 +198,13 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
         `lane_params(params, n, v_d=v_d)` for one belt speed per lane) or
         `stack_chains` (one chain per lane).
     - `y0`: initial state of each lane, shape (lanes, 2, n_osc).
-    - `solver`, `options`: as for `simulate`.
-    - `engine`: "queue" or "vmap" (`ENGINES`); by default "queue" on a CPU and
+    - `solver`, `options`, `engine`: as for `simulate` (`as_engine`); the engine is
+        dispatched once, here, and every lane runs it.
+    - `schedule`: "queue" or "vmap" (`SCHEDULES`); by default "queue" on a CPU and
         "vmap" on other platforms. The queue keeps no lane waiting: each device
         integrates a block of trajectories one after the other (`block_size`) and
         takes the next block when done, the costliest first (`expected_cost`).
-        The vmap engine integrates the lanes of a batch in lockstep (each waits
+        The vmap schedule integrates the lanes of a batch in lockstep (each waits
         for the slowest), in batches of `batch_size` lanes ordered by
         `expected_cost`, dealt to the devices.
     - `devices`: the devices to use, by default all of this process's devices of
@@ -225,9 +229,10 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
 
     **Raises:**
 
-    `ValidationError` for an unknown engine, an empty list of lanes, or lane parameters
+    `ValidationError` for an unknown engine or schedule, an empty list of lanes, or lane parameters
     that do not lead with (lanes,); see also `check_observers`.
     """
+    engine = as_engine(engine, solver, options)
     if observers is not None:
         observers = check_observers(observers)
     y0 = np.asarray(y0, dtype=float)
@@ -236,11 +241,11 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
         raise ValidationError("run_lanes needs at least one lane, got 0")
     params = _as_lanes(params, n_lanes)
     devices = list(devices or jax.local_devices())[:n_lanes]
-    if engine is None:
-        engine = "queue" if devices[0].platform == "cpu" else "vmap"
-    if engine not in ENGINES:
-        raise ValidationError(f"engine must be one of {ENGINES}, got {engine!r}")
-    if engine == "queue":
+    if schedule is None:
+        schedule = "queue" if devices[0].platform == "cpu" else "vmap"
+    if schedule not in SCHEDULES:
+        raise ValidationError(f"schedule must be one of {SCHEDULES}, got {schedule!r}")
+    if schedule == "queue":
         size = block or block_size(n_lanes, len(devices))
         starts = range(0, n_lanes, size)
         # The costliest lanes first (longest processing time first): the short ones
@@ -252,7 +257,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
         # tracing it side by side under the GIL. Where traced programs are kept (the
         # command line), a warm start reads it back instead (`kept_program`).
         first = np.minimum(np.arange(size), n_lanes - 1)
-        example = (take_lanes(params, first), y0[first], solver, options, observers)
+        example = (take_lanes(params, first), y0[first], engine, observers)
         program = kept_program(_run_block, *example)
         if program is None:
             _run_block.lower(*example)
@@ -262,7 +267,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
         def task(i, device):
             pick = by_cost[np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)]
             inputs = jax.device_put((take_lanes(params, pick), y0[pick]), home(device))
-            out = program(*inputs, solver, options, observers)
+            out = program(*inputs, engine, observers)
             return jax.tree_util.tree_map(lambda x: np.asarray(x)[:len(pick)], out)
 
         blocks = on_devices(task, len(starts), "trajectories", progress, devices=devices,
@@ -277,8 +282,7 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
             batch = by_cost[s:s + batch_size]
             order = lane_order(len(batch), len(devices))
             pick = batch[np.minimum(order, len(batch) - 1)]  # padding repeats a lane
-            out = _run_vmapped(take_lanes(params, pick), y0[pick], solver, options, mesh,
-                               observers)
+            out = _run_vmapped(take_lanes(params, pick), y0[pick], engine, mesh, observers)
             back = np.argsort(order)[:len(batch)]
             parts.append(jax.tree_util.tree_map(lambda x: np.asarray(x)[back], out))
             bar.update(len(batch))

@@ -17,7 +17,7 @@ from .._bifurcation.lyapunov_coefficient import first_lyapunov_coefficient
 from .._bifurcation.shooting import ShootingOptions, flow, periodic_orbit, unpack
 from .._bifurcation.two_parameter import BoundaryCurves, boundary_curves
 from .._physics.initial import GivenState
-from .._nonsmooth.existence import stick_slip_existence_limit
+from .._bifurcation.existence import stick_slip_existence_limit
 from .._engine.options import SimulationOptions
 from .._physics.friction import ExponentialDecay
 from .._physics.params import (

@@ -19,8 +19,8 @@ import numpy as np
 from .._engine.progress import tqdm
 from .._engine.checks import check_options, check_run
 from .._physics.initial import FAMILIES, excited_block
-from .._nonsmooth.options import NonsmoothOptions
-from .._nonsmooth.solve import run_nonsmooth
+from .._engine.exact.options import NonsmoothOptions
+from .._engine.exact.solve import run_nonsmooth
 from .._engine.options import SimulationOptions
 from .._physics.params import chain_or_default, ChainParams, with_parameter
 from .._physics.record import chain_record, check_recordable

@@ -24,7 +24,7 @@ from .._engine.observers.series import TimeSeries
 from .._engine.options import SimulationOptions
 from .._physics.params import chain_or_default, ChainParams
 from .._sweeps.datasets import run_attributes
-from .._engine.simulate import check_observers
+from .._engine.observables import check_observers
 from .._engine.status import flag_attributes
 from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._analysis.states import ClassTolerances
@@ -68,7 +68,7 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
                       observers: Sequence[AbstractObserver], ics: str = "eq8",
                       solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
                       options: SimulationOptions = SimulationOptions(), *,
-                      engine: str | None = None, progress: bool = True,
+                      schedule: str | None = None, progress: bool = True,
                       tolerances: ClassTolerances = ClassTolerances(),
                       classify_from: float | None = None) -> xr.Dataset:
     """Run the paper's solutions (k oscillators excited by eq. (8) or (10), in the
@@ -81,7 +81,7 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
     - `solutions`: the numbers k of excited oscillators, in [1, n_osc]; all if None.
     - `observers`: what to observe (see `jaxchain._engine.observers`).
     - `ics`: "eq8" or "eq10".
-    - `solver`, `options`, `engine`, `progress`: as for `ensemble`.
+    - `solver`, `options`, `schedule`, `progress`: as for `ensemble`.
     - `tolerances`, `classify_from`: when the observers include `Extrema` and
         `PeakTimes` of every oscillator and `LargestLyapunov`, each state is
         classified (`classify`) over the peaks after `classify_from`
@@ -110,7 +110,7 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
     family = take_lanes(localized_family(params.n_osc, ics, params.graph), solutions - 1)
     lanes = lane_params(params, solutions.size)
     out = run_lanes(lanes, initial_states(lanes, family), solver, options,
-                    engine=engine, progress=progress, observers=observers)
+                    schedule=schedule, progress=progress, observers=observers)
     dims = {"y_initial": ("component", "osc"), "y_final": ("component", "osc"),
             "num_steps": (), "status": ()}
     coords = {"solution": solutions, "osc": np.arange(1, params.n_osc + 1),

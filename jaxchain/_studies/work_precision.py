@@ -16,13 +16,13 @@ import numpy as np
 
 from .._engine.checks import real_array
 from .._physics.initial import OutOfPhaseExcitation, excited_block
-from .._nonsmooth.options import NonsmoothOptions
-from .._nonsmooth.solve import simulate_nonsmooth
+from .._engine.exact.options import NonsmoothOptions
+from .._engine.exact.solve import simulate_nonsmooth
 from .._engine.solver.controller import CONTROLLERS
 from .._engine.options import SimulationOptions
 from .._physics.model import vector_field
 from .._physics.params import ChainParams
-from .._engine.simulate import run
+from .._engine.smoothed import run
 from .._engine.status import Status
 from .._engine.solver.registry import SOLVERS
 from .._sweeps.result_store import CsvStore, settings_key

@@ -13,10 +13,10 @@ from jaxtyping import ArrayLike
 
 from .atomic import replacing
 from .._physics.initial import AbstractInitialCondition, OutOfPhaseExcitation
-from .._engine.options import SimulationOptions
+from .._engine.horizon import AbstractHorizon
 from .._physics.params import ChainParams
 from .._physics.record import chain_record
-from .._engine.simulate import Observables
+from .._engine.observables import Observables
 from .._engine.status import flag_attributes
 from .._setup import VERSION
 from .._physics.stick import STICK_BAND
@@ -114,32 +114,37 @@ def field_values(obj, prefix: str = "") -> dict:
             if getattr(obj, f.name) is not None}
 
 
-def run_attributes(params: ChainParams, solver: diffrax.AbstractSolver,
-                   options: SimulationOptions, ics: str, varying: str) -> dict:
+def run_attributes(params: ChainParams, solver: diffrax.AbstractSolver | None,
+                   options: AbstractHorizon, ics: str, varying: str,
+                   engine: str = "smoothed") -> dict:
     """The attributes of a Dataset of runs: the whole chain (`chain_record`: the
     boundary, the friction law and its parameters, per-oscillator arrays as lists,
     the mistuning record) but `varying` (the parameter along a dim of the
-    Dataset), the fields of `options`, the solver, the initial conditions, the
-    jaxchain version and the paper, as plain numbers, lists and strings (netCDF and
+    Dataset), the engine, the fields of `options`, the solver (the smoothed
+    engine's; None for the exact engine), the initial conditions, the jaxchain
+    version and the paper, as plain numbers, lists and strings (netCDF and
     zarr keep them)."""
     attrs = {k: v for k, v in chain_record(params).items() if k != varying}
     attrs |= {k: (v if isinstance(v, (str, int)) else float(v))
               for k, v in field_values(options).items()}
-    attrs |= {"solver": type(solver).__name__, "ics": ics,
+    if solver is not None:
+        attrs["solver"] = type(solver).__name__
+    attrs |= {"engine": engine, "ics": ics,
               "jaxchain_version": VERSION, "paper": PAPER,
               "units": "dimensionless, eqs. (4)-(6) of the paper"}
     return attrs
 
 
 def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
-               ics: AbstractInitialCondition, solver: diffrax.AbstractSolver,
-               options: SimulationOptions) -> xr.Dataset:
+               ics: AbstractInitialCondition, solver: diffrax.AbstractSolver | None,
+               options: AbstractHorizon, engine: str = "smoothed") -> xr.Dataset:
     """Turn batched `Observables` into a self-describing `xarray.Dataset`.
 
     **Arguments:**
 
     - `obs`: `Observables` with leading axes (n_vd, n_ic).
-    - `params`, `v_d`, `ics`, `solver`, `options`: what produced `obs`.
+    - `params`, `v_d`, `ics`, `solver`, `options`, `engine`: what produced `obs`
+        (the engine's name, "smoothed" or "exact"; no solver for the exact one).
 
     **Returns:**
 
@@ -162,7 +167,7 @@ def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
     if isinstance(ics, OutOfPhaseExcitation):
         excited = np.broadcast_to(np.asarray(ics.excited), (n_ic, n_osc))
         coords["n_excited"] = ("ic", excited.sum(-1))
-    attrs = run_attributes(params, solver, options, type(ics).__name__, "v_d")
+    attrs = run_attributes(params, solver, options, type(ics).__name__, "v_d", engine)
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 

@@ -9,13 +9,13 @@ import numpy as np
 from jaxtyping import ArrayLike, Float
 
 from .._physics.record import check_recordable
-from .._engine.checks import check_run
+from .._engine.checks import belt_speeds, check_params
+from .._engine.engines import AbstractEngine, as_engine
+from .._engine.horizon import AbstractHorizon
 from .._physics.initial import AbstractInitialCondition, batch_length
 from .._engine.lanes import distance_from, lane_params, lane_starts, run_lanes, take_lanes
 from .._engine.programs import compiled
-from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams
-from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._errors import ValidationError
 
 if TYPE_CHECKING:
@@ -24,9 +24,10 @@ if TYPE_CHECKING:
 
 def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
              ics: AbstractInitialCondition,
-             solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
-             options: SimulationOptions = SimulationOptions(), *,
-             engine: str | None = None, progress: bool = True) -> "xr.Dataset":
+             solver: diffrax.AbstractSolver | str | None = None,
+             options: AbstractHorizon | None = None, *,
+             engine: AbstractEngine | str = "smoothed", schedule: str | None = None,
+             progress: bool = True) -> "xr.Dataset":
     """Run every (belt speed, initial condition) pair of a grid, spread over the
     devices (on a CPU, one per core) by `run_lanes`. Trajectories never raise: each
     has a `status` (`Status`), so one failing lane never discards the
@@ -46,8 +47,9 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
         each belt speed, so that eq. (8) starts from that speed's steady sliding.
     - `solver`: a diffrax solver, `Ros34PW2()` by default (`DEFAULT_SOLVER`; a
         solver of `SPLIT_SOLVERS` gets the friction force as its stiff term).
-    - `options`: `SimulationOptions`.
-    - `engine`: "queue" or "vmap" (see `run_lanes`); by default the queue on a CPU
+    - `options`: `SimulationOptions` (`NonsmoothOptions` for the exact engine).
+    - `engine`: "smoothed" (default), "exact" or an engine value, as for `simulate`.
+    - `schedule`: "queue" or "vmap" (see `run_lanes`); by default the queue on a CPU
         and vmap elsewhere. The result does not depend on it.
     - `progress`: show a tqdm bar over the trajectories.
 
@@ -55,7 +57,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
 
     An `xarray.Dataset` (see `to_dataset`) with dims (v_d, ic, osc): amplitudes
     has shape (n_vd, n_ic, n_osc), energy (n_vd, n_ic), and so on, with the
-    parameters, options and solver as attributes.
+    parameters, the engine, its options and solver as attributes.
 
     **Raises:**
 
@@ -63,7 +65,9 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     speeds that are not finite and > 0, initial conditions of the wrong shape, an
     unknown solver name or engine; `TypeError` for arguments of the wrong type.
     """
-    params, solver, options, v_d = check_run(params, solver, options, v_d)
+    params = check_params(params)
+    engine = as_engine(engine, solver, options, params)
+    v_d = belt_speeds(v_d)
     check_recordable(params)  # before the run, not in to_dataset after it
     if not isinstance(ics, AbstractInitialCondition):
         raise TypeError(f"ics must be initial conditions (jaxchain.localized_family, "
@@ -76,12 +80,13 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     # One compiled program (its shape checks raise while it is traced), not one
     # per operation: 2 s of a small run (benchmarks/fixed_cost.py).
     y0, steady = compiled(lane_starts, lanes, take_lanes(ics, lanes_ic))
-    obs = run_lanes(lanes, y0, solver, options, engine=engine, progress=progress,
+    obs = run_lanes(lanes, y0, engine=engine, schedule=schedule, progress=progress,
                     costs=distance_from(steady, y0))
     obs = jax.tree_util.tree_map(lambda x: x.reshape(v_d.size, n_ic, *x.shape[1:]), obs)
     from .datasets import to_dataset  # xarray, imported once the run is done
 
-    return to_dataset(obs, params, v_d, ics, solver, options)
+    return to_dataset(obs, params, v_d, ics, getattr(engine, "solver", None), engine.options,
+                      engine.name)
 
 
 

@@ -45,7 +45,7 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
           options: SimulationOptions = SimulationOptions(), *,
           where: Callable | str = "v_d", batch_size: int = 64,
           store: str | Path | None = None, resume: bool = False, overwrite: bool = False,
-          engine: str | None = None, client=None, progress: bool = True) -> xr.Dataset:
+          schedule: str | None = None, client=None, progress: bool = True) -> xr.Dataset:
     """Run every (value, initial condition) pair of a grid, batch by batch, and
     write each batch to a zarr store as it finishes: the bifurcation diagram of
     Fig. 3(b) of the paper when `where` is the belt speed.
@@ -96,7 +96,7 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
         stored: until then the old one stays whole and readable (a killed
         overwrite is finished by `resume=True` with the same settings, or started
         again by `overwrite=True`).
-    - `engine`: "queue" or "vmap" (see `run_lanes`); on a cluster, each worker's
+    - `schedule`: "queue" or "vmap" (see `run_lanes`); on a cluster, each worker's
         default by default (the queue on CPUs, vmap on GPUs).
     - `client`: a `distributed.Client` to run the batches on its cluster (needs
         a `store` on a file system that this process and every worker share);
@@ -161,7 +161,7 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     attrs = run_attributes(params, solver, options, ",".join(grid.families), name)
     attrs |= {"swept": name, "batch_size": batch_size, "settings_key": key,
               "settings": text}
-    work = _Batches(grid, batch_size, solver, options, engine,
+    work = _Batches(grid, batch_size, solver, options, schedule,
                     block_size(batch_size, len(jax.local_devices())), coords, attrs)
     parts = []
     if client is not None:
@@ -253,7 +253,7 @@ class _Batches:
     batch_size: int
     solver: diffrax.AbstractSolver
     options: SimulationOptions
-    engine: str | None
+    schedule: str | None
     block: int
     coords: dict
     attrs: dict
@@ -275,7 +275,7 @@ class _Batches:
         import xarray as xr
 
         lane_params, y0 = self.lanes(b)
-        obs = run_lanes(lane_params, y0, self.solver, self.options, engine=self.engine,
+        obs = run_lanes(lane_params, y0, self.solver, self.options, schedule=self.schedule,
                         block=self.block, progress=progress, devices=devices)
         return xr.Dataset(observables_variables(obs, ("trajectory",)))
 

@@ -2,8 +2,8 @@
 
 import equinox as eqx
 
-from .._engine.horizon import AbstractHorizon, positive
-from .._errors import ValidationError
+from ..horizon import AbstractHorizon, positive
+from ..._errors import ValidationError
 
 
 class NonsmoothOptions(AbstractHorizon):

@@ -1,4 +1,7 @@
-"""The event-driven run of the non-smooth reference, observing while integrating."""
+"""The event-driven run of the exact engine (the non-smooth reference), observing while
+integrating."""
+
+import dataclasses
 
 import diffrax
 import equinox as eqx
@@ -8,14 +11,15 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
-from .._physics.custom_types import State
-from .._physics.initial import AbstractInitialCondition, GivenState
-from .._physics.params import ChainParams
-from .._engine.observers.base import Chunk, no_partial_answers, observe_chunk
-from .._engine.observers.extrema import Extrema
-from .._engine.progress import progress_bar, tick
-from .._engine.status import Status
-from .._errors import ValidationError
+from ..._physics.custom_types import State
+from ..._physics.initial import AbstractInitialCondition, GivenState
+from ..._physics.params import ChainParams
+from ..observers.base import Chunk, no_partial_answers, observe_chunk
+from ..observers.extrema import Extrema
+from ..observables import Observables
+from ..progress import progress_bar, tick
+from ..status import Status
+from ..._errors import ValidationError
 from .options import NonsmoothOptions
 from .switching import guard, initial_modes, mode_field, switch, turning_directions
 
@@ -202,11 +206,10 @@ def _initial_carry(params: ChainParams, y0: State, options: NonsmoothOptions,
     )
 
 
-def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
-                  progress: bool = False) -> NonsmoothObservables:
-    """Pure, traceable core of `simulate_nonsmooth` for one trajectory: no checks,
-    no exceptions; vmap it for batches."""
-    size = options.log_size
+def _run(params: ChainParams, y0: State, options: NonsmoothOptions,
+         progress: bool) -> tuple[dict, _Carry]:
+    """One trajectory event by event: what `Extrema` observed over the window (NaN
+    where the run failed) and the final carry."""
     c = _initial_carry(params, y0, options,
                        tuple(o.init(y0, params, options) for o in _OBSERVERS))
     for start, length, count, observe in options.phases(halves=True):
@@ -222,6 +225,28 @@ def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
     ok = c.status == Status.ok
     (extrema,) = (no_partial_answers(o.result(s, _observers_args(params), options), ok)
                   for o, s in zip(_OBSERVERS, c.observed))
+    return extrema, c
+
+
+def run_exact(params: ChainParams, y0: State, options: NonsmoothOptions,
+              progress: bool = False) -> Observables:
+    """Pure, traceable run of the exact engine for one trajectory, in the layout of
+    the smoothed engine (`Observables`): the engine value `Exact` runs it, and
+    `run_lanes` maps it over lanes. An oscillator is on the HALC when it sticks
+    during the window (`min_slip_speed` = 0: no eps)."""
+    extrema, c = _run(params, y0, options, progress)
+    kept = {f.name for f in dataclasses.fields(Observables)}
+    return Observables(**{k: v for k, v in extrema.items() if k in kept},
+                       y_initial=y0, y_final=c.y, num_steps=c.steps, status=c.status)
+
+
+def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
+                  progress: bool = False) -> NonsmoothObservables:
+    """Pure, traceable core of `simulate_nonsmooth` for one trajectory: no checks,
+    no exceptions; vmap it for batches."""
+    size = options.log_size
+    extrema, c = _run(params, y0, options, progress)
+    ok = c.status == Status.ok
     x_max, x_min = extrema["x_max_halves"], extrema["x_min_halves"]
     scale = jnp.maximum(1.0, jnp.max(extrema["amplitudes"]))
     half_difference = jnp.maximum(jnp.max(jnp.abs(x_max[0] - x_max[1])),

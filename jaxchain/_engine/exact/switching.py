@@ -20,8 +20,8 @@ earliest event however many oscillators there are.
 
 import jax.numpy as jnp
 
-from .._physics.forces import coupling_force, slip_friction_force, static_friction
-from .._physics.model import stick_force
+from ..._physics.forces import coupling_force, slip_friction_force, static_friction
+from ..._physics.model import stick_force
 
 #: Kinds of switch recorded in the event log.
 SWITCH_KINDS = ("stick to slip", "slip to stick", "slip reversal")

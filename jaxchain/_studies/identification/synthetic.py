@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ..._errors import ValidationError
-from ..._nonsmooth.options import NonsmoothOptions
-from ..._nonsmooth.solve import nonsmooth_trajectory
+from ..._engine.exact.options import NonsmoothOptions
+from ..._engine.exact.solve import nonsmooth_trajectory
 from ..._physics.params import ChainParams, with_parameter
 from ..._sweeps.atomic import write_text
 from .records import Record

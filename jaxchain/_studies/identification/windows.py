@@ -17,7 +17,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from ..._engine.checks import as_solver
-from ..._engine.simulate import terms
+from ..._engine.smoothed import terms
 from ..._engine.solver.controller import step_size_controller
 from ..._errors import ValidationError
 from ..._physics.params import ChainParams

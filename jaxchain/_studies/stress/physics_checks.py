@@ -15,9 +15,9 @@ from ..._physics.forces import friction_coefficient
 from ..._physics.friction import Coulomb, ExponentialDecay
 from ..._physics.model import mechanical_energy, split_vector_field, steady_sliding
 from ..._physics.params import single_oscillator
-from ..._nonsmooth.existence import stick_slip_existence_limit
+from ..._bifurcation.existence import stick_slip_existence_limit
 from ..._engine.observers.base import AbstractObserver
-from ..._engine.simulate import SPLIT_SOLVERS, integrate
+from ..._engine.smoothed import SPLIT_SOLVERS, integrate
 from ..._engine.status import Status
 
 #: Largest |E(t_end) - E(0) - W| allowed, relative to the energy that went through

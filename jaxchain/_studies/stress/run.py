@@ -12,7 +12,8 @@ from ..._engine.checks import as_solver
 from ..._engine.status import failure_hint
 from ..._engine.progress import progress_bar
 from ..._engine.solver.rosenbrock import Ros34PW2
-from ..._engine.simulate import SPLIT_SOLVERS, simulate
+from ..._engine.simulate import simulate
+from ..._engine.smoothed import SPLIT_SOLVERS
 from ..._engine.status import Status
 from ..._sweeps.result_store import CsvStore, settings_key
 from .cases import StressCase, stress_cases

@@ -1,0 +1,184 @@
+"""The engine as a value: what integrates one trajectory of eq. (5), chosen where a
+solver was chosen before. Two concrete engines behind one interface: `Smoothed`
+(friction smoothed by tanh(v_rel/eps), integrated by diffrax) and `Exact` (the
+stick/slip switch model of Leine et al. (1998), event by event). Every layer above
+(`simulate`, `run_lanes`, `ensemble`) takes either without knowing which."""
+
+import abc
+from typing import ClassVar
+
+import diffrax
+import equinox as eqx
+
+from .checks import as_solver, check_options
+from .exact.options import NonsmoothOptions
+from .exact.solve import run_exact
+from .horizon import AbstractHorizon
+from .observables import Observables
+from .options import SimulationOptions
+from .smoothed import run, run_observers
+from .solver.registry import DEFAULT_SOLVER, SOLVERS
+from .._physics.custom_types import State
+from .._physics.params import ChainParams
+from .._errors import ValidationError
+
+
+class AbstractEngine(eqx.Module):
+    """An engine: how one trajectory of eq. (5) is integrated and observed. It holds
+    its own settings (solver, tolerances, horizon) and is passed as a value wherever
+    a trajectory is run; `run` is pure and traceable, so that `run_lanes` can map it
+    over lanes, on a queue of CPU devices or vmapped on a GPU.
+
+    Subclasses: `Smoothed` and `Exact`. Name one by a string with its defaults
+    (`as_engine`): `engine="smoothed"` (the default) or `engine="exact"`.
+    """
+
+    name: ClassVar[str]
+    options: eqx.AbstractVar[AbstractHorizon]
+
+    @abc.abstractmethod
+    def run(self, params: ChainParams, y0: State, progress: bool = False) -> Observables:
+        """One trajectory from the state `y0` (shape (2, n_osc)): its `Observables`
+        over [transient, t_end]. Pure and traceable: no checks, no exceptions; a
+        failure is its `status`. With `progress` (static), each chunk ticks the
+        active progress bar."""
+
+    @abc.abstractmethod
+    def attributes(self) -> dict:
+        """The engine and every setting that shapes its results, as dataset
+        attributes and store keys (strings and numbers)."""
+
+    def run_observers(self, params: ChainParams, y0: State, observers: tuple,
+                      progress: bool = False) -> dict:
+        """One trajectory with the given observers only (`observe`); the smoothed
+        engine's. Raises `ValidationError` where the engine cannot."""
+        raise ValidationError(f"the {self.name} engine observes amplitudes, energy and "
+                              "the HALC only (Extrema): run other observers with "
+                              "engine='smoothed'")
+
+
+class Smoothed(AbstractEngine):
+    """The smoothed engine: eq. (5) with the friction law's sign(v_rel) smoothed as
+    tanh(v_rel/eps) (eq. (1) of the paper with eq. (7)), integrated by a diffrax
+    solver in chunks with dense output observed as it goes (`simulate`). eps is
+    read from the chain (`ChainParams.eps`).
+
+    **Arguments:**
+
+    - `solver`: a diffrax solver or the name of one (`SOLVERS`); `Ros34PW2()` by
+        default (`DEFAULT_SOLVER`). "auto" (chosen from eps) is resolved by
+        `as_engine`, which sees the chain.
+    - `options`: `SimulationOptions` (horizon, tolerances, sampling).
+
+    **Raises:**
+
+    `ValidationError` for an unknown solver name; `TypeError` for options of
+    another kind.
+    """
+
+    name: ClassVar[str] = "smoothed"
+    solver: diffrax.AbstractSolver
+    options: SimulationOptions
+
+    def __init__(self, solver: diffrax.AbstractSolver | str = DEFAULT_SOLVER,
+                 options: SimulationOptions = SimulationOptions()):
+        self.solver = as_solver(solver)
+        self.options = check_options(options)
+
+    def run(self, params: ChainParams, y0: State, progress: bool = False) -> Observables:
+        return run(params, y0, self.solver, self.options, progress)
+
+    def run_observers(self, params: ChainParams, y0: State, observers: tuple,
+                      progress: bool = False) -> dict:
+        return run_observers(params, y0, self.solver, self.options, observers, progress)
+
+    def attributes(self) -> dict:
+        return {"engine": self.name, "solver": type(self.solver).__name__,
+                "rtol": self.options.rtol, "atol": self.options.atol}
+
+
+class Exact(AbstractEngine):
+    """The exact engine: the stick/slip switch model of Leine et al. (1998),
+    Nonlinear Dynamics 16, 41-54, without its stick band (stick is exact, x_n' =
+    v_d): smooth slip segments integrated by diffrax, switches located as events
+    (`simulate_nonsmooth`). No eps: the chain's eps is not read. Its observables
+    are those of the smoothed engine, in the same layout; an oscillator is on the
+    HALC when it sticks during the window.
+
+    **Arguments:**
+
+    - `options`: `NonsmoothOptions` (horizon, tolerances, event budgets).
+
+    **Raises:**
+
+    `TypeError` for options of another kind.
+    """
+
+    name: ClassVar[str] = "exact"
+    options: NonsmoothOptions = NonsmoothOptions()
+
+    def __check_init__(self):
+        if not isinstance(self.options, NonsmoothOptions):
+            raise TypeError(f"Exact takes NonsmoothOptions, got "
+                            f"{type(self.options).__name__}")
+
+    def run(self, params: ChainParams, y0: State, progress: bool = False) -> Observables:
+        return run_exact(params, y0, self.options, progress)
+
+    def attributes(self) -> dict:
+        return {"engine": self.name, "rtol": self.options.rtol, "atol": self.options.atol,
+                "root_tol": self.options.root_tol}
+
+
+#: The engines by name, each with its defaults.
+ENGINES = {"smoothed": Smoothed, "exact": Exact}
+
+
+def as_engine(engine: AbstractEngine | str = "smoothed",
+              solver: diffrax.AbstractSolver | str | None = None,
+              options: AbstractHorizon | None = None,
+              params: ChainParams | None = None) -> AbstractEngine:
+    """The engine value that `engine` names, with `solver` and `options` where given.
+
+    **Arguments:**
+
+    - `engine`: "smoothed", "exact" (`ENGINES`), or an engine value (returned as is;
+        `solver` and `options` must then be None).
+    - `solver`: the smoothed engine's solver (a diffrax solver, a name of `SOLVERS`,
+        or "auto", chosen from eps by `auto_solver` with `params`).
+    - `options`: `SimulationOptions` for the smoothed engine; for the exact one
+        `NonsmoothOptions`, or `SimulationOptions` whose horizon (t_end, transient,
+        chunk_length) it takes with its own tolerances.
+    - `params`: the chain, for `solver="auto"`.
+
+    **Returns:**
+
+    An `AbstractEngine`.
+
+    **Raises:**
+
+    `ValidationError` for an unknown engine name, a solver given to the exact engine,
+    or settings given beside an engine value; `TypeError` for options of another kind.
+    """
+    if isinstance(engine, AbstractEngine):
+        if solver is not None or options is not None:
+            raise ValidationError("give the solver and options inside the engine value, "
+                                  "not beside it")
+        return engine
+    if engine in ("queue", "vmap"):
+        raise ValidationError(f"engine={engine!r}: engine names the model now ('smoothed' or "
+                              f"'exact'); how lanes are run is schedule={engine!r}")
+    if engine not in ENGINES:
+        raise ValidationError(f"engine must be one of {sorted(ENGINES)} or an engine value, "
+                              f"got {engine!r}")
+    if engine == "smoothed":
+        solver = SOLVERS[DEFAULT_SOLVER]() if solver is None else as_solver(solver,
+                                                                             params=params)
+        return Smoothed(solver, SimulationOptions() if options is None else options)
+    if solver is not None:
+        raise ValidationError("the exact engine takes no solver: it integrates its slip "
+                              "segments itself (NonsmoothOptions sets its tolerances)")
+    if isinstance(options, SimulationOptions):
+        options = NonsmoothOptions(t_end=options.t_end, transient=options.transient,
+                                   chunk_length=options.chunk_length)
+    return Exact(NonsmoothOptions() if options is None else options)

@@ -1,0 +1,226 @@
+"""The smoothed engine's integration of one trajectory of eq. (5) with diffrax,
+observing while integrating (friction smoothed by tanh(v_rel/eps))."""
+
+import dataclasses
+from collections.abc import Sequence
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Int, PyTree
+
+from .compat import errors_as_nan
+from .solver.controller import step_size_controller
+from .._physics.custom_types import State
+from .status import Status
+from .._physics.model import split_vector_field, vector_field
+from .observables import Observables
+from .observers.base import AbstractObserver, Chunk, no_partial_answers, observe_chunk
+from .observers.extrema import Extrema
+from .options import SimulationOptions
+from .._physics.params import ChainParams
+from .progress import tick
+from .solver.rosenbrock import Ros34PW2
+
+
+def _status_code(result, collapsed) -> Int[Array, ""]:
+    """The `Status` of one chunk's diffrax result; a chunk out of steps whose steps
+    had `collapsed` (shorter than `options.dtmin` on average) is
+    `Status.step_size_collapsed`."""
+    out_of_steps = jnp.where(collapsed, Status.step_size_collapsed,
+                             Status.max_steps_reached)
+    return jnp.where(result == diffrax.RESULTS.successful, Status.ok,
+                     jnp.where(result == diffrax.RESULTS.max_steps_reached,
+                               out_of_steps, Status.solver_failed))
+
+
+#: Solvers that take eq. (5) split in two: IMEX solvers treat the friction force
+#: implicitly, `Ros34PW2` builds its W matrix from the friction's diagonal Jacobian.
+SPLIT_SOLVERS = (diffrax.KenCarp3, diffrax.KenCarp4, diffrax.KenCarp5, Ros34PW2)
+
+
+def terms(solver: diffrax.AbstractSolver):
+    """The diffrax terms of eq. (5) for `solver`: one `ODETerm`, or for a solver of
+    `SPLIT_SOLVERS` a `MultiTerm` of the non-stiff elastic part and the stiff
+    friction part (`split_vector_field`)."""
+    if isinstance(solver, SPLIT_SOLVERS):
+        return diffrax.MultiTerm(
+            diffrax.ODETerm(lambda t, y, p: split_vector_field(t, y, p)[0]),
+            diffrax.ODETerm(lambda t, y, p: split_vector_field(t, y, p)[1]))
+    return diffrax.ODETerm(vector_field)
+
+
+def _advance(terms_, solver, args, options, observers, progress, tangent, carry, t0, t1,
+             n_samples):
+    """Integrate one chunk [t0, t1] and hand it to the observers: its `n_samples`
+    dense samples (if any) and, with a `tangent` (static) carried beside the state,
+    the log of its growth (it is then renormalised)."""
+    y, solver_state, controller_state, made_jump, states, steps, status = carry
+    # Once a chunk has failed the rest of the run is skipped (a zero-length solve),
+    # so a failed lane does not hold up the others under vmap.
+    t1 = jnp.where(status == Status.ok, t1, t0)
+    subs = [diffrax.SubSaveAt(t1=True)]
+    ts = None
+    if n_samples:
+        ts = t0 + (t1 - t0) * jnp.linspace(0.0, 1.0, n_samples)
+        subs.append(diffrax.SubSaveAt(ts=ts))
+    if tangent:
+        # The solver state holds f of the state, stale once the tangent is rescaled:
+        # it starts afresh each chunk (one more evaluation of f per chunk).
+        solver_state = None
+    with errors_as_nan():  # diffrax's checks of its arguments: no host callback
+        sol = diffrax.diffeqsolve(
+            terms_, solver, t0, t1, None, y, args,
+            saveat=diffrax.SaveAt(subs=subs, solver_state=True, controller_state=True,
+                                  made_jump=True),
+            stepsize_controller=step_size_controller(options),
+            max_steps=options.max_steps, throw=False,
+            solver_state=solver_state, controller_state=controller_state,
+            made_jump=made_jump,
+        )
+    y_end = sol.ys[0][-1]
+    samples = None if ts is None else sol.ys[1]
+    log_growth = None
+    if tangent:
+        norm = jnp.sqrt(jnp.sum(y_end[1] ** 2))
+        log_growth = jnp.log(norm)
+        y_end = jnp.stack([y_end[0], y_end[1] / norm])
+        samples = None if ts is None else samples[:, 0]
+    chunk = Chunk(t0=t0, t1=t1, ts=ts, ys=samples, log_growth=log_growth)
+    states = observe_chunk(observers, states, chunk, args, options)
+    state_end = y_end[0] if tangent else y_end
+    # Where a failed solve stopped: its t1 save holds the time it reached.
+    mean_step = (sol.ts[0][-1] - t0) / jnp.maximum(sol.stats["num_steps"], 1)
+    code = jnp.where(jnp.all(jnp.isfinite(state_end)),
+                     _status_code(sol.result, mean_step < options.dtmin),
+                     Status.non_finite_state)
+    status = jnp.where(status == Status.ok, code, status)
+    if progress:
+        tick(jnp.ravel(y_end)[0])
+    return (y_end, sol.solver_state, sol.controller_state, sol.made_jump, states,
+            steps + sol.stats["num_steps"], status)
+
+
+def _with_tangent(terms_):
+    """The terms of the state and a tangent vector, stacked on a new leading axis:
+    each `ODETerm` f becomes (f(y), J(y) u) with J u by `jax.jvp` (the variational
+    equation). The state under the Jacobian is held constant
+    (`lax.stop_gradient`): derivatives of the stacked field, as a solver takes
+    them for its implicit or W matrix, then see J on both blocks and not the
+    second derivative of f, which such matrices may leave out. Elementwise solvers
+    (`Ros34PW2`) get their diagonal right on both blocks."""
+    if isinstance(terms_, diffrax.MultiTerm):
+        return diffrax.MultiTerm(*(_with_tangent(t) for t in terms_.terms))
+    vf = terms_.vector_field
+
+    def field(t, yu, args):
+        y, u = yu[0], yu[1]
+        _, ju = jax.jvp(lambda z: vf(t, z, args), (jax.lax.stop_gradient(y),), (u,))
+        return jnp.stack([vf(t, y, args), ju])
+
+    return diffrax.ODETerm(field)
+
+
+def _spans(options: SimulationOptions) -> list[tuple[float, float, int, int]]:
+    """The phases of a run (`AbstractHorizon.phases`) as (start, chunk length,
+    number of chunks, samples per chunk): the transient (not sampled), then the
+    observed window."""
+    return [(start, length, count,
+             int(np.ceil(length / options.sample_dt)) + 1 if observed else 0)
+            for start, length, count, observed in options.phases()]
+
+
+def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
+              options: SimulationOptions, observers: Sequence[AbstractObserver],
+              progress: bool = False) -> tuple[tuple[dict, ...], PyTree, Array, Array]:
+    """Integrate any ODE in chunks, observing while integrating: the pure,
+    traceable engine under `run` and `observe`, not specific to the chain.
+
+    The run is integrated with `diffrax.diffeqsolve` in chunks (see
+    `SimulationOptions.chunks`), carrying the solver and step-size-controller
+    states across chunks. After each chunk, outside the step loop, every observer
+    gets the chunk's dense samples (every `sample_dt` after `options.transient`)
+    and reduces them into its state of fixed size: memory never grows with
+    `t_end`. If an observer `needs_tangent`, a tangent vector u is integrated
+    beside the state by the variational equation u' = J(y) u (`jax.jvp` of the
+    vector field; `_with_tangent`), under the same error control, and
+    renormalised after each chunk.
+
+    **Arguments:**
+
+    - `terms_`: diffrax terms of the ODE; `args` is passed to them.
+    - `solver`, `options`: the diffrax solver and `SimulationOptions`.
+    - `y0`: the initial state (an array).
+    - `observers`: the observers (`AbstractObserver`).
+    - `progress` (static): tick the active progress bar once per chunk.
+
+    **Returns:**
+
+    (results, y_final, num_steps, status): one dict per observer (NaN, -1 or False
+    where the run failed), the state at t_end (or where it stopped), the steps
+    taken and the `Status` (its integer value).
+    """
+    status = jnp.where(jnp.all(jnp.isfinite(y0)), Status.ok, Status.non_finite_state)
+    states = tuple(o.init(y0, args, options) for o in observers)
+    lyapunov = [o for o in observers if o.needs_tangent]
+    tangent = bool(lyapunov)
+    y = y0
+    if tangent:
+        y = jnp.stack([y0, lyapunov[0].initial_tangent(y0)])
+        terms_ = _with_tangent(terms_)
+    carry = (y, None, None, None, states, jnp.array(0), status)
+    for start, length, count, samples in _spans(options):
+        # The first chunk runs outside the scan: it creates the solver and controller
+        # states that the scan then carries from chunk to chunk.
+        if carry[1] is None:
+            carry = _advance(terms_, solver, args, options, observers, progress, tangent,
+                             carry, start, start + length, samples)
+            start, count = start + length, count - 1
+        if count:
+            t0s = start + length * jnp.arange(count)
+
+            def body(c, t0, length=length, samples=samples):
+                return _advance(terms_, solver, args, options, observers, progress,
+                                tangent, c, t0, t0 + length, samples), None
+
+            carry, _ = jax.lax.scan(body, carry, t0s)
+    y_final, _, _, _, states, steps, status = carry
+    if tangent:
+        y_final = y_final[0]
+    ok = status == Status.ok
+    results = tuple(no_partial_answers(o.result(s, args, options), ok)
+                    for o, s in zip(observers, states))
+    return results, y_final, steps, status
+
+
+def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
+        options: SimulationOptions, progress: bool = False) -> Observables:
+    """Pure, traceable core of `simulate` for one trajectory: the `Extrema` of eq.
+    (5) by `integrate`; no checks, no exceptions. `run_lanes` maps it over lanes.
+    With `progress` (static), each chunk ticks the active progress bar through a
+    host callback."""
+    (extrema,), y_final, steps, status = integrate(
+        terms(solver), solver, y0, params, options, (Extrema(),), progress)
+    kept = {f.name for f in dataclasses.fields(Observables)}
+    return Observables(**{k: v for k, v in extrema.items() if k in kept},
+                       y_initial=y0, y_final=y_final, num_steps=steps, status=status)
+
+
+def run_observers(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
+                  options: SimulationOptions, observers: Sequence[AbstractObserver],
+                  progress: bool = False) -> dict[str, Array]:
+    """Pure, traceable core of `observe`: one trajectory of eq. (5) with the given
+    observers only; `run_lanes` maps it over lanes.
+
+    **Returns:**
+
+    Every observer's results by name, with `y_initial`, `y_final`, `num_steps` and
+    `status` (see `Observables`).
+    """
+    results, y_final, steps, status = integrate(terms(solver), solver, y0, params,
+                                                options, observers, progress)
+    merged = {"y_initial": y0, "y_final": y_final, "num_steps": steps, "status": status}
+    for r in results:
+        merged |= r
+    return merged

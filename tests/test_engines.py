@@ -1,0 +1,80 @@
+"""The engine as a value: `simulate`, `observe` and `ensemble` run the smoothed or the
+exact engine, named by a string or given as a value; the exact engine against the
+non-smooth reference's own route, the smoothed engine value against the default
+call (the same program, bit for bit), and the refusals in one clear line."""
+
+import numpy as np
+import pytest
+
+import jaxchain as jc
+
+#: Two oscillators on a ring, the second excited by eq. (8): stick-slip.
+CHAIN = jc.ChainParams(n_osc=2, v_d=1.5)
+START = jc.OutOfPhaseExcitation.eq8([False, True])
+HORIZON = jc.SimulationOptions(t_end=300.0, transient=150.0)
+EXACT = jc.NonsmoothOptions(t_end=300.0, transient=150.0, chunk_length=HORIZON.chunk_length)
+
+
+@pytest.mark.numerics
+def test_the_exact_engine_is_the_stick_slip_reference():
+    """`simulate(engine="exact")` gives what `simulate_nonsmooth` gives (two compiled
+    programs of the same model, both at rtol 1e-12: agreement to 1e-8), in the
+    smoothed engine's layout, with the same oscillators on the HALC."""
+    by_name = jc.simulate(CHAIN, START, options=HORIZON, engine="exact")
+    reference = jc.simulate_nonsmooth(CHAIN, START, EXACT)
+    assert isinstance(by_name, jc.Observables)
+    np.testing.assert_allclose(by_name.amplitudes, reference.amplitudes, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(by_name.y_final, reference.y_final, rtol=0, atol=1e-8)
+    assert by_name.on_halc.tolist() == reference.on_halc.tolist()
+    assert int(by_name.n_halc) == int(reference.n_halc) >= 1  # a stick phase seen
+    # the value, with its options, is the same engine as the name with the horizon
+    by_value = jc.simulate(CHAIN, START, engine=jc.Exact(EXACT))
+    np.testing.assert_array_equal(by_value.amplitudes, by_name.amplitudes)
+
+
+@pytest.mark.numerics
+def test_the_smoothed_engine_value_is_the_default_run_bit_for_bit():
+    solver = jc.SOLVERS["tsit5"]()
+    default = jc.simulate(CHAIN, START, solver, HORIZON)
+    value = jc.simulate(CHAIN, START, engine=jc.Smoothed(solver, HORIZON))
+    named = jc.simulate(CHAIN, START, "tsit5", HORIZON, engine="smoothed")
+    for run in (value, named):
+        np.testing.assert_array_equal(run.amplitudes, default.amplitudes)
+        np.testing.assert_array_equal(run.y_final, default.y_final)
+    # the smoothed stick band moves the amplitudes by O(eps) from the exact engine's
+    exact = jc.simulate(CHAIN, START, options=HORIZON, engine="exact")
+    assert 0 < np.max(np.abs(default.amplitudes - exact.amplitudes)) < 0.05
+
+
+@pytest.mark.numerics
+def test_an_ensemble_on_the_exact_engine_records_it():
+    """Each lane of the ensemble is the exact engine's run of its start (another
+    compiled program: agreement to 1e-8 at rtol 1e-12); the dataset names the engine
+    and holds no solver."""
+    ds = jc.ensemble(CHAIN, [1.5], jc.localized_family(2), options=EXACT, engine="exact",
+                     progress=False)
+    assert ds.attrs["engine"] == "exact" and "solver" not in ds.attrs
+    assert ds.attrs["root_tol"] == EXACT.root_tol
+    for ic, start in enumerate((START, jc.OutOfPhaseExcitation.eq8([True, True]))):
+        one = jc.simulate(CHAIN, start, engine=jc.Exact(EXACT))
+        lane = ds.isel(v_d=0, ic=ic)
+        np.testing.assert_allclose(lane["amplitudes"], one.amplitudes, rtol=0, atol=1e-8)
+        assert int(lane["n_halc"]) == int(one.n_halc)
+    smoothed = jc.ensemble(CHAIN, [1.5], jc.localized_family(2), options=HORIZON,
+                           progress=False)
+    assert smoothed.attrs["engine"] == "smoothed" and "solver" in smoothed.attrs
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: jc.simulate(CHAIN, START, engine="stick"), "engine must be one of"),
+    (lambda: jc.simulate(CHAIN, START, "tsit5", engine="exact"), "takes no solver"),
+    (lambda: jc.simulate(CHAIN, START, options=HORIZON, engine=jc.Exact()),
+     "inside the engine value"),
+    (lambda: jc.ensemble(CHAIN, [1.5], START, engine="queue"), "schedule='queue'"),
+    (lambda: jc.observe(CHAIN, START, [jc.Energy()], options=HORIZON, engine="exact"),
+     "engine='smoothed'"),
+])
+def test_an_engine_it_cannot_use_is_refused_in_one_line(call, message):
+    with pytest.raises(jc.ValidationError, match=message) as err:
+        call()
+    assert "\n" not in str(err.value)
