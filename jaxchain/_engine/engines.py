@@ -17,6 +17,7 @@ from .horizon import AbstractHorizon
 from .observables import Observables
 from .options import SimulationOptions
 from .smoothed import run, run_observers
+from .status import Status, failure_hint
 from .solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._physics.custom_types import State
 from .._physics.params import ChainParams
@@ -42,6 +43,14 @@ class AbstractEngine(eqx.Module):
         over [transient, t_end]. Pure and traceable: no checks, no exceptions; a
         failure is its `status`. With `progress` (static), each chunk ticks the
         active progress bar."""
+
+    @abc.abstractmethod
+    def n_chunks(self) -> int:
+        """The chunks of one run: the ticks of its progress bar."""
+
+    def failure_hint(self, status: int, params: ChainParams) -> str:
+        """What to do about a run that ended with `status` (`Status`)."""
+        return Status(status).message
 
     @abc.abstractmethod
     def attributes(self) -> dict:
@@ -92,6 +101,12 @@ class Smoothed(AbstractEngine):
                       progress: bool = False) -> dict:
         return run_observers(params, y0, self.solver, self.options, observers, progress)
 
+    def n_chunks(self) -> int:
+        return self.options.n_chunks()
+
+    def failure_hint(self, status: int, params: ChainParams) -> str:
+        return failure_hint(status, params, self.solver, self.options)
+
     def attributes(self) -> dict:
         return {"engine": self.name, "solver": type(self.solver).__name__,
                 "rtol": self.options.rtol, "atol": self.options.atol}
@@ -124,6 +139,9 @@ class Exact(AbstractEngine):
 
     def run(self, params: ChainParams, y0: State, progress: bool = False) -> Observables:
         return run_exact(params, y0, self.options, progress)
+
+    def n_chunks(self) -> int:
+        return self.options.n_chunks(halves=True)  # the window's halves are chunked apart
 
     def attributes(self) -> dict:
         return {"engine": self.name, "rtol": self.options.rtol, "atol": self.options.atol,

@@ -7,11 +7,10 @@ import equinox as eqx
 from jaxtyping import Array
 
 from .checks import check_params
-from .engines import AbstractEngine, Smoothed, as_engine
-from .exact.options import NonsmoothOptions
+from .engines import AbstractEngine, as_engine
 from .horizon import AbstractHorizon
 from .._physics.custom_types import State
-from .status import Status, failure_hint
+from .status import Status
 from .._physics.initial import AbstractInitialCondition, GivenState
 from .observables import Observables, check_observers
 from .observers.base import AbstractObserver
@@ -85,15 +84,11 @@ def _single(fn, name, params, y0, solver, options, engine, extra, throw, progres
     if not isinstance(y0, AbstractInitialCondition):
         y0 = GivenState(y0)
     y = y0(params)
-    halves = isinstance(engine.options, NonsmoothOptions)
-    with progress_bar(engine.options.n_chunks(**({"halves": True} if halves else {})),
-                      name, progress):
+    with progress_bar(engine.n_chunks(), name, progress):
         out = fn(params, y, engine, *extra, progress)
     status = int(out["status"] if isinstance(out, dict) else out.status)
     if throw and status != Status.ok:
-        hint = (failure_hint(status, params, engine.solver, engine.options)
-                if isinstance(engine, Smoothed) else Status(status).message)
-        raise RuntimeError(f"{Status(status)}: {hint}")
+        raise RuntimeError(f"{Status(status)}: {engine.failure_hint(status, params)}")
     return out
 
 
