@@ -296,6 +296,17 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "smoothed observation": ("jaxchain._engine.observers.base", "observe_chunk"),
              "non-smooth observation": ("jaxchain._engine.exact.solve", "observe_sample"),
              "identification problem": ("jaxchain._studies.identification.fit", "_problem"),
+             "ensemble lanes": ("jaxchain._sweeps.ensemble", "run_lanes"),
+             # jitted entry points, whose traces a test counts (test_compile_once.py)
+             "simulation program": ("jaxchain._engine.simulate", "_run_jit"),
+             "Hopf modes": ("jaxchain._bifurcation.hopf", "_hopf_modes"),
+             "shooting solve": ("jaxchain._bifurcation.shooting", "_solve"),
+             "continuation corrector": ("jaxchain._bifurcation.continuation", "_correct"),
+             "continuation tangent": ("jaxchain._bifurcation.continuation", "_tangent"),
+             "continuation records": ("jaxchain._bifurcation.continuation", "_describe"),
+             "slip arc peak": ("jaxchain._bifurcation.existence", "_peak"),
+             # the progress bar every bar of jaxchain is (test_examples.py)
+             "progress bar": ("jaxchain._engine.progress", "progress_bar"),
              "command-line parser": ("jaxchain._cli.main", "build_parser"),
              "commands": ("jaxchain._cli.main", "COMMANDS"),
              "belt speeds": ("jaxchain._cli.common", "belt_speeds"),
@@ -316,6 +327,12 @@ def internal(what: str):
 
     module, name = _COMPUTES[what]
     return getattr(importlib.import_module(module), name)
+
+
+def internal_name(what: str) -> str:
+    """The name, in its module, of the function that computes `what` (a key of
+    `_COMPUTES`)."""
+    return _COMPUTES[what][1]
 
 
 def replace_internal(monkeypatch, what: str, replacement) -> None:

@@ -12,21 +12,18 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
-import jaxchain._bifurcation.continuation as continuation_module
-import jaxchain._bifurcation.hopf as hopf_module
-import jaxchain._bifurcation.shooting as shooting_module
-import jaxchain._bifurcation.existence as existence_module
-import jaxchain._engine.simulate as simulate_module
-from helpers import reference_rhs, scipy_slip_arc
+from helpers import (internal, internal_name, reference_rhs, replace_internal,
+                     scipy_slip_arc)
 
 FIVE = (0.04, 0.045, 0.05, 0.055, 0.06)
 
 
-def trace_once(monkeypatch, module, name) -> list:
-    """Replace the jitted `module.name` by the same function, jitted anew, that
-    raises if it is traced more than once; return the list to which each trace
-    appends `name`, so that a test can tell that it was traced at all."""
-    fn = getattr(module, name).__wrapped__
+def trace_once(monkeypatch, what) -> list:
+    """Replace the jitted function that computes `what` (its name in jaxchain's
+    internals, `helpers.internal`) by the same function, jitted anew, that raises
+    if it is traced more than once; return the list to which each trace appends
+    the function's name, so that a test can tell that it was traced at all."""
+    fn, name = internal(what).__wrapped__, internal_name(what)
     traces = []
 
     @functools.wraps(fn)
@@ -34,8 +31,8 @@ def trace_once(monkeypatch, module, name) -> list:
         traces.append(name)  # runs only while JAX traces
         return fn(*args, **kwargs)
 
-    monkeypatch.setattr(module, name,
-                        eqx.filter_jit(eqx.debug.assert_max_traces(counted, max_traces=1)))
+    replace_internal(monkeypatch, what,
+                     eqx.filter_jit(eqx.debug.assert_max_traces(counted, max_traces=1)))
     return traces
 
 
@@ -52,7 +49,7 @@ def test_simulate_compiles_once_for_five_eps(monkeypatch):
     """The excited oscillator reaches the belt speed (n_HALC = 1), where eps acts:
     each eps moves the final state by more than 3e-3 and each agrees with scipy
     (LSODA) to 1e-6."""
-    traces = trace_once(monkeypatch, simulate_module, "_run_jit")
+    traces = trace_once(monkeypatch, "simulation program")
     options = jc.SimulationOptions(t_end=20.0, transient=10.0, chunk_length=10.0, rtol=1e-10,
                                    atol=1e-12)
     for eps in (1e-2, 5e-3, 3e-3, 2e-3, 1e-3):
@@ -68,7 +65,7 @@ def test_simulate_compiles_once_for_five_eps(monkeypatch):
 
 @pytest.mark.numerics
 def test_hopf_point_compiles_once_for_five_xi(monkeypatch):
-    traces = trace_once(monkeypatch, hopf_module, "_hopf_modes")
+    traces = trace_once(monkeypatch, "Hopf modes")
     for xi in FIVE:
         hopf = jc.hopf_point(jc.ChainParams(n_osc=2, xi=xi))
         assert abs(float(hopf.v_d[0]) - 0.5 * jnp.log(0.5 / xi)) < 1e-9
@@ -79,7 +76,7 @@ def test_hopf_point_compiles_once_for_five_xi(monkeypatch):
 def test_shooting_compiles_once_for_five_xi(monkeypatch):
     """Two Newton steps from a rough guess bring each orbit to within 1e-5 of
     periodic, by scipy's integration over its period."""
-    traces = trace_once(monkeypatch, shooting_module, "_solve")
+    traces = trace_once(monkeypatch, "shooting solve")
     options = jc.ShootingOptions(newton_steps=2, rtol=1e-6, atol=1e-8, n_samples=64)
     for xi in FIVE:
         params = jc.ChainParams(n_osc=1, xi=xi, eps=1e-2)
@@ -94,8 +91,8 @@ def test_continuation_compiles_once_for_five_problems(monkeypatch):
     """A new `limit_cycle_problem` for each xi: its residual and records are equal
     modules, not new lambdas, so the corrector, tangent and records trace once.
     The continued point is a periodic orbit at its belt speed, by scipy."""
-    traces = [trace_once(monkeypatch, continuation_module, name)
-              for name in ("_correct", "_tangent", "_describe")]
+    traces = [trace_once(monkeypatch, what) for what in (
+        "continuation corrector", "continuation tangent", "continuation records")]
     options = jc.ShootingOptions(rtol=1e-6, atol=1e-8, n_samples=64)
     for xi in FIVE:
         params = jc.ChainParams(n_osc=1, xi=xi, eps=1e-2)
@@ -114,7 +111,7 @@ def test_continuation_compiles_once_for_five_problems(monkeypatch):
 def test_existence_limit_compiles_once_for_five_xi(monkeypatch):
     """Each limit (to 1e-6) against scipy's slip arc: it returns to the belt 1e-5
     below the limit and not 1e-5 above it."""
-    traces = trace_once(monkeypatch, existence_module, "_peak")
+    traces = trace_once(monkeypatch, "slip arc peak")
     limits = [jc.stick_slip_existence_limit(jc.ChainParams(n_osc=1, xi=xi), tol=1e-6)
               for xi in FIVE]
     assert all(a > b for a, b in zip(limits, limits[1:]))  # more damping, earlier loss

@@ -12,7 +12,7 @@ import scipy.linalg
 import scipy.optimize
 
 import jaxchain as jc
-from helpers import assert_usage_error
+from helpers import assert_usage_error, replace_internal
 
 ETA = 0.3
 
@@ -256,8 +256,7 @@ def test_a_law_that_cannot_be_recorded_is_refused_before_the_run(monkeypatch):
     assert np.isfinite(float(jc.simulate(params, np.ones((2, 2)), options=jc.SimulationOptions(
         t_end=5.0, transient=0.0)).energy))
     calls = []
-    monkeypatch.setattr("jaxchain._sweeps.ensemble.run_lanes",
-                        lambda *a, **k: calls.append(1))
+    replace_internal(monkeypatch, "ensemble lanes", lambda *a, **k: calls.append(1))
     with pytest.raises(ValueError, match="Linear cannot be recorded"):
         jc.ensemble(params, [1.5], jc.localized_family(2), progress=False)
     assert not calls
