@@ -18,6 +18,7 @@ from ..._physics.record import check_recordable
 from ..basin.basin import _key, _key_data
 from ..basin.sampling import Box, sample_states
 from ..._bifurcation.hopf import hopf_point
+from ..._engine.engines import Smoothed
 from ..._engine.checks import check_options, check_run
 from ..._engine.options import SimulationOptions
 from ..._engine.status import Status
@@ -135,8 +136,23 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
 
     `ValidationError` for a bad count, sigma or belt speed, and as `sweep`.
     """
-    import xarray as xr
+    params, sigmas, v, solver, options, edge_options, key, out = _check_study(
+        params, sigmas, n_draws, v_d, n_samples, n_folds, key, solver, options,
+        edge_options, out, resume, overwrite)
+    run = _run_study(params, sigmas, n_draws, v, n_samples, box, key, n_folds, solver,
+                     options, edge_options, out, resume, overwrite, client, progress)
+    study = _assemble_study(params, sigmas, n_draws, v, n_samples, box, key, solver,
+                            options, run)
+    if out is not None:
+        save_dataset(study, out / "mistuning.nc")
+    return study
 
+
+def _check_study(params, sigmas, n_draws, v_d, n_samples, n_folds, key, solver, options,
+                 edge_options, out, resume, overwrite):
+    """Every argument of `mistuning_study` checked once: (params, sigmas, v_d, solver,
+    options, edge_options, key, out), the chain the default ring where None, sigmas
+    an array, the key a PRNG key and out a `Path` or None."""
     params = chain_or_default(params)
     params, solver, options, v = check_run(params, solver, options, v_d)
     require_line(params, "the mistuning study")
@@ -150,15 +166,40 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
         check_count(name, value, least)
     if resume and overwrite:
         raise ValidationError("resume and overwrite exclude each other")
+    edge_options = check_options(edge_options)
+    out = Path(out) if out is not None else None
+    return params, sigmas, v, solver, options, edge_options, _key(key), out
+
+
+def _run_study(params, sigmas, n_draws, v, n_samples, box, key, n_folds, solver, options,
+               edge_options, out, resume, overwrite, client, progress) -> dict:
+    """The computations of `mistuning_study`, as NumPy arrays and numbers by name:
+    the sweeps of every chain (`_run_sweeps`), the Hopf points, upper edges and
+    folds (`_run_edges`), and the single-site state's linear localization
+    (`_run_state`)."""
     n = params.n_osc
-    key = _key(key)
     samples = np.asarray(sample_states(key, box, int(n_samples), n)) if n_samples else None
     chains = study_chains(params, sigmas, n_draws)
-    out = Path(out) if out is not None else None
     ics = {"eq8": localized_family(n, "eq8", params.graph)}
     if samples is not None:
         ics["random"] = GivenState(samples)
+    run = _run_sweeps(chains, n, sigmas, n_draws, v, n_samples, ics, solver, options, out,
+                      resume, overwrite, client, progress)
+    run |= _run_edges(chains, sigmas, n_draws, n, n_folds, solver, edge_options, out,
+                      progress)
+    run |= _run_state(params, sigmas)
+    k_index = int(np.argmin(np.abs(v - 1.5)))
+    run["envelope_decay"] = envelope_decay(run["staircase_amplitudes"][:, :, k_index, 0],
+                                           run["staircase_n_halc"][:, :, k_index, 0],
+                                           params.boundary)
+    return run
 
+
+def _run_sweeps(chains, n, sigmas, n_draws, v, n_samples, ics, solver, options, out, resume,
+                overwrite, client, progress) -> dict:
+    """One `sweep` per chain (each its own store under out/chains, on the cluster of
+    `client` all at once): the staircase's and the random states' results by
+    (sigma, draw), and the deviations of each chain."""
     shape = (sigmas.size, n_draws, v.size)
     data = {"staircase_n_halc": np.full(shape + (n,), -1),
             "staircase_status": np.full(shape + (n,), Status.not_run),
@@ -192,8 +233,15 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
             data["basin_n_halc"][i, d] = ds["n_halc"].values[:, rand]
             data["basin_status"][i, d] = ds["status"].values[:, rand]
             data["basin_on_halc"][i, d] = ds["on_halc"].values[:, rand]
+    return data | {"deviations": deviations}
 
-    edges = upper_edges([c for *_, c in chains], solver, options=check_options(edge_options),
+
+def _run_edges(chains, sigmas, n_draws, n, n_folds, solver, edge_options, out,
+               progress) -> dict:
+    """The upper edge of the single-site state at each oscillator of every chain
+    (`upper_edges`), their highest, the Hopf point of each chain, and the folds by
+    shooting of the first `n_folds` draws (`_folds`)."""
+    edges = upper_edges([c for *_, c in chains], solver, options=edge_options,
                         store=out / "edges.nc" if out else None, progress=progress)
     site_edge = np.full((sigmas.size, n_draws, n), np.nan)
     hopf = np.full((sigmas.size, n_draws), np.nan)
@@ -204,8 +252,16 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
         upper = np.where(np.all(np.isnan(site_edge), -1), np.nan,
                          np.nanmax(np.where(np.isnan(site_edge), -np.inf, site_edge), -1))
     fold, fold_site = _folds(chains, site_edge, n_folds, out, progress)
+    return {"site_edge": site_edge, "hopf_vd": hopf, "upper_edge": upper, "fold_vd": fold,
+            "fold_site": fold_site, "edge_resolution": edges.attrs["resolution"]}
 
-    centre = int(np.flatnonzero(excited_block(n, 1, params.graph))[0])
+
+def _run_state(params: ChainParams, sigmas) -> dict:
+    """The single-site state of the homogeneous chain at v_d = 1.5 (its period and
+    the damping about sliding at its site), and the linear chain's localization
+    factor for each sigma at the band centre, at theta = pi/3 (`THETAS`) and at the
+    state's frequency."""
+    centre = int(np.flatnonzero(excited_block(params.n_osc, 1, params.graph))[0])
     orbit, _ = localized_orbit(with_parameter(params, "v_d", 1.5), centre)
     period = float(orbit.period) if orbit is not None else math.nan
     omega2 = (2 * math.pi / period) ** 2
@@ -222,41 +278,44 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
             state_gamma[i], state_err[i] = float(g), float(e)
         else:
             state_gamma[i] = state_err[i] = math.nan
-    k_index = int(np.argmin(np.abs(v - 1.5)))
-    decay = envelope_decay(data["staircase_amplitudes"][:, :, k_index, 0],
-                           data["staircase_n_halc"][:, :, k_index, 0], params.boundary)
+    return {"gamma": gamma, "gamma_error": gamma_err, "state_gamma": state_gamma,
+            "state_gamma_error": state_err, "state_period": period, "state_omega2": omega2,
+            "sliding_damping": damping,
+            "state_damped_decay": float(damped_decay(eta_c, omega2, damping))}
 
+
+def _assemble_study(params, sigmas, n_draws, v, n_samples, box, key, solver, options,
+                    run: dict) -> xr.Dataset:
+    """The dataset of `mistuning_study` from the arrays of `_run_study`."""
+    import xarray as xr
+
+    n = params.n_osc
     dims = ("sigma", "draw", "v_d")
-    study = xr.Dataset(
-        {"deviations": (("sigma", "draw", "osc"), deviations),
-         "staircase_n_halc": (dims + ("k",), data["staircase_n_halc"]),
-         "staircase_status": (dims + ("k",), data["staircase_status"]),
-         "staircase_amplitudes": (dims + ("k", "osc"), data["staircase_amplitudes"]),
-         "staircase_on_halc": (dims + ("k", "osc"), data["staircase_on_halc"]),
-         "basin_n_halc": (dims + ("sample",), data["basin_n_halc"]),
-         "basin_status": (dims + ("sample",), data["basin_status"]),
-         "basin_on_halc": (dims + ("sample", "osc"), data["basin_on_halc"]),
-         "hopf_vd": (("sigma", "draw"), hopf),
-         "site_edge": (("sigma", "draw", "osc"), site_edge),
-         "upper_edge": (("sigma", "draw"), upper),
-         "fold_vd": (("sigma", "draw"), fold), "fold_site": (("sigma", "draw"), fold_site),
-         "gamma": (("sigma", "theta"), gamma), "gamma_error": (("sigma", "theta"), gamma_err),
-         "state_gamma": ("sigma", state_gamma), "state_gamma_error": ("sigma", state_err),
-         "envelope_decay": (("sigma", "draw"), decay)},
+    layout = {"deviations": ("sigma", "draw", "osc"),
+              "staircase_n_halc": dims + ("k",), "staircase_status": dims + ("k",),
+              "staircase_amplitudes": dims + ("k", "osc"),
+              "staircase_on_halc": dims + ("k", "osc"),
+              "basin_n_halc": dims + ("sample",), "basin_status": dims + ("sample",),
+              "basin_on_halc": dims + ("sample", "osc"),
+              "hopf_vd": ("sigma", "draw"), "site_edge": ("sigma", "draw", "osc"),
+              "upper_edge": ("sigma", "draw"), "fold_vd": ("sigma", "draw"),
+              "fold_site": ("sigma", "draw"), "gamma": ("sigma", "theta"),
+              "gamma_error": ("sigma", "theta"), "state_gamma": "sigma",
+              "state_gamma_error": "sigma", "envelope_decay": ("sigma", "draw")}
+    return xr.Dataset(
+        {name: (dims_of, run[name]) for name, dims_of in layout.items()},
         coords={"sigma": sigmas, "draw": np.arange(n_draws), "v_d": v,
                 "k": np.arange(1, n + 1), "osc": np.arange(1, n + 1),
                 "sample": np.arange(n_samples), "theta": np.array(THETAS)},
-        attrs=run_attributes(params, solver, options, "eq8,random", "v_d") | {
+        attrs=run_attributes(params, Smoothed(solver, options), "eq8,random", "v_d") | {
                "n_draws": int(n_draws),
                "n_samples": int(n_samples), "key": _key_data(key), "box_x": list(box.x),
-               "box_v": list(box.v), "state_period": period,
-               "state_omega2": omega2, "sliding_damping": damping,
-               "state_damped_decay": float(damped_decay(eta_c, omega2, damping)),
-               "edge_resolution": edges.attrs["resolution"],
+               "box_v": list(box.v), "state_period": run["state_period"],
+               "state_omega2": run["state_omega2"],
+               "sliding_damping": run["sliding_damping"],
+               "state_damped_decay": run["state_damped_decay"],
+               "edge_resolution": run["edge_resolution"],
                "sigma_units": "sigma / eta_c"})
-    if out is not None:
-        save_dataset(study, out / "mistuning.nc")
-    return study
 
 
 def _folds(chains, site_edge, n_folds, out, progress) -> tuple[np.ndarray, np.ndarray]:
