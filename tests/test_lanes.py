@@ -1,3 +1,13 @@
+"""The lanes of an ensemble (`jc.run_lanes`): they come back in the order given,
+each equal to its own `simulate`, and the same on one device or two; the order in
+which the queue takes them changes no result; the compiled run holds no host
+callback, custom call or scatter, and needs no more memory for a longer t_end.
+
+Besides the public names, this file tests internal units of the lanes' schedule,
+and imports them from `jaxchain._engine.lanes`: how lanes are dealt to devices
+(`lane_order`, `block_size`, `on_devices`), their expected cost, and the compiled
+block (`_run_block`)."""
+
 import os
 import re
 import subprocess
@@ -12,9 +22,8 @@ from hypothesis import strategies as st
 import jaxchain as jc
 from helpers import SHORT, TIGHT, assert_within_drift
 from lanes_on_every_device import FIELDS
-from jaxchain._engine.lanes import (_run_block, block_size, expected_cost, lane_order, lane_params,
-                             on_devices, run_lanes)
-from jaxchain._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
+from jaxchain import DEFAULT_SOLVER, SOLVERS, lane_params, run_lanes
+from jaxchain._engine.lanes import _run_block, block_size, expected_cost, lane_order, on_devices
 
 HERE = Path(__file__).parent
 
