@@ -202,10 +202,31 @@ def intentional_mistuning(params: ChainParams | None = None, *, budget: float = 
     `ValidationError` for a chain that is not a homogeneous ring of at least 2, a bad
     budget or sense; `RuntimeError` when a fold cannot be followed.
     """
+    params, sign = _check_design(params, sense)
+    best, history, homogeneous = _run_design(params, start, sign, budget, zero_mean, steps,
+                                             learning_rate, temperature, seed, progress)
+    return _design(best, history, homogeneous, budget, zero_mean, sense)
+
+
+def _check_design(params: ChainParams | None, sense: str) -> tuple[ChainParams, float]:
+    """The chain (a ring of 4 by default) and the sign of the objective of `sense`
+    (+1 to lower, -1 to raise); the ring and the budget are checked by
+    `design_problems`."""
     params = chain_or_default(params, n_osc=4)
     if sense not in ("lower", "raise"):
         raise ValidationError(f"sense must be 'lower' or 'raise', got {sense!r}")
-    sign = 1.0 if sense == "lower" else -1.0
+    return params, 1.0 if sense == "lower" else -1.0
+
+
+def _run_design(params: ChainParams, start, sign: float, budget, zero_mean, steps,
+                learning_rate, temperature, seed, progress) -> tuple[tuple, list, float]:
+    """The fold problems (`start`, or `design_problems`), then Adam's iterations of
+    `intentional_mistuning` from a small random theta: the folds followed to each new
+    pattern (`pattern_folds`), a step they cannot follow halved. Returns the best
+    iterate (objective, theta, folds, solutions, gradient), the history of (smooth
+    maximum, highest fold) and the homogeneous ring's fold.
+
+    **Raises:** `RuntimeError` when the folds cannot be followed."""
     problem, solutions, homogeneous = start or design_problems(params, budget)
     period = params.n_osc
     theta = jnp.asarray(0.05 * np.random.default_rng(seed).standard_normal(period))
@@ -241,8 +262,14 @@ def intentional_mistuning(params: ChainParams | None = None, *, budget: float = 
                                "learning_rate")
         theta, state = target, new_state
         folds, grads, solutions, _ = out
-    _, theta, folds, solutions, gradient = best  # the best iterate, not the last
-    return MistuningDesign(pattern=pattern_deviations(theta, budget, period, zero_mean),
+    return best, history, homogeneous
+
+
+def _design(best: tuple, history: list, homogeneous: float, budget, zero_mean,
+            sense: str) -> MistuningDesign:
+    """The `MistuningDesign` of the best iterate (not the last)."""
+    _, theta, folds, solutions, gradient = best
+    return MistuningDesign(pattern=pattern_deviations(theta, budget, theta.size, zero_mean),
                            folds=jnp.asarray(folds), edge=float(folds.max()),
                            homogeneous_edge=homogeneous, theta=theta,
                            gradient=jnp.asarray(gradient), history=jnp.asarray(history),
