@@ -3,10 +3,13 @@ exact engine, named by a string or given as a value; the exact engine against th
 non-smooth reference's own route, the smoothed engine value against the default
 call (the same program, bit for bit), and the refusals in one clear line."""
 
+import json
+
 import numpy as np
 import pytest
 
 import jaxchain as jc
+from helpers import assert_usage_error
 
 #: Two oscillators on a ring, the second excited by eq. (8): stick-slip.
 CHAIN = jc.ChainParams(n_osc=2, v_d=1.5)
@@ -78,3 +81,68 @@ def test_an_engine_it_cannot_use_is_refused_in_one_line(call, message):
     with pytest.raises(jc.ValidationError, match=message) as err:
         call()
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.numerics
+def test_a_sweep_on_the_exact_engine_is_each_lanes_run_and_keys_its_store(tmp_path):
+    """Each trajectory of a stored sweep on the exact engine is that engine's run
+    of its start (another compiled program: agreement to 1e-8 at rtol 1e-12); the
+    engine is part of the store's key, so the smoothed engine never resumes it."""
+    store = tmp_path / "sweep.zarr"
+    ds = jc.sweep(CHAIN, [1.5], jc.localized_family(2), options=EXACT, engine="exact",
+                  store=store, progress=False).load()
+    assert ds.attrs["engine"] == "exact" and "solver" not in ds.attrs
+    for ic, start in enumerate((START, jc.OutOfPhaseExcitation.eq8([True, True]))):
+        one = jc.simulate(CHAIN, start, engine=jc.Exact(EXACT))
+        lane = ds.isel(v_d=0, ic=ic)
+        np.testing.assert_allclose(lane["amplitudes"], one.amplitudes, rtol=0, atol=1e-8)
+        assert int(lane["n_halc"]) == int(one.n_halc)
+    with pytest.raises(jc.ValidationError, match="other settings|differ"):
+        jc.sweep(CHAIN, [1.5], jc.localized_family(2), options=HORIZON, store=store,
+                 resume=True, progress=False)
+    with pytest.raises(jc.ValidationError, match="no eps"):
+        jc.sweep(CHAIN, [1e-3], jc.localized_family(2), engine="exact", where="eps",
+                 progress=False)
+
+
+@pytest.mark.numerics
+def test_basin_stability_on_the_exact_engine_classifies_each_samples_run():
+    """Each sample's class is the n_HALC of the exact engine's run from its state
+    (`simulate`, to the same n_HALC); with no peak times, the periodic share is NaN,
+    and the convergence check still compares the classes at 2 t_end."""
+    ds = jc.basin_stability(CHAIN, [1.5], 3, key=1, options=EXACT, engine="exact",
+                            n_check=2, progress=False)
+    assert ds.attrs["engine"] == "exact"
+    for i in range(3):
+        one = jc.simulate(CHAIN, ds["y0"].values[i], engine=jc.Exact(EXACT))
+        assert int(ds["n_halc"].values[0, i]) == int(one.n_halc)
+    assert np.isnan(ds["periodic_fraction"].values).all()
+    assert 0 <= float(ds["changed_fraction"].values[0]) <= 1
+
+
+@pytest.mark.numerics
+def test_the_crosscheck_of_the_exact_engine_agrees_with_its_reference():
+    """The exact engine's lanes against its own reference runs (the same model, the
+    lanes at rtol 1e-12 and the reference at its 1e-10): the same n_HALC and
+    amplitudes to 1e-6, its variables named after the engine."""
+    ds = jc.crosscheck(CHAIN, [1.5], [("eq8", 1), ("eq8", 2)], options=EXACT,
+                       engine="exact")
+    assert ds.attrs["engine"] == "exact"
+    assert ds["n_halc_exact"].values.tolist() == ds["n_halc_reference"].values.tolist()
+    assert float(ds["amplitude_error"].max()) < 1e-6
+    assert "amplitudes_smoothed" not in ds
+
+
+def test_the_commands_run_the_exact_engine_or_refuse_it_in_one_line(tmp_path, capsys):
+    """`--engine exact` runs `jaxchain localized` (the engine in its JSON, eps and
+    the solver not), each start's n_HALC that of the exact engine's run; a command
+    that differentiates refuses it with status 2 and one line."""
+    argv = ["localized", "--n-osc", "2", "--t-end", "300", "--transient", "150",
+            "--engine", "exact", "--out", str(tmp_path / "a"), "--json"]
+    assert jc.main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["engine"] == "exact" and "eps" not in out and "solver" not in out
+    one = jc.simulate(CHAIN, START, engine=jc.Exact(EXACT))
+    assert out["runs"][0]["n_halc"][0] == int(one.n_halc)
+    assert_usage_error(["boundaries", "--engine", "exact", "--out", str(tmp_path / "b")],
+                       "--engine exact", capsys)

@@ -7,14 +7,14 @@ import numpy as np
 
 from .._studies.basin.basin import BASIN_OPTIONS, basin_stability
 from .._studies.basin.sampling import Box
-from .common import simulation_options
 from .._engine.status import Status
 from .._plots.basin import plot_basin_stability, plot_halc_histogram
 from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (Outputs, RunsFailed, UsageError, add_output_options,
-                     add_scheduler_option, add_solver_options, add_vd_option, cluster_client,
-                     note, positive_float, positive_int, print_json, show_progress)
+from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_scheduler_option,
+                     add_solver_options, add_vd_option, cluster_client, engine_of,
+                     engine_record, note, positive_float, positive_int, print_json,
+                     show_progress, simulation_options)
 
 HELP = "basin stability: how likely each state is from random initial states"
 DESCRIPTION = """\
@@ -107,7 +107,7 @@ def run(args) -> None:
     start = time.perf_counter()
     with cluster_client(args) as client:
         ds = basin_stability(params, v_d, samples, box, args.sample_seed,
-                             solver=args.solver, options=options, n_check=args.check,
+                             engine=engine_of(args, options, params), n_check=args.check,
                              store=outputs.path("basin.zarr"),
                              resume=args.resume or outputs.again,
                              overwrite=args.overwrite, client=client,
@@ -120,7 +120,8 @@ def run(args) -> None:
     shown = [c for c in range(len(classes)) if ds["counts"].values[:, c].any()]
     if args.json:
         print_json({
-            "v_d": ds["v_d"].values.tolist(), "classes": classes, "solver": args.solver,
+            "v_d": ds["v_d"].values.tolist(), "classes": classes,
+            **{k: v for k, v in engine_record(args).items() if k != "eps"},
             "chain": chain_record(params),
             "counts": ds["counts"].values.tolist(),
             "fractions": ds["fraction"].values.tolist(),

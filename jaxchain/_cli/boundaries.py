@@ -9,8 +9,8 @@ from .._studies.bistable_range import (BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
-                     add_solver_options, comma_list, param_default,
-                     positive_float, report, show_progress, simulation_options)
+                     add_solver_options, comma_list, param_default, positive_float, report,
+                     show_progress, simulation_options, smoothed_only)
 
 HELP = "Hopf and fold belt speeds of the bistable range (gradients, continuation)"
 DESCRIPTION = """\
@@ -64,6 +64,8 @@ def add_parser(sub):
 
 
 def run(args) -> None:
+    smoothed_only(args, "the boundaries are found by Newton on the smoothed model's "
+                        "Floquet multipliers and gradients")
     params = chain_params(args, args.n_osc, eps=args.eps, xi=args.xi)
     for name in ("xi_values", "ratio_values"):
         values = getattr(args, name)

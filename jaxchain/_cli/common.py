@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .._engine.solver.controller import CONTROLLERS
+from .._engine.engines import ENGINES, AbstractEngine, as_engine
 from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams
 from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
@@ -176,8 +177,14 @@ def add_solver_options(g, rtol: float = DEFAULTS.rtol, atol: float = DEFAULTS.at
     defaults, in the argument group (or parser) `g`: the same in every command
     that integrates (`rtol`, `atol`: where the command's library function has
     other defaults)."""
+    g.add_argument("--engine", choices=list(ENGINES), default="smoothed",
+                   help="the model of friction: smoothed (default: sign(v_rel) smoothed "
+                        "as tanh(v_rel/eps), integrated by --solver) or exact (the "
+                        "stick/slip switch model, Leine et al. 1998: stick exact, no eps, "
+                        "switches located as events; slower)")
     g.add_argument("--solver", choices=sorted(SOLVERS) + ["auto"], default=DEFAULT_SOLVER,
-                   help=f"diffrax solver (default {DEFAULT_SOLVER}, a Rosenbrock-W method "
+                   help=f"the smoothed engine's diffrax solver (default {DEFAULT_SOLVER}, "
+                        "a Rosenbrock-W method "
                         "whose W is the diagonal friction Jacobian); kencarp* are IMEX, "
                         "with the friction force implicit; auto takes tsit5 where "
                         "mu_st/eps <= 100 and ros34pw2 elsewhere")
@@ -204,6 +211,42 @@ def simulation_options(args, **fields) -> SimulationOptions:
     """
     given = {name: getattr(args, name) for name in _RUN_FIELDS if hasattr(args, name)}
     return SimulationOptions(**(given | fields))
+
+
+def engine_of(args, options: SimulationOptions, params: ChainParams | None = None
+              ) -> AbstractEngine:
+    """The engine that --engine names, with the command's solver (--solver, the
+    smoothed engine's; "auto" resolved with `params`) and `options` (the exact
+    engine takes their horizon, with its own tolerances)."""
+    if args.engine == "exact":
+        return as_engine("exact", options=options)
+    return as_engine("smoothed", args.solver, options, params)
+
+
+def engine_record(args) -> dict:
+    """The engine of a command for its JSON: its name, with eps and the solver for
+    the smoothed one."""
+    if args.engine == "smoothed":
+        return {"engine": "smoothed", "eps": args.eps, "solver": args.solver}
+    return {"engine": args.engine}
+
+
+def engine_text(args) -> str:
+    """The engine of a command for its table's heading."""
+    if args.engine == "smoothed":
+        return f"eps = {args.eps:g}, {args.solver}"
+    return "exact stick/slip engine"
+
+
+def smoothed_only(args, what: str) -> None:
+    """Refuse --engine exact in one line (exit status 2) where the command cannot
+    run it: `what` says why.
+
+    **Raises:**
+
+    `UsageError` when --engine is exact."""
+    if getattr(args, "engine", "smoothed") != "smoothed":
+        raise UsageError(f"--engine {args.engine}: {what}; run it with --engine smoothed")
 
 
 def add_tolerance_options(g, rtol: float = DEFAULTS.rtol, atol: float = DEFAULTS.atol

@@ -6,15 +6,15 @@ import time
 
 from .._studies.crosscheck import CROSSCHECK_ICS, CROSSCHECK_VD, crosscheck
 from .._engine.exact.options import NonsmoothOptions
-from .common import simulation_options
 from .._engine.status import Status
 from .._physics.params import with_parameter
 from .._plots.crosscheck import plot_crosscheck
 from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, UsageError, add_output_options, add_ring_options,
+from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_run_options, add_scheduler_option, add_vd_option, cluster_client,
-                     comma_list, note, Outputs, positive_float, print_json, show_progress)
+                     comma_list, engine_of, engine_record, engine_text, note, positive_float,
+                     print_json, show_progress, simulation_options)
 
 HELP = "smoothed model against the non-smooth stick/slip reference"
 DESCRIPTION = f"""\
@@ -82,7 +82,8 @@ def run(args) -> None:
 
     start = time.perf_counter()
     with cluster_client(args) as client:
-        ds = crosscheck(params, args.vd, ics, args.solver, options, ref_options,
+        ds = crosscheck(params, args.vd, ics, reference_options=ref_options,
+                        engine=engine_of(args, options, params),
                         checkpoint=outputs.path("crosscheck_cases"), client=client,
                         progress=show_progress(args))
     wall = time.perf_counter() - start
@@ -90,16 +91,17 @@ def run(args) -> None:
     outputs.dataset(ds, "crosscheck.nc")
     outputs.figure(plot_crosscheck(ds), "crosscheck")
 
-    failed = int(((ds["status_smoothed"] != Status.ok)
+    s = args.engine  # the suffix of the engine's variables
+    failed = int(((ds[f"status_{s}"] != Status.ok)
                   | (ds["status_reference"] != Status.ok)).sum())
     rows = []
     for i in range(ds.sizes["case"]):
         c = ds.isel(case=i)
         rows.append({
             "v_d": float(c["v_d"]), "ic": f"{str(c['family'].values)} k={int(c['n_excited'])}",
-            "n_halc_smoothed": int(c["n_halc_smoothed"]),
+            f"n_halc_{s}": int(c[f"n_halc_{s}"]),
             "n_halc_reference": int(c["n_halc_reference"]),
-            "class_smoothed": str(c["state_class_smoothed"].values),
+            f"class_{s}": str(c[f"state_class_{s}"].values),
             "class_reference": str(c["state_class_reference"].values),
             "amplitude_error": float(c["amplitude_error"]),
             "energy_error": float(c["energy_error"]),
@@ -115,24 +117,24 @@ def run(args) -> None:
     }
     if args.json:
         print_json({
-            "cases": rows, **summary, "chain": chain_record(params), "eps": args.eps,
-            "solver": args.solver, "scheduler": args.scheduler,
+            "cases": rows, **summary, "chain": chain_record(params), **engine_record(args),
+            "scheduler": args.scheduler,
             "rtol": args.rtol, "reference_rtol": args.ref_rtol, "wall_time_s": wall,
-            "smoothed_wall_time_s": ds.attrs["wall_time_s_smoothed"],
+            f"{s}_wall_time_s": ds.attrs[f"wall_time_s_{s}"],
             "note": "irregular states are compared by statistics (amplitudes, E, "
                     "n_HALC), not as time series",
         }, outputs)
     else:
-        print(f"smoothed (eps = {args.eps:g}, {args.solver}, rtol {args.rtol:g}) against "
+        print(f"{s} ({engine_text(args)}, rtol {args.rtol:g}) against "
               f"the non-smooth reference, N = {args.n_osc}, window "
               f"[{args.transient:g}, {args.t_end:g}]")
         print(f"{'v_d':>5} {'ic':>10} {'n_HALC s/r':>10} {'A err %':>8} {'E err %':>8}"
-              f"  class (smoothed / reference)")
+              f"  class ({s} / reference)")
         for r in rows:
             same = "" if r["class_agrees"] else "  <- differs"
-            print(f"{r['v_d']:5.2f} {r['ic']:>10} {r['n_halc_smoothed']:4d}/"
+            print(f"{r['v_d']:5.2f} {r['ic']:>10} {r[f'n_halc_{s}']:4d}/"
                   f"{r['n_halc_reference']:<5d} {100 * r['amplitude_error']:8.3f} "
-                  f"{100 * r['energy_error']:8.3f}  {r['class_smoothed']} / "
+                  f"{100 * r['energy_error']:8.3f}  {r[f'class_{s}']} / "
                   f"{r['class_reference']}{same}")
         err = summary["max_amplitude_error_periodic"]
         print(f"periodic states: max amplitude error "
@@ -141,5 +143,5 @@ def run(args) -> None:
               f"statistics, not time series.")
         note(f"wall time {wall:.1f} s; {outputs.summary()}")
     if failed:
-        raise RunsFailed(f"{failed} of {ds.sizes['case']} cases failed (smoothed or "
+        raise RunsFailed(f"{failed} of {ds.sizes['case']} cases failed ({s} or "
                          "reference); their rows are kept in the Dataset")

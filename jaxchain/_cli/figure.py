@@ -10,7 +10,6 @@ from .._studies.scenes import (PAPER_FIGURES, PAPER_SOLUTIONS, orbit_diagram_sce
                                phase_portrait_scene, time_delay_scene, time_series_scene)
 from .._sweeps.ensemble import ensemble
 from .._physics.initial import localized_family
-from .common import simulation_options
 from .._physics.params import ChainParams
 from .._plots.dynamics import (plot_orbit_diagram, plot_phase_portraits,
                                plot_states_and_orbits, plot_time_delays, plot_time_series)
@@ -19,8 +18,9 @@ from .._engine.status import status_names
 from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, add_output_options, add_solver_options,
-                     add_vd_option, note, param_default, positive_float, print_json,
-                     show_progress)
+                     add_vd_option, engine_of, engine_record, engine_text, note,
+                     param_default, positive_float, print_json, show_progress,
+                     simulation_options, smoothed_only)
 
 #: Each figure: its belt speed, initial conditions and what it shows.
 #: --quick: a ring of 8 over [0, 600], observed over [400, 600] (Fig. 5: [0, 100]),
@@ -70,14 +70,16 @@ def add_parser(sub):
     return p
 
 
-def _scene(name: str, size: dict, params: ChainParams, solver, options, progress):
-    """The Dataset and the figure of scene `name`."""
+def _scene(name: str, size: dict, params: ChainParams, engine, progress):
+    """The Dataset and the figure of scene `name`, run by `engine` (figures 5-10: the
+    smoothed one)."""
     ics = PAPER_FIGURES[name][1]
     solutions = [k for k in PAPER_SOLUTIONS if k <= params.n_osc]
     if name == "4":
         family = localized_family(params.n_osc, ics, params.graph)
-        ds = ensemble(params, [params.v_d.item()], family, solver, options, progress=progress)
+        ds = ensemble(params, [params.v_d.item()], family, engine=engine, progress=progress)
         return ds, plot_localized_states(ds)
+    solver, options = engine.solver, engine.options
     if name == "5":
         ds = time_series_scene(params, 2, ics, size["t_series"], solver=solver,
                                progress=progress)
@@ -99,6 +101,9 @@ def _stem(name: str, v_d: float, paper_vd: float) -> str:
 
 
 def run(args) -> None:
+    if args.name != "4":
+        smoothed_only(args, f"figure {args.name} observes time series, peak times or "
+                            "Lyapunov exponents, which the exact engine does not record")
     size = QUICK if args.quick else FULL
     paper_vd, ics, _ = PAPER_FIGURES[args.name]
     speeds = args.vd or [paper_vd]
@@ -110,7 +115,8 @@ def run(args) -> None:
     start = time.perf_counter()
     for v_d, stem in zip(speeds, stems):
         params = chain_params(args, size["n_osc"], v_d=v_d, eps=args.eps)
-        ds, fig = _scene(args.name, size, params, args.solver, options, show_progress(args))
+        ds, fig = _scene(args.name, size, params, engine_of(args, options, params),
+                         show_progress(args))
         ds.attrs |= {"figure": args.name, "quick": int(args.quick)}
         outputs.dataset(ds, f"{stem}.nc")
         outputs.figure(fig, stem)
@@ -132,14 +138,14 @@ def run(args) -> None:
     wall = time.perf_counter() - start
     if args.json:
         print_json({"figure": args.name, "runs": reports, "ics": ics,
-                    "n_osc": params.n_osc, "chain": chain_record(params), "eps": args.eps,
-                    "solver": args.solver, "quick": args.quick, "wall_time_s": wall},
+                    "n_osc": params.n_osc, "chain": chain_record(params), **engine_record(args),
+                    "quick": args.quick, "wall_time_s": wall},
                    outputs)
     else:
         for report in reports:
             print(f"Fig. {args.name}{' (quick)' if args.quick else ''}: "
-                  f"v_d = {report['v_d']:g}, N = {params.n_osc}, eps = {args.eps:g}, "
-                  f"{args.solver}, ics = {ics}")
+                  f"v_d = {report['v_d']:g}, N = {params.n_osc}, {engine_text(args)}, "
+                  f"ics = {ics}")
             if args.name in CLASSIFIED:
                 print(f"{'excited':>7} {'n_HALC':>6} {'class':>10} {'delays':>9} "
                       f"{'Lyapunov':>9} {'lambda':>10} {'error':>9} {'spread':>9}")

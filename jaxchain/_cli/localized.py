@@ -12,8 +12,8 @@ from .._engine.status import status_names
 from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (RESULT_MODULES, Outputs, RunsFailed, add_model_options, add_output_options,
-                     add_run_options, note, prefetch, print_json, show_progress,
-                     simulation_options, speeds_of_chain)
+                     add_run_options, engine_of, engine_record, engine_text, note, prefetch,
+                     print_json, show_progress, simulation_options, speeds_of_chain)
 
 HELP = "localized states at each belt speed, N initial conditions (Fig. 4)"
 DESCRIPTION = """\
@@ -56,7 +56,7 @@ def run(args) -> None:
     n_excited = np.arange(1, params.n_osc + 1)
 
     start = time.perf_counter()
-    ds = ensemble(params, args.vd, ics, args.solver, options,
+    ds = ensemble(params, args.vd, ics, engine=engine_of(args, options, params),
                   progress=show_progress(args))
     wall = time.perf_counter() - start
 
@@ -78,13 +78,12 @@ def run(args) -> None:
                      "num_steps": row["num_steps"].values.tolist()})
         status += rows[-1]["status"]
     if args.json:
-        print_json({"runs": rows, "wall_time_s": wall, "eps": args.eps,
-                    "solver": args.solver, "ics": args.ics, "chain": chain_record(params)},
-                   outputs)
+        print_json({"runs": rows, "wall_time_s": wall, **engine_record(args),
+                    "ics": args.ics, "chain": chain_record(params)}, outputs)
     else:
         for r in rows:
             print(f"v_d = {r['v_d']:g}, N = {params.n_osc}, {params.boundary}, "
-                  f"eps = {args.eps:g}, {args.solver}, ics = {args.ics}")
+                  f"{engine_text(args)}, ics = {args.ics}")
             print(f"{'n_excited':>9} {'n_HALC':>6} {'E':>9} {'E/n_HALC':>8}  status")
             for k, nh, e, s in zip(n_excited, r["n_halc"], r["energy"], r["status"]):
                 ratio = f"{e / nh:8.3f}" if nh > 0 else f"{'-':>8}"

@@ -16,8 +16,8 @@ from .._plots.mistuning import plot_mistuned_states, plot_mistuning_study, plot_
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_scheduler_option, add_solver_options, add_vd_option, cluster_client,
-                     comma_list, positive_float, positive_int, report,
-                     show_progress, simulation_options)
+                     comma_list, positive_float, positive_int, report, show_progress,
+                     simulation_options, smoothed_only)
 
 HELP = "random mistuning against the localized states (Anderson meets friction)"
 DESCRIPTION = """\
@@ -109,6 +109,8 @@ def add_parser(sub):
 
 
 def run(args) -> None:
+    smoothed_only(args, "the study places its belt speeds at the smoothed model's Hopf "
+                        "points and differentiates it")
     if args.design:
         return _run_design(args)
     if not 0 <= args.transient < args.t_end:

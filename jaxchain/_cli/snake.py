@@ -11,9 +11,8 @@ from .._studies.snake import (SNAKE_CONTINUATION, SNAKE_START, check_starts, def
 from .._plots.snake import plot_snake
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
-                     add_solver_options, comma_list, one_belt_speed,
-                     positive_float, positive_int, report, show_progress,
-                     simulation_options)
+                     add_solver_options, comma_list, one_belt_speed, positive_float, positive_int,
+                     report, show_progress, simulation_options, smoothed_only)
 
 HELP = "continuation of the localized periodic states (the snake), with stability"
 DESCRIPTION = """\
@@ -88,6 +87,7 @@ def add_parser(sub):
 
 
 def run(args) -> None:
+    smoothed_only(args, "the branches are continued by shooting on the smoothed model")
     params = chain_params(args, args.n_osc, eps=args.eps, v_d=args.vd)
     asked = default_starts(params.graph) if args.sites is None else args.sites
     sites = [k for k in asked if isinstance(k, str) or k <= params.n_osc]

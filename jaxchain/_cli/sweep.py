@@ -8,6 +8,7 @@ import time
 from .._physics.initial import FAMILIES, localized_family
 from .common import simulation_options
 from .._plots.sweep import plot_bifurcation_diagram
+from .._bifurcation.hopf import hopf_speed
 from .._engine.status import Status, status_names
 from .._analysis.fronts import front_fractions, front_ranges
 from .._sweeps.sweep import sweep
@@ -15,7 +16,8 @@ from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_run_options, add_scheduler_option, add_vd_option, belt_speeds,
-                     cluster_client, note, positive_int, print_json, show_progress)
+                     cluster_client, engine_of, engine_record, engine_text, note,
+                     positive_int, print_json, show_progress)
 
 HELP = "bifurcation diagram over belt speeds, stored as it runs (Fig. 3(b))"
 DESCRIPTION = """\
@@ -92,12 +94,12 @@ def run(args) -> None:
 
     start = time.perf_counter()
     with cluster_client(args) as client:
-        ds = sweep(params, args.vd, ics, args.solver, options,
+        ds = sweep(params, args.vd, ics, engine=engine_of(args, options, params),
                    batch_size=args.batch_size, store=store, resume=args.resume or outputs.again,
                    overwrite=args.overwrite, client=client,
                    progress=show_progress(args)).load()
     wall = time.perf_counter() - start
-    outputs.figure(plot_bifurcation_diagram(ds), "sweep")
+    outputs.figure(plot_bifurcation_diagram(ds, hopf_vd=hopf_speed(params)), "sweep")
 
     v_d = ds["v_d"].values
     status = status_names(ds["status"].values)
@@ -130,12 +132,11 @@ def run(args) -> None:
             "batches_total": ds.attrs["batches_total"],
             "batches_run": ds.attrs["batches_run"],
             "wall_time_s": wall,
-            "eps": args.eps,
-            "solver": args.solver,
+            **engine_record(args),
         }, outputs)
         note(summary)
     else:
-        print(f"N = {args.n_osc}, eps = {args.eps:g}, {args.solver}, ics = "
+        print(f"N = {args.n_osc}, {engine_text(args)}, ics = "
               f"{','.join(args.ics)}, t_end = {args.t_end:g}, transient = {args.transient:g}")
         print(f"{'v_d':>6} {'states':>6} {'invading':>8} {'receding':>8}  n_HALC found")
         for i, v in enumerate(v_d):

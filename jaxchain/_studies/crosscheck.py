@@ -1,5 +1,6 @@
-"""The cross-check of the smoothed model against the event-driven non-smooth
-reference, on a grid of belt speeds and initial conditions."""
+"""The cross-check of an engine (the smoothed model by default) against the
+event-driven non-smooth reference, on a grid of belt speeds and initial
+conditions."""
 
 from __future__ import annotations
 
@@ -17,17 +18,17 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._engine.progress import tqdm
-from .._engine.checks import check_options, check_run
+from .._engine.checks import belt_speeds, check_options, check_params
+from .._engine.engines import AbstractEngine, as_engine
+from .._engine.horizon import AbstractHorizon
 from .._physics.initial import FAMILIES, excited_block
 from .._engine.exact.options import NonsmoothOptions
 from .._engine.exact.solve import run_nonsmooth
-from .._engine.options import SimulationOptions
 from .._physics.params import chain_or_default, ChainParams, with_parameter
 from .._physics.record import chain_record, check_recordable
 from .._engine.lanes import lane_params, on_devices, run_lanes
 from .._sweeps.datasets import PAPER, field_values
 from .._engine.status import Status, flag_attributes
-from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._analysis.states import IRREGULAR, PERIODIC, ClassTolerances, state_class
 from .._sweeps.result_store import read_dataset, settings_key, write_dataset
 from .._errors import ValidationError
@@ -45,15 +46,16 @@ CROSSCHECK_ICS = (("eq8", 1), ("eq8", 2), ("eq8", 5), ("eq8", 20), ("eq10", 2),
 _reference_run = eqx.filter_jit(run_nonsmooth)
 
 
-def _smoothed(params, v_d, y0, solver, options):
-    """The smoothed runs over the two halves of the observed window (so that the
+def _halves(params, v_d, y0, engine: AbstractEngine):
+    """The engine's runs over the two halves of the observed window (so that the
     extrema of each half are known), all cases as lanes of `run_lanes`."""
+    options = engine.options
     mid = 0.5 * (options.transient + options.t_end)
     first = dataclasses.replace(options, t_end=mid)
     second = dataclasses.replace(options, t_end=options.t_end - mid, transient=0.0)
     params = lane_params(params, len(v_d), v_d=v_d)
-    a = run_lanes(params, y0, solver, first)
-    b = run_lanes(params, a.y_final, solver, second)
+    a = run_lanes(params, y0, engine=dataclasses.replace(engine, options=first))
+    b = run_lanes(params, a.y_final, engine=dataclasses.replace(engine, options=second))
     return a, b
 
 
@@ -164,14 +166,16 @@ def _amplitude_error(smoothed, reference):
 
 
 def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCHECK_ICS,
-               solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
-               options: SimulationOptions = SimulationOptions(),
+               solver: diffrax.AbstractSolver | str | None = None,
+               options: AbstractHorizon | None = None,
                reference_options: NonsmoothOptions | None = None, *,
+               engine: AbstractEngine | str = "smoothed",
                tolerances: ClassTolerances = ClassTolerances(),
                checkpoint: Path | None = None, client=None,
                progress: bool = False) -> xr.Dataset:
-    """Run the smoothed model and the non-smooth reference on the same grid of belt
-    speeds x initial conditions, and compare their observables.
+    """Run an engine (the smoothed model by default) and the non-smooth reference on
+    the same grid of belt speeds x initial conditions, and compare their
+    observables.
 
     Irregular states diverge between any two models (and any two tolerances), so
     they are compared by their statistics over the observed window (amplitudes, E,
@@ -184,7 +188,8 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
     - `v_d`: belt speeds, dimensionless.
     - `ics`: initial conditions as (family, k): eq. (8) ("eq8") or eq. (10)
         ("eq10") with k oscillators excited (`excited_block`).
-    - `solver`, `options`: the smoothed runs (`simulate`'s).
+    - `solver`, `options`, `engine`: the engine under test, as for `simulate`
+        ("smoothed" by default; "exact": its lanes against its own single runs).
     - `reference_options`: the reference runs; by default the horizon of
         `options` with `NonsmoothOptions`'s tolerances.
     - `tolerances`: how periodic is told from irregular (`ClassTolerances`: its
@@ -193,9 +198,8 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
     - `checkpoint`: a folder where each reference run is stored as it finishes and
         read back on a later call (resuming an interrupted cross-check). Each run
         is stored under the key of everything that determines it (every parameter
-        but eps, which the reference does not use, the initial state and every
-        field of `reference_options`; see `jaxchain._sweeps.result_store`), and only a run of
-        equal settings is read back: the others are computed anew.
+        but eps, the initial state and every field of `reference_options`): only a
+        run of equal settings is read back, the others are computed anew.
     - `client`: a `distributed.Client` to run the reference runs on its cluster,
         one task per case that stores its run in `checkpoint` (which its workers
         must reach); this process reads them back.
@@ -208,7 +212,9 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
     **Returns:**
 
     An `xarray.Dataset` with dims (case, osc) and coords v_d, family, n_excited
-    along case: amplitudes_smoothed/_reference (case, osc); energy, n_halc,
+    along case, its variables suffixed by the engine's name (`_smoothed` or
+    `_exact`, attribute `engine`) and `_reference`:
+    amplitudes_smoothed/_reference (case, osc); energy, n_halc,
     half_difference, state_class, status, num_steps of both (case);
     stick_fraction, num_events and wall_time_s of the reference; and the
     comparison: amplitude_error (max over oscillators, relative to max(1, largest
@@ -222,37 +228,12 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
     goes away, or when the runs its workers stored are not in `checkpoint` as this
     process sees it.
     """
-    import xarray as xr
-
-    params = chain_or_default(params)
-    if client is not None and checkpoint is None:
-        raise ValidationError("checkpoint: a cross-check on a Dask cluster needs a checkpoint "
-                              "folder its workers can reach")
-    params, solver, options, v_d = check_run(params, solver, options, v_d)
-    check_recordable(params)
-    ics = list(ics)
-    if not ics:
-        raise ValidationError("ics must list at least one (family, n_excited) pair, got none")
-    if reference_options is None:
-        reference_options = NonsmoothOptions(t_end=options.t_end, transient=options.transient)
-    check_options(reference_options, NonsmoothOptions, "reference_options")
-    if (reference_options.t_end, reference_options.transient) != (options.t_end,
-                                                                   options.transient):
-        raise ValidationError("reference_options must observe the same window as options")
-    cases = [(float(vd), fam, int(k)) for vd in v_d for fam, k in ics]
-    y0 = []
-    for vd, fam, k in cases:
-        if fam not in FAMILIES:
-            raise ValidationError(f"ics family must be one of {sorted(FAMILIES)}, got {fam!r}")
-        p = with_parameter(params, "v_d", vd)
-        y0.append(np.asarray(FAMILIES[fam](excited_block(params.n_osc, k, params.graph))(p)))
+    params, engine, reference_options, cases, y0 = _check(
+        params, v_d, ics, solver, options, reference_options, engine, checkpoint, client)
     vds = np.array([c[0] for c in cases])
-    y0 = np.stack(y0)
-
     start = time.perf_counter()
-    smooth = _gather(*_smoothed(params, vds, jnp.asarray(y0), solver, options))
-    smooth_wall = time.perf_counter() - start
-
+    tested = _gather(*_halves(params, vds, jnp.asarray(y0), engine))
+    wall = time.perf_counter() - start
     refs = _References(tuple(with_parameter(params, "v_d", c[0]) for c in cases), y0,
                        reference_options,
                        tuple(f"vd{vd:g}_{fam}_k{k}" for vd, fam, k in cases),
@@ -261,52 +242,95 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
         results = on_devices(refs.run, len(cases), "non-smooth reference", progress)
     else:
         results = _on_cluster(client, refs, progress)
+    return _assemble(params, engine, reference_options, cases, tested, wall, results,
+                     tolerances)
+
+
+def _check(params, v_d, ics, solver, options, reference_options, engine, checkpoint,
+           client) -> tuple:
+    """The arguments of `crosscheck`, checked: (params, engine, reference_options,
+    cases, y0), a case (v_d, family, k) starting from y0[i]."""
+    params = chain_or_default(params)
+    if client is not None and checkpoint is None:
+        raise ValidationError("checkpoint: a cross-check on a Dask cluster needs a checkpoint "
+                              "folder its workers can reach")
+    params = check_params(params)
+    engine = as_engine(engine, solver, options, params)
+    v_d = belt_speeds(v_d)
+    check_recordable(params)
+    ics = list(ics)
+    if not ics:
+        raise ValidationError("ics must list at least one (family, n_excited) pair, got none")
+    window = (engine.options.t_end, engine.options.transient)
+    if reference_options is None:
+        reference_options = NonsmoothOptions(t_end=window[0], transient=window[1])
+    check_options(reference_options, NonsmoothOptions, "reference_options")
+    if (reference_options.t_end, reference_options.transient) != window:
+        raise ValidationError("reference_options must observe the same window as options")
+    cases = [(float(vd), fam, int(k)) for vd in v_d for fam, k in ics]
+    y0 = []
+    for vd, fam, k in cases:
+        if fam not in FAMILIES:
+            raise ValidationError(f"ics family must be one of {sorted(FAMILIES)}, got {fam!r}")
+        p = with_parameter(params, "v_d", vd)
+        y0.append(np.asarray(FAMILIES[fam](excited_block(params.n_osc, k, params.graph))(p)))
+    return params, engine, reference_options, cases, np.stack(y0)
+
+
+def _assemble(params, engine, reference_options, cases, tested, wall, results,
+              tolerances) -> xr.Dataset:
+    """The cross-check's Dataset: both sides' observables, each case's state class,
+    and their differences."""
+    import xarray as xr
+
+    s = engine.name
     walls = [r[1] for r in results]
     ref = {k: np.stack([r[0][k] for r in results]) for k in results[0][0]}
-
     n = params.n_osc
-    half_s = _half_difference(smooth)
+    half_s = _half_difference(tested)
     half_r = _half_difference(ref)
     class_s = [state_class(int(h), n, PERIODIC if d <= tolerances.halves else IRREGULAR)
-               for h, d in zip(smooth["n_halc"], half_s)]
+               for h, d in zip(tested["n_halc"], half_s)]
     class_r = [state_class(int(h), n, PERIODIC if d <= tolerances.halves_reference
                            else IRREGULAR) for h, d in zip(ref["n_halc"], half_r)]
-    energy_s = 0.5 * np.sum(smooth["amplitudes"] ** 2, -1)
+    energy_s = 0.5 * np.sum(tested["amplitudes"] ** 2, -1)
     energy_r = 0.5 * np.sum(ref["amplitudes"] ** 2, -1)
     case, osc = ("case",), ("case", "osc")
     ds = xr.Dataset(
         {
-            "amplitudes_smoothed": (osc, smooth["amplitudes"]),
+            f"amplitudes_{s}": (osc, tested["amplitudes"]),
             "amplitudes_reference": (osc, ref["amplitudes"]),
-            "energy_smoothed": (case, energy_s), "energy_reference": (case, energy_r),
-            "n_halc_smoothed": (case, smooth["n_halc"]),
+            f"energy_{s}": (case, energy_s), "energy_reference": (case, energy_r),
+            f"n_halc_{s}": (case, tested["n_halc"]),
             "n_halc_reference": (case, ref["n_halc"]),
-            "half_difference_smoothed": (case, half_s),
+            f"half_difference_{s}": (case, half_s),
             "half_difference_reference": (case, half_r),
-            "state_class_smoothed": (case, class_s),
+            f"state_class_{s}": (case, class_s),
             "state_class_reference": (case, class_r),
-            "status_smoothed": (case, smooth["status"], flag_attributes()),
+            f"status_{s}": (case, tested["status"], flag_attributes()),
             "status_reference": (case, ref["status"], flag_attributes()),
-            "num_steps_smoothed": (case, smooth["num_steps"]),
+            f"num_steps_{s}": (case, tested["num_steps"]),
             "num_steps_reference": (case, ref["num_steps"]),
             "num_events_reference": (case, ref["num_events"]),
             "stick_fraction_reference": (osc, ref["stick_fraction"]),
             "wall_time_s_reference": (case, np.array(walls)),
-            "amplitude_error": (case, _amplitude_error(smooth["amplitudes"],
+            "amplitude_error": (case, _amplitude_error(tested["amplitudes"],
                                                        ref["amplitudes"])),
             "energy_error": (case, np.abs(energy_s - energy_r) / np.maximum(1.0, energy_r)),
-            "n_halc_agrees": (case, smooth["n_halc"] == ref["n_halc"]),
+            "n_halc_agrees": (case, tested["n_halc"] == ref["n_halc"]),
             "class_agrees": (case, np.array(class_s) == np.array(class_r)),
         },
-        coords={"v_d": (case, vds), "family": (case, [c[1] for c in cases]),
+        coords={"v_d": (case, np.array([c[0] for c in cases])),
+                "family": (case, [c[1] for c in cases]),
                 "n_excited": (case, [c[2] for c in cases]), "osc": np.arange(1, n + 1)},
     )
-    attrs = field_values(options, "smoothed_") | field_values(reference_options,
-                                                             "reference_")
+    attrs = field_values(engine.options, f"{s}_") | field_values(reference_options,
+                                                                 "reference_")
     attrs = {k: (float(v) if not isinstance(v, (str, int)) else v) for k, v in attrs.items()}
     attrs |= {k: v for k, v in chain_record(params).items() if k != "v_d"}
-    attrs |= {"solver": type(solver).__name__, "wall_time_s_smoothed": smooth_wall,
-              "periodic_tol_smoothed": tolerances.halves,
+    attrs |= {k: v for k, v in engine.attributes().items() if f"{s}_{k}" not in attrs}
+    attrs |= {f"wall_time_s_{s}": wall,
+              f"periodic_tol_{s}": tolerances.halves,
               "periodic_tol_reference": tolerances.halves_reference,
               "paper": PAPER, "units": "dimensionless, eqs. (4)-(6) of the paper"}
     ds.attrs = {k: (float(v) if isinstance(v, (float, np.floating)) else v)

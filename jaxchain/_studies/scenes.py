@@ -13,7 +13,8 @@ import diffrax
 import numpy as np
 
 from .._physics.record import check_recordable
-from .._engine.checks import as_solver, check_options, check_params
+from .._engine.checks import check_params
+from .._engine.engines import AbstractEngine, as_engine
 from .._physics.initial import FAMILIES, initial_states, localized_family
 from .._engine.lanes import lane_params, run_lanes, take_lanes
 from .._engine.observers.base import AbstractObserver
@@ -66,8 +67,9 @@ def _check_solutions(solutions, n_osc: int) -> np.ndarray:
 
 def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
                       observers: Sequence[AbstractObserver], ics: str = "eq8",
-                      solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
-                      options: SimulationOptions = SimulationOptions(), *,
+                      solver: diffrax.AbstractSolver | str | None = None,
+                      options: SimulationOptions | None = None, *,
+                      engine: AbstractEngine | str = "smoothed",
                       schedule: str | None = None, progress: bool = True,
                       tolerances: ClassTolerances = ClassTolerances(),
                       classify_from: float | None = None) -> xr.Dataset:
@@ -81,7 +83,8 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
     - `solutions`: the numbers k of excited oscillators, in [1, n_osc]; all if None.
     - `observers`: what to observe (see `jaxchain._engine.observers`).
     - `ics`: "eq8" or "eq10".
-    - `solver`, `options`, `schedule`, `progress`: as for `ensemble`.
+    - `solver`, `options`, `engine`, `schedule`, `progress`: as for `ensemble`;
+        observers other than `Extrema` need the smoothed engine.
     - `tolerances`, `classify_from`: when the observers include `Extrema` and
         `PeakTimes` of every oscillator and `LargestLyapunov`, each state is
         classified (`classify`) over the peaks after `classify_from`
@@ -104,12 +107,12 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
     observers = check_observers(observers)
     params = check_params(params)
     check_recordable(params)
-    solver = as_solver(solver, params=params)
-    options = check_options(options)
+    engine = as_engine(engine, solver, options, params)
+    options = engine.options
     solutions = _check_solutions(solutions, params.n_osc)
     family = take_lanes(localized_family(params.n_osc, ics, params.graph), solutions - 1)
     lanes = lane_params(params, solutions.size)
-    out = run_lanes(lanes, initial_states(lanes, family), solver, options,
+    out = run_lanes(lanes, initial_states(lanes, family), engine=engine,
                     schedule=schedule, progress=progress, observers=observers)
     dims = {"y_initial": ("component", "osc"), "y_final": ("component", "osc"),
             "num_steps": (), "status": ()}
@@ -129,7 +132,7 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
             data[name] = (("solution",) + dims[name], np.asarray(value))
     ds = xr.Dataset(data, coords=coords)
     ds["status"].attrs.update(flag_attributes())
-    ds.attrs = run_attributes(params, solver, options, ics, "") | {"ics_family": ics}
+    ds.attrs = run_attributes(params, engine, ics, "") | {"ics_family": ics}
     kinds = {type(o) for o in observers}
     peaks = [o for o in observers if isinstance(o, PeakTimes)]
     if {Extrema, LargestLyapunov} <= kinds and peaks and peaks[0].oscillators is None:

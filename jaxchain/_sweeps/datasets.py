@@ -7,13 +7,12 @@ from typing import TYPE_CHECKING
 import dataclasses
 from pathlib import Path
 
-import diffrax
 import numpy as np
 from jaxtyping import ArrayLike
 
 from .atomic import replacing
 from .._physics.initial import AbstractInitialCondition, OutOfPhaseExcitation
-from .._engine.horizon import AbstractHorizon
+from .._engine.engines import AbstractEngine
 from .._physics.params import ChainParams
 from .._physics.record import chain_record
 from .._engine.observables import Observables
@@ -114,37 +113,33 @@ def field_values(obj, prefix: str = "") -> dict:
             if getattr(obj, f.name) is not None}
 
 
-def run_attributes(params: ChainParams, solver: diffrax.AbstractSolver | None,
-                   options: AbstractHorizon, ics: str, varying: str,
-                   engine: str = "smoothed") -> dict:
+def run_attributes(params: ChainParams, engine: AbstractEngine, ics: str,
+                   varying: str) -> dict:
     """The attributes of a Dataset of runs: the whole chain (`chain_record`: the
     boundary, the friction law and its parameters, per-oscillator arrays as lists,
     the mistuning record) but `varying` (the parameter along a dim of the
-    Dataset), the engine, the fields of `options`, the solver (the smoothed
-    engine's; None for the exact engine), the initial conditions, the jaxchain
-    version and the paper, as plain numbers, lists and strings (netCDF and
-    zarr keep them)."""
+    Dataset), the fields of the engine's options and its settings
+    (`AbstractEngine.attributes`: its name, the smoothed engine's solver), the
+    initial conditions, the jaxchain version and the paper, as plain numbers,
+    lists and strings (netCDF and zarr keep them)."""
     attrs = {k: v for k, v in chain_record(params).items() if k != varying}
     attrs |= {k: (v if isinstance(v, (str, int)) else float(v))
-              for k, v in field_values(options).items()}
-    if solver is not None:
-        attrs["solver"] = type(solver).__name__
-    attrs |= {"engine": engine, "ics": ics,
-              "jaxchain_version": VERSION, "paper": PAPER,
+              for k, v in field_values(engine.options).items()}
+    attrs |= engine.attributes()
+    attrs |= {"ics": ics, "jaxchain_version": VERSION, "paper": PAPER,
               "units": "dimensionless, eqs. (4)-(6) of the paper"}
     return attrs
 
 
 def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
-               ics: AbstractInitialCondition, solver: diffrax.AbstractSolver | None,
-               options: AbstractHorizon, engine: str = "smoothed") -> xr.Dataset:
+               ics: AbstractInitialCondition, engine: AbstractEngine) -> xr.Dataset:
     """Turn batched `Observables` into a self-describing `xarray.Dataset`.
 
     **Arguments:**
 
     - `obs`: `Observables` with leading axes (n_vd, n_ic).
-    - `params`, `v_d`, `ics`, `solver`, `options`, `engine`: what produced `obs`
-        (the engine's name, "smoothed" or "exact"; no solver for the exact one).
+    - `params`, `v_d`, `ics`, `engine`: what produced `obs` (the engine value,
+        `Smoothed` or `Exact`, with its settings).
 
     **Returns:**
 
@@ -154,7 +149,8 @@ def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
     y_final (v_d, ic, component, osc); energy, n_halc, num_steps, status (v_d, ic).
     When the initial conditions excite oscillators (`OutOfPhaseExcitation`),
     `n_excited` is a coordinate along `ic`. Attributes: every field of `params`
-    (but v_d), of `options`, the solver, the type of initial condition, the
+    (but v_d), the engine and its options (the smoothed engine's solver), the type
+    of initial condition, the
     meaning of the status codes, the jaxchain version and the paper.
     """
     import xarray as xr
@@ -167,7 +163,7 @@ def to_dataset(obs: Observables, params: ChainParams, v_d: ArrayLike,
     if isinstance(ics, OutOfPhaseExcitation):
         excited = np.broadcast_to(np.asarray(ics.excited), (n_ic, n_osc))
         coords["n_excited"] = ("ic", excited.sum(-1))
-    attrs = run_attributes(params, solver, options, type(ics).__name__, "v_d", engine)
+    attrs = run_attributes(params, engine, type(ics).__name__, "v_d")
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 

@@ -85,8 +85,7 @@ def ensemble(params: ChainParams, v_d: Float[ArrayLike, " n_vd"],
     obs = jax.tree_util.tree_map(lambda x: x.reshape(v_d.size, n_ic, *x.shape[1:]), obs)
     from .datasets import to_dataset  # xarray, imported once the run is done
 
-    return to_dataset(obs, params, v_d, ics, getattr(engine, "solver", None), engine.options,
-                      engine.name)
+    return to_dataset(obs, params, v_d, ics, engine)
 
 
 

@@ -18,13 +18,13 @@ from jaxtyping import ArrayLike, Float
 
 from .._engine.progress import tqdm
 from .._physics.record import check_recordable
-from .._engine.checks import as_solver, check_options, check_params
+from .._engine.checks import check_params
+from .._engine.engines import AbstractEngine, as_engine
+from .._engine.horizon import AbstractHorizon
 from .._physics.initial import AbstractInitialCondition
 from .._engine.lanes import block_size, expected_cost, run_lanes
-from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams
 from .datasets import observables_variables, run_attributes
-from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
 from .result_store import settings_json, settings_key
 from .._analysis.fronts import propagating_fronts
 from .grid import SweepGrid
@@ -41,8 +41,9 @@ KIND = "sweep"
 
 def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
           ics: AbstractInitialCondition | Mapping[str, AbstractInitialCondition],
-          solver: diffrax.AbstractSolver = SOLVERS[DEFAULT_SOLVER](),
-          options: SimulationOptions = SimulationOptions(), *,
+          solver: diffrax.AbstractSolver | str | None = None,
+          options: AbstractHorizon | None = None, *,
+          engine: AbstractEngine | str = "smoothed",
           where: Callable | str = "v_d", batch_size: int = 64,
           store: str | Path | None = None, resume: bool = False, overwrite: bool = False,
           schedule: str | None = None, client=None, progress: bool = True) -> xr.Dataset:
@@ -57,8 +58,8 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     short by a crash or a kill is not flagged, and `resume=True` redoes it while
     skipping every flagged one. The store is keyed by a hash of every setting that
     determines the result (`settings_key`: the parameters, the swept values, the
-    initial conditions, the solver, the options and the batch size), and is never
-    resumed with other settings.
+    initial conditions, the engine with its solver and options, and the batch
+    size), and is never resumed with other settings.
 
     With a Dask `client`, each batch is one task on its cluster (`run_tasks`):
     the worker that takes it integrates its trajectories with the usual engine, on
@@ -82,7 +83,8 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
         `{"eq8": localized_family(N, "eq8"), "eq10": localized_family(N, "eq10")}`.
         They are evaluated with each value, so that eq. (8) starts from that belt
         speed's steady sliding.
-    - `solver`, `options`: as for `simulate`.
+    - `solver`, `options`, `engine`: as for `simulate` ("smoothed" by default, or
+        "exact", or an engine value).
     - `where`: the swept parameter: a name (`"v_d"`, `"eta_c"`, `"xi"`, `"eps"`,
         ...) or a lens such as `lambda p: p.eta_c` (see `parameter_name`).
     - `batch_size`: trajectories per batch (>= 1): the unit of storing and of
@@ -112,7 +114,7 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     (name, ic); n_halc_halves (name, ic, half); y_initial, y_final (name, ic,
     component, osc)) and `front` (`propagating_fronts`). Along `ic`, the
     coordinates `family` and `n_excited`. Attributes: every parameter and option,
-    the solver, the settings and their key, and `batches_total`, `batches_done`
+    the engine and its solver, the settings and their key, and `batches_total`, `batches_done`
     and `batches_run` (by this call). With a store the variables are read from it
     lazily (dask arrays; `.load()` reads them all).
 
@@ -127,79 +129,122 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     batches the cluster ran are not in the store (the workers do not share its
     file system).
     """
-    import xarray as xr
-
     params = check_params(params)
+    engine = as_engine(engine, solver, options, params)
+    plan = _plan(params, values, ics, engine, where, batch_size, store, resume, overwrite,
+                 schedule, client)
+    if client is not None:
+        _run_on_cluster(client, plan, progress)
+        parts = []
+    else:
+        parts = _run_here(plan, progress)
+    return _assemble(plan, parts)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Plan:
+    """A checked sweep: its batches, its store (None in memory) and where they go
+    (`target`), and which batches remain (`todo`)."""
+
+    work: "_Batches"
+    store: SweepStore | None
+    target: SweepStore | None
+    done: np.ndarray
+    todo: list
+
+
+def _plan(params, values, ics, engine, where, batch_size, store, resume, overwrite,
+          schedule, client) -> _Plan:
+    """Check every argument of `sweep` and plan its batches and store."""
     check_recordable(params)
-    solver = as_solver(solver, params=params)
-    options = check_options(options)
     grid = SweepGrid.build(params, where, values, ics)
     check_count("batch_size", batch_size)
     if resume and overwrite:
         raise ValidationError("resume and overwrite exclude each other")
+    if grid.name == "eps" and engine.name != "smoothed":
+        raise ValidationError(f"where='eps': the {engine.name} engine has no eps (the "
+                              "smoothing of the smoothed engine); sweep another parameter")
+    if client is not None and store is None:
+        raise ValidationError("store: a sweep on a Dask cluster needs a store its workers "
+                              "can reach")
     n, name = grid.n_trajectories, grid.name
     n_batches = -(-n // batch_size)
     settings = dict(
         params={f.name: getattr(params, f.name) for f in dataclasses.fields(params)
                 if f.name != name},
-        where=name, values=grid.values, ics=grid.families, solver=solver,
-        options=options, batch_size=batch_size)
+        where=name, values=grid.values, ics=grid.families, engine=engine,
+        batch_size=batch_size)
     key, text = settings_key(KIND, **settings), settings_json(KIND, **settings)
-
-    if client is not None and store is None:
-        raise ValidationError("store: a sweep on a Dask cluster needs a store its workers "
-                              "can reach")
     st = SweepStore(store) if store is not None else None
     target = None if st is None else _target(st, key, text, resume, overwrite)
     done = target.done() if target is not None and target.exists() \
         else np.zeros(n_batches, dtype=bool)
-    todo = [b for b in range(n_batches) if not done[b]]
-
     coords = {name: grid.values, "ic": np.arange(grid.n_ics), **grid.ic_coords(),
               "osc": np.arange(1, params.n_osc + 1),
               "component": np.array(["x", "v"], dtype=object)}
-    attrs = run_attributes(params, solver, options, ",".join(grid.families), name)
+    attrs = run_attributes(params, engine, ",".join(grid.families), name)
     attrs |= {"swept": name, "batch_size": batch_size, "settings_key": key,
               "settings": text}
-    work = _Batches(grid, batch_size, solver, options, schedule,
+    work = _Batches(grid, batch_size, engine, schedule,
                     block_size(batch_size, len(jax.local_devices())), coords, attrs)
-    parts = []
-    if client is not None:
-        from .._engine.cluster import run_tasks
+    return _Plan(work, st, target, done, [b for b in range(n_batches) if not done[b]])
 
-        with tqdm(total=n_batches, initial=n_batches - len(todo), desc="sweep",
-                  unit="batch", disable=not progress) as bar:
-            run_tasks(client, _Batches.store, work,
-                      [(target.path.resolve(), b) for b in todo],
-                      [f"sweep-{key[:12]}-batch-{b}-{uuid.uuid4().hex[:8]}" for b in todo],
-                      bar, costs=[work.cost(b) for b in todo])
-        missing = [b for b in todo if not (target.exists() and target.done()[b])]
-        if missing:
-            raise RuntimeError(f"the cluster ran {len(todo)} batches but {len(missing)} "
-                               f"are not in {target.path.resolve()}: its workers write to "
-                               "a file system this process does not see; give a store on "
-                               "a shared one")
-    else:
-        initial = sum(work.size(b) for b in np.flatnonzero(done))
-        with tqdm(total=n, initial=initial, desc="sweep", unit="trajectory",
-                  disable=not progress, smoothing=0.1) as bar:
-            for b in todo:
-                if st is None:
-                    parts.append(work.run(b, bar))
-                else:
-                    work.store(target.path, b, bar)
-    if st is not None and target.path != st.path:  # an overwrite, now complete
-        st.swap_in(target)
 
+def _run_on_cluster(client, plan: _Plan, progress: bool) -> None:
+    """Each remaining batch as one task on the cluster of `client`, written into the
+    store by the worker that runs it."""
+    from .._engine.cluster import run_tasks
+
+    work, todo, target = plan.work, plan.todo, plan.target
+    n_batches, key = plan.done.size, work.attrs["settings_key"]
+    with tqdm(total=n_batches, initial=n_batches - len(todo), desc="sweep",
+              unit="batch", disable=not progress) as bar:
+        run_tasks(client, _Batches.store, work,
+                  [(target.path.resolve(), b) for b in todo],
+                  [f"sweep-{key[:12]}-batch-{b}-{uuid.uuid4().hex[:8]}" for b in todo],
+                  bar, costs=[work.cost(b) for b in todo])
+    missing = [b for b in todo if not (target.exists() and target.done()[b])]
+    if missing:
+        raise RuntimeError(f"the cluster ran {len(todo)} batches but {len(missing)} "
+                           f"are not in {target.path.resolve()}: its workers write to "
+                           "a file system this process does not see; give a store on "
+                           "a shared one")
+
+
+def _run_here(plan: _Plan, progress: bool) -> list:
+    """Each remaining batch in this process: written into the store, or returned
+    (in memory, without a store)."""
+    work, parts = plan.work, []
+    initial = sum(work.size(b) for b in np.flatnonzero(plan.done))
+    with tqdm(total=work.grid.n_trajectories, initial=initial, desc="sweep",
+              unit="trajectory", disable=not progress, smoothing=0.1) as bar:
+        for b in plan.todo:
+            if plan.store is None:
+                parts.append(work.run(b, bar))
+            else:
+                work.store(plan.target.path, b, bar)
+    return parts
+
+
+def _assemble(plan: _Plan, parts: list) -> xr.Dataset:
+    """The sweep's Dataset on its grid (name, ic, ...), read from the store (an
+    overwrite swapped in first) or joined from the batches in memory."""
+    import xarray as xr
+
+    st, work = plan.store, plan.work
+    n_batches, grid = plan.done.size, work.grid
+    if st is not None and plan.target.path != st.path:  # an overwrite, now complete
+        st.swap_in(plan.target)
     if st is None:
-        flat = xr.concat(parts, "trajectory").assign_coords(coords).assign_attrs(attrs)
+        flat = xr.concat(parts, "trajectory").assign_coords(work.coords)
+        flat = flat.assign_attrs(work.attrs)
         n_done = n_batches
     else:
         flat = st.open()
         n_done = int(np.sum(flat["batch_done"].values == 1))
-    ds = _on_grid(flat, name, grid.values.size, grid.n_ics)
+    ds = _on_grid(flat, grid.name, grid.values.size, grid.n_ics)
     ds.attrs |= {"batches_total": n_batches, "batches_done": n_done,
-                 "batches_run": len(todo), "store": str(st.path) if st else ""}
+                 "batches_run": len(plan.todo), "store": str(st.path) if st else ""}
     return ds
 
 
@@ -251,8 +296,7 @@ class _Batches:
 
     grid: SweepGrid
     batch_size: int
-    solver: diffrax.AbstractSolver
-    options: SimulationOptions
+    engine: AbstractEngine
     schedule: str | None
     block: int
     coords: dict
@@ -275,7 +319,7 @@ class _Batches:
         import xarray as xr
 
         lane_params, y0 = self.lanes(b)
-        obs = run_lanes(lane_params, y0, self.solver, self.options, schedule=self.schedule,
+        obs = run_lanes(lane_params, y0, engine=self.engine, schedule=self.schedule,
                         block=self.block, progress=progress, devices=devices)
         return xr.Dataset(observables_variables(obs, ("trajectory",)))
 

@@ -16,7 +16,9 @@ import numpy as np
 from jaxtyping import ArrayLike, Float
 
 from ..._physics.record import check_recordable
-from ..._engine.checks import check_run
+from ..._engine.checks import belt_speeds, check_params
+from ..._engine.engines import AbstractEngine, Smoothed, as_engine
+from ..._engine.horizon import AbstractHorizon
 from ..._analysis.classify import classify
 from ..._physics.initial import GivenState
 from ..._engine.lanes import lane_params, run_lanes
@@ -24,7 +26,6 @@ from ..._engine.observers.crossings import PeakTimes
 from ..._engine.observers.extrema import Extrema
 from ..._engine.options import SimulationOptions
 from ..._physics.params import ChainParams
-from ..._engine.solver.registry import DEFAULT_SOLVER
 from ..._analysis.states import PERIODIC
 from ..._sweeps.sweep import sweep
 from .classes import class_index, class_names, halc_clusters, wilson_interval
@@ -58,29 +59,36 @@ def _key_data(key) -> list[int]:
     return np.asarray(key).ravel().tolist()
 
 
-def _doubled(options: SimulationOptions) -> SimulationOptions:
-    """The options of the convergence check: t_end doubled, the window of the same
+def _doubled(engine: AbstractEngine) -> AbstractEngine:
+    """The engine of the convergence check: t_end doubled, the window of the same
     length at its end."""
+    options = engine.options
     t_end = 2 * options.t_end
-    return dataclasses.replace(options, t_end=t_end,
-                               transient=t_end - (options.t_end - options.transient))
+    longer = dataclasses.replace(options, t_end=t_end,
+                                 transient=t_end - (options.t_end - options.transient))
+    return dataclasses.replace(engine, options=longer)
 
 
-def _check_run(params, v, states, solver, options, progress) -> dict:
-    """The convergence subset at 2 t_end, with peak times for the periodic/irregular
-    class: n_halc, on_halc, status and peak_times of shape (n_vd, n_check, ...)."""
+def _check_run(params, v, states, engine, progress) -> dict:
+    """The convergence subset at 2 t_end: n_halc, on_halc, status of shape
+    (n_vd, n_check, ...), with peak times for the periodic/irregular class
+    (`peak_times`) where the engine observes them (the smoothed one)."""
     n_vd, n = v.size, states.shape[0]
     lanes = lane_params(params, n_vd * n, v_d=np.repeat(v, n))
     y0 = np.tile(np.asarray(states), (n_vd, 1, 1))
-    out = run_lanes(lanes, y0, solver, options, progress=progress,
-                    observers=(Extrema(), PeakTimes()))
+    if isinstance(engine, Smoothed):
+        out = run_lanes(lanes, y0, engine=engine, progress=progress,
+                        observers=(Extrema(), PeakTimes()))
+    else:
+        out = dataclasses.asdict(run_lanes(lanes, y0, engine=engine, progress=progress))
     return {k: np.asarray(out[k]).reshape((n_vd, n) + np.shape(out[k])[1:])
-            for k in ("n_halc", "on_halc", "status", "peak_times")}
+            for k in ("n_halc", "on_halc", "status", "peak_times") if k in out}
 
 
 def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_samples: int,
-                    box: Box = Box(), key=0, *, solver=DEFAULT_SOLVER,
-                    options: SimulationOptions = BASIN_OPTIONS, n_check: int | None = None,
+                    box: Box = Box(), key=0, *, solver=None,
+                    options: AbstractHorizon | None = None,
+                    engine: AbstractEngine | str = "smoothed", n_check: int | None = None,
                     batch_size: int = 64, store: str | Path | None = None,
                     resume: bool = False, overwrite: bool = False, client=None,
                     progress: bool = True) -> xr.Dataset:
@@ -104,8 +112,9 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
     - `n_samples`: initial states per belt speed (the same states at each).
     - `box`: the `Box` of initial states, x in [-2, 2], x' in [0, 2] by default.
     - `key`: an integer seed or a JAX PRNG key; kept in the result.
-    - `solver`, `options`: as for `simulate`; `BASIN_OPTIONS` (t_end = 2000) by
-        default.
+    - `solver`, `options`, `engine`: as for `simulate`; the horizon `BASIN_OPTIONS`
+        (t_end = 2000) by default. The exact engine observes no peak times: its
+        periodic fractions are NaN.
     - `n_check`: samples of the convergence check, min(n_samples, 50) by default;
         0 for none.
     - `batch_size`, `store`, `resume`, `overwrite`, `client`, `progress`: as for
@@ -131,21 +140,47 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
     `ValidationError` for n_samples < 1, bad belt speeds or a bad `n_check`, and as
     `sweep`; `TypeError` for a key that is neither a seed nor a PRNG key.
     """
-    import xarray as xr
+    params, engine, v, n_check, key = _check(params, v_d, n_samples, box, key, solver,
+                                             options, engine, n_check)
+    states = sample_states(key, box, int(n_samples), params.n_osc)
+    ds = sweep(params, v, GivenState(states), engine=engine, batch_size=batch_size,
+               store=store, resume=resume, overwrite=overwrite, client=client,
+               progress=progress).load()
+    out = _classified(params, v, states, ds)
+    index = out["class_index"].values
+    out = out.assign(**_convergence(params, v, states[:n_check], index[:, :n_check],
+                                    engine, progress))
+    out.attrs = {k: val for k, val in ds.attrs.items()
+                 if k not in ("batches_total", "batches_done", "batches_run")}
+    out.attrs |= {"key": _key_data(key), "box_x": list(box.x),
+                  "box_v": list(box.v), "n_samples": int(n_samples), "n_check": int(n_check),
+                  "method": "basin stability (Menck et al., Nature Physics 9, 89 (2013))",
+                  "interval": "95 % Wilson score interval"}
+    return out
 
-    params, solver, options, v = check_run(params, solver, options, v_d)
+
+def _check(params, v_d, n_samples, box, key, solver, options, engine, n_check) -> tuple:
+    """The arguments of `basin_stability`, checked: (params, engine, v_d, n_check,
+    key)."""
+    params = check_params(params)
+    engine = as_engine(engine, solver, BASIN_OPTIONS if options is None else options,
+                       params)
+    v = belt_speeds(v_d)
     check_recordable(params)
     check_count("n_samples", n_samples)
     if not isinstance(box, Box):
         raise TypeError(f"box must be a jaxchain.Box, got {type(box).__name__}")
     n_check = min(n_samples, 50) if n_check is None else n_check
     check_count("n_check", n_check, 0, n_samples)
-    key = _key(key)
-    n_osc = params.n_osc
-    states = sample_states(key, box, int(n_samples), n_osc)
-    ds = sweep(params, v, GivenState(states), solver, options, batch_size=batch_size,
-               store=store, resume=resume, overwrite=overwrite, client=client,
-               progress=progress).load()
+    return params, engine, v, n_check, _key(key)
+
+
+def _classified(params: ChainParams, v, states, ds: xr.Dataset) -> xr.Dataset:
+    """Each sample's class and HALC groups from the sweep `ds`, and the fractions
+    of each, with their Wilson intervals."""
+    import xarray as xr
+
+    n_osc, n_samples = params.n_osc, states.shape[0]
     status = ds["status"].values
     index = class_index(ds["n_halc"].values, status, n_osc)
     clusters = np.where(status == Status.ok,
@@ -156,7 +191,7 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
     n_clusters = max(1, n_osc // 2) + 1
     cluster_counts = np.stack([(clusters == c).sum(-1) for c in range(n_clusters)], axis=-1)
     c_low, c_high = wilson_interval(cluster_counts, n_samples)
-    out = xr.Dataset(
+    return xr.Dataset(
         {"y0": (("sample", "component", "osc"), np.asarray(states)),
          "n_halc": (("v_d", "sample"), ds["n_halc"].values),
          "clusters": (("v_d", "sample"), clusters),
@@ -171,36 +206,28 @@ def basin_stability(params: ChainParams, v_d: Float[ArrayLike, " n_vd"], n_sampl
          "cluster_ci_high": (("v_d", "cluster"), c_high)},
         coords={"v_d": v, "class": names, "cluster": np.arange(n_clusters),
                 "component": ["x", "v"]})
-    out = out.assign(**_convergence(params, v, states[:n_check], index[:, :n_check],
-                                    solver, options, progress))
-    out.attrs = {k: val for k, val in ds.attrs.items()
-                 if k not in ("batches_total", "batches_done", "batches_run")}
-    out.attrs |= {"key": _key_data(key), "box_x": list(box.x),
-                  "box_v": list(box.v), "n_samples": int(n_samples), "n_check": int(n_check),
-                  "method": "basin stability (Menck et al., Nature Physics 9, 89 (2013))",
-                  "interval": "95 % Wilson score interval"}
-    return out
 
 
-def _convergence(params, v, states, index, solver, options, progress) -> dict:
+def _convergence(params, v, states, index, engine, progress) -> dict:
     """The share of the check subset whose class changed at 2 t_end, and the
     periodic share among its stick-slip states (by time delays)."""
     nan = np.full(v.size, math.nan)
     if states.shape[0] == 0:
         return {"changed_fraction": ("v_d", nan), "periodic_fraction": ("v_d", nan),
                 "periodic_ci_low": ("v_d", nan), "periodic_ci_high": ("v_d", nan)}
-    longer = _doubled(options)
-    run = _check_run(params, v, states, solver, longer, progress)
+    longer = _doubled(engine)
+    run = _check_run(params, v, states, longer, progress)
     index2 = class_index(run["n_halc"], run["status"], params.n_osc)
     changed = (index2 != index).mean(-1)
     periodic, moving = np.zeros(v.size, int), np.zeros(v.size, int)
     for i in range(v.size):
         for j in range(states.shape[0]):
-            if run["status"][i, j] != Status.ok or run["n_halc"][i, j] == 0:
+            if run["status"][i, j] != Status.ok or run["n_halc"][i, j] == 0 \
+                    or "peak_times" not in run:
                 continue
             verdict = classify(run["peak_times"][i, j], run["on_halc"][i, j],
                                int(run["n_halc"][i, j]), 0, math.nan, math.nan,
-                               longer.transient, boundary=params.graph)
+                               longer.options.transient, boundary=params.graph)
             if not math.isfinite(verdict["delay_spread"]):  # too few peaks to judge
                 continue
             moving[i] += 1
