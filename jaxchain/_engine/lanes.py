@@ -246,35 +246,51 @@ def run_lanes(params: ChainParams, y0: Float[ArrayLike, "lanes 2 n_osc"],
     if schedule not in SCHEDULES:
         raise ValidationError(f"schedule must be one of {SCHEDULES}, got {schedule!r}")
     if schedule == "queue":
-        size = block or block_size(n_lanes, len(devices))
-        starts = range(0, n_lanes, size)
-        # The costliest lanes first (longest processing time first): the short ones
-        # at the end then fill the gaps, and no device is left with a long tail.
-        by_cost = np.argsort(-_costs(params, y0, costs), kind="stable")
+        return _run_queue(params, y0, engine, observers, devices, block, progress,
+                          _costs(params, y0, costs))
+    return _run_vmap(params, y0, engine, observers, devices, batch_size, progress,
+                     _costs(params, y0, costs))
 
-        # Trace once, here: the device threads then find the program traced and only
-        # compile it for their device (or load it from the cache), rather than
-        # tracing it side by side under the GIL. Where traced programs are kept (the
-        # command line), a warm start reads it back instead (`kept_program`).
-        first = np.minimum(np.arange(size), n_lanes - 1)
-        example = (take_lanes(params, first), y0[first], engine, observers)
-        program = kept_program(_run_block, *example)
-        if program is None:
-            _run_block.lower(*example)
-            program = _run_block
-        home = _shared_device(devices)
 
-        def task(i, device):
-            pick = by_cost[np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)]
-            inputs = jax.device_put((take_lanes(params, pick), y0[pick]), home(device))
-            out = program(*inputs, engine, observers)
-            return jax.tree_util.tree_map(lambda x: np.asarray(x)[:len(pick)], out)
+def _run_queue(params, y0, engine, observers, devices, block, progress, costs):
+    """The queue schedule of `run_lanes`: blocks of lanes, the costliest first, each
+    taken by the next free device."""
+    n_lanes = y0.shape[0]
+    size = block or block_size(n_lanes, len(devices))
+    starts = range(0, n_lanes, size)
+    # The costliest lanes first (longest processing time first): the short ones
+    # at the end then fill the gaps, and no device is left with a long tail.
+    by_cost = np.argsort(-costs, kind="stable")
 
-        blocks = on_devices(task, len(starts), "trajectories", progress, devices=devices,
-                            sizes=[min(size, n_lanes - s) for s in starts])
-        obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x)[:n_lanes], *blocks)
-        return jax.tree_util.tree_map(lambda x: x[np.argsort(by_cost)], obs)
-    by_cost = np.argsort(_costs(params, y0, costs), kind="stable")
+    # Trace once, here: the device threads then find the program traced and only
+    # compile it for their device (or load it from the cache), rather than
+    # tracing it side by side under the GIL. Where traced programs are kept (the
+    # command line), a warm start reads it back instead (`kept_program`).
+    first = np.minimum(np.arange(size), n_lanes - 1)
+    example = (take_lanes(params, first), y0[first], engine, observers)
+    program = kept_program(_run_block, *example)
+    if program is None:
+        _run_block.lower(*example)
+        program = _run_block
+    home = _shared_device(devices)
+
+    def task(i, device):
+        pick = by_cost[np.minimum(np.arange(starts[i], starts[i] + size), n_lanes - 1)]
+        inputs = jax.device_put((take_lanes(params, pick), y0[pick]), home(device))
+        out = program(*inputs, engine, observers)
+        return jax.tree_util.tree_map(lambda x: np.asarray(x)[:len(pick)], out)
+
+    blocks = on_devices(task, len(starts), "trajectories", progress, devices=devices,
+                        sizes=[min(size, n_lanes - s) for s in starts])
+    obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x)[:n_lanes], *blocks)
+    return jax.tree_util.tree_map(lambda x: x[np.argsort(by_cost)], obs)
+
+
+def _run_vmap(params, y0, engine, observers, devices, batch_size, progress, costs):
+    """The vmap schedule of `run_lanes`: batches of lanes in lockstep, ordered by
+    cost, each dealt to the devices."""
+    n_lanes = y0.shape[0]
+    by_cost = np.argsort(costs, kind="stable")
     mesh = Mesh(np.array(devices), ("lanes",))
     parts = []
     with _bar(progress, n_lanes, "trajectories") as bar:

@@ -83,8 +83,7 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
     - `solutions`: the numbers k of excited oscillators, in [1, n_osc]; all if None.
     - `observers`: what to observe (see `jaxchain._engine.observers`).
     - `ics`: "eq8" or "eq10".
-    - `solver`, `options`, `engine`, `schedule`, `progress`: as for `ensemble`;
-        observers other than `Extrema` need the smoothed engine.
+    - `solver`, `options`, `engine`, `schedule`, `progress`: as for `ensemble`.
     - `tolerances`, `classify_from`: when the observers include `Extrema` and
         `PeakTimes` of every oscillator and `LargestLyapunov`, each state is
         classified (`classify`) over the peaks after `classify_from`
@@ -92,10 +91,9 @@ def observe_solutions(params: ChainParams, solutions: Sequence[int] | None,
 
     **Returns:**
 
-    A Dataset with dim `solution` (coordinate: k) and the dims of each observer's
-    results; `status` per solution; with classification, `class`,
-    `class_delays`, `class_lyapunov`, `delay_spread`, `delay_period` and `ref`
-    (1-based). Attributes: the parameters, options, solver and ics.
+    A Dataset with dim `solution` (coordinate: k), the dims of each observer's
+    results and `status`; classified: `class`, `class_delays`, `class_lyapunov`,
+    `delay_spread`, `delay_period`, `ref` (1-based). Attributes: as `ensemble`.
 
     **Raises:**
 

@@ -333,6 +333,21 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
     > 0; `TypeError` for a grid that is not a list of real numbers, a `path` that
     is not a path or a `progress` that cannot be called.
     """
+    scenes, solvers, rtols, eps = _check(path, scenes, solvers, rtols, eps, max_steps,
+                                         scipy_budget_s, progress)
+    rows: list[dict] = []
+    with CsvStore(path, COLUMNS) as store:
+        for scene_name in scenes:
+            _scene(store, rows, SCENES[scene_name], solvers, rtols, eps, scipy=scipy,
+                   reference_points=reference_points, max_steps=max_steps,
+                   scipy_budget_s=scipy_budget_s, progress=progress)
+    return rows
+
+
+def _check(path, scenes, solvers, rtols, eps, max_steps, scipy_budget_s, progress
+           ) -> tuple:
+    """The arguments of `work_precision`, checked: (scenes, solvers, rtols, eps),
+    the grids sorted from the loosest."""
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path must be a path to a CSV file, got {type(path).__name__}")
     scenes, solvers = _names(scenes, "scenes"), _names(solvers, "solvers")
@@ -360,14 +375,7 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
                               f"{scipy_budget_s!r}")
     if not callable(progress):
         raise TypeError(f"progress must be callable, got {type(progress).__name__}")
-    rtols, eps = sorted(rtols, reverse=True), sorted(eps, reverse=True)
-    rows: list[dict] = []
-    with CsvStore(path, COLUMNS) as store:
-        for scene_name in scenes:
-            _scene(store, rows, SCENES[scene_name], solvers, rtols, eps, scipy=scipy,
-                   reference_points=reference_points, max_steps=max_steps,
-                   scipy_budget_s=scipy_budget_s, progress=progress)
-    return rows
+    return scenes, solvers, sorted(rtols, reverse=True), sorted(eps, reverse=True)
 
 
 def _names(names, what: str) -> list:

@@ -1,6 +1,16 @@
 """`sweep`: a grid of parameter values x initial conditions through the engine,
 batch by batch, each batch stored as it finishes; a killed sweep resumes where it
-stopped."""
+stopped.
+
+With a Dask client, each batch is one task on its cluster (`run_tasks`): the
+worker that takes it integrates its trajectories with the sweep's engine, on its
+own devices, writes them into their region of the store and flags the batch done.
+The cluster computes the same programs as this process (the same block of the
+queue schedule, chosen here), so on the same kind of device (and XLA_FLAGS) its
+result equals the in-process sweep to the last bit. A lost worker's batches are
+run again by Dask; a batch written twice is written identically. If the scheduler
+goes away, the flagged batches stay in the store, and `resume=True` (in process or
+on any cluster) runs the others."""
 
 from __future__ import annotations
 
@@ -61,50 +71,32 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     initial conditions, the engine with its solver and options, and the batch
     size), and is never resumed with other settings.
 
-    With a Dask `client`, each batch is one task on its cluster (`run_tasks`):
-    the worker that takes it integrates its trajectories with the usual engine, on
-    its own devices, writes them into their region of the store and flags the
-    batch done. The cluster computes the same programs as this process (the same
-    block of the queue engine, chosen here), so on the same kind of device (and
-    XLA_FLAGS) its result equals the in-process sweep to the last bit. A lost
-    worker's batches are run again by Dask; a batch written twice is written
-    identically. If the scheduler goes away, the flagged
-    batches stay in the store, and `resume=True` (in process or on any cluster)
-    runs the others.
+    With a Dask `client`, each batch is one task on its cluster (module docstring).
 
     **Arguments:**
 
     - `params`: the chain parameters; the field `where` is replaced by each value.
-    - `values`: the values of the swept parameter, shape (n_values,),
-        dimensionless.
+    - `values`: the values of the swept parameter, shape (n_values,), dimensionless.
     - `ics`: initial conditions, batched along the leading axis of their array
-        fields (for example `localized_family(N, "eq8")`, or `GivenState(y0)` with
-        y0 of shape (n, 2, N)), or a dict of such families by name, for example
-        `{"eq8": localized_family(N, "eq8"), "eq10": localized_family(N, "eq10")}`.
-        They are evaluated with each value, so that eq. (8) starts from that belt
-        speed's steady sliding.
+        fields (`localized_family(N, "eq8")`, `GivenState(y0)` with y0 of shape
+        (n, 2, N)), or a dict of such families by name. They are evaluated with
+        each value (eq. (8) starts from that belt speed's steady sliding).
     - `solver`, `options`, `engine`: as for `simulate` ("smoothed" by default, or
         "exact", or an engine value).
     - `where`: the swept parameter: a name (`"v_d"`, `"eta_c"`, `"xi"`, `"eps"`,
         ...) or a lens such as `lambda p: p.eta_c` (see `parameter_name`).
-    - `batch_size`: trajectories per batch (>= 1): the unit of storing and of
-        resuming.
-    - `store`: a folder for the zarr store (conventionally `*.zarr`), or None to
-        keep the results in memory only.
+    - `batch_size`: trajectories per batch (>= 1): the unit of storing and resuming.
+    - `store`: a folder for the zarr store (`*.zarr`), or None (in memory only).
     - `resume`: continue the sweep in `store`, skipping its finished batches, or
         an overwrite of `store` with these settings that was cut short.
     - `overwrite`: replace the sweep that `store` holds by a new one, built
-        beside it (`<store>.overwrite`) and swapped in once every batch is
-        stored: until then the old one stays whole and readable (a killed
-        overwrite is finished by `resume=True` with the same settings, or started
-        again by `overwrite=True`).
+        beside it (`<store>.overwrite`) and swapped in once complete: until then
+        the old one stays whole (a killed overwrite is finished by `resume=True`).
     - `schedule`: "queue" or "vmap" (see `run_lanes`); on a cluster, each worker's
         default by default (the queue on CPUs, vmap on GPUs).
-    - `client`: a `distributed.Client` to run the batches on its cluster (needs
-        a `store` on a file system that this process and every worker share);
-        None to run them in this process.
-    - `progress`: a tqdm bar over the trajectories (over the batches on a
-        cluster), with an ETA.
+    - `client`: a `distributed.Client` to run the batches on its cluster (with a
+        `store` that this process and every worker share); None: in this process.
+    - `progress`: a tqdm bar over the trajectories (batches on a cluster).
 
     **Returns:**
 
@@ -114,20 +106,18 @@ def sweep(params: ChainParams, values: Float[ArrayLike, " n_values"],
     (name, ic); n_halc_halves (name, ic, half); y_initial, y_final (name, ic,
     component, osc)) and `front` (`propagating_fronts`). Along `ic`, the
     coordinates `family` and `n_excited`. Attributes: every parameter and option,
-    the engine and its solver, the settings and their key, and `batches_total`, `batches_done`
-    and `batches_run` (by this call). With a store the variables are read from it
+    the engine, the settings and their key, `batches_total`, `batches_done` and
+    `batches_run` (by this call). With a store the variables are read from it
     lazily (dask arrays; `.load()` reads them all).
 
     **Raises:**
 
     `ValidationError` for a bad value (naming the parameter), an empty grid, initial
     conditions of the wrong shape, batch_size < 1, an existing store without
-    `resume` or `overwrite`, or a store made with other settings (naming the
-    settings that differ), a `store` holding something other than a jaxchain
-    sweep (naming its path; it is left untouched), or a `client` without a
-    `store`. `RuntimeError` when the scheduler of `client` goes away, or when
-    batches the cluster ran are not in the store (the workers do not share its
-    file system).
+    `resume` or `overwrite`, a store of other settings (naming those that
+    differ) or of something else than a sweep (left untouched), or a `client`
+    without a `store`. `RuntimeError` when the scheduler of `client` goes away,
+    or when batches the cluster ran are not in the store.
     """
     params = check_params(params)
     engine = as_engine(engine, solver, options, params)
