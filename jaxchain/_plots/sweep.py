@@ -7,8 +7,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .._bifurcation.hopf import hopf_speed
-from .._physics.record import chain_from_record, chain_settings
 from .._analysis.fronts import front_fractions, front_ranges
 from .._engine.status import Status
 from .canvas import panel_figure
@@ -21,14 +19,14 @@ FRONT_COLOURS = {1: "tab:red", -1: "tab:blue"}
 FRONT_NAMES = {1: "stick-slip invades", -1: "stick-slip recedes"}
 
 
-def plot_bifurcation_diagram(ds: xr.Dataset, fig=None):
+def plot_bifurcation_diagram(ds: xr.Dataset, fig=None, *, hopf_vd: float | None = None):
     """Draw a sweep in the manner of Fig. 3(b) of the paper.
 
     - Upper panel: the energy E of eq. (9) of every (value, initial condition) as a
         dot coloured by n_HALC. The fully stick-slipping chain (n_HALC = N) is
-        joined by a line. Steady sliding (E = 0) is drawn, for a sweep over v_d,
-        stable above the Hopf point of `hopf_vd_analytic` and unstable below; for
-        another parameter, where it was found. Propagating fronts (`propagating_fronts`)
+        joined by a line. Steady sliding (E = 0) is drawn, for a sweep over v_d
+        given `hopf_vd`, stable above that Hopf point and unstable below; otherwise
+        where it was found. Propagating fronts (`propagating_fronts`)
         are ringed, red where stick-slip invades the sliding oscillators and blue
         where it recedes; each value is shaded in proportion to the fraction of its
         initial conditions that made a front, and dashed lines bound the ranges of
@@ -45,27 +43,32 @@ def plot_bifurcation_diagram(ds: xr.Dataset, fig=None):
         `status` and `front`), dimensionless or in SI units (`to_physical`).
     - `fig`: a matplotlib Figure or SubFigure to draw the panels on; a new figure
         if None.
+    - `hopf_vd`: the Hopf point of steady sliding of the swept chain, dimensionless
+        (`hopf_speed(params)`; drawn in m/s on a sweep in SI units); None or NaN
+        where there is none.
 
     **Returns:**
 
     The matplotlib Figure.
     """
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import BoundaryNorm
-    from matplotlib.patches import Patch
-
     name = ds.attrs.get("swept", "v_d")
     ds = ds.sortby(name).transpose(name, "ic", ...)
     values = np.asarray(ds[name], dtype=float)
-    energy = np.asarray(ds["energy"], dtype=float)
-    n_halc = np.asarray(ds["n_halc"])
     ok = np.asarray(ds["status"]) == Status.ok
-    front = np.where(ok, np.asarray(ds["front"]), 0)
-    n_osc = int(ds.sizes["osc"])
-    fractions = front_fractions(ds)
     fig = panel_figure(fig, (7.5, 6))
     ax, low = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    _draw_fronts(ax, low, values, front_fractions(ds))
+    hopf = (float(hopf_vd) if name == "v_d" and hopf_vd is not None and np.isfinite(hopf_vd)
+            else None)
+    _draw_lines(ax, ds, values, ok, hopf)
+    _draw_states(fig, ax, low, ds, values, ok)
+    _label(ax, low, ds, name, ok)
+    return fig
 
+
+def _draw_fronts(ax, low, values, fractions) -> None:
+    """The shading of each value by its fraction of fronts of each kind, the dashed
+    bounds of their ranges (upper panel), and the fractions as bars (lower panel)."""
     cells = _cells(values)
     for sign, colour in FRONT_COLOURS.items():
         share = fractions.sel(direction=sign).values
@@ -78,13 +81,20 @@ def plot_bifurcation_diagram(ds: xr.Dataset, fig=None):
         low.bar(values, share, width=0.8 * np.diff(cells, axis=1)[:, 0], color=colour,
                 bottom=fractions.sel(direction=1).values if sign == -1 else 0)
 
+
+def _draw_lines(ax, ds, values, ok, hopf) -> None:
+    """The fully stick-slipping chain's line, and steady sliding: stable above the
+    Hopf point `hopf` (dimensionless, None where not drawn) and unstable below, or
+    where it was found."""
+    energy = np.asarray(ds["energy"], dtype=float)
+    n_halc = np.asarray(ds["n_halc"])
+    n_osc = int(ds.sizes["osc"])
     full = ok & (n_halc == n_osc)
     has_full = full.any(1)
     if has_full.any():
         ax.plot(values[has_full], [energy[i][full[i]].mean() for i in np.flatnonzero(has_full)],
                 "-", color="k", lw=1, zorder=1,
                 label=f"fully stick-slipping chain ({n_osc} on the HALC)")
-    hopf = _hopf_vd(ds) if name == "v_d" else None
     si = ds.attrs.get("units") == "SI"  # converted by to_physical
     if hopf is not None and si:
         hopf *= float(ds.attrs["scale_velocity"])
@@ -101,6 +111,17 @@ def plot_bifurcation_diagram(ds: xr.Dataset, fig=None):
             ax.plot(values[has_sliding], np.zeros(has_sliding.sum()), "-", color="0.4",
                     lw=3, alpha=0.5, zorder=1, label="steady sliding")
 
+
+def _draw_states(fig, ax, low, ds, values, ok) -> None:
+    """Every run that did not fail as a dot coloured by n_HALC, ringed where it made
+    a front, and the colour bar."""
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import BoundaryNorm
+
+    energy = np.asarray(ds["energy"], dtype=float)
+    n_halc = np.asarray(ds["n_halc"])
+    front = np.where(ok, np.asarray(ds["front"]), 0)
+    n_osc = int(ds.sizes["osc"])
     x = np.broadcast_to(values[:, None], energy.shape)
     norm = BoundaryNorm(np.arange(-0.5, n_osc + 1.5), plt.get_cmap("viridis").N)
     ring = np.array([FRONT_COLOURS.get(int(f), "none") for f in front[ok]], dtype=object)
@@ -110,11 +131,19 @@ def plot_bifurcation_diagram(ds: xr.Dataset, fig=None):
     bar.set_label(r"oscillators on the HALC, $n_\mathrm{HALC}$")
     bar.set_ticks(np.unique(np.linspace(0, n_osc, min(n_osc, 10) + 1).round().astype(int)))
 
+
+def _label(ax, low, ds, name, ok) -> None:
+    """The axes' labels and limits, the title (with the count of failed runs) and
+    the legend."""
+    from matplotlib.patches import Patch
+
+    energy = np.asarray(ds["energy"], dtype=float)
     label = {"v_d": "belt speed $v_d$"}.get(name, name)
     ax.set_ylabel(r"$\tilde E = \frac{1}{2}\sum_n A_n^2$, eq. (9)")
     failed = int((~ok).sum())
     note = f"; {failed} failed run(s) not shown" if failed else ""
-    ax.set_title(f"Bifurcation diagram, N = {n_osc} (cf. Fig. 3(b)){note}", fontsize=10)
+    ax.set_title(f"Bifurcation diagram, N = {int(ds.sizes['osc'])} (cf. Fig. 3(b)){note}",
+                 fontsize=10)
     handles, _ = ax.get_legend_handles_labels()
     handles += [Patch(color=c, alpha=0.5, label=f"front: {FRONT_NAMES[s]}")
                 for s, c in FRONT_COLOURS.items()]
@@ -127,7 +156,6 @@ def plot_bifurcation_diagram(ds: xr.Dataset, fig=None):
     for a in (ax, low):
         for side in ("top", "right"):
             a.spines[side].set_visible(False)
-    return fig
 
 
 def _cells(values) -> np.ndarray:
@@ -146,17 +174,3 @@ def _edges(values, lo, hi, cells) -> list[float]:
     values; none beyond the ends of the grid."""
     i, j = np.searchsorted(values, lo), np.searchsorted(values, hi)
     return ([cells[i, 0]] if i > 0 else []) + ([cells[j, 1]] if j + 1 < len(values) else [])
-
-
-def _hopf_vd(ds: xr.Dataset) -> float | None:
-    """The Hopf point of steady sliding for the chain of `ds` (its attributes,
-    `chain_record`): the closed form of eq. (1) where it holds, else Newton's
-    method on the Jacobian's eigenvalues (`hopf_speed`); None where there is none
-    (xi = 0, mu_st = mu_d, or Newton's method fails)."""
-    record = {k: v for k, v in ds.attrs.items() if k in chain_settings(ds.attrs)}
-    try:
-        params = chain_from_record(record)
-    except (KeyError, ValueError, TypeError):
-        return None
-    value = hopf_speed(params)
-    return value if np.isfinite(value) else None
