@@ -539,8 +539,35 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
 
     `ValidationError` for bad sites or options.
     """
+    params, sites = _check_branches(params, sites)
+    run = _run_branches(params, sites, shooting, continuation_options, start_options, solver,
+                        simulation_check, out, progress)
+    return _branches_summary(*run)
+
+
+def _check_branches(params: ChainParams | None, sites) -> tuple[ChainParams, tuple]:
+    """The chain (the paper's ring where None) and the starts (`check_starts`)."""
     params = chain_or_default(params)
-    sites = check_starts(params.graph, sites)
+    return params, check_starts(params.graph, sites)
+
+
+def _run_branches(params: ChainParams, sites: tuple, shooting, continuation_options,
+                  start_options, solver, simulation_check, out, progress) -> tuple:
+    """The branches (`_find_branches`), then the checks of their stable ranges
+    (`_stable_range_checks`): (datasets, starts, failed starts, checks)."""
+    datasets, starts, failed = _find_branches(params, sites, shooting, continuation_options,
+                                              start_options, solver, out, progress)
+    checks = _stable_range_checks(params, datasets, shooting, solver, simulation_check,
+                                  progress)
+    return datasets, starts, failed, checks
+
+
+def _find_branches(params: ChainParams, sites: tuple, shooting, continuation_options,
+                   start_options, solver, out, progress) -> tuple[dict, dict, dict]:
+    """The branch of each start: read back from `out` where stored with the same
+    settings, else started by simulation and shooting (`start_orbits`), continued
+    (`_follow_branch`) and stored. Returns (label -> branch dataset, start -> the
+    simulation's n_HALC and energy, start -> why it has no periodic orbit)."""
     datasets, starts, failed = {}, {}, {}
     settings = {"chain": chain_record(params), "shooting": shooting,
                 "continuation": continuation_options, "start": start_options,
@@ -578,12 +605,39 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
                 Path(out).mkdir(parents=True, exist_ok=True)
                 write_dataset(ds, paths[k], "snake branch", k=k, **settings)
             datasets[_start_label(k)] = ds
-    links = _connections(datasets)
-    branches = []
+    return datasets, starts, failed
+
+
+def _stable_range_checks(params: ChainParams, datasets: dict, shooting, solver,
+                         simulation_check: bool, progress: bool) -> dict:
+    """For each branch (by label): its stable ranges (`stable_ranges`), the accuracy
+    of its multipliers at their ends and at its start (`_multiplier_accuracy`), and
+    with `simulation_check` direct simulation at each end (`_check_by_simulation`)."""
+    out = {}
     bar = tqdm(total=len(datasets), desc="simulation check", disable=not (progress and
                                                                            simulation_check))
     for label, ds in datasets.items():
         ranges = stable_ranges(ds)
+        ends = [i for r in ranges for pair in r["points"] for i in pair if i is not None]
+        start = int(np.argmin(np.abs(ds["v_d"].values - ds.attrs["start_vd"])))
+        out[label] = {"ranges": ranges, "multiplier_accuracy": _multiplier_accuracy(
+            params, ds, ends + [start], shooting)}
+        if simulation_check:
+            out[label]["simulation_check"] = [
+                c for r in ranges for c in _check_by_simulation(params, ds, r, shooting=shooting,
+                                                                solver=solver)]
+        bar.update()
+    bar.close()
+    return out
+
+
+def _branches_summary(datasets: dict, starts: dict, failed: dict, checks: dict) -> dict:
+    """The result of `localized_branches`: its JSON-ready summary, one entry per
+    branch with what `_stable_range_checks` found, and the datasets."""
+    links = _connections(datasets)
+    branches = []
+    for label, ds in datasets.items():
+        ranges = checks[label]["ranges"]
         entry = {"label": label, "excited": int(ds.attrs["excited"]),
                  "start_sites": [int(i) for i in np.atleast_1d(ds.attrs.get(
                      "start_sites", []))],
@@ -600,17 +654,8 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
                            "n_halc": ds.attrs["start_n_halc"]},
                  "largest_trivial_multiplier_error": float(
                      ds["trivial_multiplier_error"].max())}
-        ends = [i for r in ranges for pair in r["points"] for i in pair if i is not None]
-        start = int(np.argmin(np.abs(ds["v_d"].values - ds.attrs["start_vd"])))
-        entry["multiplier_accuracy"] = _multiplier_accuracy(params, ds, ends + [start],
-                                                            shooting)
-        if simulation_check:
-            entry["simulation_check"] = [c for r in ranges for c in
-                                         _check_by_simulation(params, ds, r, shooting=shooting,
-                                                              solver=solver)]
+        entry |= {k: v for k, v in checks[label].items() if k != "ranges"}
         branches.append(entry)
-        bar.update()
-    bar.close()
     summary = {"branches": branches,
                "not_periodic": [{"excited": k, "reason": r, "simulation": starts[k]}
                                 for k, r in failed.items()]}
