@@ -85,18 +85,21 @@ def test_notebook_runs_small_and_shows_its_figures(name, tmp_path, monkeypatch):
             f"no figure shown by the cell:\n{cell.source}"
 
 
-#: A notebook cell that imports every module of jaxchain and shows a bar, recording
-#: the warnings: tqdm.auto's notebook bar warns (TqdmWarning, with the path of its
+#: A notebook cell that imports every module of jaxchain and shows a bar (the one
+#: every bar of jaxchain is, reached through tests/helpers.py), recording the
+#: warnings: tqdm.auto's notebook bar warns (TqdmWarning, with the path of its
 #: file) in a kernel without ipywidgets, once, when a module imports it.
-BAR_CELL = """\
-import importlib, pkgutil, warnings
+BAR_CELL = f"""\
+import importlib, pkgutil, sys, warnings
 from tqdm import TqdmWarning
 with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")
     import jaxchain
     for module in pkgutil.walk_packages(jaxchain.__path__, "jaxchain."):
         importlib.import_module(module.name)
-    from jaxchain._engine.progress import progress_bar
+    sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
+    from helpers import internal
+    progress_bar = internal("progress bar")
     with progress_bar(3, "a bar in a notebook", True) as bar:
         bar.update(3)
         bar.refresh()
