@@ -1,7 +1,11 @@
 """The exit status of every `jaxchain` command: 2 only for a usage error (a bad
 option, or an argument the library's own checks refuse: `ValidationError`), 1 with
 one line for a run that fails, whatever it raises. Nothing heavy runs here: each
-command's first heavy step is replaced by one that raises."""
+command's first heavy step is replaced by one that raises.
+
+These are the command line's internals, imported from its private modules
+(`jaxchain._cli`): its parser and commands, the exit status of an error, and the
+first heavy step of each command, which a test replaces."""
 
 import contextlib
 import json
