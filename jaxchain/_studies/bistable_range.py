@@ -175,12 +175,37 @@ def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
 
     `ValidationError` for target <= 0; `RuntimeError` if a computation fails.
     """
+    params = _check_bistable(params, target)
+    run = _run_bistable(params, target, xi_values, ratio_values, ring, progress)
+    return _boundaries(params, target, run)
+
+
+def _check_bistable(params: ChainParams | None, target) -> ChainParams:
+    """The chain (the paper's ring where None), with `target` checked to be > 0."""
     params = chain_or_default(params)
     if not target > 0:
         raise ValidationError(f"target must be > 0, got {target!r}")
+    return params
+
+
+def _run_bistable(params: ChainParams, target: float, xi_values, ratio_values, ring: bool,
+                  progress: bool) -> dict:
+    """The computations of `bistable_range` by name: the single oscillator's edges
+    (`_run_single`), their curves and the design (`_run_curves`), and with `ring` the
+    chain's (`_run_ring`)."""
+    run = _run_single(params, progress)
+    run |= _run_curves(run, target, xi_values, ratio_values, progress)
+    run["ring"], run["ring_branches"] = (_run_ring(params, run, progress) if ring
+                                         else (None, {}))
+    return run
+
+
+def _run_single(params: ChainParams, progress: bool) -> dict:
+    """The single oscillator's Hopf point, its first Lyapunov coefficient, the
+    limit-cycle branch from it, the branch's fold and the non-smooth existence
+    limit."""
     options = ShootingOptions()
     single = single_oscillator(params)
-    exponential = isinstance(single.friction, ExponentialDecay)
     hopf = hopf_point(single)
     l1 = float(first_lyapunov_coefficient(with_parameter(single, "v_d", hopf.v_d[0])))
     start = hopf_cycle(single, options=options)
@@ -188,33 +213,78 @@ def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
     branch = continuation(problem, options=ContinuationOptions(
         ds=0.01, ds_max=0.1, p_min=0.5, p_max=2.5, max_points=90), progress=progress)
     fold = fold_point(problem, branch)
-    limit = stick_slip_existence_limit(single)
+    return {"options": options, "single": single, "hopf": hopf, "l1": l1, "problem": problem,
+            "branch": branch, "fold": fold, "limit": stick_slip_existence_limit(single),
+            "exponential": isinstance(single.friction, ExponentialDecay)}
+
+
+def _run_curves(run: dict, target: float, xi_values, ratio_values, progress: bool) -> dict:
+    """The fold and Hopf curves against xi and (for eq. (1)) mu_st, the smallest
+    damping of window `target` and its check by simulation, and the closed-form
+    Hopf point and its eps correction where they hold."""
+    single, fold = run["single"], run["fold"]
     solution = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
-    fold_problem = problem.with_params(fold.record.params)
-    curves_xi = boundary_curves(fold_problem, solution, "xi", xi_values, progress=progress)
-    curves_ratio = None
-    if exponential:
+    fold_problem = run["problem"].with_params(fold.record.params)
+    out = {"curves_xi": boundary_curves(fold_problem, solution, "xi", xi_values,
+                                        progress=progress), "curves_ratio": None}
+    if run["exponential"]:
         mu_d = float(single.friction.mu_d)
         mu_values = mu_d * np.asarray(ratio_values)
-        curves_ratio = boundary_curves(fold_problem, solution, "mu_st", mu_values,
-                                       progress=progress)
-        at_r = int(np.argmin(np.abs(mu_values - float(single.friction.mu_st))))
-    design = smallest_damping(fold_problem, solution, target)
-    at = int(np.argmin(np.abs(np.asarray(curves_xi.values) - float(single.xi))))
+        out["curves_ratio"] = boundary_curves(fold_problem, solution, "mu_st", mu_values,
+                                              progress=progress)
+        out |= {"mu_d": mu_d,
+                "at_r": int(np.argmin(np.abs(mu_values - float(single.friction.mu_st))))}
+    out["design"] = smallest_damping(fold_problem, solution, target)
+    out["at"] = int(np.argmin(np.abs(np.asarray(out["curves_xi"].values) - float(single.xi))))
+    exponential = run["exponential"]
+    out |= {"hopf_vd_analytic": float(hopf_vd_analytic(single)) if exponential else None,
+            "hopf_eps_correction": float(hopf_eps_correction(single)) if exponential else None,
+            "xi_curve": _curve_summary(single, "xi", out["curves_xi"]),
+            "design_check": _design_check(single, out["design"], target)}
+    if exponential:
+        out["ratio_curve"] = _curve_summary(single, "mu_st", out["curves_ratio"])
+    return out
+
+
+def _run_ring(params: ChainParams, run: dict, progress: bool) -> tuple[dict, dict]:
+    """The chain's Hopf point over its modes and, on the homogeneous ring of even N,
+    the fully stick-slipping in-phase and anti-phase states (`_ring_state`)."""
+    ring_hopf = hopf_point(params)
+    summary = {
+        "n_osc": params.n_osc, "boundary": params.boundary,
+        "hopf_vd": float(np.max(ring_hopf.v_d)),
+        "hopf_vd_spread_over_modes": float(np.ptp(np.asarray(ring_hopf.v_d))),
+        "hopf_omega_range": [float(np.min(ring_hopf.omega)), float(np.max(ring_hopf.omega))],
+    }
+    branches = {}
+    if params.n_osc % 2 == 0 and is_homogeneous_ring(params):
+        cycle = _stick_slip_cycle(run["single"], run["branch"], float(run["hopf"].v_d[0]),
+                                  float(run["fold"].p), run["options"])
+        for kind in ("in-phase", "anti-phase"):
+            summary[kind], branches[kind] = _ring_state(params, cycle, kind, run["options"],
+                                                        progress)
+    return summary, branches
+
+
+def _boundaries(params: ChainParams, target: float, run: dict) -> Boundaries:
+    """The `Boundaries` of `bistable_range` and its JSON-ready summary, from the
+    results of `_run_bistable`."""
+    hopf, fold, branch, l1 = run["hopf"], run["fold"], run["branch"], run["l1"]
+    curves_xi, design, at = run["curves_xi"], run["design"], run["at"]
     p_ok = np.asarray(branch.converged)
     summary = {
         "hopf_vd": float(hopf.v_d[0]),
         "fold_vd": float(fold.p),
         "eps": float(params.eps),
         "subcritical": l1 > 0 and float(branch.p[p_ok][1]) > float(hopf.v_d[0]),
-        "hopf_vd_analytic": float(hopf_vd_analytic(single)) if exponential else None,
-        "hopf_eps_correction": float(hopf_eps_correction(single)) if exponential else None,
+        "hopf_vd_analytic": run["hopf_vd_analytic"],
+        "hopf_eps_correction": run["hopf_eps_correction"],
         "hopf_newton_steps": int(hopf.newton_steps[0]),
         "hopf_omega": float(hopf.omega[0]),
         "hopf_growth_slope": float(hopf.slope[0]),
         "lyapunov_coefficient": l1,
-        "existence_limit_nonsmooth": limit,
-        "fold_minus_existence_limit": float(fold.p) - limit,
+        "existence_limit_nonsmooth": run["limit"],
+        "fold_minus_existence_limit": float(fold.p) - run["limit"],
         "fold_multipliers": _multipliers(fold.record),
         "fold_amplitude": float(fold.record.amplitudes[0]),
         "fold_period": float(fold.record.period),
@@ -222,39 +292,26 @@ def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
         "branch_stop": branch.stop.name,
         "d_hopf_vd_d_xi": float(curves_xi.d_hopf[at]),
         "d_fold_vd_d_xi": float(curves_xi.d_fold[at]),
-        "xi_curve": {"xi": np.asarray(curves_xi.values).tolist(),
-                     **_curve_summary(single, "xi", curves_xi)},
+        "xi_curve": {"xi": np.asarray(curves_xi.values).tolist(), **run["xi_curve"]},
         "design": {"target_window": target, "xi": design.xi, "window": design.window,
                    "hopf_vd": design.hopf_vd, "fold_vd": design.fold_vd,
                    "d_window_d_xi": design.d_window, "optax_iterations": len(design.history),
                    "converged": design.converged,
-                   "simulation_check": _design_check(single, design, target)},
+                   "simulation_check": run["design_check"]},
     }
-    if exponential:
+    if run["exponential"]:
+        mu_d, at_r, curves_ratio = run["mu_d"], run["at_r"], run["curves_ratio"]
         summary |= {
             "d_hopf_vd_d_ratio": float(mu_d * curves_ratio.d_hopf[at_r]),
             "d_fold_vd_d_ratio": float(mu_d * curves_ratio.d_fold[at_r]),
             "ratio_curve": {"mu_st/mu_d": (np.asarray(curves_ratio.values) / mu_d).tolist(),
-                            **_curve_summary(single, "mu_st", curves_ratio)}}
+                            **run["ratio_curve"]}}
     summary["chain"] = chain_record(params)
-    ring_branches = {}
-    if ring:
-        ring_hopf = hopf_point(params)
-        summary["ring"] = {
-            "n_osc": params.n_osc, "boundary": params.boundary,
-            "hopf_vd": float(np.max(ring_hopf.v_d)),
-            "hopf_vd_spread_over_modes": float(np.ptp(np.asarray(ring_hopf.v_d))),
-            "hopf_omega_range": [float(np.min(ring_hopf.omega)), float(np.max(ring_hopf.omega))],
-        }
-        if params.n_osc % 2 == 0 and is_homogeneous_ring(params):
-            cycle = _stick_slip_cycle(single, branch, float(hopf.v_d[0]), float(fold.p),
-                                      options)
-            for kind in ("in-phase", "anti-phase"):
-                summary["ring"][kind], ring_branches[kind] = _ring_state(
-                    params, cycle, kind, options, progress)
+    if run["ring"] is not None:
+        summary["ring"] = run["ring"]
     return Boundaries(summary=summary, branch=branch, fold=fold, hopf=hopf,
-                      curves_xi=curves_xi, curves_ratio=curves_ratio, design=design,
-                      ring_branches=ring_branches)
+                      curves_xi=curves_xi, curves_ratio=run["curves_ratio"], design=design,
+                      ring_branches=run["ring_branches"])
 
 
 #: The horizon of the simulation dots of Fig. 3(a).
