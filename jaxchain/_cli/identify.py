@@ -98,11 +98,30 @@ def _assignments(text: str) -> dict:
 
 
 def run(args) -> None:
-    from .._plots.identification import plot_friction_band, plot_record_fits
-    from .._studies.identification.choice import compare_laws
-    from .._studies.identification.fit import identify
-    from .._studies.identification.records import read_record
+    options, files, held_files = _check_identify(args)
+    params, records, held_out = _read_records(args, files, held_files)
+    outputs = Outputs(args, data=["identified_chain.toml"] +
+                      [f"fit_{f.stem}.csv" for f in files],
+                      figures=["identification_fits", "identified_friction"])
+    start = time.perf_counter()
+    result, comparison = _fit(args, records, held_out, params, options)
+    wall = time.perf_counter() - start
+    for row in comparison:
+        if not row["best"]:
+            for text in row["fit"].warnings:
+                note(f"{row['law']}: warning: {text}")
+    _write(outputs, result, files, records)
+    _print(args, result, comparison, files, held_files, wall, outputs)
+    if not result.converged:
+        raise RunsFailed("the fit did not converge; its last iterate is written")
 
+
+def _check_identify(args) -> tuple[IdentifyOptions, list, list]:
+    """The fit's options, and the records fitted and held out (for --laws: --held-out,
+    by default the last FILE).
+
+    **Raises:** `UsageError` when every record is held out, or for --held-out
+    without --laws."""
     options = IdentifyOptions(window=args.window, solver=args.solver, rtol=args.rtol,
                               atol=args.atol, controller=args.controller,
                               max_steps=args.max_steps)
@@ -116,6 +135,17 @@ def run(args) -> None:
                              "--held-out names")
     elif args.held_out:
         raise UsageError("--held-out is for --laws")
+    return options, files, held_files
+
+
+def _read_records(args, files, held_files) -> tuple:
+    """(the chain, the fitted records, the held-out records): the chain of the
+    options, as long as the highest measured oscillator unless --n-osc or --chain
+    says otherwise.
+
+    **Raises:** `UsageError` for a --fit name that is not a parameter of the chain."""
+    from .._studies.identification.records import read_record
+
     params = chain_params(args, args.n_osc or 1)
     scales = params.scales
 
@@ -130,10 +160,15 @@ def run(args) -> None:
         if name not in parameter_names(params) and not args.laws:
             raise UsageError(f"--fit: unknown parameter {name!r} for this chain: choose "
                              f"from {', '.join(parameter_names(params))}")
-    outputs = Outputs(args, data=["identified_chain.toml"] +
-                      [f"fit_{f.stem}.csv" for f in files],
-                      figures=["identification_fits", "identified_friction"])
-    start = time.perf_counter()
+    return params, records, held_out
+
+
+def _fit(args, records, held_out, params, options) -> tuple:
+    """(the fit, the comparison of the laws of --laws: one row each, empty without):
+    with --laws the fit of the law of lowest held-out residual."""
+    from .._studies.identification.choice import compare_laws
+    from .._studies.identification.fit import identify
+
     comparison = []
     with warnings.catch_warnings():  # each fit keeps its warnings: printed below
         warnings.simplefilter("ignore")
@@ -146,12 +181,12 @@ def run(args) -> None:
         else:
             result = identify(records, params, args.fit, start=args.start,
                               offsets=args.offsets, options=options)
-    wall = time.perf_counter() - start
-    for row in comparison:
-        if not row["best"]:
-            for text in row["fit"].warnings:
-                note(f"{row['law']}: warning: {text}")
+    return result, comparison
 
+
+def _write(outputs, result, files, records) -> None:
+    """The fitted chain file, each record's fit as CSV, and the two figures."""
+    from .._plots.identification import plot_friction_band, plot_record_fits
     from .._sweeps.chain_files import write_chain_file
 
     write_chain_file(result.chain, outputs.path("identified_chain.toml"))
@@ -160,6 +195,10 @@ def run(args) -> None:
     outputs.figure(plot_record_fits(result, records), "identification_fits")
     outputs.figure(plot_friction_band(result), "identified_friction")
 
+
+def _print(args, result, comparison, files, held_files, wall, outputs) -> None:
+    """The fit (and the laws' table) as one JSON document with --json, otherwise as
+    lines, with a note of the wall time and the files written."""
     rows = [{"law": r["law"], "sigma": r["sigma"], "aic": r["aic"], "bic": r["bic"],
              "held_out_rms": r["held_out_rms"], "best": r["best"],
              "parameters": r["fit"].to_dict()["parameters"],
@@ -179,8 +218,6 @@ def run(args) -> None:
             print()
         print(result.summary())
         note(f"wall time {wall:.1f} s; {outputs.summary()}")
-    if not result.converged:
-        raise RunsFailed("the fit did not converge; its last iterate is written")
 
 
 def _fit_csv(rec, fitted) -> str:
