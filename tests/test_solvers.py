@@ -1,7 +1,11 @@
 """The solver and step-size controller of jaxchain: ROS34PW2 with a diagonal W (its
 order, and its limit as eps -> 0), and the PI controller (`PIController`: its rules
 against the formulas of its docstring, its solutions against scipy and against
-diffrax's controller)."""
+diffrax's controller).
+
+These are internal units, imported from jaxchain's private modules: the solver's
+class, the terms of eq. (5) it integrates (`terms`) and the controllers
+(`CONTROLLERS`, `PIController`)."""
 
 import dataclasses
 
