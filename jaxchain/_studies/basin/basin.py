@@ -163,8 +163,9 @@ def _check(params, v_d, n_samples, box, key, solver, options, engine, n_check) -
     """The arguments of `basin_stability`, checked: (params, engine, v_d, n_check,
     key)."""
     params = check_params(params)
-    engine = as_engine(engine, solver, BASIN_OPTIONS if options is None else options,
-                       params)
+    if options is None and not isinstance(engine, AbstractEngine):
+        options = BASIN_OPTIONS  # an engine value holds its own horizon
+    engine = as_engine(engine, solver, options, params)
     v = belt_speeds(v_d)
     check_recordable(params)
     check_count("n_samples", n_samples)
