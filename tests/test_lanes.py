@@ -5,7 +5,7 @@ callback, custom call or scatter, and needs no more memory for a longer t_end.
 
 Besides the public names, this file tests internal units of the lanes' schedule,
 and imports them from `jaxchain._engine.lanes`: how lanes are dealt to devices
-(`lane_order`, `block_size`, `on_devices`), their expected cost, and the compiled
+(`_lane_order`, `block_size`, `on_devices`), their expected cost, and the compiled
 block (`_run_block`)."""
 
 import os
@@ -23,7 +23,7 @@ import jaxchain as jc
 from helpers import SHORT, TIGHT, assert_within_drift
 from lanes_on_every_device import FIELDS
 from jaxchain import DEFAULT_SOLVER, SOLVERS, lane_params, run_lanes
-from jaxchain._engine.lanes import _run_block, block_size, expected_cost, lane_order, on_devices
+from jaxchain._engine.lanes import _run_block, block_size, expected_cost, _lane_order, on_devices
 
 HERE = Path(__file__).parent
 
@@ -49,7 +49,7 @@ def test_one_cpu_device_per_core(every_device):
 @settings(deadline=None)  # no clock: two workers share two cores
 @given(st.integers(1, 50), st.integers(1, 8))
 def test_lane_order_deals_lanes_like_cards(n_lanes, n_devices):
-    order = lane_order(n_lanes, n_devices)
+    order = _lane_order(n_lanes, n_devices)
     assert len(order) % n_devices == 0 and len(order) - n_lanes < n_devices
     assert sorted(order) == list(range(len(order)))  # a permutation
     per_device = order.reshape(n_devices, -1)  # shard_map cuts it in equal blocks

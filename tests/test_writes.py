@@ -38,7 +38,7 @@ from helpers import (JAXCHAIN, SWEEP_BATCH, SWEEP_N_OSC, SWEEP_T_END, SWEEP_TRAN
                      held, hold_env, kill, release, replace_internal, small_sweep,
                      sweep_cli)
 from jaxchain._engine import programs as _programs
-from jaxchain._engine.programs import keep_programs, kept_program, program_key
+from jaxchain._engine.programs import keep_programs, kept_program, _program_key
 from jaxchain._sweeps.atomic import save_figure, write_text
 from jaxchain._sweeps.result_store import (CsvStore, canonical, read_dataset, settings_key,
                                           write_dataset)
@@ -424,7 +424,7 @@ def folder(tmp_path):
 def _key(x, options):
     dynamic, static = eqx.partition((x, options), eqx.is_array)
     leaves, treedef = jax.tree_util.tree_flatten(dynamic)
-    return program_key(_scaled_sum, static, treedef, leaves)
+    return _program_key(_scaled_sum, static, treedef, leaves)
 
 
 def test_key_changes_with_static_values_shapes_and_code(monkeypatch):

@@ -444,7 +444,7 @@ def record_outputs(ran: bool) -> None:
 def print_json(payload: dict, outputs: Outputs) -> None:
     """Print the command's one JSON document on stdout: `payload` with the written
     files under "outputs" (non-finite numbers as null)."""
-    print(json.dumps(json_ready(payload | {"outputs": outputs.as_json()}), allow_nan=False))
+    print(json.dumps(_json_ready(payload | {"outputs": outputs.as_json()}), allow_nan=False))
 
 
 def report(summary: dict, outputs: Outputs, name: str, as_json: bool,
@@ -453,7 +453,7 @@ def report(summary: dict, outputs: Outputs, name: str, as_json: bool,
     beside its other outputs, then shown: the one JSON document on stdout with
     `--json` (`print_json`), otherwise `table`'s lines and a note of the wall time
     and the files written."""
-    outputs.text(json.dumps(json_ready(summary), allow_nan=False), name)
+    outputs.text(json.dumps(_json_ready(summary), allow_nan=False), name)
     if as_json:
         print_json(summary, outputs)
     else:
@@ -572,14 +572,14 @@ def finish_prefetch() -> None:
         _PREFETCHING.pop().join()
 
 
-def json_ready(obj):
+def _json_ready(obj):
     """Replace non-finite floats (failed runs) by None, so that the output is JSON."""
     if isinstance(obj, dict):
-        return {k: json_ready(v) for k, v in obj.items()}
+        return {k: _json_ready(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
-        return [json_ready(v) for v in obj]
+        return [_json_ready(v) for v in obj]
     if isinstance(obj, (np.ndarray, np.generic)):
-        return json_ready(obj.tolist())
+        return _json_ready(obj.tolist())
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj

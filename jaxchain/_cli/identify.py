@@ -13,9 +13,9 @@ from .._physics.record import chain_record
 from .._studies.identification.fit import IdentifyOptions
 from .._studies.identification.unknowns import CHAIN_FITTABLE
 from .chain import CHAIN_HELP, add_chain_options, chain_params
-from .common import (RunsFailed, UsageError, add_output_options, add_solver_options,
-                     comma_list, note, Outputs,
-                     one_belt_speed, positive_float, positive_int, print_json)
+from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_solver_options,
+                     comma_list, note, one_belt_speed, positive_float, positive_int,
+                     print_json, smoothed_only)
 
 HELP = "fit friction and damping to measured stick-slip records"
 DESCRIPTION = f"""\
@@ -98,6 +98,8 @@ def _assignments(text: str) -> dict:
 
 
 def run(args) -> None:
+    smoothed_only(args, "the fit differentiates the flow of the smoothed model (the "
+                        "exact engine has no derivatives yet)")
     options, files, held_files = _check_identify(args)
     params, records, held_out = _read_records(args, files, held_files)
     outputs = Outputs(args, data=["identified_chain.toml"] +

@@ -130,7 +130,7 @@ def take_lanes(tree, index):
     return jax.tree_util.tree_map(lambda x: x[index] if eqx.is_array(x) else x, tree)
 
 
-def lane_order(n_lanes: int, n_devices: int) -> np.ndarray:
+def _lane_order(n_lanes: int, n_devices: int) -> np.ndarray:
     """Permutation that deals lanes to devices like cards: lane i goes to device
     i % n_devices. Neighbouring lanes of a grid (k and k + 1 excited oscillators,
     close belt speeds) cost about the same, so dealing balances the devices better
@@ -296,7 +296,7 @@ def _run_vmap(params, y0, engine, observers, devices, batch_size, progress, cost
     with _bar(progress, n_lanes, "trajectories") as bar:
         for s in range(0, n_lanes, batch_size):
             batch = by_cost[s:s + batch_size]
-            order = lane_order(len(batch), len(devices))
+            order = _lane_order(len(batch), len(devices))
             pick = batch[np.minimum(order, len(batch) - 1)]  # padding repeats a lane
             out = _run_vmapped(take_lanes(params, pick), y0[pick], engine, mesh, observers)
             back = np.argsort(order)[:len(batch)]

@@ -54,7 +54,7 @@ def program_folder() -> Path | None:
     return _folder[0]
 
 
-def program_key(fn: Callable, static, treedef, leaves) -> str:
+def _program_key(fn: Callable, static, treedef, leaves) -> str:
     """The key of the program of `fn` for arguments with this static part (every
     value that is not an array), this tree of arrays and these shapes and dtypes,
     on this backend, with this code (`code_identity`) and these XLA flags."""
@@ -81,7 +81,7 @@ def kept_program(fn: Callable, *example) -> Callable | None:
     The first call for a key traces `fn` and writes `<key>.jaxexport` (the
     serialised program) and `<key>.tree` (a pickled template of its output) in
     `program_folder()`; later processes read them back. A program is never reused
-    across other settings, code or package versions (`program_key`).
+    across other settings, code or package versions (`_program_key`).
 
     **Returns:**
 
@@ -95,7 +95,7 @@ def kept_program(fn: Callable, *example) -> Callable | None:
     dynamic, static = eqx.partition(example, eqx.is_array)
     leaves, treedef = jax.tree_util.tree_flatten(dynamic)
     try:
-        key = program_key(fn, static, treedef, leaves)
+        key = _program_key(fn, static, treedef, leaves)
     except TypeError:
         return None
     if (folder, key) not in _loaded:

@@ -119,7 +119,7 @@ def check_recordable(params: ChainParams) -> str:
     return names[law]
 
 
-def chain_settings(mapping: dict) -> list[str]:
+def _chain_settings(mapping: dict) -> list[str]:
     """The keys of `mapping` (for example a Dataset's attributes) that belong to the
     chain's record (`chain_record`), for the friction law it names."""
     law = FRICTION_LAWS.get(mapping.get("friction"), FRICTION_LAWS["exponential"])
