@@ -24,7 +24,7 @@ if _CACHE_OWNER:
 os.environ["JAX_NUM_CPU_DEVICES"] = "1"
 
 # Every command that the tests start runs in its own process: no warm process is
-# started behind them (`jaxchain._cli.warm`; test_warm.py starts one of its own).
+# started behind them (jaxchain/_cli/warm.py; test_warm.py starts one of its own).
 os.environ["JAXCHAIN_SERVER"] = "0"
 
 import jax  # noqa: E402

@@ -94,8 +94,8 @@ import importlib, pkgutil, sys, warnings
 from tqdm import TqdmWarning
 with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")
-    import jaxchain
-    for module in pkgutil.walk_packages(jaxchain.__path__, "jaxchain."):
+    import jaxchain as jc
+    for module in pkgutil.walk_packages(jc.__path__, "jaxchain."):
         importlib.import_module(module.name)
     sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
     from helpers import internal
