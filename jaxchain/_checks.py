@@ -33,3 +33,19 @@ def check_count(name: str, value, least: int = 1, most: int | None = None) -> in
         bounds = f">= {least}" if most is None else f"in [{least}, {most}]"
         raise ValidationError(f"{name} must be an integer {bounds}, got {value!r}")
     return int(value)
+
+
+def check_positive(name: str, value):
+    """`value`, checked to be a number > 0 (NaN is not).
+
+    **Raises:**
+
+    `ValidationError` naming the argument and its value for anything else.
+    """
+    try:
+        positive = bool(value > 0)
+    except TypeError:
+        positive = False
+    if not positive:
+        raise ValidationError(f"{name} must be > 0, got {value!r}")
+    return value

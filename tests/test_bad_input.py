@@ -135,6 +135,16 @@ CASES = {
                                  jc.ValidationError, "max_steps must be an integer >= 1"),
     "a scipy budget of 0 s": (lambda: jc.work_precision(NOWHERE, scipy_budget_s=0),
                               jc.ValidationError, "scipy_budget_s must be"),
+    "a design of -1 steps": (lambda: jc.intentional_mistuning(steps=-1), jc.ValidationError,
+                             "steps must be an integer >= 0"),
+    "a fractional design seed": (lambda: jc.intentional_mistuning(seed=0.5),
+                                 jc.ValidationError, "seed must be an integer >= 0"),
+    "a learning rate of 0": (lambda: jc.intentional_mistuning(learning_rate=0.0),
+                             jc.ValidationError, "learning_rate must be > 0"),
+    "a NaN temperature": (lambda: jc.intentional_mistuning(temperature=np.nan),
+                          jc.ValidationError, "temperature must be > 0"),
+    "a target given as text": (lambda: jc.bistable_range(target="0.5"), jc.ValidationError,
+                               "target must be > 0"),
 }
 
 

@@ -10,7 +10,7 @@ from jaxtyping import Array, Float
 from .._physics.params import with_parameter
 from .continuation import ContinuationProblem
 from .two_parameter import fold_curve, hopf_vd_and_derivative
-from .._errors import ValidationError
+from .._checks import check_positive
 
 
 class DampingDesign(eqx.Module):
@@ -66,8 +66,7 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
     `ValidationError` if target <= 0; `RuntimeError` if a fold along the way is lost or
     the Hopf point is not found.
     """
-    if not target > 0:
-        raise ValidationError(f"target must be > 0, got {target!r}")
+    check_positive("target", target)
     n = problem.u0.size
     state = {"problem": problem, "solution": fold_solution}
 

@@ -12,7 +12,7 @@ from .hopf import critical_mode, hopf_point
 from .lyapunov_coefficient import first_lyapunov_coefficient
 from .shooting import (PeriodicOrbit, ShootingOptions, describe_orbit, pack,
                        periodic_orbit, shooting_residual)
-from .._errors import ValidationError
+from .._checks import check_positive
 
 
 class ShootingResidual(eqx.Module):
@@ -79,8 +79,7 @@ def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
 
     `ValidationError` for offset <= 0 or a bad mode; `RuntimeError` if shooting fails.
     """
-    if not offset > 0:
-        raise ValidationError(f"offset must be > 0, got {offset!r}")
+    check_positive("offset", offset)
     hopf = hopf_point(params)
     at_hopf = with_parameter(params, "v_d", hopf.v_d[mode])
     l1 = first_lyapunov_coefficient(at_hopf, mode)

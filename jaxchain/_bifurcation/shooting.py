@@ -12,6 +12,7 @@ from .._physics.custom_types import State
 from .._physics.model import vector_field
 from .._physics.params import ChainParams
 from .._physics.stick import min_slip_speed, sticks
+from .._checks import check_positive
 from .._errors import ValidationError
 
 
@@ -273,8 +274,7 @@ def periodic_orbit(params: ChainParams, y0: State, period: float,
     y0 = jnp.asarray(y0, dtype=float)
     if y0.shape != (2, params.n_osc):
         raise ValidationError(f"y0 must have shape (2, {params.n_osc}), got {y0.shape}")
-    if not period > 0:
-        raise ValidationError(f"period must be > 0, got {period!r}")
+    check_positive("period", period)
     if options.phase_oscillator >= params.n_osc:
         raise ValidationError(f"ShootingOptions.phase_oscillator must be < n_osc = "
                               f"{params.n_osc}, got {options.phase_oscillator}")

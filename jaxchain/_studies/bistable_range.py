@@ -26,7 +26,7 @@ from .._physics.params import (
 from .._physics.record import chain_record
 from .._engine.simulate import simulate
 from .._engine.solver.registry import DEFAULT_SOLVER
-from .._errors import ValidationError
+from .._checks import check_positive
 
 
 @dataclasses.dataclass
@@ -183,8 +183,7 @@ def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
 def _check_bistable(params: ChainParams | None, target) -> ChainParams:
     """The chain (the paper's ring where None), with `target` checked to be > 0."""
     params = chain_or_default(params)
-    if not target > 0:
-        raise ValidationError(f"target must be > 0, got {target!r}")
+    check_positive("target", target)
     return params
 
 

@@ -19,6 +19,7 @@ from jaxtyping import Array, Bool, Float, Int
 from ..._engine.checks import as_solver
 from ..._engine.smoothed import terms
 from ..._engine.solver.controller import step_size_controller
+from ..._checks import check_positive
 from ..._errors import ValidationError
 from ..._physics.params import ChainParams
 from .records import Record
@@ -60,8 +61,7 @@ def cut(records: list[Record], n_osc: int, window: float) -> Windows:
 
     **Raises:** `ValidationError` for a window <= 0, or a record whose windows would
     hold fewer than 2 samples."""
-    if not window > 0:
-        raise ValidationError(f"window must be > 0, got {window!r}")
+    check_positive("window", window)
     pieces = []
     for r, rec in enumerate(records):
         duration = float(rec.t[-1] - rec.t[0])

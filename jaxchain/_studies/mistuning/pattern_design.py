@@ -16,6 +16,7 @@ from ..._bifurcation.fold import solve_fold
 from ..._physics.initial import excited_block
 from ..._physics.params import chain_or_default, ChainParams
 from .edges import localized_fold
+from ..._checks import check_count, check_positive
 from ..._errors import ValidationError
 
 
@@ -200,21 +201,27 @@ def intentional_mistuning(params: ChainParams | None = None, *, budget: float = 
     **Raises:**
 
     `ValidationError` for a chain that is not a homogeneous ring of at least 2, a bad
-    budget or sense; `RuntimeError` when a fold cannot be followed.
+    budget or sense, a negative or non-integer `steps` or `seed`, a `learning_rate`
+    or `temperature` that is not > 0; `RuntimeError` when a fold cannot be followed.
     """
-    params, sign = _check_design(params, sense)
+    params, sign = _check_design(params, sense, steps, learning_rate, temperature, seed)
     best, history, homogeneous = _run_design(params, start, sign, budget, zero_mean, steps,
                                              learning_rate, temperature, seed, progress)
     return _design(best, history, homogeneous, budget, zero_mean, sense)
 
 
-def _check_design(params: ChainParams | None, sense: str) -> tuple[ChainParams, float]:
+def _check_design(params: ChainParams | None, sense: str, steps, learning_rate,
+                  temperature, seed) -> tuple[ChainParams, float]:
     """The chain (a ring of 4 by default) and the sign of the objective of `sense`
-    (+1 to lower, -1 to raise); the ring and the budget are checked by
-    `design_problems`."""
+    (+1 to lower, -1 to raise), with Adam's settings checked; the ring and the
+    budget are checked by `design_problems`."""
     params = chain_or_default(params, n_osc=4)
     if sense not in ("lower", "raise"):
         raise ValidationError(f"sense must be 'lower' or 'raise', got {sense!r}")
+    check_count("steps", steps, least=0)
+    check_count("seed", seed, least=0)
+    check_positive("learning_rate", learning_rate)
+    check_positive("temperature", temperature)
     return params, 1.0 if sense == "lower" else -1.0
 
 
