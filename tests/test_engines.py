@@ -68,6 +68,22 @@ def test_an_ensemble_on_the_exact_engine_records_it():
     assert smoothed.attrs["engine"] == "smoothed" and "solver" in smoothed.attrs
 
 
+@pytest.mark.numerics
+def test_vmapped_lanes_of_the_exact_engine_are_its_single_runs():
+    """The GPU's route on the CPU: lanes of the exact engine vmapped together, where
+    the event's root find runs in every lane, also in lanes whose guards did not
+    change sign (it raised there before). Each lane is its own run (another compiled
+    program, at rtol 1e-12: agreement to 1e-8)."""
+    starts = np.random.default_rng(0).uniform(-1.0, 1.0, (3, 2, 2))
+    lanes = jc.run_lanes(CHAIN, starts, options=EXACT, engine="exact", schedule="vmap")
+    assert (np.asarray(lanes.status) == jc.Status.ok).all()
+    for lane, start in enumerate(starts):
+        one = jc.simulate(CHAIN, start, engine=jc.Exact(EXACT))
+        for field in ("amplitudes", "energy", "y_final"):
+            np.testing.assert_allclose(getattr(lanes, field)[lane], getattr(one, field),
+                                       rtol=0, atol=1e-8)
+
+
 @pytest.mark.parametrize("call, message", [
     (lambda: jc.simulate(CHAIN, START, engine="stick"), "engine must be one of"),
     (lambda: jc.simulate(CHAIN, START, "tsit5", engine="exact"), "takes no solver"),

@@ -14,6 +14,7 @@ from jaxtyping import Array, Bool, Float, Int
 from ..._physics.custom_types import State
 from ..._physics.initial import AbstractInitialCondition, GivenState
 from ..._physics.params import ChainParams
+from ..compat import errors_as_nan
 from ..observers.base import Chunk, no_partial_answers, observe_chunk
 from ..observers.extrema import Extrema
 from ..observables import Observables
@@ -133,14 +134,19 @@ def _segment(params, options, observe, t_stop, c: _Carry) -> _Carry:
     rule."""
     sigma = turning_directions(params, c.y, c.modes, options.switch_tol)
     args = (params, c.modes, sigma, observe, options.switch_tol)
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(mode_field), diffrax.Dopri8(), 0.0, t_stop - c.t, None,
-        (c.y, c.work), args, saveat=diffrax.SaveAt(t1=True),
-        stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
-        event=diffrax.Event(guard, optx.Bisection(rtol=0.0, atol=options.root_tol),
-                            direction=False),
-        max_steps=options.max_steps, throw=False,
-    )
+    # Under vmap the event's root find runs in every lane, also where no guard
+    # changed sign and its result is discarded: Bisection's check of its bracket
+    # must not raise there. As NaN, a lane whose own bracket fails ends as a
+    # non-finite state, flagged like any failure.
+    with errors_as_nan():
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(mode_field), diffrax.Dopri8(), 0.0, t_stop - c.t, None,
+            (c.y, c.work), args, saveat=diffrax.SaveAt(t1=True),
+            stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
+            event=diffrax.Event(guard, optx.Bisection(rtol=0.0, atol=options.root_tol),
+                                direction=False),
+            max_steps=options.max_steps, throw=False,
+        )
     tau = sol.ts[-1]
     y, work = sol.ys[0][-1], sol.ys[1][-1]
     event = sol.event_mask
