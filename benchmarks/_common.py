@@ -173,7 +173,7 @@ def machine_info() -> dict:
         info[pkg] = _version(pkg)
     info["jaxchain default solver"] = jc.DEFAULT_SOLVER
     defaults = jc.SimulationOptions()
-    info["jaxchain defaults"] = (f"eps = {float(jc.ChainParams().eps):g}, rtol = "
+    info["jaxchain defaults"] = (f"eps = {jc.DEFAULT_EPS:g}, rtol = "
                                  f"{defaults.rtol:g}, atol = {defaults.atol:g}, "
                                  f"sample_dt = {defaults.sample_dt:g}, chunk_length = "
                                  f"{defaults.chunk_length:g}")

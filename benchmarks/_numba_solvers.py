@@ -31,6 +31,7 @@ import math
 import numpy as np
 from numba import njit
 
+from jaxchain import DEFAULT_EPS
 from jaxchain._engine.solver.rosenbrock import _A, _C, _GAMMA, _M, _M_ERROR
 
 # Bosh3 as in diffrax/_solver/bosh3.py.
@@ -41,12 +42,12 @@ _B3_ERR = np.array([2 / 9 - 7 / 24, 1 / 3 - 1 / 4, 4 / 9 - 1 / 3, -1 / 8])
 _SAFETY, _FACTORMIN, _FACTORMAX = 0.9, 0.2, 10.0
 
 
-def params_vector(params) -> np.ndarray:
-    """`ChainParams` as the float vector the loops take:
-    (xi, mu_d, mu_st, v0, eta_c, v_d, eps)."""
+def params_vector(params, eps: float = DEFAULT_EPS) -> np.ndarray:
+    """`ChainParams` and the smoothing `eps` (the smoothed engine's) as the float
+    vector the loops take: (xi, mu_d, mu_st, v0, eta_c, v_d, eps)."""
     return np.array([float(params.xi), float(params.friction.mu_d), float(params.friction.mu_st),
                      float(params.friction.v0), float(params.eta_c), float(params.v_d),
-                     float(params.eps)])
+                     float(eps)])
 
 
 def chunk_bounds(options) -> tuple[np.ndarray, np.ndarray, float]:
@@ -311,12 +312,13 @@ def integrate_bosh3(y0, p, starts, ends, transient, rtol, atol, max_steps):
 INTEGRATORS = {"ros34pw2": integrate_ros34pw2, "bosh3": integrate_bosh3}
 
 
-def integrate(name: str, y0: np.ndarray, params, options) -> dict:
+def integrate(name: str, y0: np.ndarray, params, options, eps: float = DEFAULT_EPS) -> dict:
     """Run the numba loop `name` ("ros34pw2" or "bosh3") on the flat state y0 with
-    `ChainParams` and `SimulationOptions` (horizon, tolerances, chunks, max_steps)."""
+    `ChainParams`, `SimulationOptions` (horizon, tolerances, chunks, max_steps) and
+    the smoothing `eps` (the smoothed engine's, `DEFAULT_EPS` as jaxchain's default)."""
     starts, ends, transient = chunk_bounds(options)
     y, steps, accepted, x_max, x_min, status = INTEGRATORS[name](
-        np.ascontiguousarray(y0, dtype=float), params_vector(params), starts, ends,
+        np.ascontiguousarray(y0, dtype=float), params_vector(params, eps), starts, ends,
         float(transient), float(options.rtol), float(options.atol), int(options.max_steps))
     amplitudes = 0.5 * (x_max - x_min)
     return dict(y=y, num_steps=int(steps), accepted=int(accepted), status=int(status),

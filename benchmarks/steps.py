@@ -5,9 +5,10 @@ scene's trajectories, accepted or rejected, classified by what the chain was doi
                                [--atol 1e-7] [--pcoeff 0] [--icoeff 1] [--out DIR]
 
 The scene is the paper's ring (N = 20, v_d = 1.5, eq. (8) with k oscillators
-excited), integrated by the default solver to the window's start without
-recording, then over the window with a step-size controller that reports every
-attempted step (a host callback: slow, for measurement only). A step is
+excited), integrated by the default solver at the default eps (`DEFAULT_EPS`) to
+the window's start without recording, then over the window with a step-size
+controller that reports every attempted step (a host callback: slow, for
+measurement only). A step is
 
 - `switch`: an oscillator enters or leaves the stick band (`STICK_BAND` eps) between
   its start and its end;
@@ -81,17 +82,18 @@ def classify(steps, v_d: float, eps: float) -> dict:
 
 def census(k: int, window: tuple[float, float], controller: dict) -> dict:
     params = jc.ChainParams(v_d=1.5)
+    model = jc.Model(params, jc.DEFAULT_EPS)  # the diffrax args of a smoothed run
     y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(params.n_osc, k))(params)
     solver = jc.SOLVERS[jc.DEFAULT_SOLVER]()
     field = terms(solver)
-    start = diffrax.diffeqsolve(field, solver, 0.0, window[0], None, y0, params,
+    start = diffrax.diffeqsolve(field, solver, 0.0, window[0], None, y0, model,
                                 stepsize_controller=diffrax.PIDController(**controller),
                                 max_steps=10**7)
     _steps.clear()
-    diffrax.diffeqsolve(field, solver, window[0], window[1], None, start.ys[-1], params,
+    diffrax.diffeqsolve(field, solver, window[0], window[1], None, start.ys[-1], model,
                         stepsize_controller=ReportingPID(**controller), max_steps=10**7)
     jax.effects_barrier()
-    return classify(_steps, params.v_d, params.eps)
+    return classify(_steps, params.v_d, model.eps)
 
 
 def markdown(results: dict, args) -> str:

@@ -25,13 +25,14 @@ from ._physics.friction import (
 from ._physics.model import (
     vector_field as vector_field, split_vector_field as split_vector_field,
     jacobian as jacobian, steady_sliding as steady_sliding,
-    mechanical_energy as mechanical_energy, stick_force as stick_force,
+    mechanical_energy as mechanical_energy, stick_force as stick_force, Model as Model,
 )
 from ._physics.stick import (
     sticks as sticks, STICK_BAND as STICK_BAND, min_slip_speed as min_slip_speed,
 )
 from ._physics.forces import (
-    coupling_force as coupling_force, stiffness_matrix as stiffness_matrix,
+    DEFAULT_EPS as DEFAULT_EPS, coupling_force as coupling_force,
+    stiffness_matrix as stiffness_matrix,
     friction_coefficient as friction_coefficient,
     smoothed_friction_force as smoothed_friction_force,
     slip_friction_force as slip_friction_force, static_friction as static_friction,

@@ -19,9 +19,10 @@ from jaxchain._sweeps.atomic import HOLD  # the writers' test hook (see `hold_en
 SHORT = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=100.0)
 
 
-def reference_rhs(params: jc.ChainParams):
+def reference_rhs(params: jc.ChainParams, eps: float = 1e-3):
     """Eq. (5) written out oscillator by oscillator with NumPy, independently of
-    `jc.vector_field`, for scipy and for comparison."""
+    `jc.vector_field`, for scipy and for comparison, smoothed at `eps` (the
+    smoothed engine's default, 1e-3, unless given)."""
     n = params.n_osc
 
     def rhs(t, y):
@@ -31,7 +32,7 @@ def reference_rhs(params: jc.ChainParams):
             left, right = x[(i - 1) % n], x[(i + 1) % n]
             v_rel = v[i] - params.v_d
             mu = eq1_mu(params)(abs(v_rel))
-            force = -mu * np.tanh(v_rel / params.eps)
+            force = -mu * np.tanh(v_rel / eps)
             a[i] = (-2 * params.xi * v[i] - x[i]
                     - params.eta_c * (2 * x[i] - left - right) + force)
         return np.concatenate([v, a])

@@ -77,7 +77,13 @@ CASES = {
                            jc.ValidationError, "SimulationOptions.transient"),
     "a string parameter": (lambda: jc.ChainParams(xi="a"), TypeError, "ChainParams.xi"),
     "a boolean parameter": (lambda: jc.ChainParams(v_d=True), TypeError, "ChainParams.v_d"),
-    "a NaN parameter": (lambda: jc.ChainParams(eps=np.nan), jc.ValidationError, "ChainParams.eps"),
+    "a NaN parameter": (lambda: jc.ChainParams(xi=np.nan), jc.ValidationError, "ChainParams.xi"),
+    "a NaN eps of the engine": (lambda: jc.Smoothed(eps=np.nan), jc.ValidationError,
+                                "Smoothed.eps"),
+    "eps given to the chain": (lambda: jc.ChainParams(eps=1e-3), jc.ValidationError,
+                               r"ChainParams.eps: eps is a setting of the smoothed engine"),
+    "eps given to the exact engine": (lambda: jc.simulate(P, Y0, engine=jc.as_engine(
+        "exact", eps=1e-3)), jc.ValidationError, "the exact engine has no eps"),
     "mu_st below mu_d": (lambda: jc.ChainParams(mu_st=0.2), jc.ValidationError,
                          "ExponentialDecay.mu_st"),
     "a time series with dt <= 0": (lambda: jc.observe(P, Y0, [jc.TimeSeries(dt=0.0)],
@@ -185,13 +191,17 @@ def test_fuzzed_parameters_are_accepted_exactly_when_valid(field, value):
     a = np.asarray(value, dtype=float) if numbers else None
     valid = (numbers and np.all(np.isfinite(a)) and np.all(RULES[field](a))
              and np.ndim(a) == 0)
+    def build(v):  # eps is the smoothed engine's, the other fields the chain's
+        return jc.Smoothed(eps=v) if field == "eps" else jc.ChainParams(**{field: v})
+
     if valid:
-        jc.ChainParams(**{field: value})
+        build(value)
     else:
-        owner = "ExponentialDecay" if field in ("mu_st", "mu_d", "v0") else "ChainParams"
+        owner = {"mu_st": "ExponentialDecay", "mu_d": "ExponentialDecay",
+                 "v0": "ExponentialDecay", "eps": "Smoothed"}.get(field, "ChainParams")
         says = "mu_d" if field == "mu_d" else f"{owner}.{field}"
         with pytest.raises((jc.ValidationError, TypeError), match=says):
-            jc.ChainParams(**{field: value})
+            build(value)
 
 
 @settings(max_examples=200, deadline=None)

@@ -176,13 +176,14 @@ def test_energy_balance_of_a_mistuned_open_chain():
     n = 5
     params = jc.mistune(jc.ChainParams(n_osc=n, boundary="free", eta_c=np.full(n - 1, 0.3),
                                        xi=np.linspace(0.03, 0.07, n),
-                                       load=np.linspace(0.8, 1.2, n), eps=0.05,
+                                       load=np.linspace(0.8, 1.2, n),
                                        friction=jc.Stribeck(**STRIBECK)), 0.05, 1)
+    eps = 0.05
 
     def field(t, z, args):
         y, _ = z
-        dy = jc.vector_field(t, y, params)
-        elastic, friction = jc.split_vector_field(t, y, params)
+        dy = jc.vector_field(t, y, params, eps)
+        elastic, friction = jc.split_vector_field(t, y, params, eps)
         v = y[1]
         return dy, jnp.stack([jnp.sum(friction[1] * v), jnp.sum(2 * params.xi * v**2)])
 

@@ -139,7 +139,7 @@ def test_localized_json_and_files(localized_small):
     ds = xr.load_dataset(out / "localized_vd1.5.nc")
     assert_cf_compliant(out / "localized_vd1.5.nc")
     assert ds["energy"].values[0].tolist() == pytest.approx(res["energy"])
-    assert ds.attrs["eps"] == jc.ChainParams().eps and ds.attrs["n_osc"] == 3
+    assert ds.attrs["eps"] == jc.DEFAULT_EPS and ds.attrs["n_osc"] == 3
     assert (out / "localized_vd1.5.png").stat().st_size > 1000
     amplitudes = np.array(res["amplitudes"])
     np.testing.assert_allclose(res["energy"], 0.5 * np.sum(amplitudes**2, axis=1),

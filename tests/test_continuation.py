@@ -201,7 +201,7 @@ def test_boundaries_command_json_and_figures(tmp_path, capsys):
                                    "boundaries.json"}
     assert abs(out["hopf_vd"] - 0.5 * np.log(10)) < 1e-6
     assert abs(out["fold_vd"] - jc.stick_slip_existence_limit()) < 0.01
-    assert out["subcritical"] is True and out["eps"] == jc.ChainParams().eps
+    assert out["subcritical"] is True and out["eps"] == jc.DEFAULT_EPS
     # every point of both curves has a fold, beside the non-smooth limit there
     for curve in (out["xi_curve"], out["ratio_curve"]):
         fold, limit = np.array(curve["fold_vd"]), np.array(curve["existence_limit_nonsmooth"])

@@ -83,8 +83,9 @@ def test_stored_reference_runs_are_read_back_only_for_equal_settings(tmp_path, m
 def test_smoothed_error_shrinks_with_eps():
     """The amplitude error against the reference falls when eps is divided by 10
     (the smoothed law converges to the non-smooth one)."""
-    errs = [float(jc.crosscheck(jc.ChainParams(n_osc=1, eps=eps), (1.5,), (("eq8", 1),),
-                                options=SMALL)["amplitude_error"][0]) for eps in (1e-2, 1e-3)]
+    errs = [float(jc.crosscheck(jc.ChainParams(n_osc=1), (1.5,), (("eq8", 1),),
+                                engine=jc.Smoothed(options=SMALL, eps=eps)
+                                )["amplitude_error"][0]) for eps in (1e-2, 1e-3)]
     assert errs[1] < 0.5 * errs[0]
 
 
@@ -137,7 +138,7 @@ def test_crosscheck_command_json_and_files(tmp_path, capsys):
     assert (out / "crosscheck.png").stat().st_size > 0
     ds = xr.load_dataset(out / "crosscheck.nc", engine="h5netcdf")
     assert_cf_compliant(out / "crosscheck.nc")
-    assert ds.attrs["reference_rtol"] == 1e-12 and ds.attrs["eps"] == jc.ChainParams().eps
+    assert ds.attrs["reference_rtol"] == 1e-12 and ds.attrs["eps"] == jc.DEFAULT_EPS
     expected, _ = scipy_stick_slip_cycle(jc.ChainParams(n_osc=1, v_d=1.5))
     reference = float(ds["amplitudes_reference"].values[0, 0])
     smoothed = float(ds["amplitudes_smoothed"].values[0, 0])

@@ -91,9 +91,10 @@ def test_good_lanes_are_kept_beside_failing_ones(engine):
 
 
 def test_dataset_round_trip_keeps_parameters(tmp_path):
-    p = jc.ChainParams(n_osc=3, eps=2e-2)
+    p = jc.ChainParams(n_osc=3)
     ics = jc.localized_family(3)
-    ds = jc.ensemble(p, [1.5], ics, options=TIGHT, progress=False)
+    ds = jc.ensemble(p, [1.5], ics, engine=jc.Smoothed(options=TIGHT, eps=2e-2),
+                     progress=False)
     path = jc.save_dataset(ds, tmp_path / "out" / "run.nc")
     back = xr.load_dataset(path)
     assert dict(back.sizes) == {"v_d": 1, "ic": 3, "osc": 3, "half": 2, "component": 2}
@@ -106,5 +107,5 @@ def test_dataset_round_trip_keeps_parameters(tmp_path):
     assert back.attrs["Conventions"].startswith("CF-") and "jaxchain" in back.attrs["source"]
     assert back["energy"].attrs["units"] == "1" and "flag_values" in back["status"].attrs
     # eq. (8) at v_d = 1.5, stored: unexcited oscillators start at steady sliding
-    ss = jc.steady_sliding(jc.ChainParams(n_osc=3, eps=2e-2))
+    ss = jc.steady_sliding(jc.ChainParams(n_osc=3))
     assert np.allclose(back["y_initial"].sel(component="x")[0, 0], np.asarray(ss[0]) + [0, 2, 0])

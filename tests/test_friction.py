@@ -20,23 +20,24 @@ def test_friction_coefficient_limits():
 
 @pytest.mark.numerics
 def test_smoothed_force_tends_to_coulomb_law_away_from_zero():
-    p = jc.ChainParams(eps=1e-3)
+    p, eps = jc.ChainParams(), 1e-3
     v = jnp.array([-2.0, -0.5, 0.5, 2.0])
     coulomb = -jc.friction_coefficient(p, v) * jnp.sign(v)
-    assert np.allclose(jc.smoothed_friction_force(p, v), coulomb, rtol=1e-12)
-    assert float(jc.smoothed_friction_force(p, 0.0)) == 0.0
+    assert np.allclose(jc.smoothed_friction_force(p, v, eps), coulomb, rtol=1e-12)
+    assert float(jc.smoothed_friction_force(p, 0.0, eps)) == 0.0
     # slope at zero is mu_st / eps: the stiffness of the smoothed stick phase
     h = 1e-9
-    slope = (jc.smoothed_friction_force(p, h) - jc.smoothed_friction_force(p, -h)) / (2 * h)
-    assert np.isclose(float(slope), -p.friction.mu_st / p.eps, rtol=1e-5)
+    slope = (jc.smoothed_friction_force(p, h, eps)
+             - jc.smoothed_friction_force(p, -h, eps)) / (2 * h)
+    assert np.isclose(float(slope), -p.friction.mu_st / eps, rtol=1e-5)
 
 
 @pytest.mark.numerics
 @settings(max_examples=50, deadline=None)
 @given(v=st.floats(-100, 100), eps=st.floats(1e-5, 1.0))
 def test_smoothed_force_is_odd_and_bounded_by_mu_st(v, eps):
-    p = jc.ChainParams(eps=eps)
-    f = float(jc.smoothed_friction_force(p, v))
+    p = jc.ChainParams()
+    f = float(jc.smoothed_friction_force(p, v, eps))
     assert abs(f) <= p.friction.mu_st
-    assert f == -float(jc.smoothed_friction_force(p, -v))
+    assert f == -float(jc.smoothed_friction_force(p, -v, eps))
     assert f * v <= 0  # friction always opposes the relative motion

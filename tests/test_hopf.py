@@ -37,9 +37,9 @@ def test_hopf_point_is_the_analytic_one_for_every_mode():
 @pytest.mark.numerics
 @pytest.mark.parametrize("eps", [0.25, 0.2])
 def test_eps_correction_of_the_hopf_point(eps):
-    params = jc.ChainParams(n_osc=1, eps=eps)
-    shift = float(jc.hopf_point(params).v_d[0] - jc.hopf_vd_analytic(params))
-    predicted = float(jc.hopf_eps_correction(params))
+    params = jc.ChainParams(n_osc=1)
+    shift = float(jc.hopf_point(params, eps=eps).v_d[0] - jc.hopf_vd_analytic(params))
+    predicted = float(jc.hopf_eps_correction(params, eps))
     assert shift < 0
     assert abs(shift - predicted) < 0.05 * abs(predicted)
 

@@ -10,13 +10,15 @@ from helpers import flat, reference_rhs
 @pytest.mark.numerics
 @pytest.mark.parametrize("n_osc, v_d, eps", [(1, 1.5, 1e-2), (5, 0.8, 1e-3), (20, 2.0, 1e-2)])
 def test_steady_sliding_is_a_fixed_point(n_osc, v_d, eps):
-    p = jc.ChainParams(n_osc=n_osc, v_d=v_d, eps=eps)
-    y = jc.steady_sliding(p)
+    p = jc.ChainParams(n_osc=n_osc, v_d=v_d)
+    y = jc.steady_sliding(p, eps)
     # x_n = F(-v_d) = mu(v_d) tanh(v_d/eps), independently of the code under test
     mu = p.friction.mu_d + (p.friction.mu_st - p.friction.mu_d) * np.exp(-v_d / p.friction.v0)
     assert np.allclose(y[0], mu * np.tanh(v_d / eps), rtol=1e-14)
     assert np.all(y[1] == 0)
-    assert np.max(np.abs(jc.vector_field(0.0, y, p))) < 1e-14
+    assert np.max(np.abs(jc.vector_field(0.0, y, p, eps))) < 1e-14
+    # without eps, the unsmoothed law's fixed point: x_n = mu(v_d)
+    assert np.allclose(jc.steady_sliding(p)[0], mu, rtol=1e-14)
 
 
 @pytest.mark.numerics
@@ -39,7 +41,7 @@ def test_steady_sliding_eigenvalues_match_analytic_damping(n_osc, eps):
     """Ring mode k has stiffness 1 + 2 eta_c (1 - cos(2 pi k / N)) and, for every k,
     damping 2 xi - dF/dv_rel at v_rel = -v_d. For eps -> 0, dF/dv_rel -> mu'(v_d) =
     (mu_st - mu_d)/v0 exp(-v_d/v0) (the Hopf condition of DESIGN.md)."""
-    p = jc.ChainParams(n_osc=n_osc, v_d=1.4, eps=eps)
+    p = jc.ChainParams(n_osc=n_osc, v_d=1.4)
     s = p.v_d
     mu = p.friction.mu_d + (p.friction.mu_st - p.friction.mu_d) * np.exp(-s / p.friction.v0)
     law = p.friction
@@ -50,7 +52,7 @@ def test_steady_sliding_eigenvalues_match_analytic_damping(n_osc, eps):
     stiffness = 1 + 2 * p.eta_c * (1 - np.cos(2 * np.pi * k / n_osc))
     disc = np.sqrt((damping**2 / 4 - stiffness).astype(complex))
     analytic = np.concatenate([-damping / 2 + disc, -damping / 2 - disc])
-    numeric = np.linalg.eigvals(np.asarray(jc.jacobian(p)))
+    numeric = np.linalg.eigvals(np.asarray(jc.jacobian(p, eps=eps)))
     key = lambda z: np.round(z.imag, 9) + 1e3 * np.round(z.real, 9)  # noqa: E731
     assert np.allclose(sorted(numeric, key=key), sorted(analytic, key=key), atol=1e-10)
     if eps == 1e-2:  # the smoothing correction is exp(-2 v_d/eps): nil here

@@ -137,11 +137,11 @@ def stick_slip_scene():
     """A ring of 3 at v_d = 1.5 (eps = 1e-2) from eq. (8) with 2 excited, over [0, 60]
     at tight tolerances: the time series and the energy in one run (one compiled
     program, for the two tests against scipy below)."""
-    params = jc.ChainParams(n_osc=3, v_d=1.5, eps=1e-2)
+    params = jc.ChainParams(n_osc=3, v_d=1.5)
     y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 2))(params)
     options = jc.SimulationOptions(t_end=60.0, transient=10.0, rtol=1e-9, atol=1e-11)
     out = jc.observe(params, y0, [jc.TimeSeries(oscillators=(0, 2), dt=0.5), jc.Energy()],
-                     options=options)
+                     engine=jc.Smoothed(options=options, eps=1e-2))
     return params, y0, out
 
 
@@ -150,7 +150,7 @@ def test_time_series_match_scipy(stick_slip_scene):
     params, y0, out = stick_slip_scene
     t = np.asarray(out["series_t"])
     assert t[0] == 10.0 and t[-1] == 60.0 and t.size == 101
-    ref = solve_ivp(reference_rhs(params), (0.0, 60.0), np.ravel(y0), method="DOP853",
+    ref = solve_ivp(reference_rhs(params, 1e-2), (0.0, 60.0), np.ravel(y0), method="DOP853",
                     t_eval=t, rtol=1e-11, atol=1e-12).y.reshape(2, 3, -1)
     series = np.asarray(out["series"])  # (time, component, series_osc)
     assert np.max(np.abs(series - np.moveaxis(ref[:, [0, 2]], -1, 0))) < 1e-5
@@ -177,7 +177,7 @@ def test_energy_at_steady_sliding_and_against_scipy(steady_sliding_runs, stick_s
     assert abs(float(out["energy_max"]) - 1.5 * mu**2) < 1e-10
     params, y0, out = stick_slip_scene
     t = np.linspace(10.0, 60.0, 50001)
-    y = solve_ivp(reference_rhs(params), (0.0, 60.0), np.ravel(y0), method="DOP853",
+    y = solve_ivp(reference_rhs(params, 1e-2), (0.0, 60.0), np.ravel(y0), method="DOP853",
                   t_eval=t, rtol=1e-11, atol=1e-12).y.reshape(2, 3, -1)
     x, v = y
     energy = 0.5 * np.sum(v**2 + x**2 + 0.01 * (np.roll(x, -1, axis=0) - x) ** 2, axis=0)
@@ -210,22 +210,23 @@ def test_both_engines_observe_a_prescribed_stream_alike():
     # jitted as the engines run them: one program each, not an op-by-op dispatch
     observe_chunk, observe_sample = (eqx.filter_jit(internal("smoothed observation")),
                                      eqx.filter_jit(internal("non-smooth observation")))
-    params = jc.ChainParams(n_osc=4, v_d=1.5, eps=1e-3)
+    params = jc.ChainParams(n_osc=4, v_d=1.5)
+    model = jc.Model(params, 1e-3)
     options = jc.SimulationOptions(t_end=100.0, transient=40.0, chunk_length=15.0)
     ts = np.linspace(options.transient, options.t_end, 241)  # mid = 70 among them
     ys = _prescribed_stream(params, ts)
     observer = jc.Extrema()
 
-    chunked = (observer.init(ys[0], params, options),)
+    chunked = (observer.init(ys[0], model, options),)
     for lo in range(0, 240, 20):  # chunks [ts[lo], ts[lo + 20]], ends shared
         chunk = jc.Chunk(t0=ts[lo], t1=ts[lo + 20], ts=jnp.asarray(ts[lo:lo + 21]),
                          ys=jnp.asarray(ys[lo:lo + 21]), log_growth=None)
-        chunked = observe_chunk((observer,), chunked, chunk, params, options)
-    located = (observer.init(ys[0], params, options),)
+        chunked = observe_chunk((observer,), chunked, chunk, model, options)
+    located = (observer.init(ys[0], model, options),)
     for t, y in zip(ts, ys):
         located = observe_sample(located, jnp.asarray(t), jnp.asarray(y), params, options)
 
-    zero_eps = jc.with_fields(params, eps=1e-300)  # the reference's band, v_rel = 0
+    zero_eps = jc.Model(params, 1e-300)  # the exact engine's band, v_rel = 0
     smooth = observer.result(chunked[0], zero_eps, options)
     event = observer.result(located[0], zero_eps, options)
     for name in ("x_max_halves", "x_min_halves", "min_slip_speed", "v_max", "on_halc",

@@ -14,7 +14,7 @@ def test_defaults_are_eq7_with_paper_chain():
 
 @pytest.mark.parametrize("field, value", [
     ("n_osc", 0), ("n_osc", 2.5), ("xi", -0.1), ("mu_d", 0.0), ("mu_d", -1.0),
-    ("mu_st", 0.4), ("v0", 0.0), ("eta_c", -0.01), ("eps", 0.0), ("eps", -1e-3),
+    ("mu_st", 0.4), ("v0", 0.0), ("eta_c", -0.01),
     ("xi", math.nan), ("v_d", math.inf), ("eta_c", math.nan), ("mu_st", math.inf),
     ("v0", -math.inf), ("v_d", 0.0), ("v_d", -1.5),
 ])
@@ -22,6 +22,26 @@ def test_invalid_parameter_raises_value_error_naming_field(field, value):
     owner = "ExponentialDecay" if field in ("mu_st", "mu_d", "v0") else "ChainParams"
     with pytest.raises(ValueError, match=f"{owner}.{field}"):
         jc.ChainParams(**{field: value})
+
+
+@pytest.mark.parametrize("value", [0.0, -1e-3, math.nan, math.inf, [1e-3, 2e-3]])
+def test_invalid_eps_raises_value_error_naming_the_smoothed_engine(value):
+    with pytest.raises(ValueError, match="Smoothed.eps"):
+        jc.Smoothed(eps=value)
+
+
+def test_eps_given_to_the_chain_says_where_it_went(tmp_path):
+    """eps is the smoothed engine's: given to the chain (as an argument, by name to
+    `with_parameter`, or in a chain file) it raises, naming where it went."""
+    moved = "eps is a setting of the smoothed engine, not of the chain"
+    with pytest.raises(ValueError, match=moved):
+        jc.ChainParams(eps=1e-3)
+    with pytest.raises(ValueError, match=moved):
+        jc.with_parameter(jc.ChainParams(), "eps", 1e-3)
+    chain_file = tmp_path / "chain.toml"
+    chain_file.write_text("n_osc = 3\neps = 0.01\n")
+    with pytest.raises(ValueError, match=moved):
+        jc.chain_from_file(chain_file)
 
 
 @pytest.mark.parametrize("kwargs, field", [

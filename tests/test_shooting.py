@@ -58,7 +58,7 @@ def test_n_halc_agrees_between_simulation_shooting_and_reference(state):
     if sliding:  # both models rest at x' = 0
         assert np.allclose([obs.min_slip_speed[0], ref.min_slip_speed[0]], 1.5)
     else:  # stick: inside the band, and exactly zero without smoothing
-        assert 0 < float(obs.min_slip_speed[0]) < jc.STICK_BAND * params.eps
+        assert 0 < float(obs.min_slip_speed[0]) < jc.STICK_BAND * jc.DEFAULT_EPS
         assert float(ref.min_slip_speed[0]) == 0.0
 
 

@@ -100,11 +100,11 @@ def test_single_oscillator_cycle_converges_to_nonsmooth_stick_slip_cycle():
     reference = scipy_stick_slip_cycle(p1)[0]
     entry_force = scipy_slip_arc(p1).y[0, -1] + 2 * p1.xi * p1.v_d
     quasi_static = np.arctanh(entry_force / p1.friction.mu_st)  # in units of eps
-    default = float(jc.ChainParams().eps)
+    default = float(jc.Smoothed().eps)
     errors, slip_errors = {}, {}
     for eps in (1e-2, 3e-3, default):
-        p = jc.ChainParams(n_osc=1, eps=eps)
-        obs = jc.simulate(p, jc.OutOfPhaseExcitation.eq8([True]), options=SHORT)
+        obs = jc.simulate(p1, jc.OutOfPhaseExcitation.eq8([True]),
+                          engine=jc.Smoothed(options=SHORT, eps=eps))
         assert int(obs.n_halc) == 1
         errors[eps] = abs(float(obs.amplitudes[0]) / reference - 1)
         slip_errors[eps] = abs(float(obs.min_slip_speed[0]) / eps / quasi_static - 1)
@@ -194,7 +194,7 @@ def test_n_halc_halves_split_the_window_where_scipy_first_sticks():
     ref = solve_ivp(reference_rhs(p), (0.0, SHORT.t_end), y0.ravel(), method="LSODA",
                     rtol=1e-9, atol=1e-11, dense_output=True)
     ts = np.linspace(SHORT.transient, SHORT.t_end, 60001)
-    first_stick = ts[np.argmax(np.abs(ref.sol(ts)[1] - p.v_d) <= jc.STICK_BAND * p.eps)]
+    first_stick = ts[np.argmax(np.abs(ref.sol(ts)[1] - p.v_d) <= jc.STICK_BAND * jc.DEFAULT_EPS)]
     middle = 0.5 * (SHORT.transient + SHORT.t_end)
     assert middle + 20 < first_stick < SHORT.t_end - 20
     obs = jc.simulate(p, y0, options=SHORT)

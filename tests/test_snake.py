@@ -119,7 +119,8 @@ def test_snake_command_json_and_bad_options(tmp_path, capsys):
         assert np.max(np.abs(ref.y[:, -1] - y0)) < 1e-6, i  # periodic
         x = ref.y[:4]
         assert np.allclose(ds["amplitudes"].values[i], 0.5 * (x.max(1) - x.min(1)), rtol=1e-3)
-        sticks = np.min(np.abs(ref.y[4:] - params.v_d), axis=1) < jc.STICK_BAND * params.eps
+        sticks = (np.min(np.abs(ref.y[4:] - params.v_d), axis=1)
+                  < jc.STICK_BAND * jc.DEFAULT_EPS)
         assert int(ds["n_halc"].values[i]) == int(sticks.sum()) == 1, i
     assert_usage_error(["snake", "--sites", "0"], "--sites", capsys)
     assert_usage_error(["snake", "--vd", "3"], "--vd", capsys)

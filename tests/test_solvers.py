@@ -18,6 +18,7 @@ from scipy.integrate import solve_ivp
 import jaxchain as jc
 from helpers import SHORT, flat, reference_rhs, scipy_stick_slip_cycle
 from jaxchain._engine.smoothed import terms
+from jaxchain._physics.model import model_field
 from jaxchain._engine.solver.controller import CONTROLLERS, PIController
 from jaxchain._engine.solver.rosenbrock import Ros34PW2
 
@@ -62,16 +63,17 @@ def test_order_three_on_the_smooth_chain_against_dopri8():
     """Eq. (5) with a wide smoothing (eps = 0.2, no sharp stick) from an excited
     state, over t in [0, 4]: the fixed-step error against Dopri8 at rtol 1e-13
     falls with order 3 (the friction Jacobian is nonlinear, W is frozen per step)."""
-    p = jc.ChainParams(n_osc=4, eps=0.2)
+    p = jc.ChainParams(n_osc=4)
+    model = jc.Model(p, 0.2)
     y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(4, 2))(p)
-    ref = diffrax.diffeqsolve(diffrax.ODETerm(jc.vector_field), diffrax.Dopri8(), 0.0, 4.0,
-                              None, y0, p, max_steps=None,
+    ref = diffrax.diffeqsolve(diffrax.ODETerm(model_field), diffrax.Dopri8(), 0.0, 4.0,
+                              None, y0, model, max_steps=None,
                               stepsize_controller=diffrax.PIDController(rtol=1e-13,
                                                                          atol=1e-15))
     split = terms(Ros34PW2())
     errors = []
     for n in (80, 160, 320, 640):
-        sol = _fixed_steps(split, y0, 4.0, n, p)
+        sol = _fixed_steps(split, y0, 4.0, n, model)
         errors.append(float(jnp.max(jnp.abs(sol.ys[-1] - ref.ys[-1]))))
     assert np.all(np.abs(_orders(errors) - 3) < 0.3), (errors, _orders(errors))
 
@@ -91,11 +93,12 @@ def test_converges_to_the_nonsmooth_stick_slip_cycle_as_eps_shrinks():
     eps = 1e-4). The tolerances are arrays: one compiled program for every eps."""
     reference = scipy_stick_slip_cycle(jc.ChainParams(n_osc=1))[0]
     errors = []
+    p = jc.ChainParams(n_osc=1)
     for eps in (1e-2, 1e-3, 1e-4, 1e-5):
-        p = jc.ChainParams(n_osc=1, eps=eps)
         rtol = min(SHORT.rtol, eps / 10)
         options = _short(rtol, rtol / 100)
-        obs = jc.simulate(p, jc.OutOfPhaseExcitation.eq8([True]), Ros34PW2(), options)
+        obs = jc.simulate(p, jc.OutOfPhaseExcitation.eq8([True]),
+                          engine=jc.Smoothed(Ros34PW2(), options, eps))
         assert int(obs.n_halc) == 1
         errors.append(abs(float(obs.amplitudes[0]) / reference - 1))
     assert np.all(np.diff(errors) < 0), errors
@@ -109,11 +112,12 @@ def test_steps_are_not_bound_by_stiffness():
     stick phase; ROS34PW2 (L-stable) need not. With the same step budget (200000
     steps per chunk of 100 time units) Bosh3 either runs out of steps or takes over
     10 times as many."""
-    p = jc.ChainParams(n_osc=1, eps=1e-5)
+    p, eps = jc.ChainParams(n_osc=1), 1e-5
     ic = jc.OutOfPhaseExcitation.eq8([True])
     options = _short(SHORT.rtol, SHORT.atol)  # ROS34PW2's program of the test above
-    rosw = jc.simulate(p, ic, Ros34PW2(), options)
-    bosh = jc.simulate(p, ic, diffrax.Bosh3(), options, throw=False)
+    rosw = jc.simulate(p, ic, engine=jc.Smoothed(Ros34PW2(), options, eps))
+    bosh = jc.simulate(p, ic, engine=jc.Smoothed(diffrax.Bosh3(), options, eps),
+                       throw=False)
     assert int(rosw.n_halc) == 1
     assert (bosh.status == jc.Status.max_steps_reached
             or int(bosh.num_steps) > 10 * int(rosw.num_steps))

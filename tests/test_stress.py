@@ -71,7 +71,7 @@ def test_a_collapsing_step_size_is_its_own_status():
     assert obs.status == collapsed and np.all(np.isnan(obs.amplitudes))
     assert collapsed.message.startswith("step size collapsed")
     assert "dtmin = 0.05" in jc.failure_hint(collapsed, params, jc.SOLVERS["ros34pw2"](),
-                                             budget)
+                                             budget, jc.DEFAULT_EPS)
     with pytest.raises(RuntimeError, match="step_size_collapsed: eps = 0.001"):
         jc.simulate(params, y0, options=budget)
     floor = dataclasses.replace(budget, dtmin=1e-6)
@@ -89,7 +89,8 @@ def test_energy_balance_and_decay_rate_of_the_damped_linear_oscillator():
     y0 = jnp.array([[0.5 + x0], [0.0]])
     options = jc.SimulationOptions(t_end=60.0, transient=20.0, chunk_length=10.0,
                                    rtol=1e-9, atol=1e-11)
-    out = internal("stress energy balance")(params, y0, jc.SOLVERS["tsit5"](), options)
+    out = internal("stress energy balance")(params, y0,
+                                            jc.Smoothed(jc.SOLVERS["tsit5"](), options))
     wd = np.sqrt(1 - xi**2)
     t = options.t_end
     u = x0 * np.exp(-xi * t) * (np.cos(wd * t) + xi / wd * np.sin(wd * t))
@@ -116,11 +117,12 @@ def test_existence_limit_with_steep_friction():
 def test_auto_solver_is_explicit_only_where_the_stick_phase_is_not_stiff():
     y0 = jc.OutOfPhaseExcitation.eq8([True, False])
     options = jc.SimulationOptions(t_end=60.0, transient=30.0)
+    params = jc.ChainParams(n_osc=2)
     for eps, name in ((0.1, "tsit5"), (1e-3, "ros34pw2")):
-        params = jc.ChainParams(n_osc=2, eps=eps)
-        assert type(jc.auto_solver(params)) is type(jc.SOLVERS[name]())
-        auto = jc.simulate(params, y0, "auto", options)
-        named = jc.simulate(params, y0, name, options)
+        assert type(jc.auto_solver(params, eps)) is type(jc.SOLVERS[name]())
+        auto = jc.simulate(params, y0, engine=jc.as_engine("smoothed", "auto", options,
+                                                           params, eps=eps))
+        named = jc.simulate(params, y0, engine=jc.Smoothed(name, options, eps))
         assert np.array_equal(auto.amplitudes, named.amplitudes)
 
 

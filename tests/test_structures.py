@@ -69,12 +69,12 @@ def test_hopf_point_of_a_lattice_with_unequal_masses_against_a_jacobian_written_
     """The Jacobian of M x'' = -2 xi x' - K x + P F(x' - v_d) at steady sliding,
     written here with NumPy (friction slope by central differences), and the root
     of its leading growth rate by `scipy.optimize.brentq`, against `hopf_point`."""
-    params = _unequal_lattice(xi=0.04, eps=0.01)
+    params, eps = _unequal_lattice(xi=0.04), 0.01
     law, n = params.friction, params.n_osc
     m, k = np.asarray(params.mass), np.asarray(jc.stiffness_matrix(params))
 
     def force(v):
-        return -_mu(v, law) * np.tanh(v / params.eps)
+        return -_mu(v, law) * np.tanh(v / eps)
 
     def growth(v_d):
         h = 1e-6
@@ -84,7 +84,7 @@ def test_hopf_point_of_a_lattice_with_unequal_masses_against_a_jacobian_written_
         return np.max(np.linalg.eigvals(jac).real)
 
     expected = scipy.optimize.brentq(growth, 0.3, 3.0, xtol=1e-13)
-    got = float(jc.hopf_point(params, guess=1.0).v_d[0])
+    got = float(jc.hopf_point(params, guess=1.0, eps=eps).v_d[0])
     assert abs(got - expected) < 1e-6
 
 
@@ -95,24 +95,26 @@ def test_a_lattice_run_against_scipy_oscillator_by_oscillator():
     graph = jc.Graph.lattice(2, 3, "free")
     eta = np.linspace(0.05, 0.4, graph.n_links)
     params = jc.ChainParams(graph=graph, eta_c=eta, mass=np.linspace(0.7, 1.6, 6),
-                            xi=0.03, eps=0.05, v_d=1.2)
+                            xi=0.03, v_d=1.2)
+    eps = 0.05
     law, m = params.friction, np.asarray(params.mass)
 
     def rhs(t, y):
         x, v = y[:6], y[6:]
-        a = -2 * 0.03 * v - x - params.eps * 0 * x
+        a = -2 * 0.03 * v - x
         for (left, right), e in zip(graph.links, eta):
             a[left] += e * (x[right] - x[left])
             a[right] -= e * (x[right] - x[left])
         vr = v - 1.2
-        a = (a - _mu(vr, law) * np.tanh(vr / 0.05)) / m
+        a = (a - _mu(vr, law) * np.tanh(vr / eps)) / m
         return np.concatenate([v, a])
 
     y0 = np.concatenate([np.linspace(-1.0, 1.5, 6), np.zeros(6)])
     ref = scipy.integrate.solve_ivp(rhs, (0, 40.0), y0, method="DOP853", rtol=1e-11,
                                     atol=1e-12).y[:, -1]
     options = jc.SimulationOptions(t_end=40.0, transient=0.0, rtol=1e-10, atol=1e-12)
-    got = np.asarray(jc.simulate(params, y0.reshape(2, 6), options=options).y_final)
+    got = np.asarray(jc.simulate(params, y0.reshape(2, 6),
+                                 engine=jc.Smoothed(options=options, eps=eps)).y_final)
     np.testing.assert_allclose(got.ravel(), ref, atol=1e-6)
 
 
@@ -122,14 +124,14 @@ def test_energy_balance_on_a_lattice_with_masses():
     import diffrax
     import jax.numpy as jnp
 
-    params = _unequal_lattice(xi=np.linspace(0.02, 0.07, 6), eps=0.05)
+    params, eps = _unequal_lattice(xi=np.linspace(0.02, 0.07, 6)), 0.05
 
     def field(t, z, args):
         y, _ = z
-        _, friction = jc.split_vector_field(t, y, params)
+        _, friction = jc.split_vector_field(t, y, params, eps)
         v = y[1]
         power = jnp.sum(params.mass * friction[1] * v)  # the force, not the acceleration
-        return jc.vector_field(t, y, params), jnp.stack([power,
+        return jc.vector_field(t, y, params, eps), jnp.stack([power,
                                                          jnp.sum(2 * params.xi * v**2)])
 
     y0 = jnp.stack([jnp.linspace(-1.0, 2.0, 6), jnp.zeros(6)])
@@ -178,13 +180,13 @@ def test_from_physical_against_a_dimensional_scipy_integration():
     pint = pytest.importorskip("pint")
     law = jc.ExponentialDecay(mu_st=1.0, mu_d=0.5, v0=0.05)
     params = jc.from_physical(mass=2.0, stiffness=800.0, damping=4.0, normal_load=40.0,
-                              friction=law, belt_speed=0.3, n_osc=1, eps=1e-2)
+                              friction=law, belt_speed=0.3, n_osc=1)
     s = params.scales
     assert s.length == pytest.approx(0.05) and s.time == pytest.approx(0.05)
     ureg = pint.UnitRegistry()
     same = jc.from_physical(mass=2000 * ureg.g, stiffness=0.8 * ureg("N/mm"),
                             damping=4 * ureg("N*s/m"), normal_load=0.04 * ureg.kN,
-                            friction=law, belt_speed=30 * ureg("cm/s"), n_osc=1, eps=1e-2)
+                            friction=law, belt_speed=30 * ureg("cm/s"), n_osc=1)
     for name in ("xi", "v_d", "stiffness", "load"):
         assert float(getattr(same, name)) == pytest.approx(float(getattr(params, name)),
                                                            rel=1e-12)
@@ -201,7 +203,8 @@ def test_from_physical_against_a_dimensional_scipy_integration():
     options = jc.SimulationOptions(t_end=t_end / s.time, transient=0.0, rtol=1e-10,
                                    atol=1e-12)
     y0_dimless = np.array([[y0[0] / s.length], [y0[1] / s.velocity]])
-    got = np.asarray(jc.simulate(params, y0_dimless, options=options).y_final)[:, 0]
+    got = np.asarray(jc.simulate(params, y0_dimless,
+                                 engine=jc.Smoothed(options=options, eps=1e-2)).y_final)[:, 0]
     assert abs(got[0] * s.length - ref[0]) < 1e-7
     assert abs(got[1] * s.velocity - ref[1]) < 1e-5
     with pytest.raises(ValueError, match="stiffness"):
@@ -319,17 +322,18 @@ def test_a_mass_and_a_table_through_hopf_point_and_shooting():
     whose period and amplitude a long simulation (another program) measures."""
     law = jc.ExponentialDecay()
     v = np.linspace(0.0, 6.0, 241)
-    params = jc.ChainParams(n_osc=1, mass=1.7, eps=0.01, v_d=1.0,
-                            friction=jc.Tabulated(v=v, mu=_mu(v, law)))
+    params, eps = jc.ChainParams(n_osc=1, mass=1.7, v_d=1.0,
+                                 friction=jc.Tabulated(v=v, mu=_mu(v, law))), 0.01
     exact = float(jc.hopf_vd_analytic(jc.ChainParams(n_osc=1)))
-    assert abs(float(jc.hopf_point(params, guess=1.2).v_d[0]) - exact) < 1e-3
+    assert abs(float(jc.hopf_point(params, guess=1.2, eps=eps).v_d[0]) - exact) < 1e-3
     options = jc.SimulationOptions(t_end=200.0, transient=150.0, rtol=1e-8, atol=1e-10)
     y0 = np.array([[2.0], [0.0]])
-    peaks = jc.observe(params, y0, [jc.PeakTimes(), jc.Extrema()], options=options)
+    peaks = jc.observe(params, y0, [jc.PeakTimes(), jc.Extrema()],
+                       engine=jc.Smoothed(options=options, eps=eps))
     times = np.asarray(peaks["peak_times"])[0]
     period = float(np.median(np.diff(times[np.isfinite(times)])))
     orbit = jc.periodic_orbit(params, np.asarray(peaks["y_final"]), period,
-                              jc.ShootingOptions(root_finder="levenberg-marquardt"))
+                              jc.ShootingOptions(root_finder="levenberg-marquardt"), eps=eps)
     assert bool(orbit.converged)
     assert abs(float(orbit.period) / period - 1) < 2e-3
     assert abs(float(orbit.amplitudes[0]) / float(peaks["amplitudes"][0]) - 1) < 2e-3
@@ -366,11 +370,11 @@ def test_the_nonsmooth_reference_with_masses_on_a_lattice_against_the_smoothed_m
     law = jc.ExponentialDecay()
     v = np.linspace(0.0, 6.0, 241)
     params = jc.ChainParams(graph=jc.Graph.lattice(1, 2, "free"), mass=[1.0, 1.6],
-                            eta_c=0.05, v_d=1.0, eps=1e-4,
+                            eta_c=0.05, v_d=1.0,
                             friction=jc.Tabulated(v=v, mu=_mu(v, law)))
     y0 = np.array([[2.0, -1.0], [0.0, 0.0]])
-    smoothed = jc.simulate(params, y0, options=jc.SimulationOptions(t_end=150.0,
-                                                                    transient=100.0))
+    smoothed = jc.simulate(params, y0, engine=jc.Smoothed(
+        options=jc.SimulationOptions(t_end=150.0, transient=100.0), eps=1e-4))
     reference = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions(t_end=150.0,
                                                                       transient=100.0))
     a, b = np.asarray(smoothed.amplitudes), np.asarray(reference.amplitudes)

@@ -151,6 +151,27 @@ def test_sweeping_eta_c_through_a_lens_equals_separate_runs(monkeypatch):
             np.testing.assert_array_equal(row[name].values, one[name].values, name)
 
 
+@pytest.mark.numerics
+def test_sweeping_the_engine_s_eps_equals_separate_runs():
+    """eps, the smoothed engine's setting (not a field of the chain), swept by name
+    equals one ensemble per value with `Smoothed(eps=...)` (the same compiled run
+    per trajectory: equal to the last bit); a batch that mixes two values runs
+    each with its own eps, and the values do move the results."""
+    params, ics = jc.ChainParams(n_osc=3, v_d=1.5), jc.localized_family(3)
+    eps = [1e-2, 3e-3]
+    ds = jc.sweep(params, eps, ics, options=SHORT, where="eps", batch_size=4,
+                  progress=False)
+    assert ds["n_halc"].dims == ("eps", "ic") and ds.attrs["swept"] == "eps"
+    for value in eps:
+        one = jc.ensemble(params, [1.5], ics, engine=jc.Smoothed(options=SHORT, eps=value),
+                          progress=False).isel(v_d=0)
+        row = ds.sel(eps=value)
+        for name in ("amplitudes", "energy", "n_halc", "n_halc_halves", "y_final",
+                     "num_steps"):
+            np.testing.assert_array_equal(row[name].values, one[name].values, name)
+    assert not np.array_equal(ds["num_steps"].values[0], ds["num_steps"].values[1])
+
+
 def _synthetic(n_halc, halves, excited, status=None):
     n_halc = np.asarray(n_halc)
     return xr.Dataset(

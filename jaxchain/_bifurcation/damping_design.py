@@ -9,6 +9,8 @@ from jaxtyping import Array, Float
 
 from .._physics.params import with_parameter
 from .continuation import ContinuationProblem
+from .hopf import check_eps
+from .limit_cycles import problem_eps
 from .two_parameter import fold_curve, hopf_vd_and_derivative
 from .._checks import check_positive
 
@@ -37,7 +39,7 @@ class DampingDesign(eqx.Module):
 
 def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, " 2n+1"],
                      target: float, *, learning_rate: float = 1.0, steps: int = 60,
-                     tol: float = 1e-8) -> DampingDesign:
+                     tol: float = 1e-8, eps=None) -> DampingDesign:
     """The smallest damping ratio xi at which the bistable window of belt speeds,
     fold_vd(xi) - hopf_vd(xi), is narrower than `target`.
 
@@ -56,6 +58,9 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
     - `target`: the window width, > 0.
     - `learning_rate`, `steps`: optax L-BFGS's step scale and iteration budget.
     - `tol`: tolerance on |window - target|.
+    - `eps`: the smoothing velocity of the Hopf point (> 0, shape (),
+        dimensionless); None (the default) takes that of the problem's limit
+        cycles (`problem_eps`).
 
     **Returns:**
 
@@ -63,10 +68,11 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
 
     **Raises:**
 
-    `ValidationError` if target <= 0; `RuntimeError` if a fold along the way is lost or
-    the Hopf point is not found.
+    `ValidationError` if target <= 0, or eps is None for a problem that carries none;
+    `RuntimeError` if a fold along the way is lost or the Hopf point is not found.
     """
     check_positive("target", target)
+    eps = problem_eps(problem) if eps is None else check_eps(eps)
     n = problem.u0.size
     state = {"problem": problem, "solution": fold_solution}
 
@@ -79,7 +85,7 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
         solution, derivative = jnp.asarray(solutions[0]), derivatives[0]
         state.update(solution=solution,
                      problem=problem.with_params(with_parameter(problem.params, "xi", xi)))
-        hopf, d_hopf = hopf_vd_and_derivative(problem.params, "xi", xi)
+        hopf, d_hopf = hopf_vd_and_derivative(problem.params, "xi", xi, eps=eps)
         if not bool(jnp.isfinite(hopf)):
             raise RuntimeError(f"Newton's method did not find the Hopf point at xi = {xi:.6g}")
         return float(solution[n] - hopf), float(derivative[n] - d_hopf), float(hopf)

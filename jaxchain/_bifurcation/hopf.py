@@ -10,8 +10,8 @@ import optimistix as optx
 from jaxtyping import Array, Complex, Float
 
 from .._engine.checks import check_params, real_array
-from .._physics.forces import friction_coefficient
-from .._physics.friction import ExponentialDecay
+from .._physics.forces import DEFAULT_EPS, friction_coefficient
+from .._physics.friction import ExponentialDecay, as_parameter
 from .._physics.params import is_homogeneous_ring
 from .._physics.model import jacobian
 from .._physics.params import ChainParams, with_parameter
@@ -25,7 +25,7 @@ def _require_ring(params: ChainParams, what: str) -> None:
                               "any chain")
 
 
-def _fourier_blocks(params: ChainParams) -> Complex[Array, "n_osc 2 2"]:
+def _fourier_blocks(params: ChainParams, eps=DEFAULT_EPS) -> Complex[Array, "n_osc 2 2"]:
     """The Jacobian of eq. (5) at steady sliding (`jacobian`, by `jax.jacfwd`),
     block-diagonalised by the discrete Fourier transform of the ring.
 
@@ -40,6 +40,7 @@ def _fourier_blocks(params: ChainParams) -> Complex[Array, "n_osc 2 2"]:
     **Arguments:**
 
     - `params`: the chain parameters.
+    - `eps`: the smoothing velocity of tanh(v_rel/eps), as `jacobian` takes it.
 
     **Returns:**
 
@@ -52,22 +53,33 @@ def _fourier_blocks(params: ChainParams) -> Complex[Array, "n_osc 2 2"]:
     """
     _require_ring(params, "fourier_blocks")
     n = params.n_osc
-    jac = jnp.reshape(jacobian(params), (2, n, 2, n))
+    jac = jnp.reshape(jacobian(params, eps=eps), (2, n, 2, n))
     k, m = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     modes = jnp.asarray(np.exp(2j * np.pi * k * m / n) / np.sqrt(n))  # (k, m)
     return jnp.einsum("km,imjl,kl->kij", modes.conj(), jac, modes)
 
 
-def mode_eigenvalues(params: ChainParams) -> Complex[Array, "n_osc 2"]:
+def mode_eigenvalues(params: ChainParams, eps=DEFAULT_EPS) -> Complex[Array, "n_osc 2"]:
     """Eigenvalues of each Fourier block of the Jacobian at steady sliding, in
     closed form (lambda = tr/2 +- sqrt(tr^2/4 - det)), so that they are smooth in
     the parameters and JAX differentiates them exactly.
 
+    **Arguments:**
+
+    - `params`: the chain parameters (the homogeneous ring).
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) in the vector field (> 0),
+        shape (), dimensionless (a fraction of x_0 omega_n); the smoothed engine's
+        (`Smoothed.eps`), `DEFAULT_EPS` by default.
+
     **Returns:**
 
     Shape (n_osc, 2), complex, the larger real part first.
+
+    **Raises:**
+
+    `ValidationError` unless the chain is the homogeneous ring.
     """
-    blocks = _fourier_blocks(params)
+    blocks = _fourier_blocks(params, eps)
     half_trace = 0.5 * (blocks[:, 0, 0] + blocks[:, 1, 1])
     det = blocks[:, 0, 0] * blocks[:, 1, 1] - blocks[:, 0, 1] * blocks[:, 1, 0]
     root = jnp.sqrt(half_trace**2 - det)
@@ -75,10 +87,18 @@ def mode_eigenvalues(params: ChainParams) -> Complex[Array, "n_osc 2"]:
     return jnp.stack([half_trace + root, half_trace - root], axis=-1)
 
 
-def steady_sliding_eigenvalues(params: ChainParams) -> Complex[Array, " 2n_osc"]:
+def steady_sliding_eigenvalues(params: ChainParams, eps=DEFAULT_EPS
+                               ) -> Complex[Array, " 2n_osc"]:
     """The eigenvalues of the Jacobian of eq. (5) at steady sliding, for any chain:
     by the Fourier route (`mode_eigenvalues`) on the homogeneous ring, by
     `jnp.linalg.eigvals` of the Jacobian (`jacobian`, by `jax.jacfwd`) otherwise.
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
+        dimensionless; the smoothed engine's (`Smoothed.eps`), `DEFAULT_EPS` by
+        default. Steady sliding is the smoothed vector field's fixed point there.
 
     **Returns:**
 
@@ -86,23 +106,31 @@ def steady_sliding_eigenvalues(params: ChainParams) -> Complex[Array, " 2n_osc"]
     part), dimensionless (per unit of time, eq. (4)).
     """
     if is_homogeneous_ring(params):
-        values = jnp.reshape(mode_eigenvalues(params), (-1,))
+        values = jnp.reshape(mode_eigenvalues(params, eps), (-1,))
     else:
-        values = jnp.linalg.eigvals(jacobian(params))
+        values = jnp.linalg.eigvals(jacobian(params, eps=eps))
     order = jnp.lexsort((-values.imag, -values.real))
     return values[order]
 
 
-def leading_growth_rate(params: ChainParams) -> Float[Array, ""]:
+def leading_growth_rate(params: ChainParams, eps=DEFAULT_EPS) -> Float[Array, ""]:
     """max Re(lambda) over the eigenvalues of the Jacobian at steady sliding
-    (`steady_sliding_eigenvalues`): steady sliding is stable where it is negative.
-    Dimensionless (per unit of time, eq. (4))."""
-    return jnp.max(steady_sliding_eigenvalues(params).real)
+    (`steady_sliding_eigenvalues`, smoothed at `eps`, `DEFAULT_EPS` by default):
+    steady sliding is stable where it is negative. Dimensionless (per unit of
+    time, eq. (4))."""
+    return jnp.max(steady_sliding_eigenvalues(params, eps).real)
 
 
-def growth_rates(params: ChainParams) -> Float[Array, " modes"]:
+def growth_rates(params: ChainParams, eps=DEFAULT_EPS) -> Float[Array, " modes"]:
     """Growth rates about steady sliding; steady sliding is stable when all are
     negative.
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
+        dimensionless; the smoothed engine's (`Smoothed.eps`), `DEFAULT_EPS` by
+        default.
 
     **Returns:**
 
@@ -111,8 +139,8 @@ def growth_rates(params: ChainParams) -> Float[Array, " modes"]:
     (2 n_osc,), decreasing. Dimensionless (per unit of time, eq. (4)).
     """
     if is_homogeneous_ring(params):
-        return mode_eigenvalues(params)[:, 0].real
-    return steady_sliding_eigenvalues(params).real
+        return mode_eigenvalues(params, eps)[:, 0].real
+    return steady_sliding_eigenvalues(params, eps).real
 
 
 def hopf_vd_analytic(params: ChainParams) -> Float[Array, ""]:
@@ -146,7 +174,7 @@ def hopf_vd_analytic(params: ChainParams) -> Float[Array, ""]:
     return law.v0 * jnp.log(params.load * (law.mu_st - law.mu_d) / (2 * params.xi * law.v0))
 
 
-def hopf_eps_correction(params: ChainParams) -> Float[Array, ""]:
+def hopf_eps_correction(params: ChainParams, eps=DEFAULT_EPS) -> Float[Array, ""]:
     """Leading-order shift of the Hopf belt speed by the tanh smoothing,
 
         v_d,H(eps) - v_d,H(0) = -v0 (2 + 2 mu(v_d,H) / (xi eps)) exp(-2 v_d,H / eps),
@@ -155,14 +183,24 @@ def hopf_eps_correction(params: ChainParams) -> Float[Array, ""]:
     exp(-2v/eps) in F'(-v_d) = 2 xi. Exponentially small: 1e-1000 at eps = 1e-3, and
     -5.6e-4 at eps = 0.2 for eq. (7).
 
+    **Arguments:**
+
+    - `params`: the chain parameters (as `hopf_vd_analytic` takes them).
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
+        dimensionless (a fraction of x_0 omega_n); the smoothed engine's
+        (`Smoothed.eps`), `DEFAULT_EPS` by default. Differentiable in it.
+
     **Returns:**
 
     The shift, shape (), dimensionless (always negative).
+
+    **Raises:**
+
+    As `hopf_vd_analytic`.
     """
     v = hopf_vd_analytic(params)
     mu = params.load * friction_coefficient(params, v)
-    return -params.friction.v0 * (2 + 2 * mu / (params.xi * params.eps)) * jnp.exp(
-        -2 * v / params.eps)
+    return -params.friction.v0 * (2 + 2 * mu / (params.xi * eps)) * jnp.exp(-2 * v / eps)
 
 
 class HopfPoint(eqx.Module):
@@ -188,26 +226,26 @@ class HopfPoint(eqx.Module):
 
 
 def _mode_growth(v_d, args):
-    params, k = args
-    return growth_rates(with_parameter(params, "v_d", v_d))[k]
+    params, eps, k = args
+    return growth_rates(with_parameter(params, "v_d", v_d), eps)[k]
 
 
 @eqx.filter_jit
-def _hopf_modes(params: ChainParams, guess, rtol, atol):
+def _hopf_modes(params: ChainParams, eps, guess, rtol, atol):
     solver = optx.Newton(rtol=rtol, atol=atol)
 
     def one(k):
-        sol = optx.root_find(_mode_growth, solver, guess, (params, k), max_steps=100,
+        sol = optx.root_find(_mode_growth, solver, guess, (params, eps, k), max_steps=100,
                              throw=False)
         at = with_parameter(params, "v_d", sol.value)
-        slope = jax.grad(_mode_growth)(sol.value, (params, k))
-        return (sol.value, jnp.abs(mode_eigenvalues(at)[k, 0].imag), slope,
-                growth_rates(at)[k], sol.stats["num_steps"], sol.result)
+        slope = jax.grad(_mode_growth)(sol.value, (params, eps, k))
+        return (sol.value, jnp.abs(mode_eigenvalues(at, eps)[k, 0].imag), slope,
+                growth_rates(at, eps)[k], sol.stats["num_steps"], sol.result)
 
     return jax.vmap(one)(jnp.arange(params.n_osc))
 
 
-def critical_mode(params: ChainParams, mode: int = 0):
+def critical_mode(params: ChainParams, mode: int = 0, eps=DEFAULT_EPS):
     """The critical mode at a Hopf point (`params.v_d` at it): its frequency omega,
     the right eigenvector q of the Jacobian (A q = i omega q, |q| = 1) and the left
     one p (A^T p = -i omega p, <p, q> = conj(p) . q = 1), as the normal form of the
@@ -217,7 +255,9 @@ def critical_mode(params: ChainParams, mode: int = 0):
     On the homogeneous ring, Fourier mode `mode` (0 in phase or N/2 anti-phase, a
     real mode shape), from its 2x2 block (`_fourier_blocks`); on any other chain the
     eigenvalue of the Jacobian with the largest real part and positive imaginary
-    part (`mode` must be 0).
+    part (`mode` must be 0). The Jacobian is that of the vector field smoothed at
+    `eps` (> 0, shape (), dimensionless; `DEFAULT_EPS` by default, the smoothed
+    engine's `Smoothed.eps`).
 
     **Returns:**
 
@@ -232,7 +272,7 @@ def critical_mode(params: ChainParams, mode: int = 0):
         if mode != 0:
             raise ValidationError(f"mode must be 0 (the leading eigenvalue) on a chain other "
                                   f"than the homogeneous ring, got {mode!r}")
-        a = jacobian(params)
+        a = jacobian(params, eps=eps)
         values, right = jnp.linalg.eig(a)
         i = jnp.argmax(jnp.where(values.imag > 0, values.real, -jnp.inf))
         left_values, left = jnp.linalg.eig(a.T)
@@ -243,7 +283,7 @@ def critical_mode(params: ChainParams, mode: int = 0):
         if mode not in (0, n / 2):
             raise ValidationError(f"mode must be 0 or N/2 = {n / 2} (a real mode shape), "
                                   f"got {mode!r}")
-        block = _fourier_blocks(params)[mode]
+        block = _fourier_blocks(params, eps)[mode]
         values, right = jnp.linalg.eig(block)
         i = jnp.argmax(values.imag)
         omega = values[i].imag
@@ -257,37 +297,58 @@ def critical_mode(params: ChainParams, mode: int = 0):
     return omega, q, p
 
 
-def _leading_growth(v_d, params):
-    return leading_growth_rate(with_parameter(params, "v_d", v_d))
+def _leading_growth(v_d, args):
+    params, eps = args
+    return leading_growth_rate(with_parameter(params, "v_d", v_d), eps)
 
 
 @eqx.filter_jit
-def _hopf_leading(params: ChainParams, guess, rtol, atol):
+def _hopf_leading(params: ChainParams, eps, guess, rtol, atol):
     """The Hopf point of any chain: Newton's method (optimistix) on the leading
     growth rate, with shapes (1,) as `_hopf_modes` gives them per mode."""
-    sol = optx.root_find(_leading_growth, optx.Newton(rtol=rtol, atol=atol), guess, params,
-                         max_steps=100, throw=False)
+    sol = optx.root_find(_leading_growth, optx.Newton(rtol=rtol, atol=atol), guess,
+                         (params, eps), max_steps=100, throw=False)
     at = with_parameter(params, "v_d", sol.value)
-    values = steady_sliding_eigenvalues(at)
-    slope = jax.grad(_leading_growth)(sol.value, params)
+    values = steady_sliding_eigenvalues(at, eps)
+    slope = jax.grad(_leading_growth)(sol.value, (params, eps))
     fields = (sol.value, jnp.abs(values[0].imag), slope, values[0].real,
               sol.stats["num_steps"])
     return (*(jnp.atleast_1d(a) for a in fields), sol.result)
 
 
-def _hopf_roots(params: ChainParams, guess, rtol: float = 1e-12, atol: float = 1e-12):
-    """(v_d, omega, slope, residual, steps, result) of the Hopf point: per Fourier
-    mode on the homogeneous ring (`_hopf_modes`), of the leading eigenvalue
-    otherwise (`_hopf_leading`), each of shape (modes,) (result: () or (modes,),
-    optimistix's RESULTS). Traceable."""
+def _hopf_roots(params: ChainParams, eps, guess, rtol: float = 1e-12, atol: float = 1e-12):
+    """(v_d, omega, slope, residual, steps, result) of the Hopf point of the vector
+    field smoothed at `eps`: per Fourier mode on the homogeneous ring
+    (`_hopf_modes`), of the leading eigenvalue otherwise (`_hopf_leading`), each of
+    shape (modes,) (result: () or (modes,), optimistix's RESULTS). Traceable."""
     guess = jnp.asarray(guess, dtype=float)
     if is_homogeneous_ring(params):
-        return _hopf_modes(params, guess, rtol, atol)
-    return _hopf_leading(params, guess, rtol, atol)
+        return _hopf_modes(params, eps, guess, rtol, atol)
+    return _hopf_leading(params, eps, guess, rtol, atol)
 
 
-def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
-               atol: float = 1e-12, throw: bool = True) -> HopfPoint:
+def check_eps(eps, owner: str = "eps"):
+    """`eps`, the smoothing velocity of an analysis of the smoothed vector field, as
+    a float64 array leaf (traced by `eqx.filter_jit`: a new value does not
+    recompile, and derivatives with respect to it flow), checked to be a finite
+    number > 0 of shape () where it is concrete (a tracer passes as it is).
+
+    **Raises:** `TypeError` for a value that is not a real number;
+    `ValidationError` naming `owner` for a non-finite value, eps <= 0 or a shape
+    other than ()."""
+    eps = as_parameter(eps)
+    if isinstance(eps, np.ndarray) and eps.dtype == object:
+        raise TypeError(f"{owner} must be a real number, got {eps.tolist()!r}")
+    if not isinstance(eps, jax.core.Tracer):
+        a = np.asarray(eps)
+        if a.ndim != 0 or not (np.isfinite(a) and a > 0):
+            raise ValidationError(f"{owner} must be a finite number > 0 of shape (), got "
+                                  f"{a.tolist()!r}")
+    return eps
+
+
+def hopf_point(params: ChainParams, guess: float = 1.0, *, eps=DEFAULT_EPS,
+               rtol: float = 1e-12, atol: float = 1e-12, throw: bool = True) -> HopfPoint:
     """The Hopf boundary of steady sliding. On the homogeneous ring, mode by mode:
     the root in v_d of each Fourier mode's growth rate max Re(lambda)(v_d) = 0
     (`growth_rates`). On any other chain (mistuned, open, other loads): the root of
@@ -307,6 +368,11 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
     - `guess`: starting belt speed of Newton's method, a finite number > 0 (a law
         with several Hopf points, such as a Stribeck curve, gives the one Newton's
         method reaches).
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) in the vector field whose
+        steady sliding is analysed, a finite number > 0, shape (), dimensionless (a
+        fraction of x_0 omega_n); the smoothed engine's (`Smoothed.eps`),
+        `DEFAULT_EPS` by default. Traced: differentiable in it (implicitly, as in
+        the other parameters), and a new value does not recompile.
     - `rtol`, `atol`: Newton tolerances on v_d, finite numbers > 0.
     - `throw`: raise if Newton's method fails for a mode (the default), or give NaN
         as that mode's `v_d`, so that a failed solve never passes for a belt speed
@@ -322,8 +388,8 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
 
     `TypeError` if `params` is not a `ChainParams`, or `guess`, `rtol` or `atol` is
     not a real number;
-    `ValidationError` naming `guess`, `rtol` or `atol` for a value that is not a
-    finite number > 0; `RuntimeError` with `throw=True` if Newton's method fails for
+    `ValidationError` naming `guess`, `eps`, `rtol` or `atol` for a value that is not
+    a finite number > 0; `RuntimeError` with `throw=True` if Newton's method fails for
     a mode or gives v_d <= 0 (try another `guess`).
     """
     check_params(params)
@@ -332,7 +398,8 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
         a = real_array(value, name)
         if a.ndim != 0 or not (np.isfinite(a) and a > 0):
             raise ValidationError(f"{name} must be a finite {what} > 0, got {a.tolist()!r}")
-    v, omega, slope, residual, steps, result = _hopf_roots(params, guess, rtol, atol)
+    eps = check_eps(eps)
+    v, omega, slope, residual, steps, result = _hopf_roots(params, eps, guess, rtol, atol)
     found = (result == optx.RESULTS.successful) & (v > 0)
     if not throw:
         v = jnp.where(found, v, jnp.nan)
@@ -342,27 +409,35 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, rtol: float = 1e-12,
     return HopfPoint(v_d=v, omega=omega, slope=slope, residual=residual, newton_steps=steps)
 
 
-def hopf_vd(params: ChainParams, guess: float = 1.0) -> Float[Array, ""]:
+def hopf_vd(params: ChainParams, guess: float = 1.0, *, eps=DEFAULT_EPS
+            ) -> Float[Array, ""]:
     """The Hopf belt speed of steady sliding (the largest over the Fourier modes of
     the homogeneous ring, that of the leading eigenvalue on any other chain):
     `hopf_point` with `throw=False`, reduced to one number. Traceable and
-    differentiable in `params` by implicit differentiation through optimistix's
-    Newton method.
+    differentiable in `params` and `eps` (the smoothing velocity, as `hopf_point`
+    takes it; `DEFAULT_EPS` by default) by implicit differentiation through
+    optimistix's Newton method.
 
     **Returns:**
 
     A scalar; NaN (and a NaN derivative) where Newton's method failed for a mode
     or gave v_d <= 0.
+
+    **Raises:**
+
+    As `hopf_point` for a bad `guess` or `eps`.
     """
-    return jnp.max(hopf_point(params, guess, throw=False).v_d)
+    return jnp.max(hopf_point(params, guess, eps=eps, throw=False).v_d)
 
 
-def hopf_speed(params: ChainParams) -> float:
+def hopf_speed(params: ChainParams, eps=DEFAULT_EPS) -> float:
     """The Hopf belt speed of steady sliding as a number: the closed form of eq. (1)
     where it holds (`hopf_vd_analytic`: the exponential law with uniform damping,
-    load and law, xi > 0, mu_st > mu_d), else Newton's method on the Jacobian's
-    eigenvalues (`hopf_vd`); NaN where neither finds one."""
+    load and law, xi > 0, mu_st > mu_d; the limit eps -> 0, which differs from the
+    smoothed one by `hopf_eps_correction`, 1e-1000 at eps = 1e-3), else Newton's
+    method on the eigenvalues of the Jacobian smoothed at `eps` (`hopf_vd`; > 0,
+    dimensionless, `DEFAULT_EPS` by default); NaN where neither finds one."""
     try:
         return float(hopf_vd_analytic(params))
     except ValueError:
-        return float(hopf_vd(params))
+        return float(hopf_vd(params, eps=eps))

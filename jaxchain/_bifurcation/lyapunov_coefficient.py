@@ -7,33 +7,35 @@ import jax.numpy as jnp
 import lineax as lx
 from jaxtyping import Array, Float
 
+from .._physics.forces import DEFAULT_EPS
 from .._physics.model import jacobian, steady_sliding, vector_field
 from .._physics.params import ChainParams
 from .hopf import critical_mode
 
 
-def _derivative(params: ChainParams, y, vectors) -> Array:
-    """The multilinear form d^k f(y)[v_1, ..., v_k] of the flattened vector field,
-    by nested forward-mode derivatives (real vectors)."""
+def _derivative(params: ChainParams, eps, y, vectors) -> Array:
+    """The multilinear form d^k f(y)[v_1, ..., v_k] of the flattened vector field
+    smoothed at `eps`, by nested forward-mode derivatives (real vectors)."""
     def f(z):
-        return vector_field(0.0, z, params)
+        return vector_field(0.0, z, params, eps)
 
     for v in vectors:
         f = (lambda g, v: lambda z: jax.jvp(g, (z,), (v,))[1])(f, v)
     return f(y)
 
 
-def _complex_form(params: ChainParams, y, vectors) -> Array:
+def _complex_form(params: ChainParams, eps, y, vectors) -> Array:
     """The multilinear form for complex vectors, expanded into real and imaginary
     parts (forward-mode tangents are real)."""
     out = 0.0
     for parts in itertools.product((0, 1), repeat=len(vectors)):
         real = [(v.imag if part else v.real) for v, part in zip(vectors, parts)]
-        out = out + (1j ** sum(parts)) * _derivative(params, y, real)
+        out = out + (1j ** sum(parts)) * _derivative(params, eps, y, real)
     return out
 
 
-def first_lyapunov_coefficient(params: ChainParams, mode: int = 0) -> Float[Array, ""]:
+def first_lyapunov_coefficient(params: ChainParams, mode: int = 0, *, eps=DEFAULT_EPS
+                               ) -> Float[Array, ""]:
     """The first Lyapunov coefficient l1 of the Hopf bifurcation of steady sliding
     in Fourier mode `mode`, at `params.v_d` (pass the Hopf point's v_d):
 
@@ -61,6 +63,10 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0) -> Float[Arra
     - `params`: the chain parameters, at the Hopf point.
     - `mode`: Fourier mode k with a real mode shape, 0 or N/2, on the homogeneous
         ring; 0 (the leading eigenvalue, `critical_mode`) on any other chain.
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) in the vector field (> 0),
+        shape (), dimensionless (a fraction of x_0 omega_n); the smoothed engine's
+        (`Smoothed.eps`), `DEFAULT_EPS` by default. Pass that of the Hopf point
+        (`hopf_point`).
 
     **Returns:**
 
@@ -71,10 +77,10 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0) -> Float[Arra
     `ValidationError` for a bad mode.
     """
     n = params.n_osc
-    omega, q, p = critical_mode(params, mode)
+    omega, q, p = critical_mode(params, mode, eps)
 
-    y = jnp.reshape(steady_sliding(params), (-1,))
-    a = jacobian(params).astype(complex)
+    y = jnp.reshape(steady_sliding(params, eps), (-1,))
+    a = jacobian(params, y=jnp.reshape(y, (2, -1)), eps=eps).astype(complex)
 
     def solve(matrix, vector):
         return lx.linear_solve(lx.MatrixLinearOperator(matrix), vector, lx.LU()).value
@@ -82,9 +88,9 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0) -> Float[Arra
     def inner(u, v):
         return jnp.vdot(u, v)
 
-    c = _complex_form(params, y, [q, q, q.conj()])
-    b1 = solve(a, _complex_form(params, y, [q, q.conj()]))
-    b2 = solve(2j * omega * jnp.eye(2 * n) - a, _complex_form(params, y, [q, q]))
-    value = (inner(p, c) - 2 * inner(p, _complex_form(params, y, [q, b1]))
-             + inner(p, _complex_form(params, y, [q.conj(), b2])))
+    c = _complex_form(params, eps, y, [q, q, q.conj()])
+    b1 = solve(a, _complex_form(params, eps, y, [q, q.conj()]))
+    b2 = solve(2j * omega * jnp.eye(2 * n) - a, _complex_form(params, eps, y, [q, q]))
+    value = (inner(p, c) - 2 * inner(p, _complex_form(params, eps, y, [q, b1]))
+             + inner(p, _complex_form(params, eps, y, [q.conj(), b2])))
     return value.real / (2 * omega)

@@ -9,10 +9,12 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Complex, Float
 
 from .._physics.custom_types import State
-from .._physics.model import vector_field
+from .._physics.forces import DEFAULT_EPS
+from .._physics.model import Model, model_field, vector_field
 from .._physics.params import ChainParams
 from .._physics.stick import min_slip_speed, sticks
 from .._checks import check_positive
+from .hopf import check_eps
 from .._errors import ValidationError
 
 
@@ -68,11 +70,26 @@ class ShootingOptions(eqx.Module):
 
 
 def flow(params: ChainParams, y0: State, period, options: ShootingOptions,
-         saveat: diffrax.SaveAt = diffrax.SaveAt(t1=True)) -> diffrax.Solution:
-    """Integrate eq. (5) from `y0` over [0, period]. Forward-mode differentiable
-    (`diffrax.ForwardMode`), for monodromy matrices and Newton's method."""
+         saveat: diffrax.SaveAt = diffrax.SaveAt(t1=True), *,
+         eps=DEFAULT_EPS) -> diffrax.Solution:
+    """Integrate eq. (5), its friction smoothed as tanh(v_rel/eps), from `y0` over
+    [0, period]. Forward-mode differentiable (`diffrax.ForwardMode`), for monodromy
+    matrices and Newton's method.
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `y0`: the state at t = 0, shape (2, n_osc).
+    - `period`: the end time, > 0, dimensionless.
+    - `options`: `ShootingOptions` (solver and tolerances).
+    - `saveat`: diffrax's `SaveAt` (the end state by default).
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
+        dimensionless (a fraction of x_0 omega_n); the smoothed engine's
+        (`Smoothed.eps`), `DEFAULT_EPS` by default.
+    """
     return diffrax.diffeqsolve(
-        diffrax.ODETerm(vector_field), options.solver, 0.0, period, None, y0, params,
+        diffrax.ODETerm(model_field), options.solver, 0.0, period, None, y0,
+        Model(params, eps),
         saveat=saveat, max_steps=options.max_steps, adjoint=diffrax.ForwardMode(),
         stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
         throw=False)
@@ -89,7 +106,7 @@ def unpack(u: Float[Array, " 2n+1"]) -> tuple[State, Float[Array, ""]]:
 
 
 def shooting_residual(u: Float[Array, " 2n+1"], params: ChainParams,
-                      options: ShootingOptions) -> Float[Array, " 2n+1"]:
+                      options: ShootingOptions, eps=DEFAULT_EPS) -> Float[Array, " 2n+1"]:
     """Single-shooting residual of a periodic orbit (Seydel, *Practical Bifurcation
     and Stability Analysis*, 3rd ed. (2010), Sect. 7.1): the flow over one period
     minus the start, phi_T(y0) - y0, and the phase condition x_n'(0) = 0 with n =
@@ -102,29 +119,37 @@ def shooting_residual(u: Float[Array, " 2n+1"], params: ChainParams,
     - `u`: the unknowns `pack(y0, T)`, shape (2 n_osc + 1,).
     - `params`: the chain parameters.
     - `options`: `ShootingOptions`.
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
+        dimensionless; the smoothed engine's (`Smoothed.eps`), `DEFAULT_EPS` by
+        default.
 
     **Returns:**
 
     Shape (2 n_osc + 1,); zero on a periodic orbit.
     """
     y0, period = unpack(u)
-    y1 = flow(params, y0, period, options).ys[-1]
+    y1 = flow(params, y0, period, options, eps=eps).ys[-1]
     n = options.phase_oscillator
     return jnp.concatenate([jnp.reshape(y1 - y0, (-1,)), y0[1, n:n + 1]])
 
 
-def monodromy(params: ChainParams, y0: State, period, options: ShootingOptions
-              ) -> Float[Array, "2n 2n"]:
-    """The monodromy matrix d phi_T(y0) / d y0, by forward-mode differentiation
-    through `diffrax.diffeqsolve` (`jax.jacfwd`). Ordered as `jacobian`."""
+def monodromy(params: ChainParams, y0: State, period, options: ShootingOptions,
+              eps=DEFAULT_EPS) -> Float[Array, "2n 2n"]:
+    """The monodromy matrix d phi_T(y0) / d y0 of the flow smoothed at `eps` (> 0,
+    dimensionless; `DEFAULT_EPS` by default, as `flow` takes it), by forward-mode
+    differentiation through `diffrax.diffeqsolve` (`jax.jacfwd`). Ordered as
+    `jacobian`."""
     def end(z):
-        return jnp.reshape(flow(params, jnp.reshape(z, (2, -1)), period, options).ys[-1], (-1,))
+        return jnp.reshape(flow(params, jnp.reshape(z, (2, -1)), period, options,
+                                eps=eps).ys[-1], (-1,))
     return jax.jacfwd(end)(jnp.reshape(y0, (-1,)))
 
 
-def floquet_multipliers(params: ChainParams, y0: State, period, options: ShootingOptions
-                        ) -> tuple[Complex[Array, " 2n"], Array]:
-    """Floquet multipliers of the orbit through `y0`, with the trivial one deflated.
+def floquet_multipliers(params: ChainParams, y0: State, period, options: ShootingOptions,
+                        eps=DEFAULT_EPS) -> tuple[Complex[Array, " 2n"], Array]:
+    """Floquet multipliers of the orbit through `y0` of the flow smoothed at `eps`
+    (> 0, shape (), dimensionless; `DEFAULT_EPS` by default, as `flow` takes it),
+    with the trivial one deflated.
 
     The flow direction f = f(y0) is an eigenvector of the monodromy matrix M with
     multiplier 1 on an exact orbit. In an orthonormal basis [f/|f|, V] (Householder
@@ -142,8 +167,8 @@ def floquet_multipliers(params: ChainParams, y0: State, period, options: Shootin
     non-trivial ones and the trivial one; index of the trivial one, shape ()).
     Its distance from 1 measures the accuracy of the flow.
     """
-    m = monodromy(params, y0, period, options)
-    direction = jnp.reshape(vector_field(0.0, y0, params), (-1,))
+    m = monodromy(params, y0, period, options, eps)
+    direction = jnp.reshape(vector_field(0.0, y0, params, eps), (-1,))
     direction = direction / jnp.linalg.norm(direction)
     basis, _ = jnp.linalg.qr(direction[:, None], mode="complete")
     rest = basis[:, 1:]
@@ -153,13 +178,13 @@ def floquet_multipliers(params: ChainParams, y0: State, period, options: Shootin
     return values[order], jnp.argmax(order == values.size - 1)
 
 
-def _orbit_extrema(params: ChainParams, y0: State, period, options: ShootingOptions
-                   ) -> tuple[Float[Array, " n_osc"], Float[Array, " n_osc"],
-                              Float[Array, " n_osc"]]:
+def _orbit_extrema(params: ChainParams, y0: State, period, options: ShootingOptions,
+                   eps) -> tuple[Float[Array, " n_osc"], Float[Array, " n_osc"],
+                                 Float[Array, " n_osc"]]:
     """(x_max, x_min, smallest slip speed |x' - v_d|) of each oscillator over one
     period, from `options.n_samples` dense-output samples."""
     ts = period * jnp.linspace(0.0, 1.0, options.n_samples)
-    ys = flow(params, y0, period, options, diffrax.SaveAt(ts=ts)).ys
+    ys = flow(params, y0, period, options, diffrax.SaveAt(ts=ts), eps=eps).ys
     return ys[:, 0].max(0), ys[:, 0].min(0), min_slip_speed(ys[:, 1], params.v_d)
 
 
@@ -169,6 +194,8 @@ class PeriodicOrbit(eqx.Module):
     **Fields:**
 
     - `params`: the parameters it belongs to.
+    - `eps`: the smoothing velocity of the flow it is an orbit of (tanh(v_rel/eps)),
+        shape (), dimensionless.
     - `y0`: the state at t = 0 (x_1'(0) = 0), shape (2, n_osc).
     - `period`: T, shape ().
     - `amplitudes`: half of peak-to-peak of each x_n, shape (n_osc,).
@@ -186,6 +213,7 @@ class PeriodicOrbit(eqx.Module):
     """
 
     params: ChainParams
+    eps: Float[Array, ""]
     y0: State
     period: Float[Array, ""]
     amplitudes: Float[Array, " n_osc"]
@@ -205,26 +233,28 @@ class PeriodicOrbit(eqx.Module):
 
 
 def describe_orbit(params: ChainParams, u: Float[Array, " 2n+1"], options: ShootingOptions,
-                   converged=True) -> PeriodicOrbit:
-    """The `PeriodicOrbit` of the shooting unknowns `u` (traceable)."""
+                   converged=True, eps=DEFAULT_EPS) -> PeriodicOrbit:
+    """The `PeriodicOrbit` of the shooting unknowns `u` of the flow smoothed at `eps`
+    (> 0, shape (), dimensionless; `DEFAULT_EPS` by default) (traceable)."""
+    eps = jnp.asarray(eps, dtype=float)
     y0, period = unpack(u)
-    multipliers, trivial = floquet_multipliers(params, y0, period, options)
-    x_max, x_min, slip_speed = _orbit_extrema(params, y0, period, options)
+    multipliers, trivial = floquet_multipliers(params, y0, period, options, eps)
+    x_max, x_min, slip_speed = _orbit_extrema(params, y0, period, options, eps)
     amplitudes = 0.5 * (x_max - x_min)
     others = jnp.where(jnp.arange(multipliers.size) == trivial, 0.0, jnp.abs(multipliers))
-    residual = jnp.max(jnp.abs(shooting_residual(u, params, options)))
-    n_halc = jnp.sum(sticks(slip_speed, params.eps))
+    residual = jnp.max(jnp.abs(shooting_residual(u, params, options, eps)))
+    n_halc = jnp.sum(sticks(slip_speed, eps))
     return PeriodicOrbit(
-        params=params, y0=y0, period=period, amplitudes=amplitudes,
+        params=params, eps=eps, y0=y0, period=period, amplitudes=amplitudes,
         energy=0.5 * jnp.sum(amplitudes**2), n_halc=n_halc,
         multipliers=multipliers, trivial=trivial, stable=jnp.all(others < 1),
         residual=residual, converged=jnp.asarray(converged))
 
 
 @eqx.filter_jit
-def _solve(params, u0, options):
+def _solve(params, eps, u0, options):
     def fn(u, p):
-        return shooting_residual(u, p, options)
+        return shooting_residual(u, p, options, eps)
 
     tol = options.newton_tol
     if options.root_finder == "newton":
@@ -234,7 +264,8 @@ def _solve(params, u0, options):
         sol = optx.least_squares(fn, optx.LevenbergMarquardt(rtol=tol, atol=tol), u0, params,
                                  options={"jac": "fwd"}, max_steps=5 * options.newton_steps,
                                  throw=False)
-    orbit = describe_orbit(params, sol.value, options, sol.result == optx.RESULTS.successful)
+    orbit = describe_orbit(params, sol.value, options, sol.result == optx.RESULTS.successful,
+                           eps)
     # Levenberg-Marquardt also stops at a local minimum of the residual: only a root
     # counts as converged.
     return eqx.tree_at(lambda o: o.converged, orbit,
@@ -242,7 +273,7 @@ def _solve(params, u0, options):
 
 
 def periodic_orbit(params: ChainParams, y0: State, period: float,
-                   options: ShootingOptions = ShootingOptions(), *,
+                   options: ShootingOptions = ShootingOptions(), *, eps=DEFAULT_EPS,
                    throw: bool = True) -> PeriodicOrbit:
     """Solve for a periodic orbit of eq. (5) by single shooting: optimistix's Newton
     method on `shooting_residual` (state and period, with the phase condition
@@ -258,6 +289,10 @@ def periodic_orbit(params: ChainParams, y0: State, period: float,
         is set to 0 first.
     - `period`: a guess of the period.
     - `options`: `ShootingOptions`.
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) in eq. (5), a finite number
+        > 0, shape (), dimensionless (a fraction of x_0 omega_n): the orbit is one
+        of the smoothed engine's model at this eps (`Smoothed.eps`), `DEFAULT_EPS`
+        by default. Traced: a new eps does not recompile.
     - `throw`: raise if Newton's method does not converge (default); otherwise
         return the orbit with `converged=False`.
 
@@ -267,8 +302,8 @@ def periodic_orbit(params: ChainParams, y0: State, period: float,
 
     **Raises:**
 
-    `ValidationError` for a guess of the wrong shape, a non-positive period or a phase
-    oscillator outside the chain;
+    `ValidationError` for a guess of the wrong shape, a non-positive period or eps, or
+    a phase oscillator outside the chain;
     `RuntimeError` if Newton's method does not converge and `throw=True`.
     """
     y0 = jnp.asarray(y0, dtype=float)
@@ -278,8 +313,9 @@ def periodic_orbit(params: ChainParams, y0: State, period: float,
     if options.phase_oscillator >= params.n_osc:
         raise ValidationError(f"ShootingOptions.phase_oscillator must be < n_osc = "
                               f"{params.n_osc}, got {options.phase_oscillator}")
+    eps = check_eps(eps)
     y0 = y0.at[1, options.phase_oscillator].set(0.0)
-    orbit = _solve(params, pack(y0, period), options)
+    orbit = _solve(params, eps, pack(y0, period), options)
     if throw and not bool(orbit.converged):
         raise RuntimeError("shooting did not converge: start from a state closer to the "
                            "orbit (after a longer simulation) or a better period guess")

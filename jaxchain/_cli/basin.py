@@ -10,6 +10,7 @@ from .._studies.basin.sampling import Box
 from .._engine.status import Status
 from .._plots.basin import plot_basin_stability, plot_halc_histogram
 from .._physics.record import chain_record
+from .._physics.forces import DEFAULT_EPS
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_scheduler_option,
                      add_solver_options, add_vd_option, cluster_client, engine_of,
@@ -69,8 +70,8 @@ def add_parser(sub):
                         "(default min(S, 50); 0 for none)")
     p.add_argument("--sample-seed", type=int, default=0, metavar="K",
                    help="seed of the JAX PRNG key of the initial states (default 0)")
-    p.add_argument("--eps", type=positive_float, default=1e-3,
-                   help="tanh smoothing velocity (default 0.001)")
+    p.add_argument("--eps", type=positive_float, default=DEFAULT_EPS,
+                   help=f"tanh smoothing velocity (default {DEFAULT_EPS:g})")
     add_chain_options(p.add_argument_group("chain"))
     g = p.add_argument_group("integration")
     g.add_argument("--t-end", type=positive_float, default=None, metavar="T",
@@ -99,7 +100,7 @@ def run(args) -> None:
         raise UsageError(f"--transient must lie in [0, t_end = {t_end:g}), got {transient:g}")
     box = Box(x=tuple(args.x_range), v=tuple(args.v_range))
     options = simulation_options(args, t_end=t_end, transient=transient)
-    params = chain_params(args, n_osc, eps=args.eps)
+    params = chain_params(args, n_osc)
     n_osc = params.n_osc
     outputs = Outputs(args, data=["basin.zarr", "basin.nc"], figures=["basin", "basin_halc"])
     if args.resume and args.overwrite:
@@ -121,7 +122,7 @@ def run(args) -> None:
     if args.json:
         print_json({
             "v_d": ds["v_d"].values.tolist(), "classes": classes,
-            **{k: v for k, v in engine_record(args).items() if k != "eps"},
+            **engine_record(args),
             "chain": chain_record(params),
             "counts": ds["counts"].values.tolist(),
             "fractions": ds["fraction"].values.tolist(),

@@ -4,6 +4,7 @@ for one oscillator and for the ring."""
 import argparse
 import time
 
+from .._engine.engines import Smoothed
 from .._studies.bistable_range import (BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES,
                                        FIG3A_OPTIONS, bistable_range, fig3a_simulations)
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
@@ -66,7 +67,7 @@ def add_parser(sub):
 def run(args) -> None:
     smoothed_only(args, "the boundaries are found by Newton on the smoothed model's "
                         "Floquet multipliers and gradients")
-    params = chain_params(args, args.n_osc, eps=args.eps, xi=args.xi)
+    params = chain_params(args, args.n_osc, xi=args.xi)
     for name in ("xi_values", "ratio_values"):
         values = getattr(args, name)
         if not values or min(values) <= 0:
@@ -77,14 +78,17 @@ def run(args) -> None:
                       figures=["bifurcation_single", "bistable_region"])
     progress = show_progress(args)
     start = time.perf_counter()
+    # --eps smooths every analysis; the design's check keeps the default solver (the
+    # solver options set the simulation dots)
     found = bistable_range(params, target=args.target, xi_values=args.xi_values,
                        ratio_values=args.ratio_values, ring=not args.no_ring,
-                       progress=progress)
+                       engine=Smoothed(eps=args.eps), progress=progress)
     s = found.summary
     sims = None if args.no_simulation else fig3a_simulations(
         params, solver=args.solver,
         options=simulation_options(args, t_end=FIG3A_OPTIONS.t_end,
-                                   transient=FIG3A_OPTIONS.transient), progress=progress)
+                                   transient=FIG3A_OPTIONS.transient), progress=progress,
+        eps=args.eps)
     fig = plot_limit_cycle_branch(found.branch, s["hopf_vd"], s["fold_vd"],
                                   float(found.fold.record.energy), sims,
                                   title=f"single oscillator (Fig. 3(a)), eps = {args.eps:g}")

@@ -115,7 +115,7 @@ def _parse_friction(text: str | None):
 
 
 def chain_params(args, n_osc: int, **fields) -> ChainParams:
-    """The chain of a command: `n_osc`, `fields` (v_d, eps, xi) and the chain
+    """The chain of a command: `n_osc`, `fields` (v_d, xi) and the chain
     options; a --chain file overrides them, then --mistuning draws the stiffness.
 
     **Raises:**

@@ -22,12 +22,13 @@ from .._engine.engines import ENGINES, AbstractEngine, as_engine
 from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams
 from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
+from .._physics.forces import DEFAULT_EPS
 from .parser import Parser, UsageError  # noqa: F401  (for the commands)
 
 
 #: Field names in error messages, as the options a user typed.
 OPTION_NAMES = {
-    "ChainParams.v_d": "--vd", "ChainParams.n_osc": "--n-osc", "ChainParams.eps": "--eps",
+    "ChainParams.v_d": "--vd", "ChainParams.n_osc": "--n-osc", "Smoothed.eps": "--eps",
     "ChainParams.xi": "--xi",
     "SimulationOptions.t_end": "--t-end", "SimulationOptions.transient": "--transient",
     "SimulationOptions.rtol": "--rtol", "SimulationOptions.atol": "--atol",
@@ -154,7 +155,7 @@ def add_ring_options(g, *, n_osc: int = 20) -> None:
     """--n-osc and --eps, in the argument group (or parser) `g`."""
     g.add_argument("--n-osc", type=positive_int, default=n_osc, metavar="N",
                    help=f"number of oscillators on the ring (default {n_osc})")
-    eps = param_default("eps")
+    eps = DEFAULT_EPS
     g.add_argument("--eps", type=positive_float, default=eps,
                    help=f"tanh smoothing velocity of sign(v_rel) (default {eps:g})")
 
@@ -215,12 +216,12 @@ def simulation_options(args, **fields) -> SimulationOptions:
 
 def engine_of(args, options: SimulationOptions, params: ChainParams | None = None
               ) -> AbstractEngine:
-    """The engine that --engine names, with the command's solver (--solver, the
-    smoothed engine's; "auto" resolved with `params`) and `options` (the exact
-    engine takes their horizon, with its own tolerances)."""
-    if args.engine == "exact":
+    """The engine that --engine names, with the command's solver and eps (--solver,
+    --eps, the smoothed engine's; "auto" resolved with `params`) and `options` (the
+    exact engine takes their horizon, with its own tolerances)."""
+    if getattr(args, "engine", "smoothed") == "exact":
         return as_engine("exact", options=options)
-    return as_engine("smoothed", args.solver, options, params)
+    return as_engine("smoothed", args.solver, options, params, eps=args.eps)
 
 
 def engine_record(args) -> dict:

@@ -72,7 +72,7 @@ def run(args) -> None:
     for _, k in ics:
         if not 1 <= k <= args.n_osc:
             raise UsageError(f"--eq8/--eq10: k must lie in [1, {args.n_osc}], got {k}")
-    params = chain_params(args, args.n_osc, eps=args.eps)
+    params = chain_params(args, args.n_osc)
     for vd in args.vd:
         with_parameter(params, "v_d", vd)  # validates every belt speed now
     options = simulation_options(args)

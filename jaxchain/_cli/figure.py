@@ -15,11 +15,12 @@ from .._plots.dynamics import (plot_orbit_diagram, plot_phase_portraits,
                                plot_states_and_orbits, plot_time_delays, plot_time_series)
 from .._plots.localized import plot_localized_states
 from .._engine.status import status_names
+from .._physics.forces import DEFAULT_EPS
 from .._physics.record import chain_record
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, add_output_options, add_solver_options,
                      add_vd_option, engine_of, engine_record, engine_text, note,
-                     param_default, positive_float, print_json, show_progress,
+                     positive_float, print_json, show_progress,
                      simulation_options, smoothed_only)
 
 #: Each figure: its belt speed, initial conditions and what it shows.
@@ -59,8 +60,8 @@ def add_parser(sub):
     p.add_argument("--quick", action="store_true",
                    help="a reduced scene: N = 8, t in [0, 600], window [400, 600]")
     g = p.add_argument_group("model and integration (other parameters eq. (7))")
-    g.add_argument("--eps", type=positive_float, default=param_default("eps"),
-                   help=f"tanh smoothing velocity (default {param_default('eps'):g})")
+    g.add_argument("--eps", type=positive_float, default=DEFAULT_EPS,
+                   help=f"tanh smoothing velocity (default {DEFAULT_EPS:g})")
     add_vd_option(g, None, "belt speeds, each drawn in turn (default the figure's own, "
                            "that of the paper)")
     add_chain_options(g)
@@ -114,7 +115,7 @@ def run(args) -> None:
     reports, status = [], []
     start = time.perf_counter()
     for v_d, stem in zip(speeds, stems):
-        params = chain_params(args, size["n_osc"], v_d=v_d, eps=args.eps)
+        params = chain_params(args, size["n_osc"], v_d=v_d)
         ds, fig = _scene(args.name, size, params, engine_of(args, options, params),
                          show_progress(args))
         ds.attrs |= {"figure": args.name, "quick": int(args.quick)}

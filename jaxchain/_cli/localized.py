@@ -47,7 +47,7 @@ def add_parser(sub):
 
 def run(args) -> None:
     prefetch(*RESULT_MODULES)
-    params = chain_params(args, args.n_osc, v_d=args.vd[0], eps=args.eps)
+    params = chain_params(args, args.n_osc, v_d=args.vd[0])
     args.vd = speeds_of_chain(args, params)
     options = simulation_options(args)
     stems = [f"localized_vd{v:g}" for v in args.vd]

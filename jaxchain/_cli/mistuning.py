@@ -116,7 +116,7 @@ def run(args) -> None:
     if not 0 <= args.transient < args.t_end:
         raise UsageError(f"--transient must lie in [0, t_end = {args.t_end:g}), got "
                          f"{args.transient:g}")
-    params = chain_params(args, args.n_osc, eps=args.eps, v_d=1.5)
+    params = chain_params(args, args.n_osc, v_d=1.5)
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
     outputs = Outputs(args, data=["mistuning.json", "mistuning.nc", "chains"],
@@ -128,7 +128,7 @@ def run(args) -> None:
             key=args.sample_seed, n_folds=args.folds, solver=args.solver,
             options=simulation_options(args),
             edge_options=SimulationOptions(t_end=args.edge_t_end,
-                                           transient=0.8 * args.edge_t_end),
+                                           transient=0.8 * args.edge_t_end), eps=args.eps,
             out=args.out, resume=args.resume or outputs.again,
             overwrite=args.overwrite, client=client,
             progress=show_progress(args))
@@ -140,7 +140,7 @@ def run(args) -> None:
     shown = 1.0 if 1.0 in study["sigma"].values else float(study["sigma"].values[-1])
     outputs.figure(plot_mistuned_states(study, shown, 0, 1.5), "mistuned_fig4")
     s = study_summary(study) | {"localization_factor": table, "chain": chain_record(params),
-                                "wall_time_s": wall, "solver": args.solver}
+                                "wall_time_s": wall, "solver": args.solver, "eps": args.eps}
     report(s, outputs, "mistuning.json", args.json, _print_summary, wall)
     failed = failed_runs(study)
     if failed:
@@ -179,10 +179,10 @@ def _run_design(args) -> None:
     if args.period < 2 or args.n_osc % args.period:
         raise UsageError(f"--period must be >= 2 and divide --n-osc {args.n_osc}, got "
                          f"{args.period}")
-    params = chain_params(args, args.period, eps=args.eps, v_d=1.5)
+    params = chain_params(args, args.period, v_d=1.5)
     outputs = Outputs(args, data=["design.json"], figures=["design"])
     start = time.perf_counter()
-    result = design_study(params, budget=args.budget, chain_n_osc=args.n_osc,
+    result = design_study(params, budget=args.budget, chain_n_osc=args.n_osc, eps=args.eps,
                           progress=show_progress(args))
     result |= {"wall_time_s": time.perf_counter() - start, "chain": chain_record(params)}
     outputs.figure(plot_mistuning_design(result), "design")

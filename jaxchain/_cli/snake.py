@@ -88,7 +88,7 @@ def add_parser(sub):
 
 def run(args) -> None:
     smoothed_only(args, "the branches are continued by shooting on the smoothed model")
-    params = chain_params(args, args.n_osc, eps=args.eps, v_d=args.vd)
+    params = chain_params(args, args.n_osc, v_d=args.vd)
     asked = default_starts(params.graph) if args.sites is None else args.sites
     sites = [k for k in asked if isinstance(k, str) or k <= params.n_osc]
     try:
@@ -110,7 +110,8 @@ def run(args) -> None:
                                start_options=simulation_options(
                                    args, t_end=SNAKE_START.t_end,
                                    transient=SNAKE_START.transient),
-                               solver=args.solver, simulation_check=not args.no_simulation,
+                               solver=args.solver, eps=args.eps,
+                               simulation_check=not args.no_simulation,
                                out=outputs.path("snake"), progress=show_progress(args))
     outputs.figure(plot_snake(found["datasets"], sweep,
                               title=f"N = {params.n_osc}, eps = {args.eps:g}: stable solid, "

@@ -84,7 +84,7 @@ def add_parser(sub):
 
 
 def run(args) -> None:
-    params = chain_params(args, args.n_osc, eps=args.eps)
+    params = chain_params(args, args.n_osc)
     options = simulation_options(args)
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
@@ -99,7 +99,8 @@ def run(args) -> None:
                    overwrite=args.overwrite, client=client,
                    progress=show_progress(args)).load()
     wall = time.perf_counter() - start
-    outputs.figure(plot_bifurcation_diagram(ds, hopf_vd=hopf_speed(params)), "sweep")
+    outputs.figure(plot_bifurcation_diagram(ds, hopf_vd=hopf_speed(params, eps=args.eps)),
+                   "sweep")
 
     v_d = ds["v_d"].values
     status = status_names(ds["status"].values)

@@ -5,16 +5,17 @@ import diffrax
 import numpy as np
 
 from .options import SimulationOptions
+from .._physics.forces import DEFAULT_EPS
 from .._physics.params import ChainParams
 from .solver.registry import AUTO, SOLVERS, auto_solver
 from .._errors import ValidationError
 
 
-def as_solver(solver, name: str = "solver", params: ChainParams | None = None
-              ) -> diffrax.AbstractSolver:
+def as_solver(solver, name: str = "solver", params: ChainParams | None = None,
+              eps=DEFAULT_EPS) -> diffrax.AbstractSolver:
     """A diffrax solver, given as an instance, by name (`SOLVERS`), or as "auto":
-    chosen from `params` by `auto_solver` (the stiffness-aware ROS34PW2 unless
-    eps is large), or ROS34PW2 when no params are given.
+    chosen from `params` smoothed at `eps` by `auto_solver` (the stiffness-aware
+    ROS34PW2 unless eps is large), or ROS34PW2 when no params are given.
 
     **Raises:**
 
@@ -23,7 +24,7 @@ def as_solver(solver, name: str = "solver", params: ChainParams | None = None
     """
     if isinstance(solver, str):
         if solver == AUTO:
-            return auto_solver(params) if params is not None else SOLVERS["ros34pw2"]()
+            return auto_solver(params, eps) if params is not None else SOLVERS["ros34pw2"]()
         if solver not in SOLVERS:
             raise ValidationError(f"{name} must be one of {', '.join(sorted(SOLVERS))}, "
                                   f"'{AUTO}' or a diffrax solver, got {solver!r}")

@@ -9,6 +9,8 @@ from typing import ClassVar
 
 import diffrax
 import equinox as eqx
+import numpy as np
+from jaxtyping import ArrayLike
 
 from .checks import as_solver, check_options
 from .exact.options import NonsmoothOptions
@@ -20,6 +22,8 @@ from .smoothed import run, run_observers
 from .status import Status, failure_hint
 from .solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._physics.custom_types import State
+from .._physics.forces import DEFAULT_EPS
+from .._physics.friction import as_parameter, check_values
 from .._physics.params import ChainParams
 from .._errors import ValidationError
 
@@ -69,8 +73,8 @@ class AbstractEngine(eqx.Module):
 class Smoothed(AbstractEngine):
     """The smoothed engine: eq. (5) with the friction law's sign(v_rel) smoothed as
     tanh(v_rel/eps) (eq. (1) of the paper with eq. (7)), integrated by a diffrax
-    solver in chunks with dense output observed as it goes (`simulate`). eps is
-    read from the chain (`ChainParams.eps`).
+    solver in chunks with dense output observed as it goes (`simulate`). The
+    smoothing is the engine's, not the chain's: `ChainParams` holds physics only.
 
     **Arguments:**
 
@@ -78,37 +82,51 @@ class Smoothed(AbstractEngine):
         default (`DEFAULT_SOLVER`). "auto" (chosen from eps) is resolved by
         `as_engine`, which sees the chain.
     - `options`: `SimulationOptions` (horizon, tolerances, sampling).
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
+        dimensionless (a fraction of x_0 omega_n, eqs. (4)-(6)); `DEFAULT_EPS` =
+        1e-3 by default. An array leaf: a new eps does not recompile, and
+        derivatives with respect to it flow through a run.
 
     **Raises:**
 
-    `ValidationError` for an unknown solver name; `TypeError` for options of
-    another kind.
+    `ValidationError` for an unknown solver name or eps <= 0 (or not finite);
+    `TypeError` for options of another kind.
     """
 
     name: ClassVar[str] = "smoothed"
     solver: diffrax.AbstractSolver
     options: SimulationOptions
+    eps: ArrayLike = eqx.field(converter=as_parameter)
 
     def __init__(self, solver: diffrax.AbstractSolver | str = DEFAULT_SOLVER,
-                 options: SimulationOptions = SimulationOptions()):
+                 options: SimulationOptions = SimulationOptions(), eps=DEFAULT_EPS):
         self.solver = as_solver(solver)
         self.options = check_options(options)
+        self.eps = eps
+
+    def __check_init__(self):
+        check_values("Smoothed", {"eps": self.eps}, {"eps": (lambda a: a > 0, "> 0")})
+        if np.ndim(self.eps) != 0:
+            raise ValidationError(f"Smoothed.eps must be one number (shape ()), got shape "
+                                  f"{np.shape(self.eps)}")
 
     def run(self, params: ChainParams, y0: State, progress: bool = False) -> Observables:
-        return run(params, y0, self.solver, self.options, progress)
+        return run(params, self.eps, y0, self.solver, self.options, progress)
 
     def run_observers(self, params: ChainParams, y0: State, observers: tuple,
                       progress: bool = False) -> dict:
-        return run_observers(params, y0, self.solver, self.options, observers, progress)
+        return run_observers(params, self.eps, y0, self.solver, self.options, observers,
+                             progress)
 
     def n_chunks(self) -> int:
         return self.options.n_chunks()
 
     def failure_hint(self, status: int, params: ChainParams) -> str:
-        return failure_hint(status, params, self.solver, self.options)
+        return failure_hint(status, params, self.solver, self.options, self.eps)
 
     def attributes(self) -> dict:
-        return {"engine": self.name, "solver": type(self.solver).__name__,
+        return {"engine": self.name, "eps": float(self.eps),
+                "solver": type(self.solver).__name__,
                 "rtol": self.options.rtol, "atol": self.options.atol}
 
 
@@ -116,7 +134,7 @@ class Exact(AbstractEngine):
     """The exact engine: the stick/slip switch model of Leine et al. (1998),
     Nonlinear Dynamics 16, 41-54, without its stick band (stick is exact, x_n' =
     v_d): smooth slip segments integrated by diffrax, switches located as events
-    (`simulate_nonsmooth`). No eps: the chain's eps is not read. Its observables
+    (`simulate_nonsmooth`). No eps: nothing is smoothed. Its observables
     are those of the smoothed engine, in the same layout; an oscillator is on the
     HALC when it sticks during the window.
 
@@ -155,8 +173,9 @@ ENGINES = {"smoothed": Smoothed, "exact": Exact}
 def as_engine(engine: AbstractEngine | str = "smoothed",
               solver: diffrax.AbstractSolver | str | None = None,
               options: AbstractHorizon | None = None,
-              params: ChainParams | None = None) -> AbstractEngine:
-    """The engine value that `engine` names, with `solver` and `options` where given.
+              params: ChainParams | None = None, eps=None) -> AbstractEngine:
+    """The engine value that `engine` names, with `solver`, `options` and `eps`
+    where given.
 
     **Arguments:**
 
@@ -168,6 +187,8 @@ def as_engine(engine: AbstractEngine | str = "smoothed",
         `NonsmoothOptions`, or `SimulationOptions` whose horizon (t_end, transient,
         chunk_length) it takes with its own tolerances.
     - `params`: the chain, for `solver="auto"`.
+    - `eps`: the smoothed engine's smoothing velocity (`Smoothed.eps`);
+        `DEFAULT_EPS` when None.
 
     **Returns:**
 
@@ -175,13 +196,13 @@ def as_engine(engine: AbstractEngine | str = "smoothed",
 
     **Raises:**
 
-    `ValidationError` for an unknown engine name, a solver given to the exact engine,
-    or settings given beside an engine value; `TypeError` for options of another kind.
+    `ValidationError` for an unknown engine name, a solver or eps given to the exact
+    engine, or settings given beside an engine value; `TypeError` for options of another kind.
     """
     if isinstance(engine, AbstractEngine):
-        if solver is not None or options is not None:
-            raise ValidationError("give the solver and options inside the engine value, "
-                                  "not beside it")
+        if solver is not None or options is not None or eps is not None:
+            raise ValidationError("give the solver, options and eps inside the engine "
+                                  "value, not beside it")
         return engine
     if engine in ("queue", "vmap"):
         raise ValidationError(f"engine={engine!r}: engine names the model now ('smoothed' or "
@@ -190,9 +211,13 @@ def as_engine(engine: AbstractEngine | str = "smoothed",
         raise ValidationError(f"engine must be one of {sorted(ENGINES)} or an engine value, "
                               f"got {engine!r}")
     if engine == "smoothed":
-        solver = SOLVERS[DEFAULT_SOLVER]() if solver is None else as_solver(solver,
-                                                                             params=params)
-        return Smoothed(solver, SimulationOptions() if options is None else options)
+        eps = DEFAULT_EPS if eps is None else eps
+        solver = SOLVERS[DEFAULT_SOLVER]() if solver is None else as_solver(
+            solver, params=params, eps=eps)
+        return Smoothed(solver, SimulationOptions() if options is None else options, eps)
+    if eps is not None:
+        raise ValidationError("eps: the exact engine has no eps (it does not smooth the "
+                              "friction law); give eps to engine='smoothed'")
     if solver is not None:
         raise ValidationError("the exact engine takes no solver: it integrates its slip "
                               "segments itself (NonsmoothOptions sets its tolerances)")

@@ -14,7 +14,7 @@ from .compat import errors_as_nan
 from .solver.controller import step_size_controller
 from .._physics.custom_types import State
 from .status import Status
-from .._physics.model import split_vector_field, vector_field
+from .._physics.model import Model, model_field, model_split_field
 from .observables import Observables
 from .observers.base import AbstractObserver, Chunk, no_partial_answers, observe_chunk
 from .observers.extrema import Extrema
@@ -46,9 +46,9 @@ def terms(solver: diffrax.AbstractSolver):
     friction part (`split_vector_field`)."""
     if isinstance(solver, SPLIT_SOLVERS):
         return diffrax.MultiTerm(
-            diffrax.ODETerm(lambda t, y, p: split_vector_field(t, y, p)[0]),
-            diffrax.ODETerm(lambda t, y, p: split_vector_field(t, y, p)[1]))
-    return diffrax.ODETerm(vector_field)
+            diffrax.ODETerm(lambda t, y, m: model_split_field(t, y, m)[0]),
+            diffrax.ODETerm(lambda t, y, m: model_split_field(t, y, m)[1]))
+    return diffrax.ODETerm(model_field)
 
 
 def _advance(terms_, solver, args, options, observers, progress, tangent, carry, t0, t1,
@@ -194,32 +194,33 @@ def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
     return results, y_final, steps, status
 
 
-def run(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
+def run(params: ChainParams, eps, y0: State, solver: diffrax.AbstractSolver,
         options: SimulationOptions, progress: bool = False) -> Observables:
     """Pure, traceable core of `simulate` for one trajectory: the `Extrema` of eq.
-    (5) by `integrate`; no checks, no exceptions. `run_lanes` maps it over lanes.
-    With `progress` (static), each chunk ticks the active progress bar through a
-    host callback."""
+    (5) at the smoothing velocity `eps` by `integrate`; no checks, no exceptions.
+    `run_lanes` maps it over lanes. With `progress` (static), each chunk ticks the
+    active progress bar through a host callback."""
     (extrema,), y_final, steps, status = integrate(
-        terms(solver), solver, y0, params, options, (Extrema(),), progress)
+        terms(solver), solver, y0, Model(params, eps), options, (Extrema(),), progress)
     kept = {f.name for f in dataclasses.fields(Observables)}
     return Observables(**{k: v for k, v in extrema.items() if k in kept},
                        y_initial=y0, y_final=y_final, num_steps=steps, status=status)
 
 
-def run_observers(params: ChainParams, y0: State, solver: diffrax.AbstractSolver,
+def run_observers(params: ChainParams, eps, y0: State, solver: diffrax.AbstractSolver,
                   options: SimulationOptions, observers: Sequence[AbstractObserver],
                   progress: bool = False) -> dict[str, Array]:
     """Pure, traceable core of `observe`: one trajectory of eq. (5) with the given
-    observers only; `run_lanes` maps it over lanes.
+    observers only, at the smoothing velocity `eps`; `run_lanes` maps it over lanes.
 
     **Returns:**
 
     Every observer's results by name, with `y_initial`, `y_final`, `num_steps` and
     `status` (see `Observables`).
     """
-    results, y_final, steps, status = integrate(terms(solver), solver, y0, params,
-                                                options, observers, progress)
+    results, y_final, steps, status = integrate(terms(solver), solver, y0,
+                                                Model(params, eps), options, observers,
+                                                progress)
     merged = {"y_initial": y0, "y_final": y_final, "num_steps": steps, "status": status}
     for r in results:
         merged |= r

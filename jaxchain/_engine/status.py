@@ -103,13 +103,14 @@ def _explicit(solver) -> bool:
 
 
 def failure_hint(status: int, params: ChainParams, solver: diffrax.AbstractSolver,
-                 options: SimulationOptions) -> str:
+                 options: SimulationOptions, eps) -> str:
     """A hint for a trajectory of `status`, naming the setting to change.
 
     **Arguments:**
 
     - `status`: the `Status` of the run (or its integer value).
-    - `params`, `solver`, `options`: those of the run.
+    - `params`, `solver`, `options`, `eps`: those of the run (the chain, the smoothed
+        engine's solver, options and smoothing velocity).
 
     **Returns:**
 
@@ -117,15 +118,16 @@ def failure_hint(status: int, params: ChainParams, solver: diffrax.AbstractSolve
     has no hint of its own.
     """
     status = Status(int(status))
-    eps = float(np.max(np.asarray(params.eps)))
+    stiffness = stick_stiffness(params, eps)
+    eps = float(np.max(np.asarray(eps)))
     name = _name(solver)
     stiff = (f"eps = {eps:g} makes the stick phase stiff (stiffness mu_st/eps = "
-             f"{stick_stiffness(params):.3g})")
+             f"{stiffness:.3g})")
     if status is Status.ok:
         return ""
     if status is Status.max_steps_reached:
         if _explicit(solver):
-            step = EXPLICIT_STABILITY / stick_stiffness(params)
+            step = EXPLICIT_STABILITY / stiffness
             return (f"{stiff}: an explicit solver ({name}) may need steps as small as "
                     f"3 eps/mu_st = {step:.1g} while it sticks; use "
                     f"solver='{DEFAULT_SOLVER}' (or 'auto'), or eps >= {10 * eps:g}")

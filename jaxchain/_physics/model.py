@@ -1,19 +1,46 @@
 """The vector field of the chain, eq. (5) of the paper, its steady sliding and its
 Jacobian. Nothing here knows about solvers."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
-from jaxtyping import Array, Float
+from jaxtyping import Array, ArrayLike, Float
 
 from .custom_types import State
-from .forces import coupling_energy, coupling_force, smoothed_friction_force, stiffness_matrix
+from .forces import (DEFAULT_EPS, coupling_energy, coupling_force, friction_coefficient,
+                     smoothed_friction_force, stiffness_matrix)
 from .params import ChainParams, is_homogeneous_ring
 from .._errors import ValidationError
 
 
-def vector_field(t, y: State | Float[Array, " 2n"],
-                 params: ChainParams):
+class Model(eqx.Module):
+    """What an engine integrates and its observers see as `args`: the chain and the
+    smoothing velocity of its friction law, tanh(v_rel/eps) (the smoothed engine's
+    `Smoothed.eps`; 0 for the exact engine, which does not smooth).
+
+    **Arguments:**
+
+    - `params`: the chain (`ChainParams`).
+    - `eps`: the smoothing velocity, shape () (or one per lane), dimensionless.
+    """
+
+    params: ChainParams
+    eps: Float[ArrayLike, ""]
+
+
+def model_field(t, y: State | Float[Array, " 2n"], model: Model):
+    """`vector_field` of a `Model`: eq. (5) as diffrax calls it (args = the model)."""
+    return vector_field(t, y, model.params, model.eps)
+
+
+def model_split_field(t, y: State | Float[Array, " 2n"], model: Model):
+    """`split_vector_field` of a `Model`, as diffrax calls it (args = the model)."""
+    return split_vector_field(t, y, model.params, model.eps)
+
+
+def vector_field(t, y: State | Float[Array, " 2n"], params: ChainParams,
+                 eps: Float[ArrayLike, ""] = DEFAULT_EPS):
     """Right-hand side of eq. (5) of the paper, with the smoothed friction force of
     `smoothed_friction_force` and the coupling of `coupling_force`:
 
@@ -30,6 +57,8 @@ def vector_field(t, y: State | Float[Array, " 2n"],
     - `y`: state of shape (2, n_osc), rows (x, x'), or the same flattened to
         (2 n_osc,).
     - `params`: the chain parameters.
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (); the
+        smoothed engine's (`Smoothed.eps`), `DEFAULT_EPS` by default.
 
     **Returns:**
 
@@ -39,11 +68,12 @@ def vector_field(t, y: State | Float[Array, " 2n"],
 
     `ValidationError` if the shape of `y` does not match `params.n_osc`.
     """
-    elastic, friction = split_vector_field(t, y, params)
+    elastic, friction = split_vector_field(t, y, params, eps)
     return elastic + friction
 
 
-def split_vector_field(t, y: State | Float[Array, " 2n"], params: ChainParams):
+def split_vector_field(t, y: State | Float[Array, " 2n"], params: ChainParams,
+                       eps: Float[ArrayLike, ""] = DEFAULT_EPS):
     """The right-hand side of eq. (5) as (elastic and viscous part, friction part),
     whose sum is `vector_field`: the elastic part (x_n' and -2 xi x_n' - x_n -
     eta_c (2 x_n - x_{n+1} - x_{n-1})) is non-stiff, the friction part (0 and the
@@ -67,7 +97,7 @@ def split_vector_field(t, y: State | Float[Array, " 2n"], params: ChainParams):
         raise ValidationError(f"state must have shape (2, {n}) or ({2 * n},), got {shape}")
     x, v = jnp.reshape(y, (2, n))
     acceleration = -2 * params.xi * v - params.stiffness * x - coupling_force(params, x)
-    force = smoothed_friction_force(params, v - params.v_d)
+    force = smoothed_friction_force(params, v - params.v_d, eps)
     if params.mass is not None:
         acceleration, force = acceleration / params.mass, force / params.mass
     elastic = jnp.stack([v, acceleration])
@@ -75,18 +105,29 @@ def split_vector_field(t, y: State | Float[Array, " 2n"], params: ChainParams):
     return jnp.reshape(elastic, shape), jnp.reshape(friction, shape)
 
 
-def steady_sliding(params: ChainParams) -> State:
+def steady_sliding(params: ChainParams, eps: Float[ArrayLike, ""] | None = None) -> State:
     """Steady sliding, the fixed point of eq. (5): x_n' = 0 and K x = F(-v_d), K the
-    `stiffness_matrix` and F_n(-v_d) = (P_n/P) mu(v_d) tanh(v_d/eps) the friction
-    force at rest. On a homogeneous ring every x_n = F(-v_d)/k; otherwise the
-    linear system is solved (lineax, LU).
+    `stiffness_matrix` and F_n(-v_d) = (P_n/P) mu(v_d) the friction force at rest
+    (the belt slides under every oscillator), or with `eps` the smoothed force
+    (P_n/P) mu(v_d) tanh(v_d/eps) of the smoothed engine's fixed point (equal in
+    float64 for v_d/eps > 19). On a homogeneous ring every x_n = F(-v_d)/k;
+    otherwise the linear system is solved (lineax, LU).
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `eps`: the smoothing velocity (`vector_field`), or None for the law unsmoothed
+        (the exact engine's fixed point, from which initial conditions start).
 
     **Returns:**
 
     State of shape (2, n_osc), dimensionless.
     """
     n = params.n_osc
-    force = jnp.broadcast_to(smoothed_friction_force(params, -jnp.asarray(params.v_d)), (n,))
+    v_d = jnp.asarray(params.v_d)
+    force = (params.load * friction_coefficient(params, -v_d) if eps is None
+             else smoothed_friction_force(params, -v_d, eps))
+    force = jnp.broadcast_to(force, (n,))
     if is_homogeneous_ring(params):
         x = force / params.stiffness
     else:
@@ -149,19 +190,21 @@ def mechanical_energy(params: ChainParams, y: State) -> Float[Array, ""]:
     return 0.5 * jnp.sum(kinetic + params.stiffness * x**2) + jnp.sum(coupling_energy(params, x))
 
 
-def jacobian(params: ChainParams, y: State | None = None) -> Float[Array, "2n 2n"]:
+def jacobian(params: ChainParams, y: State | None = None,
+             eps: Float[ArrayLike, ""] = DEFAULT_EPS) -> Float[Array, "2n 2n"]:
     """Jacobian of the flattened vector field of eq. (5), by `jax.jacfwd`.
 
     **Arguments:**
 
     - `params`: the chain parameters.
     - `y`: the state, shape (2, n_osc); steady sliding if None.
+    - `eps`: the smoothing velocity, as `vector_field` takes it.
 
     **Returns:**
 
     Matrix of shape (2 n_osc, 2 n_osc), ordered (x_1..x_N, x_1'..x_N').
     """
     if y is None:
-        y = steady_sliding(params)
+        y = steady_sliding(params, eps)
     flat = jnp.reshape(y, (-1,))
-    return jax.jacfwd(lambda z: vector_field(0.0, z, params))(flat)
+    return jax.jacfwd(lambda z: vector_field(0.0, z, params, eps))(flat)

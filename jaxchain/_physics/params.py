@@ -19,7 +19,7 @@ from .._errors import ValidationError
 from .._setup import check_float64
 
 #: The fields that hold one value per chain (never per oscillator).
-CHAIN_SCALARS = ("v_d", "eps")
+CHAIN_SCALARS = ("v_d",)
 #: The fields that may hold one value per oscillator, shape (n_osc,).
 PER_OSCILLATOR = ("xi", "stiffness", "load", "mass")
 
@@ -32,6 +32,10 @@ def _optional_parameter(value):
 #: Marks a shorthand argument of `ChainParams` that was not given.
 _ABSENT = object()
 
+#: Where eps went: the error for eps given to the chain, as before.
+EPS_MOVED = ("ChainParams.eps: eps is a setting of the smoothed engine, not of the chain: "
+             "give engine=jaxchain.Smoothed(eps=...) (--eps on the command line)")
+
 
 class ChainParams(eqx.Module):
     """Dimensionless parameters of a chain of friction-excited oscillators, eq. (5)
@@ -41,7 +45,9 @@ class ChainParams(eqx.Module):
         x_n'' = -2 xi_n x_n' - k_n x_n - (coupling)_n + (P_n/P) F(x_n' - v_d),
 
     with the coupling of `coupling_force` (eta_c (2 x_n - x_{n+1} - x_{n-1}) on the
-    paper's ring) and F the friction law's force, smoothed by tanh(v_rel/eps).
+    paper's ring) and F the friction law's force. The chain holds physics only: how
+    sign(v_rel) is treated is the engine's (`Smoothed(eps=...)` smooths it as
+    tanh(v_rel/eps), `Exact` switches between stick and slip).
 
     All quantities are dimensionless as in eqs. (4)-(6): displacements in units of
     x_0 = P/k, velocities in units of x_0*omega_n, time in units of 1/omega_n.
@@ -55,7 +61,6 @@ class ChainParams(eqx.Module):
         free line, N + 1 on a fixed one, see `BOUNDARIES` and `Graph`).
     - `v_d`: belt speed (> 0; a belt moving the other way is the mirror image
         x -> -x), shape ().
-    - `eps`: velocity scale of the tanh smoothing of sign(v_rel) (> 0), shape ().
     - `stiffness`: ground stiffness k_n/k = 1 + delta_n (> 0), shape () or (n_osc,).
     - `load`: normal load P_n/P, which scales oscillator n's friction force (> 0),
         shape () or (n_osc,).
@@ -80,27 +85,18 @@ class ChainParams(eqx.Module):
     v0 = 0.5) with eta_c = 0.01, N = 20 and v_d = 1.5, the scene of Fig. 4, on the
     homogeneous ring.
 
-    The default `eps = 1e-3` is chosen from the work-precision study against the
-    event-driven non-smooth reference (documentation, "Choice of eps and solver"): it is
-    the largest eps whose amplitudes stay within 1 % of the reference on every
-    periodic state of the cross-check grid, n_HALC included (0.23 % on the chain
-    scene; at eps = 3e-3 the case v_d = 1.75, eq. (10), k = 20 falls to steady
-    sliding instead of the reference's 10 oscillators on the HALC). Smaller eps
-    cost more: the stick phase stiffens (stiffness about mu_st/eps), and the step
-    count grows as 1x, 2x, 6x and 30x for eps = 1e-2, 3e-3, 1e-3 and 3e-4 on the
-    Fig. 4 scene.
-
     Array fields are stored as float64 arrays (JAX arrays or tracers are kept as
     they are, for example under `jax.vmap`), so that `eqx.filter_jit` traces them: a
-    new value of v_d, eps or xi does not recompile. Only concrete values are
+    new value of v_d or xi does not recompile. Only concrete values are
     validated. Change a field with `with_parameter`, which validates. A batch of
     chains (lanes) is never made by giving a field a longer axis: see `lane_params`
     and `stack_chains`.
 
     **Raises:**
 
-    `ValidationError` naming the field for a non-finite value, n_osc < 1, xi < 0,
-    eta_c < 0, v_d <= 0, eps <= 0, stiffness <= 0, load <= 0, mass <= 0, a field of
+    `ValidationError` naming the field for eps (the smoothed engine's now), a
+    non-finite value, n_osc < 1, xi < 0,
+    eta_c < 0, v_d <= 0, stiffness <= 0, load <= 0, mass <= 0, a field of
     the wrong shape, an unknown boundary, both `graph` and `boundary`, a graph of
     another n_osc, a friction law that is not an
     `AbstractFrictionLaw`, both `friction` and `mu_st`/`mu_d`/`v0`, or a
@@ -113,7 +109,6 @@ class ChainParams(eqx.Module):
     xi: ArrayLike = eqx.field(converter=as_parameter)
     eta_c: ArrayLike = eqx.field(converter=as_parameter)
     v_d: ArrayLike = eqx.field(converter=as_parameter)
-    eps: ArrayLike = eqx.field(converter=as_parameter)
     stiffness: ArrayLike = eqx.field(converter=as_parameter)
     load: ArrayLike = eqx.field(converter=as_parameter)
     mass: ArrayLike | None = eqx.field(converter=_optional_parameter)
@@ -122,12 +117,14 @@ class ChainParams(eqx.Module):
     mistuning: Mistuning | None = eqx.field(static=True)
     scales: Scales | None = eqx.field(static=True)
 
-    def __init__(self, n_osc: int = _ABSENT, xi=0.05, eta_c=0.01, v_d=1.5, eps=1e-3,
+    def __init__(self, n_osc: int = _ABSENT, xi=0.05, eta_c=0.01, v_d=1.5,
                  stiffness=1.0, load=1.0, friction: AbstractFrictionLaw | None = None,
                  boundary: str = _ABSENT, mistuning: Mistuning | None = None, *,
                  mass=None, graph: Graph | None = None, scales: Scales | None = None,
-                 mu_st=_ABSENT, mu_d=_ABSENT, v0=_ABSENT):
+                 mu_st=_ABSENT, mu_d=_ABSENT, v0=_ABSENT, eps=_ABSENT):
         check_float64()  # before the converters make arrays of the wrong precision
+        if eps is not _ABSENT:
+            raise ValidationError(EPS_MOVED)
         shorthand = {k: v for k, v in (("mu_st", mu_st), ("mu_d", mu_d), ("v0", v0))
                      if v is not _ABSENT}
         if friction is None:
@@ -155,7 +152,6 @@ class ChainParams(eqx.Module):
         self.xi = xi
         self.eta_c = eta_c
         self.v_d = v_d
-        self.eps = eps
         self.stiffness = stiffness
         self.load = load
         self.mass = mass
@@ -180,11 +176,11 @@ class ChainParams(eqx.Module):
                                   f"got {type(self.mistuning).__name__}")
         positive = (lambda a: a > 0, "> 0")
         non_negative = (lambda a: a >= 0, ">= 0")
-        names = ("xi", "eta_c", "v_d", "eps", "stiffness", "load", "mass")
+        names = ("xi", "eta_c", "v_d", "stiffness", "load", "mass")
         check_values("ChainParams", {name: getattr(self, name) for name in names
                                      if getattr(self, name) is not None},
                      {"xi": non_negative, "eta_c": non_negative, "v_d": positive,
-                      "eps": positive, "stiffness": positive, "load": positive,
+                      "stiffness": positive, "load": positive,
                       "mass": positive})
         self._check_shapes()
         if self.mistuning is not None and not isinstance(self.stiffness, jax.core.Tracer):
@@ -237,7 +233,7 @@ def _shape_message(name, shape, shapes) -> str:
 def single_oscillator(params: ChainParams, index: int = 0) -> ChainParams:
     """Oscillator `index` of the chain on its own: n_osc = 1 on the ring (no
     coupling), with that oscillator's xi, stiffness, load and friction law, the
-    chain's v_d and eps. The single oscillator of Fig. 3(a) for the paper's ring.
+    chain's v_d. The single oscillator of Fig. 3(a) for the paper's ring.
     Traceable in the parameters' values (`jax.jacfwd` through it).
 
     **Raises:**
@@ -256,7 +252,7 @@ def single_oscillator(params: ChainParams, index: int = 0) -> ChainParams:
                       [getattr(law, n) if n in tables else pick(getattr(law, n))
                        for n in law.parameter_names()])
     return ChainParams(n_osc=1, xi=pick(params.xi), eta_c=params.eta_c if np.ndim(
-        params.eta_c) == 0 else 0.0, v_d=params.v_d, eps=params.eps,
+        params.eta_c) == 0 else 0.0, v_d=params.v_d,
         stiffness=pick(params.stiffness), load=pick(params.load), friction=law,
         mass=None if params.mass is None else pick(params.mass))
 
@@ -298,6 +294,8 @@ def parameter_lens(where: Callable | str, params: ChainParams | None = None) -> 
     if not isinstance(where, str):
         return where
     names = parameter_names(params)
+    if where == "eps":
+        raise ValidationError(EPS_MOVED)
     if where not in names:
         raise ValidationError(f"unknown parameter {where!r}: choose one of {', '.join(names)}")
     return _Field(where)

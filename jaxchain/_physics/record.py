@@ -9,7 +9,7 @@ from .chain import Graph
 from .mistuning import Mistuning
 from .scales import Scales
 from .friction import FRICTION_LAWS
-from .params import ChainParams, _chain_fields
+from .params import EPS_MOVED, ChainParams, _chain_fields
 from .._errors import ValidationError
 
 #: Keys of a record besides the array fields and the law's parameters.
@@ -211,7 +211,7 @@ def read_chain_file(path) -> dict:
 
 #: The keys of a chain file in SI units (`units = "SI"`), read by `from_physical`.
 SI_KEYS = ("mass", "stiffness", "damping", "normal_load", "coupling_stiffness",
-           "belt_speed", "eps", "reference")
+           "belt_speed", "reference")
 
 
 def chain_from_file(path, base: ChainParams | None = None) -> ChainParams:
@@ -222,7 +222,7 @@ def chain_from_file(path, base: ChainParams | None = None) -> ChainParams:
     parameters, ...). `table = "FILE.csv"` (relative to the chain file) gives a
     `Tabulated` law's v and mu. A file with `units = "SI"` holds instead the
     arguments of `from_physical` (mass, stiffness, damping, normal_load,
-    coupling_stiffness, belt_speed; eps and reference), the topology and the
+    coupling_stiffness, belt_speed; reference), the topology and the
     friction law with its velocities in m/s.
 
     **Raises:**
@@ -237,6 +237,8 @@ def chain_from_file(path, base: ChainParams | None = None) -> ChainParams:
 
     record = read_chain_file(path)
     try:
+        if "eps" in record:  # a chain holds physics only
+            raise ValidationError(EPS_MOVED)
         if "table" in record:
             law = Tabulated.from_csv(Path(path).parent / str(record.pop("table")))
             record |= {"friction": "table", "v": list(law.v), "mu": law.mu.tolist()}

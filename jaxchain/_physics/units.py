@@ -45,7 +45,7 @@ def _si_value(name: str, value) -> np.ndarray:
 
 def from_physical(*, mass, stiffness, normal_load, friction, belt_speed, damping=0.0,
                   coupling_stiffness=0.0, n_osc: int | None = None, boundary: str = "ring",
-                  graph=None, eps: float = 1e-3, reference: int = 0):
+                  graph=None, reference: int = 0):
     """A chain given in SI units, made dimensionless as eqs. (4)-(6) of the paper
     with its reference oscillator's mass m, stiffness k and normal load P:
 
@@ -67,8 +67,6 @@ def from_physical(*, mass, stiffness, normal_load, friction, belt_speed, damping
     - `coupling_stiffness`: k_c of each link, N/m.
     - `n_osc`, `boundary`, `graph`: the topology, as `ChainParams` takes it (n_osc
         from the longest per-oscillator array when not given).
-    - `eps`: the smoothing velocity of tanh(v_rel/eps), dimensionless (a fraction of
-        x_0 omega_n), as `ChainParams.eps`.
     - `reference`: the index of the reference oscillator (0-based).
 
     **Returns:**
@@ -107,7 +105,7 @@ def from_physical(*, mass, stiffness, normal_load, friction, belt_speed, damping
     topology = {"graph": graph} if graph is not None else {"boundary": boundary}
     return ChainParams(n_osc=n_osc, xi=values["damping"] / (2 * scales.mass * omega),
                        eta_c=values["coupling_stiffness"] / scales.stiffness,
-                       v_d=values["belt_speed"] / scales.velocity, eps=eps,
+                       v_d=values["belt_speed"] / scales.velocity,
                        stiffness=values["stiffness"] / scales.stiffness,
                        load=values["normal_load"] / scales.force,
                        mass=None if np.all(ratio == 1.0) else ratio,

@@ -31,14 +31,17 @@ def plot_crosscheck(ds: xr.Dataset, fig=None):
     """
     fig = panel_figure(fig, (11, 4.5))
     left, right = fig.subplots(1, 2)
+    s = ds.attrs.get("engine", "smoothed")  # the suffix of the tested engine's variables
     a_r = ds["amplitudes_reference"].values.ravel()
-    a_s = ds["amplitudes_smoothed"].values.ravel()
+    a_s = ds[f"amplitudes_{s}"].values.ravel()
     top = np.nanmax(np.concatenate([a_r, a_s, [1.0]])) * 1.05
     left.plot([0, top], [0, top], color="0.7", lw=1)
     left.scatter(a_r, a_s, s=10, alpha=0.6)
-    left.set(xlabel="amplitude, non-smooth reference", ylabel="amplitude, smoothed",
-             title=f"(a) all oscillators, $\\varepsilon$ = {ds.attrs['eps']:g}",
-             xlim=(0, top), ylim=(0, top))
+    # eps is the smoothed engine's (its attribute); the exact engine has none
+    setting = (f"$\\varepsilon$ = {ds.attrs['eps']:g}" if "eps" in ds.attrs
+               else f"{s} engine")
+    left.set(xlabel="amplitude, non-smooth reference", ylabel=f"amplitude, {s}",
+             title=f"(a) all oscillators, {setting}", xlim=(0, top), ylim=(0, top))
 
     error = 100 * ds["amplitude_error"].values
     periodic = np.array(["periodic" in c for c in ds["state_class_reference"].values])
@@ -60,6 +63,6 @@ def plot_crosscheck(ds: xr.Dataset, fig=None):
     right.axhline(1.0, color="k", lw=1, ls="--", label="1 %")
     right.set(yscale="log", xlabel="belt speed $v_d$",
               ylabel="amplitude error, % of max(1, largest amplitude)",
-              title="(b) smoothed vs non-smooth, per case")
+              title=f"(b) {s} vs non-smooth, per case")
     right.legend(fontsize=8)
     return fig

@@ -18,7 +18,10 @@ from .._bifurcation.shooting import ShootingOptions, flow, periodic_orbit, unpac
 from .._bifurcation.two_parameter import BoundaryCurves, boundary_curves
 from .._physics.initial import GivenState
 from .._bifurcation.existence import stick_slip_existence_limit
+from .._engine.engines import AbstractEngine, Smoothed, as_engine
 from .._engine.options import SimulationOptions
+from .._errors import ValidationError
+from .._physics.forces import DEFAULT_EPS
 from .._physics.friction import ExponentialDecay
 from .._physics.params import (
     chain_or_default, ChainParams, is_homogeneous_ring, single_oscillator, with_parameter,
@@ -48,19 +51,24 @@ def _multipliers(orbit) -> list[float]:
     return [float(m) for m in np.sort(np.abs(np.asarray(orbit.multipliers)))[::-1][:2]]
 
 
+#: The horizon of the design's check by simulation (`_design_check`).
+DESIGN_CHECK_OPTIONS = SimulationOptions(t_end=4000.0, transient=3500.0)
+
+
 def _design_check(params: ChainParams, design: DampingDesign, target: float,
-                  margin: float = 0.05) -> dict:
+                  engine: Smoothed, margin: float = 0.05) -> dict:
     """Direct simulation on both sides of the design: at v_d = v_d,H(xi) + target
     the stick-slip cycle must survive for xi = (1 - margin) xi* (window wider than
     the target) and die for (1 + margin) xi* (narrower). Starts far outside the
-    cycle (x = 3 above steady sliding) and integrates 4000 time units."""
+    cycle (x = 3 above steady sliding) and integrates 4000 time units
+    (`DESIGN_CHECK_OPTIONS`) with the solver and eps of `engine`."""
+    engine = Smoothed(engine.solver, DESIGN_CHECK_OPTIONS, engine.eps)
     out = {}
     for side, factor in (("below", 1 - margin), ("above", 1 + margin)):
         p = with_parameter(params, "xi", design.xi * factor)
-        v = hopf_speed(p) + target
+        v = hopf_speed(p, engine.eps) + target
         p = with_parameter(p, "v_d", v)
-        obs = simulate(p, GivenState(jnp.array([[3.5], [0.0]])),
-                       options=SimulationOptions(t_end=4000.0, transient=3500.0))
+        obs = simulate(p, GivenState(jnp.array([[3.5], [0.0]])), engine=engine)
         out[side] = {"xi": design.xi * factor, "v_d": v,
                      "amplitude": float(obs.amplitudes[0]), "n_halc": int(obs.n_halc)}
     out["holds"] = out["below"]["n_halc"] == 1 and out["above"]["amplitude"] < 1e-3
@@ -68,7 +76,7 @@ def _design_check(params: ChainParams, design: DampingDesign, target: float,
 
 
 def _stick_slip_cycle(single: ChainParams, branch: Branch, hopf_vd: float, fold_vd: float,
-                      options: ShootingOptions):
+                      options: ShootingOptions, eps):
     """The single oscillator's stable cycle inside its bistable window, at v_d = 1.5
     (the paper's scene) when the window holds it, else at the window's middle:
     shooting from the stable point of the continued branch nearest to that v_d."""
@@ -80,21 +88,23 @@ def _stick_slip_cycle(single: ChainParams, branch: Branch, hopf_vd: float, fold_
                            "chain's stick-slip states from")
     nearest = stable[np.argmin(np.abs(p[stable] - v_d))]
     y0, period = unpack(np.asarray(branch.u)[np.asarray(branch.converged)][nearest])
-    return periodic_orbit(with_parameter(single, "v_d", v_d), y0, float(period), options)
+    return periodic_orbit(with_parameter(single, "v_d", v_d), y0, float(period), options,
+                          eps=eps)
 
 
 def _ring_state(params: ChainParams, single, kind: str, options, progress):
     """Continue the ring's fully stick-slipping state `kind` (in-phase or
     anti-phase: neighbours half a period apart) from the single oscillator's cycle
-    at `single.params.v_d` towards its fold."""
+    at `single.params.v_d` towards its fold, at the cycle's smoothing `single.eps`."""
     n = params.n_osc
     if kind == "in-phase":
         y0 = jnp.tile(single.y0, (1, n))
     else:
-        half = flow(single.params, single.y0, single.period / 2, options).ys[-1]
+        half = flow(single.params, single.y0, single.period / 2, options,
+                    eps=single.eps).ys[-1]
         y0 = jnp.tile(jnp.concatenate([single.y0, half], axis=1), (1, n // 2))
     orbit = periodic_orbit(with_parameter(params, "v_d", single.params.v_d), y0,
-                           float(single.period), options, throw=False)
+                           float(single.period), options, eps=single.eps, throw=False)
     out = {"at_vd": float(single.params.v_d), "converged": bool(orbit.converged),
            "stable": bool(orbit.stable), "multipliers": _multipliers(orbit)}
     if not orbit.converged:
@@ -141,7 +151,8 @@ BISTABLE_RATIO_VALUES = (1.6, 1.8, 2.0, 2.2, 2.4)
 
 def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
                    xi_values=BISTABLE_XI_VALUES, ratio_values=BISTABLE_RATIO_VALUES,
-                   ring: bool = True, progress: bool = False) -> Boundaries:
+                   ring: bool = True, engine: AbstractEngine | str = "smoothed",
+                   progress: bool = False) -> Boundaries:
     """The Hopf and fold belt speeds of the single oscillator and of the chain.
 
     1. Single oscillator (the chain's first, `single_oscillator`, with its friction
@@ -160,10 +171,16 @@ def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
 
     **Arguments:**
 
-    - `params`: the chain parameters (eq. (7), eta_c, N, eps).
+    - `params`: the chain parameters (eq. (7), eta_c, N).
     - `target`: the design's window width, > 0.
     - `xi_values`, `ratio_values`: grids of xi and of mu_st/mu_d.
     - `ring`: also analyse the ring.
+    - `engine`: the smoothed engine, "smoothed" (`DEFAULT_EPS`, the default solver)
+        or a `Smoothed` value: its eps (the smoothing velocity of tanh(v_rel/eps),
+        > 0, dimensionless) is that of every Hopf point, shooting and fold, and
+        its solver that of the design's check by simulation (which keeps its own
+        horizon, `DESIGN_CHECK_OPTIONS`). The exact engine is refused: the edges
+        are found by Newton's method on the smoothed model.
     - `progress`: show tqdm bars.
 
     **Returns:**
@@ -173,46 +190,66 @@ def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
 
     **Raises:**
 
-    `ValidationError` for target <= 0; `RuntimeError` if a computation fails.
+    `ValidationError` for target <= 0 or the exact engine; `RuntimeError` if a
+    computation fails.
     """
-    params = _check_bistable(params, target)
-    run = _run_bistable(params, target, xi_values, ratio_values, ring, progress)
+    params, engine = _check_bistable(params, target, engine)
+    run = _run_bistable(params, target, xi_values, ratio_values, ring, engine, progress)
     return _boundaries(params, target, run)
 
 
-def _check_bistable(params: ChainParams | None, target) -> ChainParams:
-    """The chain (the paper's ring where None), with `target` checked to be > 0."""
+def _smoothed_engine(engine: AbstractEngine | str, what: str) -> Smoothed:
+    """The smoothed engine that `engine` names (`as_engine`: "smoothed" at
+    `DEFAULT_EPS`, or a `Smoothed` value).
+
+    **Raises:**
+
+    `ValidationError` in one line for the exact engine, which `what` cannot use."""
+    engine = as_engine(engine)
+    if not isinstance(engine, Smoothed):
+        raise ValidationError(f"engine={engine.name!r}: {what} needs the smoothed engine "
+                              "(its eps); give engine='smoothed' or jaxchain.Smoothed(eps=...)")
+    return engine
+
+
+def _check_bistable(params: ChainParams | None, target, engine) -> tuple[ChainParams, Smoothed]:
+    """The chain (the paper's ring where None) and the smoothed engine, with `target`
+    checked to be > 0."""
     params = chain_or_default(params)
     check_positive("target", target)
-    return params
+    engine = _smoothed_engine(engine, "bistable_range (Newton's method on the smoothed "
+                                     "model's Hopf points and Floquet multipliers)")
+    return params, engine
 
 
 def _run_bistable(params: ChainParams, target: float, xi_values, ratio_values, ring: bool,
-                  progress: bool) -> dict:
+                  engine: Smoothed, progress: bool) -> dict:
     """The computations of `bistable_range` by name: the single oscillator's edges
     (`_run_single`), their curves and the design (`_run_curves`), and with `ring` the
     chain's (`_run_ring`)."""
-    run = _run_single(params, progress)
+    run = _run_single(params, engine.eps, progress) | {"engine": engine}
     run |= _run_curves(run, target, xi_values, ratio_values, progress)
     run["ring"], run["ring_branches"] = (_run_ring(params, run, progress) if ring
                                          else (None, {}))
     return run
 
 
-def _run_single(params: ChainParams, progress: bool) -> dict:
+def _run_single(params: ChainParams, eps, progress: bool) -> dict:
     """The single oscillator's Hopf point, its first Lyapunov coefficient, the
-    limit-cycle branch from it, the branch's fold and the non-smooth existence
-    limit."""
+    limit-cycle branch from it (all smoothed at `eps`), the branch's fold and the
+    non-smooth existence limit."""
     options = ShootingOptions()
     single = single_oscillator(params)
-    hopf = hopf_point(single)
-    l1 = float(first_lyapunov_coefficient(with_parameter(single, "v_d", hopf.v_d[0])))
-    start = hopf_cycle(single, options=options)
+    hopf = hopf_point(single, eps=eps)
+    l1 = float(first_lyapunov_coefficient(with_parameter(single, "v_d", hopf.v_d[0]),
+                                          eps=eps))
+    start = hopf_cycle(single, options=options, eps=eps)
     problem = limit_cycle_problem(start, options)
     branch = continuation(problem, options=ContinuationOptions(
         ds=0.01, ds_max=0.1, p_min=0.5, p_max=2.5, max_points=90), progress=progress)
     fold = fold_point(problem, branch)
-    return {"options": options, "single": single, "hopf": hopf, "l1": l1, "problem": problem,
+    return {"options": options, "eps": eps, "single": single, "hopf": hopf, "l1": l1,
+            "problem": problem,
             "branch": branch, "fold": fold, "limit": stick_slip_existence_limit(single),
             "exponential": isinstance(single.friction, ExponentialDecay)}
 
@@ -237,9 +274,10 @@ def _run_curves(run: dict, target: float, xi_values, ratio_values, progress: boo
     out["at"] = int(np.argmin(np.abs(np.asarray(out["curves_xi"].values) - float(single.xi))))
     exponential = run["exponential"]
     out |= {"hopf_vd_analytic": float(hopf_vd_analytic(single)) if exponential else None,
-            "hopf_eps_correction": float(hopf_eps_correction(single)) if exponential else None,
+            "hopf_eps_correction": (float(hopf_eps_correction(single, run["eps"]))
+                                    if exponential else None),
             "xi_curve": _curve_summary(single, "xi", out["curves_xi"]),
-            "design_check": _design_check(single, out["design"], target)}
+            "design_check": _design_check(single, out["design"], target, run["engine"])}
     if exponential:
         out["ratio_curve"] = _curve_summary(single, "mu_st", out["curves_ratio"])
     return out
@@ -248,7 +286,7 @@ def _run_curves(run: dict, target: float, xi_values, ratio_values, progress: boo
 def _run_ring(params: ChainParams, run: dict, progress: bool) -> tuple[dict, dict]:
     """The chain's Hopf point over its modes and, on the homogeneous ring of even N,
     the fully stick-slipping in-phase and anti-phase states (`_ring_state`)."""
-    ring_hopf = hopf_point(params)
+    ring_hopf = hopf_point(params, eps=run["eps"])
     summary = {
         "n_osc": params.n_osc, "boundary": params.boundary,
         "hopf_vd": float(np.max(ring_hopf.v_d)),
@@ -258,7 +296,7 @@ def _run_ring(params: ChainParams, run: dict, progress: bool) -> tuple[dict, dic
     branches = {}
     if params.n_osc % 2 == 0 and is_homogeneous_ring(params):
         cycle = _stick_slip_cycle(run["single"], run["branch"], float(run["hopf"].v_d[0]),
-                                  float(run["fold"].p), run["options"])
+                                  float(run["fold"].p), run["options"], run["eps"])
         for kind in ("in-phase", "anti-phase"):
             summary[kind], branches[kind] = _ring_state(params, cycle, kind, run["options"],
                                                         progress)
@@ -274,7 +312,7 @@ def _boundaries(params: ChainParams, target: float, run: dict) -> Boundaries:
     summary = {
         "hopf_vd": float(hopf.v_d[0]),
         "fold_vd": float(fold.p),
-        "eps": float(params.eps),
+        "eps": float(run["eps"]),
         "subcritical": l1 > 0 and float(branch.p[p_ok][1]) > float(hopf.v_d[0]),
         "hopf_vd_analytic": run["hopf_vd_analytic"],
         "hopf_eps_correction": run["hopf_eps_correction"],
@@ -319,15 +357,20 @@ FIG3A_OPTIONS = SimulationOptions(t_end=3000.0, transient=2500.0)
 
 def fig3a_simulations(params: ChainParams, v_d=np.round(np.arange(0.6, 2.21, 0.1), 2),
                       solver=DEFAULT_SOLVER, options: SimulationOptions = FIG3A_OPTIONS,
-                      progress: bool = False):
+                      progress: bool = False, *, eps=DEFAULT_EPS):
     """The simulation dots of Fig. 3(a): the single oscillator at each belt speed
     from a small and a large initial displacement (x = 0.6 and 3.5, x' = 0),
-    integrated with `solver` over `options` (t_end = 3000, observed after 2500, by
-    default). Returns (v_d, energy) with energy of shape (n_vd, 2)."""
+    integrated by the smoothed engine at `eps` (the smoothing velocity of
+    tanh(v_rel/eps), > 0, dimensionless; `DEFAULT_EPS` by default) with `solver`
+    over `options` (t_end = 3000, observed after 2500, by default). Returns (v_d,
+    energy) with energy of shape (n_vd, 2).
+
+    **Raises:** `ValidationError` for eps <= 0, and as `ensemble`."""
     from .._sweeps.ensemble import ensemble
 
     single = single_oscillator(params)
+    engine = as_engine("smoothed", solver, options, single, eps=eps)
     ds = ensemble(single, jnp.asarray(v_d), GivenState(jnp.array([[[0.6], [0.0]],
                                                                   [[3.5], [0.0]]])),
-                  solver, options, progress=progress)
+                  engine=engine, progress=progress)
     return np.asarray(v_d), ds["energy"].values

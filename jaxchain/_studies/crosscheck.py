@@ -79,10 +79,10 @@ _REFERENCE_FIELDS = ("amplitudes", "x_max", "x_min", "n_halc", "status", "stick_
 def _reference_settings(params: ChainParams, y0: np.ndarray,
                         options: NonsmoothOptions) -> dict:
     """Everything that determines a reference run, the key of its stored result:
-    every parameter but eps (the reference has no smoothing, so one stored run
-    serves every eps), the initial state and every reference option."""
-    return {"params": {f.name: getattr(params, f.name) for f in dataclasses.fields(params)
-                       if f.name != "eps"},
+    every parameter (eps is not one: it is the smoothed engine's, and the reference
+    has no smoothing, so one stored run serves every eps), the initial state and
+    every reference option."""
+    return {"params": {f.name: getattr(params, f.name) for f in dataclasses.fields(params)},
             "y0": y0, "options": options}
 
 
@@ -183,13 +183,13 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
 
     **Arguments:**
 
-    - `params`: chain parameters; `v_d` is replaced by each belt speed, `eps` is
-        that of the smoothed model.
+    - `params`: chain parameters; `v_d` is replaced by each belt speed.
     - `v_d`: belt speeds, dimensionless.
     - `ics`: initial conditions as (family, k): eq. (8) ("eq8") or eq. (10)
         ("eq10") with k oscillators excited (`excited_block`).
     - `solver`, `options`, `engine`: the engine under test, as for `simulate`
-        ("smoothed" by default; "exact": its lanes against its own single runs).
+        (`Smoothed(solver, options, eps)` holds its eps: one cross-check per eps,
+        sharing the stored reference runs; "exact": its lanes against its runs).
     - `reference_options`: the reference runs; by default the horizon of
         `options` with `NonsmoothOptions`'s tolerances.
     - `tolerances`: how periodic is told from irregular (`ClassTolerances`: its
@@ -197,17 +197,17 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
         two halves of the observed window).
     - `checkpoint`: a folder where each reference run is stored as it finishes and
         read back on a later call (resuming an interrupted cross-check). Each run
-        is stored under the key of everything that determines it (every parameter
-        but eps, the initial state and every field of `reference_options`): only a
-        run of equal settings is read back, the others are computed anew.
+        is stored under the key of everything that determines it (every parameter,
+        the initial state and every field of `reference_options`; not the engine
+        under test, its eps included): only a run of equal settings is read back,
+        the others are computed anew.
     - `client`: a `distributed.Client` to run the reference runs on its cluster,
         one task per case that stores its run in `checkpoint` (which its workers
         must reach); this process reads them back.
     - `progress`: show a tqdm bar over the reference runs.
 
-    The smoothed runs are lanes of `run_lanes`; the reference runs are spread over
-    the devices, one case at a time per device (`on_devices`), or over the workers
-    of `client`.
+    The tested runs are lanes of `run_lanes`; the reference runs one case at a
+    time per device (`on_devices`), or per worker of `client`.
 
     **Returns:**
 
@@ -219,7 +219,8 @@ def crosscheck(params: ChainParams | None = None, v_d=CROSSCHECK_VD, ics=CROSSCH
     stick_fraction, num_events and wall_time_s of the reference; and the
     comparison: amplitude_error (max over oscillators, relative to max(1, largest
     reference amplitude)), energy_error (relative to max(1, E_reference)),
-    n_halc_agrees, class_agrees. Attributes hold parameters and options.
+    n_halc_agrees, class_agrees. Attributes hold parameters, options and the
+    engine's settings (`eps` for the smoothed engine).
 
     **Raises:**
 

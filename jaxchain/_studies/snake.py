@@ -21,9 +21,11 @@ from .._bifurcation.limit_cycles import limit_cycle_problem
 from .._bifurcation.shooting import (ShootingOptions, floquet_multipliers, flow, periodic_orbit,
                                     unpack)
 from .._sweeps.ensemble import ensemble
+from .._engine.engines import as_engine
 from .._engine.options import SimulationOptions
 from .._engine.observers.crossings import downward_crossings
 from .._physics.chain import Graph
+from .._physics.forces import DEFAULT_EPS
 from .._physics.initial import GivenState, OutOfPhaseExcitation, centre_site, excited_block
 from .._physics.params import chain_or_default, ChainParams, with_parameter
 from .._physics.record import chain_record
@@ -121,24 +123,24 @@ SNAKE_CONTINUATION = ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.0, p_max=2
                                          max_points=150)
 
 
-def _downward_crossings(params: ChainParams, y, options: ShootingOptions,
+def _downward_crossings(params: ChainParams, y, options: ShootingOptions, eps,
                         horizon: float = 40.0) -> tuple[np.ndarray, np.ndarray, list]:
-    """The flow from `y` sampled every 1e-3 over `horizon`: (times, states, and for
-    each oscillator the sample indices where x_n' passes from + to -, the intervals
-    of `downward_crossings`)."""
+    """The flow from `y`, smoothed at `eps`, sampled every 1e-3 over `horizon`:
+    (times, states, and for each oscillator the sample indices where x_n' passes
+    from + to -, the intervals of `downward_crossings`)."""
     ts = np.linspace(0.0, horizon, int(round(horizon * 1000)) + 1)
     ys = np.asarray(flow(params, jnp.asarray(y), horizon, options,
-                         diffrax.SaveAt(ts=jnp.asarray(ts))).ys)
+                         diffrax.SaveAt(ts=jnp.asarray(ts)), eps=eps).ys)
     mask, _ = downward_crossings(ts, ys[:, 0], ys[:, 1], np.ones(ts.size, dtype=bool))
     mask = np.asarray(mask)
     return ts, ys, [np.flatnonzero(mask[:, n]) for n in range(mask.shape[1])]
 
 
 def _turning_point(params: ChainParams, y: np.ndarray, oscillator: int,
-                   options: ShootingOptions) -> tuple[np.ndarray, float] | None:
+                   options: ShootingOptions, eps) -> tuple[np.ndarray, float] | None:
     """A state where x_n' passes from + to - (n = `oscillator`), and the time to the
-    next such crossing (`_downward_crossings`)."""
-    ts, ys, down = _downward_crossings(params, y, options)
+    next such crossing (`_downward_crossings`, smoothed at `eps`)."""
+    ts, ys, down = _downward_crossings(params, y, options, eps)
     down = down[oscillator]
     if down.size < 2:
         return None
@@ -147,7 +149,7 @@ def _turning_point(params: ChainParams, y: np.ndarray, oscillator: int,
 
 def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions = SNAKE_START,
                  shooting: ShootingOptions = SNAKE_SHOOTING, solver=DEFAULT_SOLVER,
-                 progress: bool = False):
+                 eps=DEFAULT_EPS, progress: bool = False):
     """Periodic localized states of the chain at `params.v_d`, refined by shooting
     from direct simulation: eq. (8) with k oscillators excited (`excited_block`),
     integrated over `options`, then a turning point of the oscillator of largest
@@ -163,6 +165,10 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
     - `options`: `SimulationOptions` of the simulations.
     - `shooting`: `ShootingOptions` (its `phase_oscillator` is replaced).
     - `solver`: the solver of the simulations (`SOLVERS`; shooting has its own).
+    - `eps`: the smoothing velocity of tanh(v_rel/eps), a finite number > 0,
+        shape (), dimensionless (a fraction of x_0 omega_n): that of the smoothed
+        engine of the simulations (`Smoothed.eps`) and of shooting; `DEFAULT_EPS`
+        by default.
     - `progress`: progress bars.
 
     **Returns:**
@@ -173,13 +179,15 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
 
     **Raises:**
 
-    `ValidationError` for a k outside 1..n_osc.
+    `ValidationError` for a k outside 1..n_osc or eps <= 0.
     """
     sites = check_starts(params.graph, sites)
     masks = np.stack([start_mask(params.graph, k) for k in sites])
     ics = OutOfPhaseExcitation(excited=jnp.asarray(masks),
                                velocity=jnp.zeros(len(sites)), base_sign=-1.0)
-    ds = ensemble(params, [float(params.v_d)], ics, solver, options, progress=progress)
+    engine = as_engine("smoothed", solver, options, params, eps=eps)
+    eps = engine.eps
+    ds = ensemble(params, [float(params.v_d)], ics, engine=engine, progress=progress)
     out = {}
     for i, k in enumerate(sites):
         amplitudes = ds["amplitudes"].values[0, i]
@@ -190,11 +198,11 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
             continue
         n = int(np.argmax(amplitudes))
         opts = dataclasses.replace(shooting, phase_oscillator=n)
-        guess = _turning_point(params, ds["y_final"].values[0, i], n, opts)
+        guess = _turning_point(params, ds["y_final"].values[0, i], n, opts, eps)
         if guess is None:
             out[k] = (None, sim, "no turning point: steady sliding")
             continue
-        orbit = periodic_orbit(params, guess[0], guess[1], opts, throw=False)
+        orbit = periodic_orbit(params, guess[0], guess[1], opts, eps=eps, throw=False)
         reason = None if bool(orbit.converged) else (
             f"shooting did not converge (residual {float(orbit.residual):.2g}): the "
             f"simulated state is not periodic")
@@ -328,11 +336,12 @@ def _connections(branches: dict, tol: float = 1e-3) -> dict:
     return out
 
 
-def _phase_lags(params: ChainParams, y, sites, options: ShootingOptions) -> np.ndarray | None:
+def _phase_lags(params: ChainParams, y, sites, options: ShootingOptions, eps
+                ) -> np.ndarray | None:
     """The phase of each oscillator of `sites` relative to the first, in periods
     (0 to 1): from the first turning point (x_n' from + to -) of each
-    (`_downward_crossings`)."""
-    ts, _, down = _downward_crossings(params, y, options)
+    (`_downward_crossings`, smoothed at `eps`)."""
+    ts, _, down = _downward_crossings(params, y, options, eps)
     if any(down[n].size < 2 for n in sites):
         return None
     first = np.asarray([ts[down[n][0]] for n in sites])
@@ -345,9 +354,10 @@ def _check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict,
                          shooting: ShootingOptions = SNAKE_SHOOTING,
                          options: SimulationOptions = SimulationOptions(t_end=5000.0,
                                                                         transient=4500.0),
-                         solver=DEFAULT_SOLVER) -> list[dict]:
-    """Direct simulation just inside and just outside each end of a stable segment
-    that a bifurcation ends, each from an orbit of the branch with its positions
+                         solver=DEFAULT_SOLVER, eps=DEFAULT_EPS) -> list[dict]:
+    """Direct simulation (the smoothed engine at `eps`, with `solver` over
+    `options`) just inside and just outside each end of a stable segment that a
+    bifurcation ends, each from an orbit of the branch with its positions
     perturbed by `perturbation`:
 
     - inside: at v_d = end -+ `delta`, from the segment's orbit nearest there;
@@ -393,16 +403,17 @@ def _check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict,
             a = branch["amplitudes"].values[start]
             sites = np.flatnonzero(a > 0.5 * a.max())
             lags = _phase_lags(with_parameter(params, "v_d", float(v[start])), y_orbit, sites,
-                               shooting)
+                               shooting, eps)
             y0 = np.asarray(y_orbit).copy()
             y0[0] += perturbation * rng.standard_normal(y0.shape[1])
             p = with_parameter(params, "v_d", float(vd))
-            obs = simulate(p, GivenState(jnp.asarray(y0)), solver, options)
+            obs = simulate(p, GivenState(jnp.asarray(y0)),
+                           engine=as_engine("smoothed", solver, options, p, eps=eps))
             amp = np.asarray(obs.amplitudes)
             sim_sites = np.flatnonzero(amp > 0.5 * amp.max())
             lag_difference = None
             if np.array_equal(sites, sim_sites) and lags is not None:
-                sim_lags = _phase_lags(p, obs.y_final, sites, shooting)
+                sim_lags = _phase_lags(p, obs.y_final, sites, shooting, eps)
                 if sim_lags is not None:
                     d = np.mod(sim_lags - lags, 1.0)
                     lag_difference = float(np.max(np.minimum(d, 1 - d)))
@@ -462,11 +473,12 @@ _multipliers = eqx.filter_jit(floquet_multipliers)
 
 
 def _multiplier_accuracy(params: ChainParams, branch: xr.Dataset, points,
-                         shooting: ShootingOptions = SNAKE_SHOOTING, factor: float = 100.0
-                         ) -> dict:
+                         shooting: ShootingOptions = SNAKE_SHOOTING, factor: float = 100.0,
+                         eps=DEFAULT_EPS) -> dict:
     """How accurate the branch's Floquet multipliers are: at the given points, the
-    multipliers again from the same orbits with the flow's tolerances divided by
-    `factor`; the difference estimates the error at the branch's tolerances.
+    multipliers again from the same orbits (of the flow smoothed at `eps`) with the
+    flow's tolerances divided by `factor`; the difference estimates the error at
+    the branch's tolerances.
 
     **Returns:**
 
@@ -483,7 +495,7 @@ def _multiplier_accuracy(params: ChainParams, branch: xr.Dataset, points,
         p = with_parameter(params, "v_d", float(v[i]))
         got = []
         for options, errors in zip((shooting, tight), trivial):
-            values, index = _multipliers(p, y0, period, options)
+            values, index = _multipliers(p, y0, period, options, eps)
             values = np.asarray(values)
             errors.append(abs(values[int(index)] - 1))
             got.append(np.delete(values, int(index)))
@@ -501,7 +513,7 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
                        shooting: ShootingOptions = SNAKE_SHOOTING,
                        continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
                        start_options: SimulationOptions = SNAKE_START,
-                       solver=DEFAULT_SOLVER, simulation_check: bool = True,
+                       solver=DEFAULT_SOLVER, eps=DEFAULT_EPS, simulation_check: bool = True,
                        out: Path | None = None, progress: bool = False) -> dict:
     """The snake: each localized periodic state that simulation finds at
     `params.v_d` (eq. (8) with k excited, for k in `sites`), refined by shooting,
@@ -522,6 +534,11 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     - `start_options`: `SimulationOptions` of the starting simulations.
     - `solver`: the solver of the simulations, the starts and the checks
         (`SOLVERS`); shooting has its own (`shooting.solver`).
+    - `eps`: the smoothing velocity of tanh(v_rel/eps), a finite number > 0,
+        shape (), dimensionless (a fraction of x_0 omega_n): that of the smoothed
+        engine of every simulation (`Smoothed.eps`) and of every orbit, branch and
+        multiplier; `DEFAULT_EPS` by default. Stored branches are read back only
+        for an equal eps.
     - `simulation_check`: check every stable range by direct simulation.
     - `out`: a folder: each branch is stored there as `branch_k<k>.nc` (or
         `branch_<name>.nc`) with the key
@@ -537,39 +554,41 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
 
     **Raises:**
 
-    `ValidationError` for bad sites or options.
+    `ValidationError` for bad sites, options or eps.
     """
-    params, sites = _check_branches(params, sites)
+    params, sites, eps = _check_branches(params, sites, solver, eps)
     run = _run_branches(params, sites, shooting, continuation_options, start_options, solver,
-                        simulation_check, out, progress)
+                        eps, simulation_check, out, progress)
     return _branches_summary(*run)
 
 
-def _check_branches(params: ChainParams | None, sites) -> tuple[ChainParams, tuple]:
-    """The chain (the paper's ring where None) and the starts (`check_starts`)."""
+def _check_branches(params: ChainParams | None, sites, solver, eps) -> tuple:
+    """The chain (the paper's ring where None), the starts (`check_starts`) and eps
+    (checked by the smoothed engine it sets)."""
     params = chain_or_default(params)
-    return params, check_starts(params.graph, sites)
+    eps = as_engine("smoothed", solver, None, params, eps=eps).eps
+    return params, check_starts(params.graph, sites), eps
 
 
 def _run_branches(params: ChainParams, sites: tuple, shooting, continuation_options,
-                  start_options, solver, simulation_check, out, progress) -> tuple:
+                  start_options, solver, eps, simulation_check, out, progress) -> tuple:
     """The branches (`_find_branches`), then the checks of their stable ranges
     (`_stable_range_checks`): (datasets, starts, failed starts, checks)."""
     datasets, starts, failed = _find_branches(params, sites, shooting, continuation_options,
-                                              start_options, solver, out, progress)
-    checks = _stable_range_checks(params, datasets, shooting, solver, simulation_check,
+                                              start_options, solver, eps, out, progress)
+    checks = _stable_range_checks(params, datasets, shooting, solver, eps, simulation_check,
                                   progress)
     return datasets, starts, failed, checks
 
 
 def _find_branches(params: ChainParams, sites: tuple, shooting, continuation_options,
-                   start_options, solver, out, progress) -> tuple[dict, dict, dict]:
+                   start_options, solver, eps, out, progress) -> tuple[dict, dict, dict]:
     """The branch of each start: read back from `out` where stored with the same
     settings, else started by simulation and shooting (`start_orbits`), continued
     (`_follow_branch`) and stored. Returns (label -> branch dataset, start -> the
     simulation's n_HALC and energy, start -> why it has no periodic orbit)."""
     datasets, starts, failed = {}, {}, {}
-    settings = {"chain": chain_record(params), "shooting": shooting,
+    settings = {"chain": chain_record(params), "eps": float(eps), "shooting": shooting,
                 "continuation": continuation_options, "start": start_options,
                 "solver": solver if isinstance(solver, str) else type(solver).__name__}
     paths = {k: None if out is None else Path(out) / (
@@ -586,7 +605,7 @@ def _find_branches(params: ChainParams, sites: tuple, shooting, continuation_opt
     if todo:
         for k, (orbit, sim, reason) in start_orbits(params, todo, options=start_options,
                                                     shooting=shooting, solver=solver,
-                                                    progress=progress).items():
+                                                    eps=eps, progress=progress).items():
             starts[k] = sim
             if orbit is None:
                 failed[k] = reason
@@ -608,7 +627,7 @@ def _find_branches(params: ChainParams, sites: tuple, shooting, continuation_opt
     return datasets, starts, failed
 
 
-def _stable_range_checks(params: ChainParams, datasets: dict, shooting, solver,
+def _stable_range_checks(params: ChainParams, datasets: dict, shooting, solver, eps,
                          simulation_check: bool, progress: bool) -> dict:
     """For each branch (by label): its stable ranges (`stable_ranges`), the accuracy
     of its multipliers at their ends and at its start (`_multiplier_accuracy`), and
@@ -621,11 +640,11 @@ def _stable_range_checks(params: ChainParams, datasets: dict, shooting, solver,
         ends = [i for r in ranges for pair in r["points"] for i in pair if i is not None]
         start = int(np.argmin(np.abs(ds["v_d"].values - ds.attrs["start_vd"])))
         out[label] = {"ranges": ranges, "multiplier_accuracy": _multiplier_accuracy(
-            params, ds, ends + [start], shooting)}
+            params, ds, ends + [start], shooting, eps=eps)}
         if simulation_check:
             out[label]["simulation_check"] = [
                 c for r in ranges for c in _check_by_simulation(params, ds, r, shooting=shooting,
-                                                                solver=solver)]
+                                                                solver=solver, eps=eps)]
         bar.update()
     bar.close()
     return out

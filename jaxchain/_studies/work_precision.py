@@ -20,9 +20,9 @@ from .._engine.exact.options import NonsmoothOptions
 from .._engine.exact.solve import simulate_nonsmooth
 from .._engine.solver.controller import CONTROLLERS
 from .._engine.options import SimulationOptions
+from .._engine.engines import Smoothed
 from .._physics.model import vector_field
 from .._physics.params import ChainParams
-from .._engine.smoothed import run
 from .._engine.status import Status
 from .._engine.solver.registry import SOLVERS
 from .._sweeps.result_store import CsvStore, settings_key
@@ -44,8 +44,10 @@ class Scene:
     t_end: float
     window: float
 
-    def params(self, eps=1e-12) -> ChainParams:
-        return ChainParams(n_osc=self.n_osc, v_d=self.v_d, eps=eps)
+    def params(self) -> ChainParams:
+        """The chain, the same for every run: the smoothing eps is the engine's
+        (`Smoothed`), one per point of the grid."""
+        return ChainParams(n_osc=self.n_osc, v_d=self.v_d)
 
     def y0(self) -> np.ndarray:
         """The initial state, the same for every run: eq. (8) with the non-smooth
@@ -146,8 +148,8 @@ def errors(ref: Reference, amplitudes, y_window) -> dict:
 
 
 @eqx.filter_jit
-def _diffrax_run(params, y0, solver, options):
-    return run(params, y0, solver, options)
+def _diffrax_run(params, y0, engine: Smoothed):
+    return engine.run(params, y0)
 
 
 def _timed(fn):
@@ -160,23 +162,26 @@ def diffrax_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: f
                   max_steps: int) -> dict:
     """One smoothed run of `scene` (observables, then the trajectory window) with a
     diffrax solver and a step-size controller (`method`, see `split_method`). rtol,
-    atol = rtol / 100 and eps are traced, so each method compiles once per scene;
-    `compile_s` is the compilation time of this call (0 once compiled)."""
-    p = scene.params(jnp.asarray(eps))
+    atol = rtol / 100 and eps (the smoothed engine's, `Smoothed.eps`) are traced, so
+    each method compiles once per scene; `compile_s` is the compilation time of
+    this call (0 once compiled)."""
+    p = scene.params()
     y0 = jnp.asarray(scene.y0())
     solver_name, controller = split_method(method)
-    observe, short = _diffrax_options(scene, rtol, max_steps, controller)
     solver = SOLVERS[solver_name]()
+    observe, short = (Smoothed(solver, opt, jnp.asarray(eps))
+                      for opt in _diffrax_options(scene, rtol, max_steps, controller))
     compile_s = 0.0
-    for opt in (observe, short):
+    for engine in (observe, short):
+        opt = engine.options
         key = (method, opt.t_end, opt.transient, scene.n_osc, max_steps)
         if key not in _compiled:
             start = time.perf_counter()
-            _diffrax_run.lower(p, y0, solver, opt).compile()
+            _diffrax_run.lower(p, y0, engine).compile()
             compile_s += time.perf_counter() - start
             _compiled.add(key)
-    obs, wall = _timed(lambda: _diffrax_run(p, y0, solver, observe))
-    end, _ = _timed(lambda: _diffrax_run(p, y0, solver, short))
+    obs, wall = _timed(lambda: _diffrax_run(p, y0, observe))
+    end, _ = _timed(lambda: _diffrax_run(p, y0, short))
     status = max(int(obs.status), int(end.status))
     row = {"status": Status(status).name, "wall_s": wall, "compile_s": compile_s,
            "num_steps": int(obs.num_steps)}
@@ -188,11 +193,11 @@ def diffrax_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: f
 _compiled: set = set()
 
 
-def _numpy_field(p: ChainParams) -> Callable:
-    """Eq. (5) for scipy: the one `vector_field`, compiled by `jax.jit` once and
-    called with NumPy arrays (a few microseconds of dispatch per call, as a NumPy
-    expression of the same field costs)."""
-    field = jax.jit(lambda y: vector_field(0.0, y, p))
+def _numpy_field(p: ChainParams, eps: float) -> Callable:
+    """Eq. (5) smoothed at `eps` for scipy: the one `vector_field`, compiled by
+    `jax.jit` once and called with NumPy arrays (a few microseconds of dispatch per
+    call, as a NumPy expression of the same field costs)."""
+    field = jax.jit(lambda y: vector_field(0.0, y, p, eps))
 
     def rhs(t, y):
         return np.asarray(field(y))
@@ -210,8 +215,7 @@ def _scipy_point(scene: Scene, ref: Reference, method: str, eps: float, rtol: fl
     `budget_s` is stopped and recorded as such."""
     from scipy.integrate import solve_ivp
 
-    p = scene.params(eps)
-    rhs = _numpy_field(p)
+    rhs = _numpy_field(scene.params(), eps)
     y0 = scene.y0().reshape(-1)
     deadline = time.perf_counter() + budget_s
 
@@ -248,10 +252,10 @@ def _row_settings(scene: Scene, method: str, eps: float, rtol: float, *,
     """Everything that determines a row of the study, the settings of its `key`
     (`settings_key`): the scene (every field), its initial state and the options
     of the reference that errors are measured against; then, by method, the
-    parameters (every `ChainParams` field, eps included), the solver (its class and
-    every field) and its options (every `SimulationOptions` field), or scipy's
-    method, tolerances, time budget and sample spacing, or the options of the
-    reference at `rtol`.
+    parameters (every `ChainParams` field) and the smoothing eps, the solver (its
+    class and every field) and its options (every `SimulationOptions` field), or
+    scipy's method, tolerances, time budget and sample spacing, or the options of
+    the reference at `rtol` (no eps: the reference does not smooth).
 
     **Arguments:**
 
@@ -265,11 +269,11 @@ def _row_settings(scene: Scene, method: str, eps: float, rtol: float, *,
 
     A dict of the settings, as `settings_key` takes them.
     """
-    out = {"scene": scene, "y0": scene.y0(),
+    out = {"scene": scene, "y0": scene.y0(), "params": scene.params(),
            "reference": _reference_options(scene, REFERENCE_RTOL)}
     if method == "reference":
-        return out | {"params": scene.params(), "options": _reference_options(scene, rtol)}
-    out["params"] = scene.params(eps)
+        return out | {"options": _reference_options(scene, rtol)}
+    out["eps"] = eps
     if method.startswith("scipy "):
         return out | {"solve_ivp": method.removeprefix("scipy "), "rtol": rtol,
                       "atol": rtol / 100, "budget_s": scipy_budget_s,

@@ -11,7 +11,11 @@ from .._physics.initial import (AbstractInitialCondition, OutOfPhaseExcitation, 
 from .._engine.lanes import lane_params, take_lanes
 from .._engine.programs import compiled
 from .._physics.params import ChainParams, parameter_name, with_parameter
+from .._engine.engines import Smoothed
 from .._errors import ValidationError
+
+#: The swept names that are settings of the engine, not fields of the chain.
+ENGINE_PARAMETERS = ("eps",)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -23,7 +27,10 @@ class SweepGrid:
     **Arguments:**
 
     - `params`: the chain parameters; the field `name` is replaced by each value.
-    - `name`: the swept field of `ChainParams` (see `parameter_name`).
+    - `name`: the swept field of `ChainParams` (see `parameter_name`), or "eps",
+        the smoothed engine's smoothing velocity (`ENGINE_PARAMETERS`): then the
+        chain is the same in every lane, and each lane runs the engine at its eps
+        (`lane_engines`).
     - `values`: its values, shape (n_values,).
     - `families`: initial conditions by family name, each batched along the
         leading axis of its array fields (for example `localized_family(N)`).
@@ -42,13 +49,16 @@ class SweepGrid:
 
     @classmethod
     def build(cls, params, where, values, ics) -> "SweepGrid":
-        name = parameter_name(where, params)
+        name = where if where in ENGINE_PARAMETERS else parameter_name(where, params)
         values = np.atleast_1d(np.asarray(values, dtype=float))
         if values.ndim != 1 or values.size == 0:
             raise ValidationError(f"{name}: the sweep needs a 1-d list of at least one value, "
                                   f"got shape {values.shape}")
         for value in values:  # validates every value, naming the field
-            with_parameter(params, name, value)
+            if name in ENGINE_PARAMETERS:
+                Smoothed(eps=value)
+            else:
+                with_parameter(params, name, value)
         families = dict(ics) if isinstance(ics, Mapping) else {type(ics).__name__: ics}
         if not families:
             raise ValidationError("ics: the sweep needs at least one family of initial "
@@ -56,9 +66,19 @@ class SweepGrid:
         grid = cls(params, name, values, families)
         for family in families.values():  # shapes checked before anything runs
             batch_length(family)
-            compiled(initial_states, lane_params(params, 1, **{name: values[:1]}),
+            compiled(initial_states, grid._lane_params(np.array([0])),
                      take_lanes(family, np.array([0])))
         return grid
+
+    def _lane_params(self, value: np.ndarray) -> ChainParams:
+        """The chain of each lane, for the indices `value` into `values`."""
+        if self.name in ENGINE_PARAMETERS:
+            return lane_params(self.params, value.size)
+        return lane_params(self.params, value.size, **{self.name: self.values[value]})
+
+    def lane_values(self, start: int, stop: int) -> np.ndarray:
+        """The swept value of each of the trajectories [start, stop)."""
+        return self.values[np.arange(start, stop) // self.n_ics]
 
     @property
     def sizes(self) -> list[int]:
@@ -93,7 +113,7 @@ class SweepGrid:
         initial states, shape (lanes, 2, n_osc), of trajectories [start, stop)."""
         t = np.arange(start, stop)
         value, ic = t // self.n_ics, t % self.n_ics
-        params = lane_params(self.params, t.size, **{self.name: self.values[value]})
+        params = self._lane_params(value)
         y0 = np.empty((t.size, 2, self.params.n_osc))
         first = 0
         for family, n in zip(self.families.values(), self.sizes):

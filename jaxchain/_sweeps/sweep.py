@@ -22,6 +22,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import diffrax
+import equinox as eqx
 import jax
 import numpy as np
 from jaxtyping import ArrayLike, Float
@@ -32,12 +33,12 @@ from .._engine.checks import check_params
 from .._engine.engines import AbstractEngine, as_engine
 from .._engine.horizon import AbstractHorizon
 from .._physics.initial import AbstractInitialCondition
-from .._engine.lanes import block_size, expected_cost, run_lanes
+from .._engine.lanes import block_size, expected_cost, run_lanes, take_lanes
 from .._physics.params import ChainParams
 from .datasets import observables_variables, run_attributes
 from .result_store import settings_json, settings_key
 from .._analysis.fronts import propagating_fronts
-from .grid import SweepGrid
+from .grid import ENGINE_PARAMETERS, SweepGrid
 from .zarr_store import SweepStore
 from .._checks import check_count
 from .._errors import ValidationError
@@ -309,8 +310,24 @@ class _Batches:
         import xarray as xr
 
         lane_params, y0 = self.lanes(b)
-        obs = run_lanes(lane_params, y0, engine=self.engine, schedule=self.schedule,
-                        block=self.block, progress=progress, devices=devices)
+        if self.grid.name not in ENGINE_PARAMETERS:
+            obs = run_lanes(lane_params, y0, engine=self.engine, schedule=self.schedule,
+                            block=self.block, progress=progress, devices=devices)
+        else:  # one run of the lanes per value of the engine's setting
+            start = b * self.batch_size
+            values = self.grid.lane_values(start, start + self.size(b))
+            parts, order = [], []
+            for value in np.unique(values):
+                lanes = np.flatnonzero(values == value)
+                engine = eqx.tree_at(lambda e: getattr(e, self.grid.name), self.engine,
+                                     np.asarray(value))
+                parts.append(run_lanes(take_lanes(lane_params, lanes), y0[lanes],
+                                       engine=engine, schedule=self.schedule,
+                                       block=self.block, progress=progress,
+                                       devices=devices))
+                order.append(lanes)
+            back = np.argsort(np.concatenate(order))
+            obs = jax.tree_util.tree_map(lambda *x: np.concatenate(x)[back], *parts)
         return xr.Dataset(observables_variables(obs, ("trajectory",)))
 
     def store(self, path: Path, b: int, progress: bool | tqdm = False,

@@ -236,7 +236,7 @@ def _leaves(obj, path: tuple = ()) -> dict:
 
 
 def _differences(old: dict, new: dict) -> list[str]:
-    """The settings (`params.eps`, `options.t_end`, `ics.eq10`, ...) at which two
+    """The settings (`engine.eps`, `options.t_end`, `ics.eq10`, ...) at which two
     differ, named to two levels."""
     old, new = _leaves(old), _leaves(new)
     return list({".".join(p[:2]) for p in set(old) | set(new) if old.get(p) != new.get(p)})

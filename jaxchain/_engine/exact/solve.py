@@ -13,6 +13,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from ..._physics.custom_types import State
 from ..._physics.initial import AbstractInitialCondition, GivenState
+from ..._physics.model import Model
 from ..._physics.params import ChainParams
 from ..compat import errors_as_nan
 from ..observers.base import Chunk, no_partial_answers, observe_chunk
@@ -113,11 +114,10 @@ class _Carry(eqx.Module):
 _OBSERVERS = (Extrema(),)
 
 
-def _observers_args(params: ChainParams) -> ChainParams:
-    """The chain as the observers see it: eps = 0, since the reference has no
-    smoothing (its stick band is v_rel = 0, `sticks`). The reference never reads
-    eps, so no check of eps > 0 is bypassed where it matters."""
-    return eqx.tree_at(lambda p: p.eps, params, jnp.zeros_like(params.eps))
+def _observers_args(params: ChainParams) -> Model:
+    """The model as the observers see it: eps = 0, since the exact engine has no
+    smoothing (its stick band is v_rel = 0, `sticks`)."""
+    return Model(params, jnp.zeros(()))
 
 
 def observe_sample(states: tuple, t, y, params: ChainParams, options) -> tuple:
@@ -307,7 +307,7 @@ def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State
 
     **Arguments:**
 
-    - `params`: the chain parameters (`eps` is not used: there is no smoothing).
+    - `params`: the chain parameters.
     - `y0`: an initial condition or a state of shape (2, n_osc).
     - `options`: `NonsmoothOptions`.
     - `throw`: raise on failure (default) or return the status.
@@ -355,7 +355,7 @@ def nonsmooth_trajectory(params: ChainParams, y0: AbstractInitialCondition | Sta
 
     **Arguments:**
 
-    - `params`: the chain parameters (`eps` is not used).
+    - `params`: the chain parameters.
     - `y0`: an initial condition or a state of shape (2, n_osc) at t = 0.
     - `ts`: sample times, increasing, >= 0, shape (m,), dimensionless (eq. (4)).
     - `options`: `NonsmoothOptions`; its tolerances and event budget apply (its

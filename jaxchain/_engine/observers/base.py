@@ -39,6 +39,10 @@ class AbstractObserver(eqx.Module):
     `result` at the end. Failed runs get NaN (float), -1 (integer) or False
     (boolean) results: no partial answers.
 
+    Every hook gets `args`, the `Model` the engine integrates: the chain
+    (`args.params`) and the smoothing velocity of its friction (`args.eps`, 0 for
+    the exact engine).
+
     Subclasses set `needs_tangent = True` to have a tangent vector propagated beside
     the trajectory (`Chunk.log_growth`); they then define `initial_tangent(y0)`,
     the unit vector it starts from (see `LargestLyapunov`).

@@ -35,7 +35,7 @@ class Energy(AbstractObserver):
             return state
         integral, length, peak = state
         seen = in_window(chunk, window_start(self.t_start, options))
-        energy = jax.vmap(lambda y: mechanical_energy(args, y))(chunk.ys)
+        energy = jax.vmap(lambda y: mechanical_energy(args.params, y))(chunk.ys)
         both = seen[:-1] & seen[1:]
         dt = jnp.diff(chunk.ts)
         integral = integral + jnp.sum(jnp.where(both, 0.5 * (energy[:-1] + energy[1:]) * dt, 0.0))

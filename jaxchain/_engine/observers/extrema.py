@@ -63,7 +63,7 @@ class Extrema(AbstractObserver):
                 jnp.minimum(x_min, per_half(jnp.min, x, jnp.inf)),
                 jnp.maximum(v_max, jnp.where(seen, v, -jnp.inf).max(0)),
                 jnp.minimum(slip, jnp.stack([
-                    min_slip_speed(jnp.where(h[:, None], v, jnp.inf), args.v_d)
+                    min_slip_speed(jnp.where(h[:, None], v, jnp.inf), args.params.v_d)
                     for h in halves])))
 
     def result(self, state, args, options):

@@ -54,17 +54,17 @@ AUTO = "auto"
 AUTO_STIFFNESS = 100.0
 
 
-def stick_stiffness(params) -> float:
+def stick_stiffness(params, eps) -> float:
     """The stiffness of the stick phase, |dF/dv_rel| at v_rel = 0: (P_n/P) mu(0) /
     eps (the smoothed force of eq. (2), -(P_n/P) mu tanh(v_rel/eps); mu_st / eps
     for eq. (1)), its largest over the oscillators and lanes, in units of
     omega_n."""
-    return float(np.max(np.asarray(static_friction(params)) / np.asarray(params.eps)))
+    return float(np.max(np.asarray(static_friction(params)) / np.asarray(eps)))
 
 
-def auto_solver(params) -> diffrax.AbstractSolver:
-    """The solver for `params`: Tsit5 where the stick phase is not stiff
+def auto_solver(params, eps) -> diffrax.AbstractSolver:
+    """The solver for `params` smoothed at `eps`: Tsit5 where the stick phase is not stiff
     (`stick_stiffness`, (P_n/P) mu(0)/eps, <= `AUTO_STIFFNESS` for every
     oscillator and lane), else the stiffness-aware `DEFAULT_SOLVER`, ROS34PW2."""
-    stiffness = stick_stiffness(params)
+    stiffness = stick_stiffness(params, eps)
     return SOLVERS["tsit5" if stiffness <= AUTO_STIFFNESS else DEFAULT_SOLVER]()

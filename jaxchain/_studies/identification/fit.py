@@ -36,9 +36,12 @@ class IdentifyOptions(eqx.Module):
         mu(v) and xi), short enough that the misfit stays smooth in the window's
         initial state (measured in `benchmarks/identification_windows.py` and on
         the documentation page "Identification").
-    - `eps`: the smoothing of the fitted model. The fit is to the exact switch
-        model's records, so eps is a bias: 1e-5 keeps it below 0.5 % (1e-3, the
-        simulations' default, biases xi and v0 by about 3 %).
+    - `eps`: the smoothing velocity of the fitted model, tanh(v_rel/eps) (> 0),
+        dimensionless (a fraction of x_0 omega_n): the fit integrates the smoothed
+        vector field at this eps (the chain holds no eps). The fit is to the exact
+        switch model's records, so eps is a bias: 1e-5 keeps it below 0.5 %
+        (1e-3, the simulations' default `DEFAULT_EPS`, biases xi and v0 by about
+        3 %).
     - `solver`, `rtol`, `atol`, `controller`, `max_steps`: the integration of
         each window, as in `SimulationOptions`, but at rtol 1e-6, atol 1e-8: the
         fit needs the forward-mode sensitivities, which are exact only for the
@@ -94,6 +97,7 @@ class _Problem(eqx.Module):
     states, the records' sensor offsets)."""
 
     base: ChainParams
+    eps: jnp.ndarray  # the fitted model's smoothing, shape (): traced, not static
     unknowns: Unknowns = eqx.field(static=True)
     windows: Windows
     offsets: bool = eqx.field(static=True)
@@ -115,7 +119,7 @@ class _Problem(eqx.Module):
     def flow(self, theta, state, times, v_d):
         """One window: the states at `times` from `state`, at belt speed `v_d`."""
         params = with_parameter(self.unknowns.params(self.base, theta), "v_d", v_d)
-        return _window_flow(params, state, times, self.flow_options)
+        return _window_flow(params, self.eps, state, times, self.flow_options)
 
     def predictions(self, u):
         """The model at every window's times, offsets included, shape (W, K + 1, 2,
@@ -230,7 +234,9 @@ class Identification:
 
     **Fields:**
 
-    - `chain`: the fitted chain (`ChainParams`, at the eps of the chain given).
+    - `chain`: the fitted chain (`ChainParams`: physics only, no smoothing).
+    - `eps`: the smoothing velocity of the fitted model (`IdentifyOptions.eps`),
+        dimensionless: the values are those of the smoothed model at this eps.
     - `labels`: the fitted parameters (a vector parameter gets one label per
         entry), shape (P,).
     - `values`, `standard_errors`: their values and standard errors, shape (P,).
@@ -259,6 +265,7 @@ class Identification:
     """
 
     chain: ChainParams
+    eps: float
     labels: tuple
     values: np.ndarray
     standard_errors: np.ndarray
@@ -288,13 +295,15 @@ class Identification:
         covariance of the fitted unknowns (first order: good while the standard
         errors are small against the scale on which q bends).
 
-        **Arguments:** `quantity`: a function of a `ChainParams` (at the fitted
-        chain's eps) returning a scalar or an array, differentiable by
-        `jax.jacfwd` (a Hopf point, an existence limit, mu on a grid of speeds).
+        **Arguments:** `quantity`: a function of a `ChainParams` returning a scalar
+        or an array, differentiable by `jax.jacfwd` (a Hopf point, an existence
+        limit, mu on a grid of speeds). The chain holds no eps: a quantity of the
+        smoothed model gives its eps itself (`eps` of this result for the fitted
+        model's).
 
         **Returns:** (value, standard error), arrays of the quantity's shape."""
-        base = with_parameter(self.base, "eps", self.chain.eps)
-        value, g = _value_and_jacobian(quantity, self.unknowns, base, jnp.asarray(self.theta))
+        value, g = _value_and_jacobian(quantity, self.unknowns, self.base,
+                                       jnp.asarray(self.theta))
         value = np.asarray(value)
         g = np.asarray(g).reshape(value.size, -1)
         var = np.einsum("ij,jk,ik->i", g, self.theta_covariance, g)
@@ -305,7 +314,8 @@ class Identification:
         out = {"parameters": {label: {"value": float(v), "standard_error": float(s)}
                               for label, v, s in zip(self.labels, self.values,
                                                      self.standard_errors)},
-               "correlation": self.correlation.tolist(), "sigma": self.sigma,
+               "correlation": self.correlation.tolist(), "eps": self.eps,
+               "sigma": self.sigma,
                "rss": self.rss, "n_data": self.n_data, "n_free": self.n_free,
                "aic": self.aic, "bic": self.bic, "converged": self.converged,
                "iterations": self.iterations, "warnings": list(self.warnings)}
@@ -337,9 +347,9 @@ def identify(records: list[Record], chain: ChainParams, fit=("mu_st", "mu_d", "v
 
     Each record is cut into windows of `options.window` (multiple shooting: Bock
     (1983); van Domselaar & Hemker (1975)); each window is integrated by the
-    smoothed model (eq. (5), tanh(v_rel/eps) friction) from its own fitted
-    initial state, and the residuals are the model minus every measured value,
-    plus the jumps between consecutive windows. Levenberg-Marquardt
+    smoothed model (eq. (5), tanh(v_rel/eps) friction, eps = `options.eps`) from
+    its own fitted initial state, and the residuals are the model minus every
+    measured value, plus the jumps between consecutive windows. Levenberg-Marquardt
     (`optimistix.LevenbergMarquardt`, Jacobians by forward-mode autodiff through
     diffrax) solves it in stages of growing continuity weight
     (`IdentifyOptions.weights`), so that the answer is a continuous trajectory
@@ -426,10 +436,11 @@ def _problem(records, chain, fit, start, offsets, options, frozen: bool = False
     if total < n_unknowns:
         raise ValidationError(f"{records[0].source}: {total} measured values for "
                               f"{n_unknowns} unknowns: a fit needs more samples")
-    base = with_parameter(chain, "eps", options.eps)
+    base = chain
     if not frozen:
         base = _start_chain(records, base, unknowns, start or {})
-    problem = _Problem(base=base, unknowns=unknowns, windows=windows,
+    problem = _Problem(base=base, eps=jnp.asarray(options.eps, dtype=float),
+                       unknowns=unknowns, windows=windows,
                        offsets=offsets, flow_options=options.flow,
                        frozen=jnp.asarray(frozen))
     states = _start_states(records, windows, chain.n_osc)
@@ -514,8 +525,7 @@ def _result(problem: _Problem, records, chain, answer: _Answer, noise, converged
     fits = _stitch(records, problem.windows, np.asarray(answer.ys))
     values = np.asarray(answer.values)
     # NumPy from here: an eager JAX operation would compile a program of its own
-    fitted = problem.unknowns.with_values(with_parameter(problem.base, "eps", chain.eps),
-                                          values)
+    fitted = problem.unknowns.with_values(problem.base, values)
     log_term = n_data * np.log(max(rss, 1e-300) / n_data)
     off, off_se = None, None
     if problem.offsets:
@@ -524,7 +534,8 @@ def _result(problem: _Problem, records, chain, answer: _Answer, noise, converged
         off_se = np.concatenate([[0.0], np.sqrt(np.maximum(np.diag(cov_u)[cov_u.shape[0] - k:],
                                                            0.0))])
     return Identification(
-        chain=fitted, labels=problem.unknowns.labels, values=values, standard_errors=se,
+        chain=fitted, eps=float(options.eps), labels=problem.unknowns.labels,
+        values=values, standard_errors=se,
         covariance=cov, correlation=corr, offsets=off, offset_errors=off_se,
         sigma=float(np.sqrt(rss / max(n_data - n_free, 1))),
         noise=_record_noise(records, noise), rss=rss, n_data=n_data, n_free=n_free,

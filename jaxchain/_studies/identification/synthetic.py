@@ -27,7 +27,7 @@ def reference_record(params: ChainParams, v_d: float, t_end: float, dt: float, *
 
     **Arguments:**
 
-    - `params`: the chain with the true parameters (eps unused).
+    - `params`: the chain with the true parameters (nothing is smoothed).
     - `v_d`, `t_end`, `dt`: belt speed, duration and sample interval
         (dimensionless, eq. (4)).
     - `oscillators`: the measured oscillators, numbered from 1.

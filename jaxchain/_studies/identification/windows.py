@@ -21,6 +21,7 @@ from ..._engine.smoothed import terms
 from ..._engine.solver.controller import step_size_controller
 from ..._checks import check_positive
 from ..._errors import ValidationError
+from ..._physics.model import Model
 from ..._physics.params import ChainParams
 from .records import Record
 
@@ -112,12 +113,23 @@ class FlowOptions(eqx.Module):
     max_steps: int = eqx.field(static=True)
 
 
-def window_flow(params: ChainParams, y0, times, options: FlowOptions):
+def window_flow(params: ChainParams, eps, y0, times, options: FlowOptions):
     """The smoothed model's states at `times` (from 0) from `y0`, shape
-    (len(times), 2, n_osc); NaN where the integration failed."""
+    (len(times), 2, n_osc); NaN where the integration failed.
+
+    **Arguments:**
+
+    - `params`: the chain.
+    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
+        dimensionless (`IdentifyOptions.eps`); traced, so that derivatives with
+        respect to it flow through the integration.
+    - `y0`: the state at t = 0, shape (2, n_osc).
+    - `times`: increasing times from 0, shape (K,).
+    - `options`: `FlowOptions`.
+    """
     solver = as_solver(options.solver)
     sol = diffrax.diffeqsolve(
-        terms(solver), solver, 0.0, times[-1], None, y0, params,
+        terms(solver), solver, 0.0, times[-1], None, y0, Model(params, eps),
         saveat=diffrax.SaveAt(ts=times), stepsize_controller=step_size_controller(options),
         adjoint=diffrax.ForwardMode(), max_steps=options.max_steps, throw=False)
     return jnp.where(diffrax.is_successful(sol.result), sol.ys, jnp.nan)

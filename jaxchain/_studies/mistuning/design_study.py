@@ -7,7 +7,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._physics.chain import require_line
+from ..._bifurcation.limit_cycles import problem_eps
+from ..._engine.engines import Smoothed, as_engine
 from ..._engine.options import SimulationOptions
+from ..._physics.forces import DEFAULT_EPS
 from ..._physics.params import chain_or_default, ChainParams, with_fields, with_parameter
 from ..._bifurcation.shooting import periodic_orbit
 from ..._engine.simulate import simulate
@@ -67,7 +70,8 @@ def _fold_by_simulation(problem, solution, delta: np.ndarray, site: int, *,
     from the fold's orbit moved along its null vector, the first converged cycle
     whose non-trivial Floquet multipliers lie inside the unit circle), which must
     persist; Tsit5 at rtol 1e-10 (`CHECK_OPTIONS`); at v_d = fold + offset from the
-    fold's orbit, which must be lost (no cycle is left).
+    fold's orbit, which must be lost (no cycle is left). Shooting and simulations
+    at the problem's eps (`problem_eps`).
 
     **Returns:**
 
@@ -80,33 +84,35 @@ def _fold_by_simulation(problem, solution, delta: np.ndarray, site: int, *,
     u, w = np.asarray(solution[: 2 * n + 1]), np.asarray(solution[2 * n + 2:])
     chain = _ring_like(problem.params, n, 1.0 + np.roll(np.asarray(delta), centre - site))
     below, above = (with_parameter(chain, "v_d", fold + s * offset) for s in (-1, 1))
+    eps = problem_eps(problem)
+    engine = Smoothed(diffrax.Tsit5(), options, eps)
     out = {"fold": fold, "offset": offset, "persists_below": None}
     for scale in (0.01, 0.03, 0.1):
         for sign in (1, -1):
             guess = u + sign * scale * w
             orbit = periodic_orbit(below, guess[:-1].reshape(2, n), guess[-1],
-                                   problem.residual.options, throw=False)
+                                   problem.residual.options, eps=eps, throw=False)
             if bool(orbit.converged) and bool(orbit.stable):
-                obs = simulate(below, orbit.y0, diffrax.Tsit5(), options)
+                obs = simulate(below, orbit.y0, engine=engine)
                 out["persists_below"] = _vibrates(obs)
                 break
         if out["persists_below"] is not None:
             break
-    obs = simulate(above, jnp.asarray(u[:-1].reshape(2, n)), diffrax.Tsit5(), options)
+    obs = simulate(above, jnp.asarray(u[:-1].reshape(2, n)), engine=engine)
     out["persists_above"] = _vibrates(obs)
     out["agrees"] = bool(out["persists_below"]) and not out["persists_above"]
     return out
 
 
 def _ring_like(params: ChainParams, n_osc: int, stiffness) -> ChainParams:
-    """The ring of `params` (its damping, coupling, smoothing, load and friction
-    law), of `n_osc` oscillators with the given stiffness."""
+    """The ring of `params` (its damping, coupling, load and friction law), of
+    `n_osc` oscillators with the given stiffness."""
     return with_fields(params, n_osc=n_osc, stiffness=stiffness, mistuning=None)
 
 
 def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
                  n_random: int = 8, steps: int = 15, chain_n_osc: int = 20,
-                 progress: bool = True) -> dict:
+                 eps=DEFAULT_EPS, progress: bool = True) -> dict:
     """Intentional mistuning by gradient (`intentional_mistuning`) on a ring of
     `params.n_osc` (one period of the pattern), against the alternating A-B
     pattern and `n_random` random draws of the same budget:
@@ -119,9 +125,13 @@ def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
     - the patterns tiled on a ring of `chain_n_osc` and their upper edges by
       simulation (`upper_edges`), with random draws of that ring's length.
 
+    Every fold, orbit and simulation is of the model smoothed at `eps` (the
+    smoothing velocity of tanh(v_rel/eps), a finite number > 0, shape (),
+    dimensionless; the smoothed engine's `Smoothed.eps`, `DEFAULT_EPS` by default).
+
     **Returns:**
 
-    A dict of plain numbers and lists (JSON-ready).
+    A dict of plain numbers and lists (JSON-ready), `eps` among them.
 
     **Raises:**
 
@@ -129,15 +139,17 @@ def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
     """
     params = chain_or_default(params, n_osc=4)
     require_line(params, "the mistuning design")
+    eps = as_engine("smoothed", eps=eps).eps
     n = params.n_osc
-    start = design_problems(params, budget)
+    start = design_problems(params, budget, eps=eps)
     problem, solutions, homogeneous = start
-    out = {"budget": budget, "n_osc": n, "homogeneous_fold": homogeneous, "designs": {}}
+    out = {"budget": budget, "n_osc": n, "eps": float(eps), "homogeneous_fold": homogeneous,
+           "designs": {}}
     tiled = {"homogeneous": np.zeros(chain_n_osc)}
     for name, sense, zero_mean in (("lower", "lower", True), ("retune", "lower", False),
                                    ("raise", "raise", True)):
         d = intentional_mistuning(params, budget=budget, sense=sense, zero_mean=zero_mean,
-                                  steps=steps, start=start, progress=progress)
+                                  steps=steps, start=start, eps=eps, progress=progress)
         site = int(np.argmax(np.asarray(d.folds)))
         pattern = np.asarray(d.pattern)
         out["designs"][name] = {
@@ -163,7 +175,8 @@ def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
     names = list(tiled) + [f"random {i}" for i in range(n_random)]
     patterns = list(tiled.values()) + list(_random_patterns(chain_n_osc, budget, n_random, 1))
     chains = [_ring_like(params, chain_n_osc, 1.0 + p) for p in patterns]
-    edges = upper_edges(chains, SOLVERS[DEFAULT_SOLVER](), steps=8, progress=progress)
+    edges = upper_edges(chains, SOLVERS[DEFAULT_SOLVER](), steps=8, eps=eps,
+                        progress=progress)
     out["chain_edges"] = {"n_osc": chain_n_osc, "resolution": edges.attrs["resolution"],
                           "edge": {k: float(np.nanmax(e)) for k, e in
                                    zip(names, edges["edge"].values)}}

@@ -18,12 +18,15 @@ from ..._bifurcation.continuation import ContinuationOptions, PseudoArclength, c
 from ..._bifurcation.fold import FoldPoint, fold_point
 from ..._bifurcation.limit_cycles import limit_cycle_problem
 from ..._bifurcation.shooting import ShootingOptions, periodic_orbit
+from ..._engine.engines import as_engine
 from ..._engine.lanes import run_lanes
 from ..._engine.options import SimulationOptions
+from ..._physics.forces import DEFAULT_EPS
 from ..._physics.initial import OutOfPhaseExcitation, initial_states
 from ..._physics.params import ChainParams, stack_chains, with_parameter
 from ..snake import SNAKE_SHOOTING, _turning_point
 from ..._sweeps.result_store import read_dataset, write_dataset
+from ..._checks import check_count
 from ..._errors import ValidationError
 from ..._engine.status import Status
 
@@ -49,14 +52,17 @@ def _site_excitation(n_osc: int, sites) -> OutOfPhaseExcitation:
                                 velocity=jnp.zeros(sites.size), base_sign=-1.0)
 
 
-def _vibrates(chains, v, solver, options, bar) -> np.ndarray:
+def _vibrates(chains, v, solver, options, eps, bar) -> np.ndarray:
     """Whether the single-site state of each (chain, site) lane still has an
-    oscillator on the HALC at t_end, at belt speeds v of shape (n_chains, n_osc)."""
+    oscillator on the HALC at t_end, at belt speeds v of shape (n_chains, n_osc),
+    by the smoothed engine at `eps`."""
     n_chains, n_osc = v.shape
     lanes = stack_chains([with_parameter(c, "v_d", float(v[i, j]))
                           for i, c in enumerate(chains) for j in range(n_osc)])
     y0 = initial_states(lanes, _site_excitation(n_osc, np.tile(np.arange(n_osc), n_chains)))
-    out = run_lanes(lanes, np.asarray(y0), solver, options, progress=bar)
+    out = run_lanes(lanes, np.asarray(y0),
+                    engine=as_engine("smoothed", solver, options, lanes, eps=eps),
+                    progress=bar)
     status = np.asarray(out.status).reshape(n_chains, n_osc)
     n_halc = np.asarray(out.n_halc).reshape(n_chains, n_osc)
     return np.where(status == Status.ok, n_halc > 0, np.nan)
@@ -64,7 +70,8 @@ def _vibrates(chains, v, solver, options, bar) -> np.ndarray:
 
 def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: float = 1.9,
                 steps: int = 7, options: SimulationOptions = EDGE_OPTIONS,
-                store: str | Path | None = None, progress: bool = True) -> xr.Dataset:
+                eps=DEFAULT_EPS, store: str | Path | None = None,
+                progress: bool = True) -> xr.Dataset:
     """For each chain and each oscillator n, the largest belt speed at which the
     single-site localized state at n (eq. (8), k = 1) survives direct simulation:
     bisection on [low, high], every (chain, oscillator) lane at once through
@@ -79,11 +86,11 @@ def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: fl
     - `solver`: a diffrax solver.
     - `low`, `high`: the bracket of belt speeds; a lane that does not vibrate at
         `low`, or still vibrates at `high`, gets NaN.
-    - `steps`: bisection steps after the two ends: the resolution is
-        (high - low) / 2^steps.
+    - `steps`: bisection steps after the ends: resolution (high - low) / 2^steps.
     - `options`: `SimulationOptions` of each simulation.
-    - `store`: a netCDF file; the bracket is written after each step and a run
-        with the same settings continues from it.
+    - `eps`: the smoothed engine's smoothing velocity (`Smoothed.eps`), > 0.
+    - `store`: a netCDF file holding the bracket after each step, from which a
+        run of the same settings continues.
     - `progress`: a tqdm bar over the simulations.
 
     **Returns:**
@@ -94,18 +101,18 @@ def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: fl
 
     **Raises:**
 
-    `ValidationError` unless 0 < low < high and steps >= 1.
+    `ValidationError` unless 0 < low < high, steps >= 1 and eps > 0.
     """
     import xarray as xr
 
     if not 0 < low < high:
         raise ValidationError(f"low, high: need 0 < low < high, got {low!r}, {high!r}")
-    if steps < 1:
-        raise ValidationError(f"steps must be >= 1, got {steps!r}")
+    check_count("steps", steps, 1)
+    eps = float(as_engine("smoothed", eps=eps).eps)
     n_chains, n_osc = len(chains), chains[0].n_osc
     settings = dict(chains=[{f.name: getattr(c, f.name) for f in dataclasses.fields(c)
                               if f.name != "v_d"} for c in chains],
-                    solver=solver, low=low, high=high, steps=steps, options=options)
+                    solver=solver, eps=eps, low=low, high=high, steps=steps, options=options)
     state = read_dataset(Path(store), KIND, **settings) if store is not None else None
     if state is None:
         lo = np.full((n_chains, n_osc), float(low))
@@ -119,12 +126,12 @@ def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: fl
               desc="upper edges", unit="simulation", disable=not progress) as bar:
         for step in range(done, steps + 2):
             if step == 0:
-                valid &= _vibrates(chains, lo, solver, options, bar) == 1
+                valid &= _vibrates(chains, lo, solver, options, eps, bar) == 1
             elif step == 1:
-                valid &= _vibrates(chains, hi, solver, options, bar) == 0
+                valid &= _vibrates(chains, hi, solver, options, eps, bar) == 0
             else:
                 mid = 0.5 * (lo + hi)
-                alive = _vibrates(chains, mid, solver, options, bar)
+                alive = _vibrates(chains, mid, solver, options, eps, bar)
                 lo = np.where(alive == 1, mid, lo)
                 hi = np.where(alive == 0, mid, hi)
                 valid &= np.isfinite(alive)
@@ -150,46 +157,59 @@ FOLD_CONTINUATION = ContinuationOptions(ds=0.01, ds_max=0.05, p_max=2.2, max_poi
 def localized_orbit(params: ChainParams, site: int, *,
                     options: SimulationOptions = SimulationOptions(t_end=3000.0,
                                                                    transient=2500.0),
-                    shooting: ShootingOptions = SNAKE_SHOOTING):
+                    shooting: ShootingOptions = SNAKE_SHOOTING, eps=DEFAULT_EPS):
     """The periodic single-site localized state at oscillator `site` (0-based) at
     `params.v_d`, refined by shooting (Levenberg-Marquardt) from a simulation of
-    eq. (8) with that oscillator excited.
+    eq. (8) with that oscillator excited, both of the model smoothed at `eps` (the
+    smoothing velocity of tanh(v_rel/eps), a finite number > 0, dimensionless;
+    the smoothed engine's `Smoothed.eps`, `DEFAULT_EPS` by default).
 
     **Returns:**
 
     (`PeriodicOrbit`, the `ShootingOptions` of its phase condition), or
     (None, None) when the simulated state is not periodic or does not vibrate.
+
+    **Raises:**
+
+    `ValidationError` for eps <= 0.
     """
     from ..._engine.simulate import simulate
 
+    engine = as_engine("smoothed", None, options, params, eps=eps)
     mask = np.arange(params.n_osc) == site
     y0 = OutOfPhaseExcitation(excited=jnp.asarray(mask), velocity=0.0, base_sign=-1.0)(params)
-    obs = simulate(params, y0, options=options)
+    obs = simulate(params, y0, engine=engine)
     if int(obs.status) != Status.ok or int(obs.n_halc) == 0:
         return None, None
     opts = dataclasses.replace(shooting, phase_oscillator=int(site))
-    guess = _turning_point(params, np.asarray(obs.y_final), int(site), opts)
+    guess = _turning_point(params, np.asarray(obs.y_final), int(site), opts, engine.eps)
     if guess is None:
         return None, None
-    orbit = periodic_orbit(params, guess[0], guess[1], opts, throw=False)
+    orbit = periodic_orbit(params, guess[0], guess[1], opts, eps=engine.eps, throw=False)
     return (orbit, opts) if bool(orbit.converged) else (None, None)
 
 
 def localized_fold(params: ChainParams, site: int, *,
-                   continuation_options: ContinuationOptions = FOLD_CONTINUATION
-                   ) -> tuple[FoldPoint | None, object]:
+                   continuation_options: ContinuationOptions = FOLD_CONTINUATION,
+                   eps=DEFAULT_EPS) -> tuple[FoldPoint | None, object]:
     """The fold of limit cycles that ends the single-site localized state at
     oscillator `site` upwards in v_d: its orbit at `params.v_d` (`localized_orbit`),
     pseudo-arclength continuation upwards to the first fold, then Newton's method on
     the Moore-Spence extended system (`fold_point`) from the point where the fold
-    was detected, or else from one of its neighbours on the branch.
+    was detected, or else from one of its neighbours on the branch. Everything is
+    of the model smoothed at `eps` (as `localized_orbit` takes it; `DEFAULT_EPS` by
+    default), which the problem carries.
 
     **Returns:**
 
     (`FoldPoint`, the limit cycles' `ContinuationProblem`), or (None, None) when
     the state is not periodic at `params.v_d` or no fold is met.
+
+    **Raises:**
+
+    `ValidationError` for eps <= 0.
     """
-    orbit, opts = localized_orbit(params, site)
+    orbit, opts = localized_orbit(params, site, eps=eps)
     if orbit is None:
         return None, None
     problem = limit_cycle_problem(orbit, opts)

@@ -8,7 +8,9 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from ..._engine.engines import Smoothed
 from ..._physics.custom_types import State
+from ..._physics.forces import DEFAULT_EPS
 from ..._physics.initial import OutOfPhaseExcitation, excited_block
 from ..._physics.model import steady_sliding
 from ..._engine.options import SimulationOptions
@@ -52,16 +54,18 @@ QUICK_OPTIONS = SimulationOptions(t_end=150.0, transient=100.0, chunk_length=25.
 
 class StressCase(eqx.Module):
     """One case of the stress matrix: the paper's defaults (`ChainParams()`, eq. (7)
-    at v_d = 1.5, the localized start of eq. (8) on a quarter of the ring) with
-    `what` set to `value`.
+    at v_d = 1.5, smoothed at `DEFAULT_EPS`, the localized start of eq. (8) on a
+    quarter of the ring) with `what` set to `value`.
 
-    **Fields:** `what`, `value` (as in `MATRIX`), `params`, `y0` (shape (2, n_osc),
-    dimensionless) and `options`.
+    **Fields:** `what`, `value` (as in `MATRIX`), `params`, `eps` (the smoothing
+    velocity the case runs the smoothed engine at, `Smoothed.eps`: a float > 0,
+    dimensionless), `y0` (shape (2, n_osc), dimensionless) and `options`.
     """
 
     what: str = eqx.field(static=True)
     value: float | str = eqx.field(static=True)
     params: ChainParams
+    eps: float = eqx.field(static=True)
     y0: State
     options: SimulationOptions = eqx.field(static=True)
 
@@ -79,15 +83,17 @@ def make_case(what: str, value, options: SimulationOptions = OPTIONS) -> StressC
     """
     if what not in MATRIX:
         raise ValidationError(f"what must be one of {', '.join(MATRIX)}, got {what!r}")
-    params = ChainParams()
-    if what == "n_osc":
+    params, eps = ChainParams(), DEFAULT_EPS
+    if what == "eps":  # the engine's, not the chain's: validated as Smoothed does
+        eps = float(Smoothed(eps=float(value)).eps)
+    elif what == "n_osc":
         params = ChainParams(n_osc=int(value))
     elif what == "mu_st/mu_d":
         params = with_parameter(params, "mu_st", float(value) * float(params.friction.mu_d))
     elif what != "ics":
         params = with_parameter(params, what, float(value))
     n = params.n_osc
-    base = steady_sliding(params)
+    base = steady_sliding(params, eps)  # the smoothed engine's fixed point
     if what != "ics":
         y0 = OutOfPhaseExcitation.eq8(excited_block(n, max(1, n // 4), params.graph))(params)
     elif value == "steady sliding":
@@ -98,7 +104,7 @@ def make_case(what: str, value, options: SimulationOptions = OPTIONS) -> StressC
         y0 = base.at[1].add(50.0 * _pattern(n))
     else:
         raise ValidationError(f"ics must be one of {MATRIX['ics']}, got {value!r}")
-    return StressCase(what=what, value=value, params=params, y0=jnp.asarray(y0),
+    return StressCase(what=what, value=value, params=params, eps=eps, y0=jnp.asarray(y0),
                       options=options)
 
 

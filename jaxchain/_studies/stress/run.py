@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from ..._engine.checks import as_solver
-from ..._engine.status import failure_hint
+from ..._engine.engines import Smoothed
 from ..._engine.progress import progress_bar
 from ..._engine.solver.rosenbrock import Ros34PW2
 from ..._engine.simulate import simulate
@@ -40,7 +40,7 @@ def _too_costly(case: StressCase, solver) -> str:
     `IMEX_LIMITS`), or ""."""
     if not isinstance(solver, SPLIT_SOLVERS) or isinstance(solver, Ros34PW2):
         return ""
-    n, eps = case.params.n_osc, float(np.min(np.asarray(case.params.eps)))
+    n, eps = case.params.n_osc, float(case.eps)
     if n <= IMEX_LIMITS["n_osc"] and eps >= IMEX_LIMITS["eps"]:
         return ""
     return (f"not run: {type(solver).__name__}'s dense Newton solves cost O(N^3) per "
@@ -70,20 +70,20 @@ def run_case(case: StressCase, solver: str) -> dict:
         return {"what": case.what, "value": case.value, "solver": solver, "num_steps": 0,
                 "outcome": "failed", "status": f"{Status.not_run}: too costly", "check": "",
                 "hint": reason, "wall_s": 0.0}
-    observed = simulate(case.params, case.y0, solve, case.options, throw=False)
+    engine = Smoothed(solve, case.options, case.eps)
+    observed = simulate(case.params, case.y0, engine=engine, throw=False)
     code = Status(int(observed.status))
     row = {"what": case.what, "value": case.value, "solver": solver,
            "num_steps": int(observed.num_steps)}
     if code is not Status.ok:
         row |= {"outcome": "failed", "status": code.name, "check": "",
-                "hint": failure_hint(code, case.params, solve, case.options)}
+                "hint": engine.failure_hint(code, case.params)}
     elif not _finite(observed):
         row |= {"outcome": "failed", "status": Status.non_finite_state.name, "check": "",
-                "hint": failure_hint(Status.non_finite_state, case.params, solve,
-                                     case.options)}
+                "hint": engine.failure_hint(Status.non_finite_state, case.params)}
     else:
         exactly = case.what == "ics" and case.value == "steady sliding"
-        checks = physics_checks(case.params, case.y0, solve, case.options, observed, exactly)
+        checks = physics_checks(case.params, case.y0, engine, observed, exactly)
         held = all(ok for ok, _ in checks)
         row |= {"outcome": "verified" if held else "failed",
                 "status": Status.ok.name if held else "check failed",
@@ -101,8 +101,8 @@ CHECKS_VERSION = 2
 def _row_key(case: StressCase, solver: str) -> str:
     """The key of a stored row: everything that determines it (`settings_key`)."""
     return settings_key("stress row", what=case.what, value=case.value,
-                        params=case.params, y0=case.y0, options=case.options,
-                        solver=solver, checks=CHECKS_VERSION)
+                        params=case.params, eps=case.eps, y0=case.y0,
+                        options=case.options, solver=solver, checks=CHECKS_VERSION)
 
 
 def stress(cases: Sequence[StressCase] | None = None, solvers: Sequence[str] = PATHS,
