@@ -15,14 +15,15 @@ from .._studies.identification.unknowns import CHAIN_FITTABLE
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_solver_options,
                      comma_list, note, one_belt_speed, positive_float, positive_int,
-                     print_json, smoothed_only)
+                     print_json)
 
 HELP = "fit friction and damping to measured stick-slip records"
 DESCRIPTION = f"""\
 Fit the named parameters of the chain and its friction law (--fit) to measured
 records of the rig, one CSV file per belt speed, by least squares through the
-integration of eq. (5) (smoothed friction, eps = {IdentifyOptions().eps:g}), and
-print them with their standard errors.
+integration of eq. (5) (smoothed friction, eps = {IdentifyOptions().eps:g}; or with
+--engine exact the stick/slip switch model itself, differentiated through every
+switch, without the smoothing's bias), and print them with their standard errors.
 
 A record has a column t, one column x<n> per measured oscillator (n from 1, as in
 the paper; any subset), optionally v<n> velocity columns, and a constant column v_d
@@ -98,8 +99,6 @@ def _assignments(text: str) -> dict:
 
 
 def run(args) -> None:
-    smoothed_only(args, "the fit differentiates the flow of the smoothed model (the "
-                        "exact engine has no derivatives yet)")
     options, files, held_files = _check_identify(args)
     params, records, held_out = _read_records(args, files, held_files)
     outputs = Outputs(args, data=["identified_chain.toml"] +
@@ -124,7 +123,8 @@ def _check_identify(args) -> tuple[IdentifyOptions, list, list]:
 
     **Raises:** `UsageError` when every record is held out, or for --held-out
     without --laws."""
-    options = IdentifyOptions(window=args.window, solver=args.solver, rtol=args.rtol,
+    options = IdentifyOptions(window=args.window, engine=args.engine, solver=args.solver,
+                              rtol=args.rtol,
                               atol=args.atol, controller=args.controller,
                               max_steps=args.max_steps)
     files = list(args.records)

@@ -146,6 +146,11 @@ def _segment(params, options, observe, t_stop, c: _Carry) -> _Carry:
             event=diffrax.Event(guard, optx.Bisection(rtol=0.0, atol=options.root_tol),
                                 direction=False),
             max_steps=options.max_steps, throw=False,
+            # Forward mode: the segments run in a while loop, which reverse mode
+            # cannot cross anyway; forward mode differentiates a run through every
+            # event, its time by the implicit function theorem (optimistix's root
+            # find), which gives the saltation matrix of each switch.
+            adjoint=diffrax.ForwardMode(),
         )
     tau = sol.ts[-1]
     y, work = sol.ys[0][-1], sol.ys[1][-1]
@@ -334,7 +339,12 @@ def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State
 
 
 @eqx.filter_jit
-def _sampled(params: ChainParams, y0: State, ts, options: NonsmoothOptions):
+def sampled_states(params: ChainParams, y0: State, ts, options: NonsmoothOptions):
+    """The exact engine's states at the times `ts` (increasing, from t = 0) from the
+    state `y0`, event by event, shape (len(ts), 2, n_osc), and the run's `Status`.
+    Pure and traceable; differentiable in forward mode (`jax.jvp`, `jax.jacfwd`)
+    through every switch with respect to `params` and `y0`."""
+
     def body(c, t):
         c = _chunk(params, options, False, False, c, t)
         return c, c.y
@@ -375,7 +385,7 @@ def nonsmooth_trajectory(params: ChainParams, y0: AbstractInitialCondition | Sta
         raise ValidationError("ts must be a non-empty increasing array of times >= 0")
     if not isinstance(y0, AbstractInitialCondition):
         y0 = GivenState(y0)
-    ys, status = _sampled(params, y0(params), jnp.asarray(ts), options)
+    ys, status = sampled_states(params, y0(params), jnp.asarray(ts), options)
     status = Status(int(status))
     if status is not Status.ok:
         raise RuntimeError(f"{status}: {status.message}")

@@ -36,13 +36,19 @@ class IdentifyOptions(eqx.Module):
         mu(v) and xi), short enough that the misfit stays smooth in the window's
         initial state (measured in `benchmarks/identification_windows.py` and on
         the documentation page "Identification").
-    - `eps`: the smoothing velocity of the fitted model, tanh(v_rel/eps) (> 0),
+    - `engine`: the fitted model: "smoothed" (eq. (5) with tanh(v_rel/eps), by
+        diffrax) or "exact" (the stick/slip switch model, event by event, its
+        derivatives through every switch: no smoothing bias, at the cost of
+        locating every event of every window).
+    - `eps`: the smoothing velocity of the smoothed model, tanh(v_rel/eps) (> 0),
         dimensionless (a fraction of x_0 omega_n): the fit integrates the smoothed
-        vector field at this eps (the chain holds no eps). The fit is to the exact
-        switch model's records, so eps is a bias: 1e-5 keeps it below 0.5 %
-        (1e-3, the simulations' default `DEFAULT_EPS`, biases xi and v0 by about
-        3 %).
-    - `solver`, `rtol`, `atol`, `controller`, `max_steps`: the integration of
+        vector field at this eps (the chain holds no eps). Records of real
+        stick-slip (or of the exact model) make eps a bias: 1e-5 keeps it below
+        0.5 % (1e-3, the simulations' default `DEFAULT_EPS`, biases xi and v0 by
+        about 3 %). Not read by the exact engine.
+    - `solver`, `controller`: the smoothed model's solver and step-size
+        controller (the exact one integrates its segments by Dopri8).
+    - `rtol`, `atol`, `max_steps`: the integration of
         each window, as in `SimulationOptions`, but at rtol 1e-6, atol 1e-8: the
         fit needs the forward-mode sensitivities, which are exact only for the
         discrete solution, to be accurate too; at the simulations' rtol 3e-5
@@ -56,10 +62,12 @@ class IdentifyOptions(eqx.Module):
     - `condition_limit`: the condition number of the parameters' correlation
         matrix above which the fit warns that a direction is poorly determined.
 
-    **Raises:** `ValidationError` naming the field for a value that is not > 0.
+    **Raises:** `ValidationError` naming the field for a value that is not > 0, or
+    for an engine other than "smoothed" and "exact".
     """
 
     window: float = eqx.field(static=True, default=10.0)
+    engine: str = eqx.field(static=True, default="smoothed")
     eps: float = eqx.field(static=True, default=1e-5)
     solver: str = eqx.field(static=True, default=DEFAULT_SOLVER)
     rtol: float = eqx.field(static=True, default=1e-6)
@@ -79,6 +87,9 @@ class IdentifyOptions(eqx.Module):
                 raise ValidationError(f"IdentifyOptions.{name} must be a number > 0, got "
                                       f"{value!r}")
         as_solver(self.solver, "IdentifyOptions.solver")
+        if self.engine not in ("smoothed", "exact"):
+            raise ValidationError(f"IdentifyOptions.engine must be 'smoothed' or 'exact', "
+                                  f"got {self.engine!r}")
         if self.controller not in CONTROLLERS:
             raise ValidationError(f"IdentifyOptions.controller must be one of "
                                   f"{', '.join(CONTROLLERS)}, got {self.controller!r}")
@@ -88,7 +99,8 @@ class IdentifyOptions(eqx.Module):
 
     @property
     def flow(self) -> FlowOptions:
-        return FlowOptions(solver=self.solver, rtol=self.rtol, atol=self.atol,
+        return FlowOptions(engine=self.engine, solver=self.solver, rtol=self.rtol,
+                           atol=self.atol,
                            controller=self.controller, max_steps=self.max_steps)
 
 
@@ -235,8 +247,10 @@ class Identification:
     **Fields:**
 
     - `chain`: the fitted chain (`ChainParams`: physics only, no smoothing).
-    - `eps`: the smoothing velocity of the fitted model (`IdentifyOptions.eps`),
-        dimensionless: the values are those of the smoothed model at this eps.
+    - `engine`: the fitted model, "smoothed" or "exact" (`IdentifyOptions.engine`).
+    - `eps`: the smoothing velocity of the fitted smoothed model
+        (`IdentifyOptions.eps`), dimensionless: the values are those of the
+        smoothed model at this eps; None for the exact engine.
     - `labels`: the fitted parameters (a vector parameter gets one label per
         entry), shape (P,).
     - `values`, `standard_errors`: their values and standard errors, shape (P,).
@@ -265,7 +279,8 @@ class Identification:
     """
 
     chain: ChainParams
-    eps: float
+    engine: str
+    eps: float | None
     labels: tuple
     values: np.ndarray
     standard_errors: np.ndarray
@@ -314,7 +329,8 @@ class Identification:
         out = {"parameters": {label: {"value": float(v), "standard_error": float(s)}
                               for label, v, s in zip(self.labels, self.values,
                                                      self.standard_errors)},
-               "correlation": self.correlation.tolist(), "eps": self.eps,
+               "correlation": self.correlation.tolist(), "engine": self.engine,
+               "eps": self.eps,
                "sigma": self.sigma,
                "rss": self.rss, "n_data": self.n_data, "n_free": self.n_free,
                "aic": self.aic, "bic": self.bic, "converged": self.converged,
@@ -348,7 +364,8 @@ def identify(records: list[Record], chain: ChainParams, fit=("mu_st", "mu_d", "v
     Each record is cut into windows of `options.window` (multiple shooting: Bock
     (1983); van Domselaar & Hemker (1975)); each window is integrated by the
     smoothed model (eq. (5), tanh(v_rel/eps) friction, eps = `options.eps`) from
-    its own fitted initial state, and the residuals are the model minus every
+    its own fitted initial state (or by the exact switch model, `options.engine`),
+    and the residuals are the model minus every
     measured value, plus the jumps between consecutive windows. Levenberg-Marquardt
     (`optimistix.LevenbergMarquardt`, Jacobians by forward-mode autodiff through
     diffrax) solves it in stages of growing continuity weight
@@ -534,7 +551,9 @@ def _result(problem: _Problem, records, chain, answer: _Answer, noise, converged
         off_se = np.concatenate([[0.0], np.sqrt(np.maximum(np.diag(cov_u)[cov_u.shape[0] - k:],
                                                            0.0))])
     return Identification(
-        chain=fitted, eps=float(options.eps), labels=problem.unknowns.labels,
+        chain=fitted, engine=options.engine,
+        eps=float(options.eps) if options.engine == "smoothed" else None,
+        labels=problem.unknowns.labels,
         values=values, standard_errors=se,
         covariance=cov, correlation=corr, offsets=off, offset_errors=off_se,
         sigma=float(np.sqrt(rss / max(n_data - n_free, 1))),

@@ -17,7 +17,10 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from ..._engine.checks import as_solver
+from ..._engine.exact.options import NonsmoothOptions
+from ..._engine.exact.solve import sampled_states
 from ..._engine.smoothed import terms
+from ..._engine.status import Status
 from ..._engine.solver.controller import step_size_controller
 from ..._checks import check_positive
 from ..._errors import ValidationError
@@ -101,11 +104,13 @@ def cut(records: list[Record], n_osc: int, window: float) -> Windows:
 
 
 class FlowOptions(eqx.Module):
-    """How a window is integrated: the solver (a name of `SOLVERS`), the step-size
-    controller (of `CONTROLLERS`) at `rtol`, `atol`, and the step budget, as in
+    """How a window is integrated: by the `engine` ("smoothed" or "exact"); the
+    smoothed one with the solver (a name of `SOLVERS`) and the step-size controller
+    (of `CONTROLLERS`), both at `rtol`, `atol` and the step budget, as in
     `SimulationOptions`; forward-mode differentiable (`diffrax.ForwardMode`) for
     the Jacobian of the fit."""
 
+    engine: str = eqx.field(static=True)
     solver: str = eqx.field(static=True)
     rtol: float = eqx.field(static=True)
     atol: float = eqx.field(static=True)
@@ -114,19 +119,26 @@ class FlowOptions(eqx.Module):
 
 
 def window_flow(params: ChainParams, eps, y0, times, options: FlowOptions):
-    """The smoothed model's states at `times` (from 0) from `y0`, shape
-    (len(times), 2, n_osc); NaN where the integration failed.
+    """The model's states at `times` (from 0) from `y0`, shape (len(times), 2,
+    n_osc); NaN where the integration failed. The smoothed model (eq. (5) with
+    tanh(v_rel/eps)) by diffrax, or the exact stick/slip switch model event by
+    event (`sampled_states`, Dopri8 at the same tolerances), whose derivatives
+    cross every switch (the event times by the implicit function theorem).
 
     **Arguments:**
 
     - `params`: the chain.
     - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
         dimensionless (`IdentifyOptions.eps`); traced, so that derivatives with
-        respect to it flow through the integration.
+        respect to it flow through the integration. Not read by the exact engine.
     - `y0`: the state at t = 0, shape (2, n_osc).
     - `times`: increasing times from 0, shape (K,).
     - `options`: `FlowOptions`.
     """
+    if options.engine == "exact":
+        ys, status = sampled_states(params, y0, times, NonsmoothOptions(
+            rtol=options.rtol, atol=options.atol, max_steps=options.max_steps))
+        return jnp.where(status == Status.ok, ys, jnp.nan)
     solver = as_solver(options.solver)
     sol = diffrax.diffeqsolve(
         terms(solver), solver, 0.0, times[-1], None, y0, Model(params, eps),
