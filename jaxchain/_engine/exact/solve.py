@@ -134,16 +134,22 @@ def _segment(params, options, observe, t_stop, c: _Carry) -> _Carry:
     rule."""
     sigma = turning_directions(params, c.y, c.modes, options.switch_tol)
     args = (params, c.modes, sigma, observe, options.switch_tol)
-    # Under vmap the event's root find runs in every lane, also where no guard
-    # changed sign and its result is discarded: Bisection's check of its bracket
-    # must not raise there. As NaN, a lane whose own bracket fails ends as a
-    # non-finite state, flagged like any failure.
+    # The smallest guard starts every segment above zero and the event is its fall
+    # through zero (direction=False), so the root find's function decreases over
+    # its bracket: Bisection is told so (flip=True) rather than detecting it. This
+    # holds also where diffrax's root find runs without an event (every lane under
+    # vmap: its function is then t_next - t) and where the guard on the dense
+    # output at the step's end has not yet changed sign by a rounding (the root is
+    # then the step's end): Bisection's check of its bracket, which raised there
+    # (through the lazily traced derivative of the root find too), is not traced.
+    # diffrax's own checks of its arguments are traced as NaN (`errors_as_nan`).
     with errors_as_nan():
         sol = diffrax.diffeqsolve(
             diffrax.ODETerm(mode_field), diffrax.Dopri8(), 0.0, t_stop - c.t, None,
             (c.y, c.work), args, saveat=diffrax.SaveAt(t1=True),
             stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
-            event=diffrax.Event(guard, optx.Bisection(rtol=0.0, atol=options.root_tol),
+            event=diffrax.Event(guard, optx.Bisection(rtol=0.0, atol=options.root_tol,
+                                                       flip=True),
                                 direction=False),
             max_steps=options.max_steps, throw=False,
             # Forward mode: the segments run in a while loop, which reverse mode
