@@ -46,12 +46,13 @@ def add_parser(sub):
     add_vd_option(g, list(CROSSCHECK_VD), "belt speeds")
     default8 = [k for f, k in CROSSCHECK_ICS if f == "eq8"]
     default10 = [k for f, k in CROSSCHECK_ICS if f == "eq10"]
-    g.add_argument("--eq8", type=comma_list(int), default=default8, metavar="K,K,...",
+    g.add_argument("--eq8", type=comma_list(int), default=None, metavar="K,K,...",
                    help="numbers of excited oscillators of eq. (8) initial conditions "
-                        f"(default {','.join(map(str, default8))}; '' for none)")
-    g.add_argument("--eq10", type=comma_list(int), default=default10, metavar="K,K,...",
+                        f"(default {','.join(map(str, default8))}, each at most N: on a "
+                        "shorter chain the larger ones become k = N; '' for none)")
+    g.add_argument("--eq10", type=comma_list(int), default=None, metavar="K,K,...",
                    help="the same for eq. (10) (default "
-                        f"{','.join(map(str, default10))}; '' for none)")
+                        f"{','.join(map(str, default10))}, each at most N; '' for none)")
     add_ring_options(g)
     add_chain_options(g)
     add_run_options(p)
@@ -65,13 +66,26 @@ def add_parser(sub):
     return p
 
 
+def _excited(family: str, given: list[int] | None, n_osc: int) -> list[int]:
+    """The numbers of excited oscillators of `family` ("eq8" or "eq10"): those
+    given, each checked against the chain's `n_osc`, or the defaults of
+    `CROSSCHECK_ICS` with each k at most `n_osc` (k = 20, the whole default ring,
+    is the whole chain on a shorter one).
+
+    **Raises:** `UsageError` naming the option for a k outside [1, n_osc]."""
+    if given is None:
+        return sorted({min(k, n_osc) for f, k in CROSSCHECK_ICS if f == family})
+    for k in given:
+        if not 1 <= k <= n_osc:
+            raise UsageError(f"--{family}: k must lie in [1, {n_osc}], got {k}")
+    return given
+
+
 def run(args) -> None:
-    ics = [("eq8", k) for k in args.eq8] + [("eq10", k) for k in args.eq10]
+    ics = [(family, k) for family in ("eq8", "eq10")
+           for k in _excited(family, getattr(args, family), args.n_osc)]
     if not ics:
         raise UsageError("--eq8 and --eq10 are both empty: no initial conditions")
-    for _, k in ics:
-        if not 1 <= k <= args.n_osc:
-            raise UsageError(f"--eq8/--eq10: k must lie in [1, {args.n_osc}], got {k}")
     params = chain_params(args, args.n_osc)
     for vd in args.vd:
         with_parameter(params, "v_d", vd)  # validates every belt speed now
