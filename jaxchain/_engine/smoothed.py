@@ -122,6 +122,21 @@ def _with_tangent(terms_):
     return diffrax.ODETerm(field)
 
 
+def _initial_states(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
+                    options: SimulationOptions, t0, t1) -> tuple[PyTree, PyTree]:
+    """The solver's and the step-size controller's states at the start of a run, as
+    `diffrax.diffeqsolve` makes them when it is given none (each one's `init`, the
+    controller choosing the first step), for the first chunk [t0, t1]: so that the
+    first chunk too is a step of the scan over chunks, and the run compiles one copy
+    of the solve per phase instead of two. Not differentiated (diffrax stops the
+    gradient of the states it makes itself)."""
+    controller = step_size_controller(options)
+    tnext, controller_state = controller.init(terms_, t0, t1, y0, None, args, solver.func,
+                                              solver.error_order(terms_))
+    solver_state = solver.init(terms_, t0, jnp.minimum(tnext, t1), y0, args)
+    return jax.lax.stop_gradient((solver_state, controller_state))
+
+
 def _spans(options: SimulationOptions) -> list[tuple[float, float, int, int]]:
     """The phases of a run (`AbstractHorizon.phases`) as (start, chunk length,
     number of chunks, samples per chunk): the transient (not sampled), then the
@@ -169,22 +184,21 @@ def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
     if tangent:
         y = jnp.stack([y0, lyapunov[0].initial_tangent(y0)])
         terms_ = _with_tangent(terms_)
-    carry = (y, None, None, None, states, jnp.array(0), status)
-    for start, length, count, samples in _spans(options):
-        # The first chunk runs outside the scan: it creates the solver and controller
-        # states that the scan then carries from chunk to chunk.
-        if carry[1] is None:
-            carry = _advance(terms_, solver, args, options, observers, progress, tangent,
-                             carry, start, start + length, samples)
-            start, count = start + length, count - 1
-        if count:
-            t0s = start + length * jnp.arange(count)
+    spans = _spans(options)
+    solver_state, controller_state = _initial_states(terms_, solver, y, args, options,
+                                                     spans[0][0], spans[0][0] + spans[0][1])
+    carry = (y, solver_state, controller_state, jnp.array(False), states, jnp.array(0),
+             status)
+    # Every chunk of a phase is one step of its scan, the first too (its solver and
+    # controller states made above): one compiled copy of the solve per phase.
+    for start, length, count, samples in spans:
+        t0s = start + length * jnp.arange(count)
 
-            def body(c, t0, length=length, samples=samples):
-                return _advance(terms_, solver, args, options, observers, progress,
-                                tangent, c, t0, t0 + length, samples), None
+        def body(c, t0, length=length, samples=samples):
+            return _advance(terms_, solver, args, options, observers, progress,
+                            tangent, c, t0, t0 + length, samples), None
 
-            carry, _ = jax.lax.scan(body, carry, t0s)
+        carry, _ = jax.lax.scan(body, carry, t0s)
     y_final, _, _, _, states, steps, status = carry
     if tangent:
         y_final = y_final[0]
