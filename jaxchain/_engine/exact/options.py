@@ -21,8 +21,8 @@ class NonsmoothOptions(AbstractHorizon):
         irregular states.
     - `rtol`, `atol`: tolerances of the smooth phases (diffrax `PIDController`).
         The defaults, 1e-12, make the reference about 1e-9 accurate.
-    - `root_tol`: absolute tolerance on event times of the bisection
-        (`optimistix.Bisection`) that locates them on the dense output.
+    - `root_tol`: absolute tolerance on event times of the bracketed root find
+        (Chandrupatla's method) that locates them on the dense output.
     - `switch_tol`: at an event, every oscillator whose guard (relative velocity,
         stick margin mu_st - |f| or velocity) lies within `switch_tol` of zero
         switches at that instant. This is how simultaneous and near-simultaneous

@@ -23,6 +23,7 @@ from ..progress import progress_bar, tick
 from ..status import Status
 from ..._errors import ValidationError
 from .options import NonsmoothOptions
+from .root import Chandrupatla
 from .switching import guard, initial_modes, mode_field, switch, turning_directions
 
 
@@ -130,27 +131,25 @@ def observe_sample(states: tuple, t, y, params: ChainParams, options) -> tuple:
 
 def _segment(params, options, observe, t_stop, c: _Carry) -> _Carry:
     """Integrate from c.t with fixed modes until the first event or t_stop, hand
-    the state there to the observers (while `observe`), then apply the switching
-    rule."""
+    the state there to the observers, then apply the switching rule. `observe`
+    (traced, the chunk lies in the observed window) adds the turning points to the
+    events and counts the stick time; the observers take only samples in their
+    window, by time."""
     sigma = turning_directions(params, c.y, c.modes, options.switch_tol)
     args = (params, c.modes, sigma, observe, options.switch_tol)
     # The smallest guard starts every segment above zero and the event is its fall
-    # through zero (direction=False), so the root find's function decreases over
-    # its bracket: Bisection is told so (flip=True) rather than detecting it. This
-    # holds also where diffrax's root find runs without an event (every lane under
-    # vmap: its function is then t_next - t) and where the guard on the dense
-    # output at the step's end has not yet changed sign by a rounding (the root is
-    # then the step's end): Bisection's check of its bracket, which raised there
-    # (through the lazily traced derivative of the root find too), is not traced.
-    # diffrax's own checks of its arguments are traced as NaN (`errors_as_nan`).
+    # through zero (direction=False), located on the dense output of the step in
+    # which it occurs by Chandrupatla's bracketed method (`Chandrupatla`), which
+    # raises nothing where that bracket holds no sign change (every lane under
+    # vmap without an event, and a rounding that keeps the guard's sign at the
+    # step's end): the root is then the step's end. diffrax's own checks of its
+    # arguments are traced as NaN (`errors_as_nan`).
     with errors_as_nan():
         sol = diffrax.diffeqsolve(
             diffrax.ODETerm(mode_field), diffrax.Dopri8(), 0.0, t_stop - c.t, None,
             (c.y, c.work), args, saveat=diffrax.SaveAt(t1=True),
             stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
-            event=diffrax.Event(guard, optx.Bisection(rtol=0.0, atol=options.root_tol,
-                                                       flip=True),
-                                direction=False),
+            event=diffrax.Event(guard, Chandrupatla(atol=options.root_tol), direction=False),
             max_steps=options.max_steps, throw=False,
             # Forward mode: the segments run in a while loop, which reverse mode
             # cannot cross anyway; forward mode differentiates a run through every
@@ -169,8 +168,7 @@ def _segment(params, options, observe, t_stop, c: _Carry) -> _Carry:
 
     stick_time = c.stick_time + jnp.where(observe & (c.modes == 0), tau, 0.0)
     t_new = jnp.where(event, c.t + tau, t_stop)
-    observed = observe_sample(c.observed, t_new, y, params, options) if observe \
-        else c.observed
+    observed = observe_sample(c.observed, t_new, y, params, options)
     y_new, modes, kind, _, resolved = switch(params, y, c.modes, sigma, observe,
                                              options.switch_tol)
     # An event that no guard accounts for would repeat forever: stop the run.
@@ -194,7 +192,8 @@ def _segment(params, options, observe, t_stop, c: _Carry) -> _Carry:
 
 
 def _chunk(params, options, progress, observe, c: _Carry, t_stop) -> _Carry:
-    """Advance to t_stop through as many event-separated segments as it takes."""
+    """Advance to t_stop through as many event-separated segments as it takes
+    (`observe`: see `_segment`)."""
     c = eqx.tree_at(lambda d: d.chunk_events, c, jnp.array(0))
 
     def cond(d):
@@ -229,15 +228,24 @@ def _run(params: ChainParams, y0: State, options: NonsmoothOptions,
     where the run failed) and the final carry."""
     c = _initial_carry(params, y0, options,
                        tuple(o.init(y0, params, options) for o in _OBSERVERS))
+    # One scan over the chunks of every phase (one compiled copy of a segment), each
+    # chunk's end and whether it lies in the observed window as its inputs. A
+    # sample at the start of the window is the end of the transient's last chunk;
+    # the observers ignore the samples of the transient by their time.
+    ends, observed = [], []
     for start, length, count, observe in options.phases(halves=True):
-        if observe:  # the window's edge, where no segment ends
-            c = eqx.tree_at(lambda d: d.observed, c,
-                            observe_sample(c.observed, c.t, c.y, params, options))
+        ends.append(start + length * np.arange(1, count + 1))
+        observed.append(np.full(count, observe))
+    if not options.transient:  # the window's edge, where no segment ends
+        c = eqx.tree_at(lambda d: d.observed, c,
+                        observe_sample(c.observed, c.t, c.y, params, options))
 
-        def body(d, t_stop, observe=observe):
-            return _chunk(params, options, progress, observe, d, t_stop), None
+    def body(d, chunk):
+        t_stop, observe = chunk
+        return _chunk(params, options, progress, observe, d, t_stop), None
 
-        c, _ = jax.lax.scan(body, c, start + length * jnp.arange(1, count + 1))
+    c, _ = jax.lax.scan(body, c, (jnp.asarray(np.concatenate(ends)),
+                                  jnp.asarray(np.concatenate(observed))))
 
     ok = c.status == Status.ok
     (extrema,) = (no_partial_answers(o.result(s, _observers_args(params), options), ok)
@@ -306,9 +314,10 @@ def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State
     compute their amplitudes, extrema and HALC alike.
 
     Every event (a switch, or a turning point of an oscillator while observing) is
-    located by bisection (`optimistix.Bisection`, to `options.root_tol`) on
-    diffrax's dense output of the smooth segment (`diffrax.Event`): the guards
-    change sign at an event, so a bracket exists and bisection cannot leave it.
+    located by Chandrupatla's bracketed method (`Chandrupatla`, to
+    `options.root_tol`) on diffrax's dense output of the smooth segment
+    (`diffrax.Event`): the guards change sign at an event, so a bracket exists
+    and the method cannot leave it.
     Time is measured from the segment start so
     that event times keep full precision. Smooth segments use Dopri8 at
     `options.rtol`. Several oscillators that switch at the same instant (within
