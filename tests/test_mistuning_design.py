@@ -33,11 +33,15 @@ def test_followed_fold_is_the_mistuned_ring_s_own_fold(followed):
     """The fold of the state at oscillator 1 (0-based), followed from the
     homogeneous ring through the pattern and the ring's symmetry, is the fold that
     `localized_fold` finds from scratch on the mistuned ring (simulation,
-    shooting, continuation, Moore-Spence), to Newton's tolerance."""
+    shooting, continuation, Moore-Spence), to Newton's tolerance. From scratch on
+    the ring turned by one oscillator (delta_n -> delta_(n-1)), where that state
+    sits at oscillator 2, the site of the design's own problem: a ring is the same
+    chain whichever oscillator is numbered first, and the solve compiles the
+    programs of the problem's site once."""
     _, folds, _, _, homogeneous = followed
     delta = np.asarray(jc.pattern_deviations(jnp.asarray(THETA), BUDGET, 4, False))
-    chain = jc.ChainParams(n_osc=4, v_d=1.5, stiffness=1 + delta)
-    fold, _ = jc.localized_fold(chain, 1)
+    turned = jc.ChainParams(n_osc=4, v_d=1.5, stiffness=1 + np.roll(delta, 1))
+    fold, _ = jc.localized_fold(turned, 2)
     assert abs(float(fold.p) - folds[1]) < 1e-7
     assert abs(folds[1] - homogeneous) > 1e-5  # the pattern moved it
 
