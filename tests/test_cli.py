@@ -145,7 +145,7 @@ def test_localized_json_and_files(localized_small):
     np.testing.assert_allclose(res["energy"], 0.5 * np.sum(amplitudes**2, axis=1),
                                rtol=1e-12)
     params = jc.ChainParams(n_osc=3, v_d=1.5)
-    reference = jc.NonsmoothOptions(t_end=400.0, transient=200.0)
+    reference = jc.NonsmoothOptions.reference(t_end=400.0, transient=200.0)
     for k, n_halc, amplitude in zip(res["n_excited"], res["n_halc"], amplitudes):
         y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, k))(params)
         exact = jc.simulate_nonsmooth(params, y0, reference)

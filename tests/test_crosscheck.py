@@ -45,7 +45,7 @@ TINY = {"params": jc.ChainParams(n_osc=1), "v_d": (1.5,), "ics": (("eq8", 1),),
 #: and a reference option.
 OTHER_SETTINGS = {
     "xi": {"params": jc.ChainParams(n_osc=1, xi=0.06)},
-    "reference rtol": {"reference_options": jc.NonsmoothOptions(
+    "reference rtol": {"reference_options": jc.NonsmoothOptions.reference(
         t_end=SMALL.t_end, transient=SMALL.transient, rtol=1e-9, atol=1e-9)},
 }
 

@@ -15,24 +15,29 @@ from helpers import assert_usage_error
 CHAIN = jc.ChainParams(n_osc=2, v_d=1.5)
 START = jc.OutOfPhaseExcitation.eq8([False, True])
 HORIZON = jc.SimulationOptions(t_end=300.0, transient=150.0)
-EXACT = jc.NonsmoothOptions(t_end=300.0, transient=150.0, chunk_length=HORIZON.chunk_length)
+EXACT = jc.NonsmoothOptions.reference(t_end=300.0, transient=150.0, chunk_length=HORIZON.chunk_length)
 
 
 @pytest.mark.numerics
 def test_the_exact_engine_is_the_stick_slip_reference():
-    """`simulate(engine="exact")` gives what `simulate_nonsmooth` gives (two compiled
-    programs of the same model, both at rtol 1e-12: agreement to 1e-8), in the
-    smoothed engine's layout, with the same oscillators on the HALC."""
-    by_name = jc.simulate(CHAIN, START, options=HORIZON, engine="exact")
-    reference = jc.simulate_nonsmooth(CHAIN, START, EXACT)
-    assert isinstance(by_name, jc.Observables)
-    np.testing.assert_allclose(by_name.amplitudes, reference.amplitudes, rtol=0, atol=1e-8)
-    np.testing.assert_allclose(by_name.y_final, reference.y_final, rtol=0, atol=1e-8)
-    assert by_name.on_halc.tolist() == reference.on_halc.tolist()
-    assert int(by_name.n_halc) == int(reference.n_halc) >= 1  # a stick phase seen
-    # the value, with its options, is the same engine as the name with the horizon
+    """`simulate` on the exact engine at the reference's tolerances gives what the
+    reference `simulate_nonsmooth` gives (two compiled programs of the same model,
+    both at rtol 1e-12: agreement to 1e-8), in the smoothed engine's layout, with
+    the same oscillators on the HALC; `engine="exact"` at the engine's defaults
+    (rtol 1e-7) gives the same amplitudes to 100 times its rtol (the periodic
+    states of the Fig. 4 scene are within 10 to 30 times it; the final state, a
+    phase on the cycle, drifts further)."""
     by_value = jc.simulate(CHAIN, START, engine=jc.Exact(EXACT))
-    np.testing.assert_array_equal(by_value.amplitudes, by_name.amplitudes)
+    reference = jc.simulate_nonsmooth(CHAIN, START, EXACT)
+    assert isinstance(by_value, jc.Observables)
+    np.testing.assert_allclose(by_value.amplitudes, reference.amplitudes, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(by_value.y_final, reference.y_final, rtol=0, atol=1e-8)
+    assert by_value.on_halc.tolist() == reference.on_halc.tolist()
+    assert int(by_value.n_halc) == int(reference.n_halc) >= 1  # a stick phase seen
+    by_name = jc.simulate(CHAIN, START, options=HORIZON, engine="exact")
+    np.testing.assert_allclose(by_name.amplitudes, reference.amplitudes, rtol=0,
+                               atol=100 * jc.NonsmoothOptions().rtol)
+    assert by_name.on_halc.tolist() == reference.on_halc.tolist()
 
 
 @pytest.mark.numerics
@@ -53,10 +58,10 @@ def test_the_smoothed_engine_value_is_the_default_run_bit_for_bit():
 def test_an_ensemble_on_the_exact_engine_records_it():
     """Each lane of the ensemble is the exact engine's run of its start (another
     compiled program: agreement to 1e-8 at rtol 1e-12); the dataset names the engine
-    and holds no solver."""
+    and its Runge-Kutta pair."""
     ds = jc.ensemble(CHAIN, [1.5], jc.localized_family(2), options=EXACT, engine="exact",
                      progress=False)
-    assert ds.attrs["engine"] == "exact" and "solver" not in ds.attrs
+    assert ds.attrs["engine"] == "exact" and ds.attrs["solver"] == EXACT.solver
     assert ds.attrs["root_tol"] == EXACT.root_tol
     for ic, start in enumerate((START, jc.OutOfPhaseExcitation.eq8([True, True]))):
         one = jc.simulate(CHAIN, start, engine=jc.Exact(EXACT))
@@ -107,7 +112,7 @@ def test_a_sweep_on_the_exact_engine_is_each_lanes_run_and_keys_its_store(tmp_pa
     store = tmp_path / "sweep.zarr"
     ds = jc.sweep(CHAIN, [1.5], jc.localized_family(2), options=EXACT, engine="exact",
                   store=store, progress=False).load()
-    assert ds.attrs["engine"] == "exact" and "solver" not in ds.attrs
+    assert ds.attrs["engine"] == "exact" and ds.attrs["solver"] == EXACT.solver
     for ic, start in enumerate((START, jc.OutOfPhaseExcitation.eq8([True, True]))):
         one = jc.simulate(CHAIN, start, engine=jc.Exact(EXACT))
         lane = ds.isel(v_d=0, ic=ic)

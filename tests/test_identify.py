@@ -59,7 +59,7 @@ def test_the_reference_trajectory_is_the_reference_run():
     params = jc.with_parameter(RIG, "v_d", 0.7)
     ts = np.arange(int(round(T_END / DT)) + 1) * DT
     ys = np.asarray(jc.nonsmooth_trajectory(params, np.zeros((2, 1)), ts))
-    run = jc.simulate_nonsmooth(params, np.zeros((2, 1)), jc.NonsmoothOptions(
+    run = jc.simulate_nonsmooth(params, np.zeros((2, 1)), jc.NonsmoothOptions.reference(
         t_end=T_END, transient=T_END / 2, chunk_length=5.0))
     np.testing.assert_allclose(ys[-1], np.asarray(run.y_final), atol=1e-8)
     sticking = np.abs(ys[:, 1, 0] - 0.7) < 1e-12

@@ -28,7 +28,7 @@ def test_stick_exit_time_and_oscillator_match_the_stick_force_formula():
     first = int(np.argmax(f))
     t_exit = float((p.friction.mu_st - f[first]) / p.v_d)
     y0 = np.stack([x, np.full(3, p.v_d)])
-    obs = jc.simulate_nonsmooth(p, y0, jc.NonsmoothOptions(t_end=t_exit + 0.1, transient=0.0))
+    obs = jc.simulate_nonsmooth(p, y0, jc.NonsmoothOptions.reference(t_end=t_exit + 0.1, transient=0.0))
     logged = np.asarray(obs.log_osc) >= 0
     assert int(obs.log_osc[logged][0]) == first
     assert jc.SWITCH_KINDS[int(obs.log_kind[logged][0])] == "stick to slip"
@@ -41,7 +41,7 @@ def test_single_oscillator_cycle_matches_scipy():
     DOP853 with events, to 1e-8 relative (the acceptance asks 1e-6)."""
     amplitude, period = scipy_stick_slip_cycle(ONE)
     obs = jc.simulate_nonsmooth(ONE, _stick_exit_state(ONE),
-                                jc.NonsmoothOptions(t_end=200.0, transient=100.0))
+                                jc.NonsmoothOptions.reference(t_end=200.0, transient=100.0))
     exits = np.asarray(obs.log_time)[np.asarray(obs.log_kind) == 0]
     assert float(obs.amplitudes[0]) == pytest.approx(amplitude, rel=1e-8)
     assert np.allclose(np.diff(exits), period, rtol=1e-8, atol=0)
@@ -59,7 +59,7 @@ def test_energy_balance_over_a_long_run():
     oscillator 2.8e-11. The bound, 1e-9, leaves a factor of 2 on this case."""
     p = jc.ChainParams(n_osc=4)
     obs = jc.simulate_nonsmooth(p, jc.OutOfPhaseExcitation.eq8(jc.excited_block(4, 2)),
-                                jc.NonsmoothOptions(t_end=3000.0, transient=2000.0))
+                                jc.NonsmoothOptions.reference(t_end=3000.0, transient=2000.0))
     change = jc.mechanical_energy(p, obs.y_final) - jc.mechanical_energy(p, obs.y_initial)
     residual = change - (obs.friction_work - obs.viscous_dissipation)
     assert int(obs.num_events) > 1000  # many switches were crossed
@@ -73,7 +73,7 @@ def test_identical_oscillators_switch_together_like_one():
     follows the single oscillator's cycle."""
     p = jc.ChainParams(n_osc=4)
     y0 = jnp.tile(_stick_exit_state(p), (1, 4))
-    opt = jc.NonsmoothOptions(t_end=200.0, transient=100.0)
+    opt = jc.NonsmoothOptions.reference(t_end=200.0, transient=100.0)
     ring = jc.simulate_nonsmooth(p, y0, opt)
     single = jc.simulate_nonsmooth(ONE, _stick_exit_state(ONE), opt)
     assert np.allclose(ring.amplitudes, single.amplitudes[0], rtol=1e-9)
@@ -106,19 +106,20 @@ def test_existence_limit_rejects_a_bad_bracket():
 
 def test_failures_are_a_status_or_an_error():
     # the options of the single oscillator's cycle above: its compiled run
-    opt = jc.NonsmoothOptions(t_end=200.0, transient=100.0)
+    opt = jc.NonsmoothOptions.reference(t_end=200.0, transient=100.0)
     bad = jnp.full((2, 1), jnp.nan)
     obs = jc.simulate_nonsmooth(ONE, bad, opt, throw=False)
     assert obs.status == jc.Status.non_finite_state and int(obs.n_halc) == -1
     with pytest.raises(RuntimeError, match="non-finite"):
         jc.simulate_nonsmooth(ONE, bad, opt)
-    chatter = jc.NonsmoothOptions(t_end=50.0, transient=0.0, max_events=2)
+    chatter = jc.NonsmoothOptions.reference(t_end=50.0, transient=0.0, max_events=2)
     obs = jc.simulate_nonsmooth(ONE, _stick_exit_state(ONE), chatter, throw=False)
     assert obs.status == jc.Status.event_not_resolved and np.isnan(float(obs.energy))
 
 
 @pytest.mark.parametrize("field,value", [("rtol", 0.0), ("switch_tol", -1.0),
-                                         ("transient", 50.0), ("max_events", 0)])
+                                         ("transient", 50.0), ("max_events", 0),
+                                         ("solver", "rk4")])
 def test_bad_options_raise_naming_the_field(field, value):
     with pytest.raises(ValueError, match=f"NonsmoothOptions.{field}"):
         jc.NonsmoothOptions(t_end=50.0, **{field: value})

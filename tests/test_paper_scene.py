@@ -71,7 +71,7 @@ def test_a_lone_sliding_oscillator_is_pumped_by_its_in_phase_neighbours():
     antiphase = jc.simulate(p, y0.at[0].set(base + (y0[0] - base) * flip), options=opts)
     assert int(antiphase.n_halc) == 19 and not bool(antiphase.on_halc[0])
     assert float(antiphase.amplitudes[0]) < 0.2
-    reference = jc.NonsmoothOptions(t_end=opts.t_end, transient=opts.transient)
+    reference = jc.NonsmoothOptions.reference(t_end=opts.t_end, transient=opts.transient)
     for smoothed, start in ((symmetric, y0), (antiphase, antiphase.y_initial)):
         exact = jc.simulate_nonsmooth(p, start, reference)
         assert np.array_equal(exact.on_halc, smoothed.on_halc)

@@ -46,7 +46,7 @@ def test_n_halc_agrees_between_simulation_shooting_and_reference(state):
     sliding = state == "steady sliding"
     y0 = jc.steady_sliding(params) if sliding else jnp.array([[2.0], [0.0]])
     obs = jc.simulate(params, y0, options=SHORT)
-    ref = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions(
+    ref = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions.reference(
         t_end=SHORT.t_end, transient=SHORT.transient))
     if sliding:
         shooting_unknowns = jnp.concatenate([jnp.ravel(y0), jnp.array([2 * np.pi])])

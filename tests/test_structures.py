@@ -375,7 +375,7 @@ def test_the_nonsmooth_reference_with_masses_on_a_lattice_against_the_smoothed_m
     y0 = np.array([[2.0, -1.0], [0.0, 0.0]])
     smoothed = jc.simulate(params, y0, engine=jc.Smoothed(
         options=jc.SimulationOptions(t_end=150.0, transient=100.0), eps=1e-4))
-    reference = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions(t_end=150.0,
+    reference = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions.reference(t_end=150.0,
                                                                       transient=100.0))
     a, b = np.asarray(smoothed.amplitudes), np.asarray(reference.amplitudes)
     assert np.all(b > 0.5)  # both on stick-slip

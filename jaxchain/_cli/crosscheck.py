@@ -5,7 +5,7 @@ import argparse
 import time
 
 from .._studies.crosscheck import CROSSCHECK_ICS, CROSSCHECK_VD, crosscheck
-from .._engine.exact.options import NonsmoothOptions
+from .._engine.exact.options import NonsmoothOptions, REFERENCE_TOLERANCES
 from .._engine.status import Status
 from .._physics.params import with_parameter
 from .._plots.crosscheck import plot_crosscheck
@@ -57,9 +57,9 @@ def add_parser(sub):
     add_chain_options(g)
     add_run_options(p)
     g = p.add_argument_group("reference")
-    g.add_argument("--ref-rtol", type=positive_float, default=NonsmoothOptions().rtol,
+    g.add_argument("--ref-rtol", type=positive_float, default=REFERENCE_TOLERANCES["rtol"],
                    help="tolerance (rtol = atol) of the reference's smooth phases "
-                        f"(default {NonsmoothOptions().rtol:g})")
+                        f"(default {REFERENCE_TOLERANCES['rtol']:g})")
     add_scheduler_option(g)
     add_output_options(p, resume="from the reference runs stored in DIR/crosscheck_cases")
     p.set_defaults(run=run)
@@ -90,8 +90,8 @@ def run(args) -> None:
     for vd in args.vd:
         with_parameter(params, "v_d", vd)  # validates every belt speed now
     options = simulation_options(args)
-    ref_options = NonsmoothOptions(t_end=args.t_end, transient=args.transient,
-                                   rtol=args.ref_rtol, atol=args.ref_rtol)
+    ref_options = NonsmoothOptions.reference(t_end=args.t_end, transient=args.transient,
+                                             rtol=args.ref_rtol, atol=args.ref_rtol)
     outputs = Outputs(args, data=["crosscheck.nc"], figures=["crosscheck"])
 
     start = time.perf_counter()

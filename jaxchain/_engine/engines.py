@@ -162,7 +162,8 @@ class Exact(AbstractEngine):
         return self.options.n_chunks(halves=True)  # the window's halves are chunked apart
 
     def attributes(self) -> dict:
-        return {"engine": self.name, "rtol": self.options.rtol, "atol": self.options.atol,
+        return {"engine": self.name, "solver": self.options.solver,
+                "rtol": self.options.rtol, "atol": self.options.atol,
                 "root_tol": self.options.root_tol}
 
 

@@ -264,7 +264,7 @@ def _check(params, v_d, ics, solver, options, reference_options, engine, checkpo
         raise ValidationError("ics must list at least one (family, n_excited) pair, got none")
     window = (engine.options.t_end, engine.options.transient)
     if reference_options is None:
-        reference_options = NonsmoothOptions(t_end=window[0], transient=window[1])
+        reference_options = NonsmoothOptions.reference(t_end=window[0], transient=window[1])
     check_options(reference_options, NonsmoothOptions, "reference_options")
     if (reference_options.t_end, reference_options.transient) != window:
         raise ValidationError("reference_options must observe the same window as options")

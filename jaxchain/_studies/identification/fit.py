@@ -47,7 +47,8 @@ class IdentifyOptions(eqx.Module):
         0.5 % (1e-3, the simulations' default `DEFAULT_EPS`, biases xi and v0 by
         about 3 %). Not read by the exact engine.
     - `solver`, `controller`: the smoothed model's solver and step-size
-        controller (the exact one integrates its segments by Dopri8).
+        controller (the exact engine steps with its own Runge-Kutta pair,
+        `NonsmoothOptions.solver`).
     - `rtol`, `atol`, `max_steps`: the integration of
         each window, as in `SimulationOptions`, but at rtol 1e-6, atol 1e-8: the
         fit needs the forward-mode sensitivities, which are exact only for the

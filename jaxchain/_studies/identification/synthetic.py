@@ -20,7 +20,7 @@ from .records import Record
 def reference_record(params: ChainParams, v_d: float, t_end: float, dt: float, *,
                      oscillators=(1,), velocities: bool = False, noise: float = 0.0,
                      offset: float = 0.0, seed: int = 0, y0=None,
-                     options: NonsmoothOptions = NonsmoothOptions()) -> Record:
+                     options: NonsmoothOptions = NonsmoothOptions.reference()) -> Record:
     """A record of the chain at belt speed `v_d`, made by the non-smooth reference
     (`nonsmooth_trajectory`: the exact switch model, no smoothing), sampled every
     `dt` over [0, t_end], with Gaussian noise.

@@ -122,8 +122,9 @@ def window_flow(params: ChainParams, eps, y0, times, options: FlowOptions):
     """The model's states at `times` (from 0) from `y0`, shape (len(times), 2,
     n_osc); NaN where the integration failed. The smoothed model (eq. (5) with
     tanh(v_rel/eps)) by diffrax, or the exact stick/slip switch model event by
-    event (`sampled_states`, Dopri8 at the same tolerances), whose derivatives
-    cross every switch (the event times by the implicit function theorem).
+    event (`sampled_states`, the exact engine's Runge-Kutta pair at the same
+    tolerances), whose derivatives cross every switch (the event times by the
+    implicit function theorem).
 
     **Arguments:**
 

@@ -1,0 +1,275 @@
+"""The exact engine's event-driven integration: one adaptive Runge-Kutta step at a
+time (diffrax's solver and step-size controller), the switches located on each
+step's dense output, and the turning points of the oscillators read from it.
+
+A step of the loop:
+
+1. one step of the Runge-Kutta pair from t to t + dt (diffrax's `solver.step`),
+   accepted or rejected by the PID controller (`adapt_step_size`), which also
+   proposes the next dt;
+2. if accepted and the smallest guard (`guard`) has fallen through zero, the
+   switch time tau is located on the step's dense output by Chandrupatla's method
+   (`Chandrupatla`), the state there is the dense output at tau, and the switching
+   rule (`switch`) gives the new modes; the next step starts at tau with the
+   solver's stored derivative discarded (`made_jump`: the vector field has
+   changed), and with the step size the controller proposed;
+3. while observing, every slipping oscillator whose velocity changes sign within
+   the step has a turning point there, located on the dense output by Newton's
+   method (all oscillators at once); the states at the turning points, at every
+   switch and at every chunk end go to the observers. A turning point does not
+   stop the integration.
+
+The integration never restarts at a switch (no new initial step, no lost
+step size), which is what makes the engine as fast as the smoothed one. Every
+event time is a root of a smooth function on the dense output, and its
+derivatives are those of the implicit function theorem (optimistix's
+`ImplicitAdjoint`): forward-mode differentiation of a run goes through every
+switch, and at each it applies the saltation matrix (Leine and Nijmeijer, 2004,
+Section 7.1) without forming it.
+"""
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Float, Int, PyTree
+
+from ..._physics.custom_types import State
+from ..._physics.model import Model
+from ..._physics.params import ChainParams
+from ..observers.base import Chunk, observe_chunk
+from ..observers.extrema import Extrema
+from ..progress import tick
+from ..status import Status
+from .root import Chandrupatla
+from .switching import guard, initial_modes, mode_field, switch
+
+#: The Runge-Kutta pairs of the exact engine, by the name `NonsmoothOptions.solver`
+#: takes.
+SOLVERS = {"tsit5": diffrax.Tsit5, "dopri5": diffrax.Dopri5, "dopri8": diffrax.Dopri8}
+
+_TERM = diffrax.ODETerm(mode_field)
+
+#: Newton iterations that locate a turning point from the secant within a step:
+#: the error squares at each, from the secant's O(h^2) to rounding in three.
+_NEWTON = 4
+
+#: What the exact engine observes (`Extrema`, with the halves of the window).
+OBSERVERS = (Extrema(),)
+
+
+def _solver(options) -> diffrax.AbstractAdaptiveSolver:
+    """The Runge-Kutta pair, its stages in a plain loop (as diffrax's `ForwardMode`
+    sets them), through which forward-mode differentiation passes."""
+    return SOLVERS[options.solver](scan_kind="lax")
+
+
+def _controller(options) -> diffrax.PIDController:
+    return diffrax.PIDController(rtol=options.rtol, atol=options.atol)
+
+
+class Carry(eqx.Module):
+    """The state of a run between steps."""
+
+    t: Float[Array, ""]
+    y: State
+    work: Float[Array, "2"]
+    modes: Float[Array, " n_osc"]
+    dt: Float[Array, ""]
+    solver_state: PyTree
+    controller_state: PyTree
+    made_jump: Array
+    observed: tuple
+    stick_time: Float[Array, " n_osc"]
+    log_time: Float[Array, " log"]
+    log_kind: Int[Array, "log n_osc"]
+    events: Int[Array, ""]
+    chunk_events: Int[Array, ""]
+    steps: Int[Array, ""]
+    chunk_steps: Int[Array, ""]
+    status: Int[Array, ""]
+
+
+def observers_args(params: ChainParams) -> Model:
+    """The model as the observers see it: eps = 0, since the exact engine has no
+    smoothing (its stick band is v_rel = 0, `sticks`)."""
+    return Model(params, jnp.zeros(()))
+
+
+def observe_samples(states: tuple, ts, ys, params: ChainParams, options) -> tuple:
+    """The observers' states after the located samples `ys` at the times `ts`
+    (samples at a time outside the window, such as -inf, are not seen): a chunk
+    through `observe_chunk`, the route of the smoothed engine."""
+    chunk = Chunk(t0=jnp.min(ts), t1=jnp.max(ts), ts=ts, ys=ys, log_growth=None)
+    return observe_chunk(OBSERVERS, states, chunk, observers_args(params), options)
+
+
+def initial_carry(params: ChainParams, y0: State, options, observed: tuple) -> Carry:
+    """The carry at t = 0: the modes of `initial_modes`, the first step chosen by
+    the controller and the solver's initial state, as `diffrax.diffeqsolve` makes
+    them (not differentiated, as there)."""
+    solver, controller = _solver(options), _controller(options)
+    modes = initial_modes(params, y0)
+    state = (y0, jnp.zeros(2))
+    tnext, controller_state = controller.init(_TERM, 0.0, options.t_end, state, None,
+                                              (params, modes), solver.func,
+                                              solver.error_order(_TERM))
+    solver_state = solver.init(_TERM, 0.0, tnext, state, (params, modes))
+    dt, solver_state, controller_state = jax.lax.stop_gradient(
+        (jnp.asarray(tnext, float), solver_state, controller_state))
+    size = options.log_size
+    zero = jnp.array(0)
+    return Carry(
+        t=jnp.array(0.0), y=y0, work=state[1], modes=modes, dt=dt,
+        solver_state=solver_state, controller_state=controller_state,
+        made_jump=jnp.array(False), observed=observed,
+        stick_time=jnp.zeros(params.n_osc), log_time=jnp.full(size, jnp.nan),
+        log_kind=jnp.full((size, params.n_osc), -1),
+        events=zero, chunk_events=zero, steps=zero, chunk_steps=zero,
+        status=jnp.where(jnp.all(jnp.isfinite(y0)), Status.ok, Status.non_finite_state),
+    )
+
+
+def _root(fn, t0, t1, tol):
+    """The root of fn on [t0, t1] (fn(t0) > 0 >= fn(t1); else t1), Chandrupatla's
+    method, differentiable by the implicit function theorem."""
+    return optx.root_find(lambda t, _: fn(t), Chandrupatla(atol=tol), t1,
+                          options=dict(lower=t0, upper=t1), throw=False).value
+
+
+def _turning_points(interp, c: Carry, y_end, t0, t_end):
+    """The turning points of the slipping oscillators within [t0, t_end]: where x_n'
+    changes sign, located on the dense output by Newton's method from the secant
+    (`_NEWTON` iterations, all oscillators at once, kept within the step); (times,
+    states), shape (n_osc,) and (n_osc, 2, n_osc), time -inf where an oscillator
+    has none. The times carry no derivative: an extremum's derivative is that of x
+    at fixed time, x' being 0 there."""
+    v0, v1 = c.y[1], y_end[1]
+    turns = (c.modes != 0) & (v0 * v1 < 0)
+    osc = jnp.arange(v0.size)
+
+    def newton(t, n):
+        v, a = jax.jvp(lambda s: interp.evaluate(s)[0][1, n], (t,), (jnp.ones_like(t),))
+        return jnp.clip(t - v / jnp.where(a == 0, 1.0, a), t0, t_end)
+
+    def locate():
+        t = t0 + (t_end - t0) * jnp.where(turns, v0 / (v0 - v1), 0.5)
+        for _ in range(_NEWTON):
+            t = jax.vmap(newton)(t, osc)
+        t = jax.lax.stop_gradient(t)
+        return jnp.where(turns, t, -jnp.inf), jax.vmap(lambda s: interp.evaluate(s)[0])(t)
+
+    def none():
+        return (jnp.full(v0.shape, -jnp.inf), jnp.broadcast_to(y_end, v0.shape + y_end.shape))
+
+    return jax.lax.cond(jnp.any(turns), locate, none)
+
+
+def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
+    """One step of the loop (see the module docstring). `observe` (traced: the chunk
+    lies in the observed window) adds the turning points and counts the stick time;
+    the observers take only samples in their window, by time."""
+    solver, controller = _solver(options), _controller(options)
+    args = (params, c.modes)
+    t0 = c.t
+    t1 = c.t + c.dt
+    # the chunk's end is a step's end (within 100 units of rounding, as diffrax)
+    t1 = jnp.where(t1 > t_stop - 100 * jnp.finfo(float).eps * abs(t_stop), t_stop, t1)
+    start = (c.y, c.work)
+    end, error, dense, solver_state, solver_result = solver.step(
+        _TERM, t0, t1, start, args, c.solver_state, c.made_jump)
+    error = jax.tree.map(lambda e: jnp.where(jnp.isnan(e), jnp.inf, e), error)
+    keep, next_t0, next_t1, _, controller_state, controller_result = \
+        controller.adapt_step_size(t0, t1, start, end, args, error,
+                                   solver.error_order(_TERM), c.controller_state)
+    interp = solver.interpolation_cls(t0=t0, t1=t1, **dense)
+
+    # the earliest switch within the step, if the smallest guard has fallen through 0
+    event = keep & (guard(params, end[0], c.modes) <= 0)
+    at_end = keep & (t1 >= t_stop)
+    turning = observe & keep & jnp.any((c.modes != 0) & (c.y[1] * end[0][1] < 0))
+
+    def located():
+        """The switch (its time, the state there, the new modes), the turning
+        points before it, and the samples observed."""
+        tau = jax.lax.cond(event, lambda: _root(
+            lambda t: guard(params, interp.evaluate(t)[0], c.modes), t0, t1,
+            options.root_tol), lambda: t1)
+        y, work = jax.lax.cond(event, lambda: interp.evaluate(tau), lambda: end)
+        turn_ts, turn_ys = jax.lax.cond(
+            observe, lambda: _turning_points(interp, c, y, t0, tau),
+            lambda: (jnp.full(c.modes.shape, -jnp.inf),
+                     jnp.broadcast_to(y, c.modes.shape + y.shape)))
+        sample_t = jnp.where((observe & event) | at_end, tau, -jnp.inf)
+        observed = observe_samples(c.observed, jnp.append(turn_ts, sample_t),
+                                   jnp.concatenate([turn_ys, y[None]]), params, options)
+        switched = jax.lax.cond(
+            event, lambda: switch(params, y, c.modes, options.switch_tol),
+            lambda: (y, c.modes, jnp.full(c.modes.shape, -1), jnp.array(True)))
+        return (tau, y, work, observed) + switched
+
+    def plain():
+        return (t1, end[0], end[1], c.observed, end[0], c.modes,
+                jnp.full(c.modes.shape, -1), jnp.array(True))
+
+    tau, y, work, observed, y_switched, modes, kind, resolved = jax.lax.cond(
+        event | at_end | turning, located, plain)
+    ok = keep & diffrax.is_okay(solver_result) & diffrax.is_okay(controller_result)
+    code = jnp.where(diffrax.is_okay(solver_result) & diffrax.is_okay(controller_result),
+                     jnp.where(jnp.all(jnp.isfinite(y)), Status.ok, Status.non_finite_state),
+                     Status.solver_failed)
+    # a switch that no guard accounts for would repeat forever: stop the run
+    code = jnp.where((code == Status.ok) & event & ~resolved, Status.event_not_resolved,
+                     code)
+    # the switch log, a ring buffer of switch instants: the time and every
+    # oscillator's kind of switch (a row written in place; a scatter of the
+    # switching oscillators into a list costs more than the step)
+    row = c.events % options.log_size
+    log_time = jax.lax.dynamic_update_index_in_dim(
+        c.log_time, jnp.where(event, tau, c.log_time[row]), row, 0)
+    log_kind = jax.lax.dynamic_update_index_in_dim(
+        c.log_kind, jnp.where(event, kind, c.log_kind[row]), row, 0)
+    return Carry(
+        t=jnp.where(keep, tau, t0),
+        y=jnp.where(event, y_switched, jnp.where(keep, y, c.y)),
+        work=jnp.where(keep, work, c.work),
+        modes=jnp.where(event, modes, c.modes),
+        # the step sizes carry no derivative (as the initial one, and diffrax's
+        # step factor): the grid shifts with each switch time, and no more, else a
+        # step cut short at a chunk's end would amplify its time's derivative as
+        # the steps grow again
+        dt=jax.lax.stop_gradient(next_t1 - next_t0),
+        solver_state=jax.tree.map(lambda a, b: jnp.where(keep, a, b), solver_state,
+                                  c.solver_state),
+        controller_state=controller_state,
+        made_jump=event | (c.made_jump & ~ok),
+        observed=observed,
+        stick_time=c.stick_time + jnp.where(observe & keep & (c.modes == 0), tau - t0, 0.0),
+        log_time=log_time, log_kind=log_kind,
+        events=c.events + event,
+        chunk_events=c.chunk_events + event, steps=c.steps + 1,
+        chunk_steps=c.chunk_steps + 1,
+        status=jnp.where(c.status == Status.ok, code, c.status),
+    )
+
+
+def chunk(params: ChainParams, options, progress: bool, observe, c: Carry, t_stop) -> Carry:
+    """Advance to t_stop, step by step through every switch (`observe`: see
+    `_step`); the step budget (`max_steps`) and the switch budget (`max_events`,
+    more means chattering) are per chunk."""
+    c = eqx.tree_at(lambda d: (d.chunk_events, d.chunk_steps), c,
+                    (jnp.array(0), jnp.array(0)))
+
+    def cond(d):
+        return ((d.t < t_stop) & (d.status == Status.ok)
+                & (d.chunk_events < options.max_events) & (d.chunk_steps < options.max_steps))
+
+    c = jax.lax.while_loop(cond, lambda d: _step(params, options, observe, t_stop, d), c)
+    status = jnp.where((c.status == Status.ok) & (c.t < t_stop),
+                       jnp.where(c.chunk_steps >= options.max_steps, Status.max_steps_reached,
+                                 Status.event_not_resolved), c.status)
+    c = eqx.tree_at(lambda d: d.status, c, status)
+    if progress:
+        tick(c.t)
+    return c
