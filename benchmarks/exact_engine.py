@@ -9,8 +9,10 @@ printed too.
 Prints the ratio exact / smoothed of the wall times, each row's n_HALC on the three
 runs, and the largest amplitude error of each engine against the reference over
 the rows that are periodic (the reference's two halves of the window agree to
-1e-6, `half_difference`). Run: `python benchmarks/exact_engine.py [--quick]`
-(--quick: t in [0, 3000], observed after 2000). Exits with status 1 if the exact
+1e-6, `half_difference`). Run: `python benchmarks/exact_engine.py [--quick] [--pairs]`
+(--quick: t in [0, 3000], observed after 2000; --pairs: first the table of the
+exact engine's Runge-Kutta pairs and tolerances, one trajectory of rows k = 1
+and 3 over [0, 3000] against Dopri8 at 1e-13, by which its defaults were chosen). Exits with status 1 if the exact
 engine is slower than the smoothed one, or if its n_HALC or periodic amplitudes
 differ from the reference's by more than 1e-5.
 """
@@ -35,10 +37,37 @@ def _timed(run):
     return ds, cold, time.perf_counter() - start
 
 
+#: The pairs and tolerances of the table of `pairs`.
+PAIRS = (("dopri8", 1e-12), ("tsit5", 1e-12), ("dopri5", 1e-12), ("dopri5", 1e-8),
+         ("dopri5", 1e-7), ("tsit5", 1e-8), ("tsit5", 1e-7))
+
+
+def pairs() -> None:
+    """Largest amplitude error against Dopri8 at 1e-13 and wall time (compiled) of
+    one trajectory of rows k = 1 and 3, for each of `PAIRS`."""
+    chain = jc.ChainParams()
+    for k in (1, 3):
+        y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(20, k))
+        best = jc.NonsmoothOptions(t_end=3000.0, transient=2000.0, rtol=1e-13, atol=1e-13,
+                                   solver="dopri8")
+        ref = np.asarray(jc.simulate_nonsmooth(chain, y0, best).amplitudes)
+        for solver, rtol in PAIRS:
+            options = jc.NonsmoothOptions(t_end=3000.0, transient=2000.0, rtol=rtol,
+                                          atol=rtol, solver=solver)
+            _, _, wall = _timed(lambda: jc.simulate_nonsmooth(chain, y0, options))
+            error = np.abs(np.asarray(jc.simulate_nonsmooth(chain, y0, options).amplitudes)
+                           - ref).max()
+            print(f"k = {k}: {solver} at {rtol:g}: error {error:.1e}, wall {wall:.3f} s")
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="t_end 3000, transient 2000")
+    parser.add_argument("--pairs", action="store_true",
+                        help="first the table of Runge-Kutta pairs and tolerances")
     args = parser.parse_args(argv)
+    if args.pairs:
+        pairs()
     t_end, transient = (3000.0, 2000.0) if args.quick else (15000.0, 10000.0)
     chain, starts = jc.ChainParams(), jc.localized_family(20)
     smoothed = jc.Smoothed(options=jc.SimulationOptions(t_end=t_end, transient=transient))

@@ -70,6 +70,7 @@ from ._engine.status import (
 )
 from ._engine.exact.solve import (
     simulate_nonsmooth as simulate_nonsmooth,
+    run_nonsmooth as run_nonsmooth,
     nonsmooth_trajectory as nonsmooth_trajectory,
     NonsmoothObservables as NonsmoothObservables,
 )

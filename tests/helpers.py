@@ -295,7 +295,7 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "pattern folds": ("jaxchain._studies.mistuning.pattern_design", "pattern_folds"),
              "tasks on devices": ("jaxchain._engine.lanes", "on_devices"),
              "smoothed observation": ("jaxchain._engine.observers.base", "observe_chunk"),
-             "non-smooth observation": ("jaxchain._engine.exact.solve", "observe_sample"),
+             "non-smooth observation": ("jaxchain._engine.exact.stepping", "observe_samples"),
              "identification problem": ("jaxchain._studies.identification.fit", "_problem"),
              "ensemble lanes": ("jaxchain._sweeps.ensemble", "run_lanes"),
              # jitted entry points, whose traces a test counts (test_compile_once.py)

@@ -202,9 +202,9 @@ def _prescribed_stream(params, ts):
 
 def test_both_engines_observe_a_prescribed_stream_alike():
     """The smoothed engine hands `Extrema` chunks of dense samples (the end sample
-    of one chunk repeated at the start of the next), the non-smooth reference one
-    located sample at a time: the same stream gives the same extrema, bitwise, and
-    those of NumPy over each half of the window."""
+    of one chunk repeated at the start of the next), the exact engine the samples
+    it locates (here one at a time): the same stream gives the same extrema,
+    bitwise, and those of NumPy over each half of the window."""
     from helpers import internal
 
     # jitted as the engines run them: one program each, not an op-by-op dispatch
@@ -224,7 +224,8 @@ def test_both_engines_observe_a_prescribed_stream_alike():
         chunked = observe_chunk((observer,), chunked, chunk, model, options)
     located = (observer.init(ys[0], model, options),)
     for t, y in zip(ts, ys):
-        located = observe_sample(located, jnp.asarray(t), jnp.asarray(y), params, options)
+        located = observe_sample(located, jnp.asarray([t]), jnp.asarray(y)[None], params,
+                                 options)
 
     zero_eps = jc.Model(params, 1e-300)  # the exact engine's band, v_rel = 0
     smooth = observer.result(chunked[0], zero_eps, options)

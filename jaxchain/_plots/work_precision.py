@@ -12,8 +12,9 @@ def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_er
                         fig=None):
     """One panel per eps, one line per diffrax solver over its rtols (wall time
     against `error`, log-log), and the outside points in black: scipy's LSODA and
-    Radau at the same eps, and the non-smooth reference at its own tolerances (in
-    every panel). Failed runs are marked x at the top of their panel.
+    Radau at the same eps, and the exact engine at its own tolerances (rows
+    "reference"; black stars joined, in every panel: it has no eps). Failed runs
+    are marked x at the top of their panel.
 
     **Arguments:**
 
@@ -54,10 +55,14 @@ def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_er
             pts = [r for r in ok if r["method"] == method
                    and (method == "reference" or float(r["eps"]) == eps)]
             if pts:
+                exact = method == "reference"
+                if exact:
+                    pts.sort(key=lambda r: float(r["rtol"]), reverse=True)
                 ax.plot([float(r["wall_s"]) for r in pts],
-                        [max(float(r[error]), 1e-16) for r in pts], marker, color="k",
-                        ms=7 if marker == "*" else 4, mfc="none" if marker != "*" else "k",
-                        label=method)
+                        [max(float(r[error]), 1e-16) for r in pts],
+                        marker + ("-" if exact else ""), color="k", ms=7 if exact else 4,
+                        mfc="k" if exact else "none",
+                        label="exact engine" if exact else method)
         ax.axhline(1e-2, color="0.6", lw=0.8, ls="--")
         ax.axhline(1e-3, color="0.6", lw=0.8, ls=":")
         ax.set(xscale="log", yscale="log", title=f"$\\varepsilon$ = {eps:g}",

@@ -34,6 +34,11 @@ class NonsmoothOptions(AbstractHorizon):
         1e-7 by default; the reference's, 1e-12, make it about 1e-9 accurate.
     - `solver`: the Runge-Kutta pair of the smooth phases: "tsit5", "dopri5" (the
         default) or "dopri8".
+    - `adjoint`: the mode of automatic differentiation the run is built for:
+        "forward" (the default: `jax.jvp`, `jax.jacfwd`; plain loops) or "reverse"
+        (`jax.grad`, `jax.vjp`; checkpointed loops whose memory is bounded however
+        many steps a chunk takes, at about twice the run time of the
+        derivative). A run is computed the same either way.
     - `root_tol`: absolute tolerance on event times of the bracketed root find
         (Chandrupatla's method) that locates them on the dense output.
     - `switch_tol`: at an event, every oscillator whose guard (relative velocity,
@@ -50,7 +55,7 @@ class NonsmoothOptions(AbstractHorizon):
 
     `ValidationError` naming the field for t_end <= 0, transient outside [0, t_end),
     a tolerance, length or budget that is not a finite number > 0, or an unknown
-    solver.
+    solver or adjoint.
     """
 
     t_end: float = eqx.field(static=True, default=15000.0)
@@ -58,6 +63,7 @@ class NonsmoothOptions(AbstractHorizon):
     rtol: float = eqx.field(static=True, default=1e-7)
     atol: float = eqx.field(static=True, default=1e-7)
     solver: str = eqx.field(static=True, default="dopri5")
+    adjoint: str = eqx.field(static=True, default="forward")
     root_tol: float = eqx.field(static=True, default=1e-13)
     switch_tol: float = eqx.field(static=True, default=1e-9)
     chunk_length: float = eqx.field(static=True, default=250.0)
@@ -78,6 +84,9 @@ class NonsmoothOptions(AbstractHorizon):
             if not positive(value):
                 raise ValidationError(f"NonsmoothOptions.{name} must be a finite number > 0, "
                                       f"got {value!r}")
+        if self.adjoint not in ("forward", "reverse"):
+            raise ValidationError(f"NonsmoothOptions.adjoint must be 'forward' or 'reverse', "
+                                  f"got {self.adjoint!r}")
         if self.solver not in SOLVERS:
             raise ValidationError(f"NonsmoothOptions.solver must be one of "
                                   f"{', '.join(SOLVERS)}, got {self.solver!r}")

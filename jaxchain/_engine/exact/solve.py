@@ -150,8 +150,33 @@ def _switch_log(c: Carry, size: int):
 
 def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
                   progress: bool = False) -> NonsmoothObservables:
-    """Pure, traceable core of `simulate_nonsmooth` for one trajectory: no checks,
-    no exceptions; vmap it for batches."""
+    """The pure, traceable core of `simulate_nonsmooth` for one trajectory: no
+    checks and no exceptions (a failure is in `status`), to differentiate or to
+    vmap over a batch.
+
+    Differentiable through every switch with respect to `params` and `y0`: each
+    switch time by the implicit function theorem on its guard, each extremum as x
+    at its turning point's time (x' = 0 there), so that an event time, a period
+    (the difference of two switch times in the log) or an amplitude has the
+    derivative of the exact model (Leine and Nijmeijer, *Dynamics and Bifurcations
+    of Non-Smooth Mechanical Systems*, 2004: the saltation matrix of each switch,
+    applied without forming it). In forward mode (`jax.jvp`, `jax.jacfwd`) with
+    `options.adjoint` "forward", the default; in reverse mode (`jax.grad`,
+    `jax.vjp`) with "reverse". A derivative is meaningful on a periodic state
+    (a limit cycle, as of the stick-slip cycle); on an irregular one it is that of
+    one trajectory over the horizon, which grows with it.
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `y0`: the initial state, shape (2, n_osc).
+    - `options`: `NonsmoothOptions` (static).
+    - `progress`: tick the active progress bar once per chunk (static).
+
+    **Returns:**
+
+    `NonsmoothObservables`, per-oscillator fields of shape (n_osc,).
+    """
     size = options.log_size
     extrema, c = _run(params, y0, options, progress)
     ok = c.status == Status.ok

@@ -30,6 +30,7 @@ Section 7.1) without forming it.
 
 import diffrax
 import equinox as eqx
+import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 import optimistix as optx
@@ -59,10 +60,16 @@ _NEWTON = 4
 OBSERVERS = (Extrema(),)
 
 
+#: How the loops of a run are built for each mode of differentiation
+#: (`NonsmoothOptions.adjoint`): (the Runge-Kutta stages, the steps of a chunk).
+_LOOPS = {"forward": ("lax", "lax"), "reverse": ("bounded", "checkpointed")}
+
+
 def _solver(options) -> diffrax.AbstractAdaptiveSolver:
-    """The Runge-Kutta pair, its stages in a plain loop (as diffrax's `ForwardMode`
-    sets them), through which forward-mode differentiation passes."""
-    return SOLVERS[options.solver](scan_kind="lax")
+    """The Runge-Kutta pair, its stages in a loop that the run's mode of
+    differentiation passes (as diffrax's `ForwardMode` and
+    `RecursiveCheckpointAdjoint` set them)."""
+    return SOLVERS[options.solver](scan_kind=_LOOPS[options.adjoint][0])
 
 
 def _controller(options) -> diffrax.PIDController:
@@ -257,7 +264,11 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
 def chunk(params: ChainParams, options, progress: bool, observe, c: Carry, t_stop) -> Carry:
     """Advance to t_stop, step by step through every switch (`observe`: see
     `_step`); the step budget (`max_steps`) and the switch budget (`max_events`,
-    more means chattering) are per chunk."""
+    more means chattering) are per chunk. For reverse-mode differentiation the
+    steps run in equinox's checkpointed loop, which stores a bounded number of
+    states and recomputes the others (recursive checkpointing, Griewank and
+    Walther, "Evaluating Derivatives", 2nd ed., SIAM 2008, Ch. 12): memory does not
+    grow with the steps of a chunk."""
     c = eqx.tree_at(lambda d: (d.chunk_events, d.chunk_steps), c,
                     (jnp.array(0), jnp.array(0)))
 
@@ -265,7 +276,10 @@ def chunk(params: ChainParams, options, progress: bool, observe, c: Carry, t_sto
         return ((d.t < t_stop) & (d.status == Status.ok)
                 & (d.chunk_events < options.max_events) & (d.chunk_steps < options.max_steps))
 
-    c = jax.lax.while_loop(cond, lambda d: _step(params, options, observe, t_stop, d), c)
+    kind = _LOOPS[options.adjoint][1]
+    c = eqxi.while_loop(cond, lambda d: _step(params, options, observe, t_stop, d), c,
+                        max_steps=options.max_steps if kind == "checkpointed" else None,
+                        kind=kind)
     status = jnp.where((c.status == Status.ok) & (c.t < t_stop),
                        jnp.where(c.chunk_steps >= options.max_steps, Status.max_steps_reached,
                                  Status.event_not_resolved), c.status)
