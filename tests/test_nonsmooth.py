@@ -170,7 +170,7 @@ def test_cycle_gradients_against_finite_differences_of_scipy(adjoint):
     d xi at v_d 1.7, near the cycle's existence limit). The derivative of an event time is the
     implicit function theorem's, that of the amplitude x at a turning point's
     fixed time (x' = 0 there)."""
-    options = jc.NonsmoothOptions.reference(t_end=120.0, transient=60.0, adjoint=adjoint)
+    options = jc.NonsmoothOptions.reference(t_end=40.0, transient=20.0, adjoint=adjoint)
     jac = jax.jit(jax.jacrev(_cycle, argnums=(0, 1)) if adjoint == "reverse"
                   else jax.jacfwd(_cycle, argnums=(0, 1)), static_argnums=2)
     h = 1e-4

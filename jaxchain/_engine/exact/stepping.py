@@ -223,8 +223,11 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
     tau, y, work, observed, y_switched, modes, kind, resolved = jax.lax.cond(
         event | at_end | turning, located, plain)
     ok = keep & diffrax.is_okay(solver_result) & diffrax.is_okay(controller_result)
+    # a rejected step may overflow (the controller then shortens it): only an
+    # accepted state that is not finite ends the run
     code = jnp.where(diffrax.is_okay(solver_result) & diffrax.is_okay(controller_result),
-                     jnp.where(jnp.all(jnp.isfinite(y)), Status.ok, Status.non_finite_state),
+                     jnp.where(~keep | jnp.all(jnp.isfinite(y)), Status.ok,
+                               Status.non_finite_state),
                      Status.solver_failed)
     # a switch that no guard accounts for would repeat forever: stop the run
     code = jnp.where((code == Status.ok) & event & ~resolved, Status.event_not_resolved,
