@@ -41,15 +41,15 @@ class NonsmoothOptions(AbstractHorizon):
         derivative). A run is computed the same either way.
     - `root_tol`: absolute tolerance on event times of the bracketed root find
         (Chandrupatla's method) that locates them on the dense output.
-    - `switch_tol`: at an event, every oscillator whose guard (relative velocity,
-        stick margin mu_st - |f| or velocity) lies within `switch_tol` of zero
+    - `switch_tol`: at a switch, every oscillator whose guard (relative velocity or
+        stick margin mu_st - |f|) lies within `switch_tol` of zero
         switches at that instant. This is how simultaneous and near-simultaneous
         switches are handled; see `simulate_nonsmooth`.
     - `chunk_length`: the run advances in chunks of about this length (one
-        progress tick each); events split a chunk into smooth segments.
+        progress tick each); every chunk end is a step end.
     - `max_steps`: step budget of one chunk.
-    - `max_events`: event budget of one chunk; more means chattering.
-    - `log_size`: the event log keeps the last `log_size` switches.
+    - `max_events`: budget of switch instants of one chunk; more means chattering.
+    - `log_size`: the switch log gives the last `log_size` switches.
 
     **Raises:**
 

@@ -1,8 +1,8 @@
 """Event location of the exact engine: Chandrupatla's bracketed root find on the
 dense output of a step.
 
-The guard of a segment changes sign within the step in which diffrax detects the
-event, so the event time is bracketed; `optimistix.Bisection` halves that bracket
+The smallest guard changes sign within the step at whose end the engine finds it
+below zero (`stepping.py`), so the switch time is bracketed; `optimistix.Bisection` halves that bracket
 about 45 times to reach 1e-13 from a step of order one. Chandrupatla's method
 (T. R. Chandrupatla, "A new hybrid quadratic/bisection algorithm for finding the
 zero of a nonlinear function without using derivatives", Advances in Engineering
@@ -43,12 +43,10 @@ class Chandrupatla(optx.AbstractRootFinder):
     (see the module docstring), for the events of the exact engine.
 
     **Options** (of `optimistix.root_find`): `lower` and `upper`, the ends of a
-    bracket on which the function changes sign (diffrax's `Event` passes the step
-    in which the event occurred). Where it does not change sign (diffrax calls the
-    root find on every lane of a vmapped solve, also those without an event, and a
-    rounding may keep the dense output's sign at the step's end), the result is
-    the upper end and the solve still succeeds: the caller decides from its own
-    event mask.
+    bracket on which the function changes sign (the engine passes the step in
+    which the switch occurred). Where it does not change sign (a rounding may keep
+    the dense output's sign at the step's end), the result is the upper end and
+    the solve still succeeds.
 
     **Arguments:**
 
