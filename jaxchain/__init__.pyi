@@ -72,10 +72,13 @@ from ._engine.exact.solve import (
     simulate_nonsmooth as simulate_nonsmooth,
     run_nonsmooth as run_nonsmooth,
     nonsmooth_trajectory as nonsmooth_trajectory,
+    nonsmooth_flow as nonsmooth_flow,
     NonsmoothObservables as NonsmoothObservables,
 )
 from ._engine.exact.options import NonsmoothOptions as NonsmoothOptions
-from ._engine.exact.switching import SWITCH_KINDS as SWITCH_KINDS
+from ._engine.exact.switching import (
+    SWITCH_KINDS as SWITCH_KINDS, saltation_matrix as saltation_matrix,
+)
 from ._bifurcation.existence import (
     stick_slip_existence_limit as stick_slip_existence_limit,
     differentiable_existence_limit as differentiable_existence_limit,
@@ -123,6 +126,11 @@ from ._bifurcation.shooting import (
     periodic_orbit as periodic_orbit, PeriodicOrbit as PeriodicOrbit,
     ShootingOptions as ShootingOptions, floquet_multipliers as floquet_multipliers,
     monodromy as monodromy, shooting_residual as shooting_residual,
+)
+from ._bifurcation.exact_orbit import (
+    exact_periodic_orbit as exact_periodic_orbit, ExactOrbit as ExactOrbit,
+    ExactShooting as ExactShooting, exact_monodromy as exact_monodromy,
+    exact_shooting_residual as exact_shooting_residual,
 )
 from ._bifurcation.continuation import (
     continuation as continuation, ContinuationProblem as ContinuationProblem,

@@ -7,9 +7,9 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from .._physics.forces import static_friction
+from .._physics.forces import friction_coefficient, static_friction
+from .._physics.model import stick_force
 from .._physics.params import chain_or_default, ChainParams, with_parameter
-from .._engine.exact.switching import mode_field
 from .._errors import ValidationError
 
 
@@ -21,22 +21,31 @@ def _slip_arc_peak(v_d, args):
     p = with_parameter(params, "v_d", v_d)
     exit_x = (static_friction(p) - 2 * p.xi * v_d) / p.stiffness
     exit_state = jnp.stack([jnp.atleast_1d(exit_x), jnp.atleast_1d(v_d)])
-    modes = -jnp.ones(1)  # f = +mu(0) at the exit: the oscillator falls behind the belt
+
+    def field(t, y, p):
+        """Slip behind the belt, F = +(P_n/P) mu(|v_rel|), continued past v_rel = 0 as
+        the same physical law (the arc's peak is a smooth function of v_d on both
+        sides of the limit); not the exact engine's slip mode, whose law is
+        continued analytically past its switch (`of_slip_speed`)."""
+        x, v = y
+        a = (-stick_force(p, x) - 2 * p.xi * (v - p.v_d)
+             + p.load * friction_coefficient(p, v - p.v_d))
+        return jnp.stack([v, a / (1.0 if p.mass is None else p.mass)])
 
     def acceleration(t, y, args, **kwargs):
-        return mode_field(t, y, args)[0][1, 0]
+        return field(t, y, args)[1, 0]
 
     # The first down-crossing of x'' is the first maximum of x' (x'' = 0 at the exit,
     # then negative, so that the exit itself does not trigger).
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(mode_field), diffrax.Dopri8(), 0.0, 100.0, None,
-        (exit_state, jnp.zeros(2)), (p, modes), saveat=diffrax.SaveAt(t1=True),
+        diffrax.ODETerm(field), diffrax.Dopri8(), 0.0, 100.0, None, exit_state, p,
+        saveat=diffrax.SaveAt(t1=True),
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=rtol),
         event=diffrax.Event(acceleration, optx.Bisection(rtol=0.0, atol=1e-14),
                             direction=False),
         adjoint=diffrax.ForwardMode(),  # forward-differentiable: `existence_limit_tangent`
     )
-    return sol.ys[0][-1, 1, 0] - v_d
+    return sol.ys[-1, 1, 0] - v_d
 
 
 _peak = eqx.filter_jit(_slip_arc_peak)

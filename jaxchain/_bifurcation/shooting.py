@@ -168,7 +168,15 @@ def floquet_multipliers(params: ChainParams, y0: State, period, options: Shootin
     Its distance from 1 measures the accuracy of the flow.
     """
     m = monodromy(params, y0, period, options, eps)
-    direction = jnp.reshape(vector_field(0.0, y0, params, eps), (-1,))
+    return deflated_multipliers(m, jnp.reshape(vector_field(0.0, y0, params, eps), (-1,)))
+
+
+def deflated_multipliers(m: Float[Array, "2n 2n"], direction: Float[Array, " 2n"]
+                         ) -> tuple[Complex[Array, " 2n"], Array]:
+    """The eigenvalues of a monodromy matrix `m`, the trivial one (of the flow
+    direction `direction`, the vector field at the orbit's start) deflated as
+    `floquet_multipliers` describes: (multipliers by decreasing modulus, index of
+    the trivial one)."""
     direction = direction / jnp.linalg.norm(direction)
     basis, _ = jnp.linalg.qr(direction[:, None], mode="complete")
     rest = basis[:, 1:]
@@ -272,6 +280,23 @@ def _solve(params, eps, u0, options):
                        orbit.converged & (orbit.residual <= 1e3 * tol))
 
 
+def shooting_guess(params: ChainParams, y0: State, period, options) -> Float[Array, " 2n+1"]:
+    """The unknowns `pack(y0, T)` of a checked guess, its phase oscillator's velocity
+    set to 0 (the phase condition). `options` is `ShootingOptions` or
+    `ExactShooting` (its `phase_oscillator`).
+
+    **Raises:** `ValidationError` for a guess of the wrong shape, a non-positive
+    period or a phase oscillator outside the chain."""
+    y0 = jnp.asarray(y0, dtype=float)
+    if y0.shape != (2, params.n_osc):
+        raise ValidationError(f"y0 must have shape (2, {params.n_osc}), got {y0.shape}")
+    check_positive("period", period)
+    if options.phase_oscillator >= params.n_osc:
+        raise ValidationError(f"{type(options).__name__}.phase_oscillator must be < n_osc = "
+                              f"{params.n_osc}, got {options.phase_oscillator}")
+    return pack(y0.at[1, options.phase_oscillator].set(0.0), period)
+
+
 def periodic_orbit(params: ChainParams, y0: State, period: float,
                    options: ShootingOptions = ShootingOptions(), *, eps=DEFAULT_EPS,
                    throw: bool = True) -> PeriodicOrbit:
@@ -306,16 +331,8 @@ def periodic_orbit(params: ChainParams, y0: State, period: float,
     a phase oscillator outside the chain;
     `RuntimeError` if Newton's method does not converge and `throw=True`.
     """
-    y0 = jnp.asarray(y0, dtype=float)
-    if y0.shape != (2, params.n_osc):
-        raise ValidationError(f"y0 must have shape (2, {params.n_osc}), got {y0.shape}")
-    check_positive("period", period)
-    if options.phase_oscillator >= params.n_osc:
-        raise ValidationError(f"ShootingOptions.phase_oscillator must be < n_osc = "
-                              f"{params.n_osc}, got {options.phase_oscillator}")
-    eps = check_eps(eps)
-    y0 = y0.at[1, options.phase_oscillator].set(0.0)
-    orbit = _solve(params, eps, pack(y0, period), options)
+    u0 = shooting_guess(params, y0, period, options)
+    orbit = _solve(params, check_eps(eps), u0, options)
     if throw and not bool(orbit.converged):
         raise RuntimeError("shooting did not converge: start from a state closer to the "
                            "orbit (after a longer simulation) or a better period guess")

@@ -249,8 +249,12 @@ def slip_friction_force(params: ChainParams, v_rel: Float[ArrayLike, "*shape"],
     **Returns:**
 
     F, of the broadcast shape, dimensionless (F/P in eq. (6)).
+
+    The law is evaluated at the slip speed direction * v_rel by
+    `AbstractFrictionLaw.of_slip_speed` (mu(|v_rel|), with the derivative of the
+    phase's side where it begins, at v_rel = 0).
     """
-    return -(params.load * friction_coefficient(params, v_rel)) * direction
+    return -(params.load * params.friction.of_slip_speed(direction * v_rel)) * direction
 
 
 def static_friction(params: ChainParams) -> Float[Array, "*shape"]:

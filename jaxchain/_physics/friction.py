@@ -89,6 +89,17 @@ class AbstractFrictionLaw(eqx.Module):
     def __call__(self, v_rel: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
         """mu(v_rel), broadcast against the law's fields; dimensionless."""
 
+    def of_slip_speed(self, speed: Float[ArrayLike, "*shape"]) -> Float[Array, "*shape"]:
+        """mu within a slip phase as a function of the slip speed u = s v_rel (s the
+        phase's direction, u >= 0 during the phase): mu(|u|), moved off u = 0 by
+        the smallest normal number, so that a phase that begins at v_rel = 0 (after
+        a stick or a reversal) has the derivative mu'(0+) of its side there, where
+        JAX's derivative of |.| is 0. Past u = 0 (a step that overshoots the end of
+        the phase) it is the law mirrored, mu(|u|), which pulls the state back:
+        an analytic continuation (exp(-u/v0) for eq. (1)) would push it on and
+        make a phase that begins tangentially, at a breakaway from stick, chatter."""
+        return self(speed + jnp.where(speed == 0, jnp.finfo(jnp.result_type(speed)).tiny, 0.0))
+
     @abc.abstractmethod
     def static(self) -> Float[Array, "*shape"]:
         """mu(0), the static friction coefficient: the bound |F| <= P_n mu(0) of the

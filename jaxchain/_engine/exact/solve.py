@@ -263,11 +263,34 @@ def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State
 
 
 @eqx.filter_jit
-def sampled_states(params: ChainParams, y0: State, ts, options: NonsmoothOptions):
-    """The exact engine's states at the times `ts` (increasing, from t = 0) from the
-    state `y0`, event by event, shape (len(ts), 2, n_osc), and the run's `Status`.
-    Pure and traceable; differentiable in forward mode (`jax.jvp`, `jax.jacfwd`)
-    through every switch with respect to `params` and `y0`."""
+def nonsmooth_flow(params: ChainParams, y0: State, ts, options: NonsmoothOptions):
+    """The flow map of the exact switch model: the states at the times `ts` from
+    the state `y0` at t = 0, event by event through every switch. Pure and
+    traceable (no checks, no exceptions; a failure is its status), to
+    differentiate, vmap or use inside a Newton solve such as shooting.
+
+    Differentiable with respect to `params` and `y0` through every switch: in
+    forward mode (`jax.jvp`, `jax.jacfwd`) with `options.adjoint` "forward" (the
+    default), in reverse mode with "reverse". The Jacobian with respect to `y0`
+    is the product of the smooth flows' Jacobians and the saltation matrix of
+    each switch (`saltation_matrix`; Leine and Nijmeijer, *Dynamics and
+    Bifurcations of Non-Smooth Mechanical Systems*, 2004, Section 7.1). A
+    sticking oscillator is one whose x_n' equals v_d exactly (`initial_modes`):
+    its velocity's column is zero (stick does not read it).
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `y0`: the state at t = 0, shape (2, n_osc).
+    - `ts`: times, increasing, > 0, shape (m,), dimensionless (eq. (4)).
+    - `options`: `NonsmoothOptions` (static); its tolerances, budgets and adjoint
+        apply, its horizon does not.
+
+    **Returns:**
+
+    (states, status): shape (m, 2, n_osc), and the run's `Status` as an integer
+    (shape ()).
+    """
 
     def body(c, t):
         c = chunk(params, options, False, False, c, t)
@@ -309,7 +332,7 @@ def nonsmooth_trajectory(params: ChainParams, y0: AbstractInitialCondition | Sta
         raise ValidationError("ts must be a non-empty increasing array of times >= 0")
     if not isinstance(y0, AbstractInitialCondition):
         y0 = GivenState(y0)
-    ys, status = sampled_states(params, y0(params), jnp.asarray(ts), options)
+    ys, status = nonsmooth_flow(params, y0(params), jnp.asarray(ts), options)
     status = Status(int(status))
     if status is not Status.ok:
         raise RuntimeError(f"{status}: {status.message}")

@@ -173,6 +173,19 @@ def _turning_points(interp, c: Carry, y_end, t0, t_end):
     return jax.lax.cond(jnp.any(turns), locate, none)
 
 
+def _on_dense_output(interp, params, modes, t):
+    """The dense output at t, (y, work), whose derivative in t is the vector field
+    there rather than the interpolating polynomial's: the derivative of a switch
+    time (the implicit function theorem divides by the guard's rate) and of the
+    state at it are then those of the flow, to the integration tolerance, where
+    the polynomial's own slope is a few orders less accurate (it enters the
+    saltation matrix of a slip reversal, whose acceleration jumps)."""
+    fixed = jax.lax.stop_gradient(t)
+    state = interp.evaluate(fixed)
+    rate = mode_field(fixed, state, (params, modes))
+    return jax.tree.map(lambda y, r: y + r * (t - fixed), state, rate)
+
+
 def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
     """One step of the loop (see the module docstring). `observe` (traced: the chunk
     lies in the observed window) adds the turning points and counts the stick time;
@@ -201,9 +214,11 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
         """The switch (its time, the state there, the new modes), the turning
         points before it, and the samples observed."""
         tau = jax.lax.cond(event, lambda: _root(
-            lambda t: guard(params, interp.evaluate(t)[0], c.modes), t0, t1,
+            lambda t: guard(params, _on_dense_output(interp, params, c.modes, t)[0],
+                            c.modes), t0, t1,
             options.root_tol), lambda: t1)
-        y, work = jax.lax.cond(event, lambda: interp.evaluate(tau), lambda: end)
+        y, work = jax.lax.cond(event, lambda: _on_dense_output(interp, params, c.modes, tau),
+                               lambda: end)
         turn_ts, turn_ys = jax.lax.cond(
             observe, lambda: _turning_points(interp, c, y, t0, tau),
             lambda: (jnp.full(c.modes.shape, -jnp.inf),

@@ -14,6 +14,7 @@ is the first switch of any oscillator, so one scalar function locates the earlie
 switch however many oscillators there are.
 """
 
+import jax
 import jax.numpy as jnp
 
 from ..._physics.forces import coupling_force, slip_friction_force, static_friction
@@ -118,3 +119,50 @@ def initial_modes(params, y):
     v_rel = v - params.v_d
     return jnp.where(v_rel == 0, jnp.where(jnp.abs(f) < static_friction(params), 0.0, -jnp.sign(f)),
                      jnp.sign(v_rel))
+
+
+def saltation_matrix(params, y, modes_before, modes_after, osc):
+    """The saltation matrix of one oscillator's switch: how a perturbation of the
+    state just before the switch maps to one just after it (Leine and Nijmeijer,
+    *Dynamics and Bifurcations of Non-Smooth Mechanical Systems*, 2004, Section
+    7.1; Aizerman and Gantmacher 1958),
+
+        S = I + (f+ - f-) h_y^T / (h_y^T f-),
+
+    with f- and f+ the vector fields of the modes before and after, h the
+    switching oscillator's guard in the mode before (`switch_guards`), all at
+    the switch point. The state is flattened as (x_1..x_n, x_1'..x_n').
+
+    - slip to stick: S = I - e_v e_v^T for the oscillator's velocity v: stick
+        fixes x_n' = v_d, and a perturbation of x_n' is lost;
+    - stick to slip: S = I when the friction law is continuous at v_rel = 0
+        (the slip force there is the static friction that stick had reached);
+    - slip reversal: the acceleration jumps by twice the static friction, and S
+        differs from I in the oscillator's velocity column.
+
+    The exact engine applies these without forming them (its derivatives go
+    through each switch time by the implicit function theorem); this function is
+    the check and the building block of a monodromy matrix.
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `y`: the state at the switch, shape (2, n_osc).
+    - `modes_before`, `modes_after`: the modes (+1/-1 slip, 0 stick), shape
+        (n_osc,).
+    - `osc`: the switching oscillator (index from 0).
+
+    **Returns:**
+
+    S, shape (2 n_osc, 2 n_osc).
+    """
+    shape = y.shape
+
+    def field(modes):
+        return mode_field(0.0, (y, None), (params, modes))[0].reshape(-1)
+
+    h_y = jax.grad(lambda z: switch_guards(params, z.reshape(shape), modes_before)[osc])(
+        y.reshape(-1))
+    f_before = field(modes_before)
+    jump = field(modes_after) - f_before
+    return jnp.eye(y.size) + jnp.outer(jump, h_y) / jnp.dot(h_y, f_before)

@@ -18,7 +18,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from ..._engine.checks import as_solver
 from ..._engine.exact.options import NonsmoothOptions
-from ..._engine.exact.solve import sampled_states
+from ..._engine.exact.solve import nonsmooth_flow
 from ..._engine.smoothed import terms
 from ..._engine.status import Status
 from ..._engine.solver.controller import step_size_controller
@@ -122,7 +122,7 @@ def window_flow(params: ChainParams, eps, y0, times, options: FlowOptions):
     """The model's states at `times` (from 0) from `y0`, shape (len(times), 2,
     n_osc); NaN where the integration failed. The smoothed model (eq. (5) with
     tanh(v_rel/eps)) by diffrax, or the exact stick/slip switch model event by
-    event (`sampled_states`, the exact engine's Runge-Kutta pair at the same
+    event (`nonsmooth_flow`, the exact engine's Runge-Kutta pair at the same
     tolerances), whose derivatives cross every switch (the event times by the
     implicit function theorem).
 
@@ -137,7 +137,7 @@ def window_flow(params: ChainParams, eps, y0, times, options: FlowOptions):
     - `options`: `FlowOptions`.
     """
     if options.engine == "exact":
-        ys, status = sampled_states(params, y0, times, NonsmoothOptions(
+        ys, status = nonsmooth_flow(params, y0, times, NonsmoothOptions(
             rtol=options.rtol, atol=options.atol, max_steps=options.max_steps))
         return jnp.where(status == Status.ok, ys, jnp.nan)
     solver = as_solver(options.solver)

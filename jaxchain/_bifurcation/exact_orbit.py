@@ -1,0 +1,223 @@
+"""Periodic orbits of the exact stick/slip switch model by single shooting on the
+exact engine, and their exact Floquet multipliers: the monodromy matrix is the
+exact engine's derivative of its flow map, the product of the smooth flows'
+Jacobians and the saltation matrix of every switch."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Bool, Complex, Float, Int
+
+from .._engine.exact.options import NonsmoothOptions
+from .._engine.exact.solve import nonsmooth_flow
+from .._engine.exact.switching import initial_modes, mode_field
+from .._engine.status import Status
+from .._errors import ValidationError
+from .._physics.custom_types import State
+from .._physics.params import ChainParams
+from .shooting import deflated_multipliers, shooting_guess, unpack
+
+
+class ExactShooting(eqx.Module):
+    """How periodic orbits of the exact switch model are solved for.
+
+    **Arguments:**
+
+    - `flow`: `NonsmoothOptions` of the exact engine's flow over one period (its
+        horizon is not read; forward-mode derivatives are needed, so `adjoint`
+        must be "forward"). The reference's tolerances by default (Tsit5 at
+        rtol = atol = 1e-12): the trivial multiplier is 1 only as far as the
+        flow is exact.
+    - `newton_tol`: Newton's tolerance (optimistix, rtol = atol) on the state and
+        period.
+    - `newton_steps`: Newton's iteration budget.
+    - `n_samples`: samples of one period from which amplitudes and stick are
+        read (an extremum between samples is missed by about
+        A (pi / n_samples)^2 / 2).
+    - `phase_oscillator`: the oscillator n of the phase condition x_n'(0) = 0
+        (0-based): the orbit starts at a turning point of n, in slip; choose
+        one that vibrates.
+
+    **Raises:**
+
+    `ValidationError` naming the field for a non-positive tolerance or count, a
+    negative phase oscillator or a reverse-mode flow.
+    """
+
+    flow: NonsmoothOptions = NonsmoothOptions.reference(t_end=1.0, transient=0.0)
+    newton_tol: float = eqx.field(static=True, default=1e-9)
+    newton_steps: int = eqx.field(static=True, default=40)
+    n_samples: int = eqx.field(static=True, default=4096)
+    phase_oscillator: int = eqx.field(static=True, default=0)
+
+    def __check_init__(self):
+        if self.phase_oscillator < 0:
+            raise ValidationError(f"ExactShooting.phase_oscillator must be >= 0, got "
+                                  f"{self.phase_oscillator!r}")
+        if self.flow.adjoint != "forward":
+            raise ValidationError("ExactShooting.flow.adjoint must be 'forward': Newton's "
+                                  "method and the monodromy matrix use forward mode")
+        for name in ("newton_tol", "newton_steps", "n_samples"):
+            if not getattr(self, name) > 0:
+                raise ValidationError(f"ExactShooting.{name} must be > 0, got "
+                                      f"{getattr(self, name)!r}")
+
+
+def exact_flow(params: ChainParams, y0: State, period, options: ExactShooting) -> State:
+    """The exact engine's state after `period` from `y0`, shape (2, n_osc)
+    (`nonsmooth_flow`); NaN where the run failed."""
+    ys, status = nonsmooth_flow(params, y0, jnp.atleast_1d(period), options.flow)
+    return jnp.where(status == Status.ok, ys[-1], jnp.nan)
+
+
+def exact_shooting_residual(u: Float[Array, " 2n+1"], params: ChainParams,
+                            options: ExactShooting) -> Float[Array, " 2n+1"]:
+    """Single-shooting residual of a periodic orbit of the exact switch model
+    (Seydel, *Practical Bifurcation and Stability Analysis*, 3rd ed. (2010),
+    Sect. 7.1): the exact flow over one period minus the start, and the phase
+    condition x_n'(0) = 0 (n = `options.phase_oscillator`). A sticking
+    oscillator's velocity is v_d exactly at both ends, so its rows are zero on
+    the orbit and its column of the monodromy matrix is zero.
+
+    **Arguments:**
+
+    - `u`: the unknowns `pack(y0, T)`, shape (2 n_osc + 1,).
+    - `params`: the chain parameters.
+    - `options`: `ExactShooting`.
+
+    **Returns:**
+
+    Shape (2 n_osc + 1,); zero on a periodic orbit.
+    """
+    y0, period = unpack(u)
+    n = options.phase_oscillator
+    return jnp.concatenate([jnp.reshape(exact_flow(params, y0, period, options) - y0, (-1,)),
+                            y0[1, n:n + 1]])
+
+
+def exact_monodromy(params: ChainParams, y0: State, period, options: ExactShooting
+                    ) -> Float[Array, "2n 2n"]:
+    """The monodromy matrix d phi_T(y0) / d y0 of the exact switch model: forward-mode
+    differentiation of the exact engine's flow through every switch, which
+    applies each switch's saltation matrix (`saltation_matrix`; Leine and
+    Nijmeijer, *Dynamics and Bifurcations of Non-Smooth Mechanical Systems*,
+    2004, Sect. 7.1). Ordered as (x_1..x_N, x_1'..x_N'), shape (2 n_osc, 2 n_osc)."""
+    def end(z):
+        return jnp.reshape(exact_flow(params, jnp.reshape(z, (2, -1)), period, options), (-1,))
+    return jax.jacfwd(end)(jnp.reshape(y0, (-1,)))
+
+
+class ExactOrbit(eqx.Module):
+    """A periodic orbit of the exact switch model and its exact stability.
+
+    **Fields:**
+
+    - `params`: the parameters it belongs to.
+    - `y0`: the state at t = 0 (x_n'(0) = 0, n the phase oscillator), shape
+        (2, n_osc).
+    - `period`: T, shape ().
+    - `amplitudes`: half of peak-to-peak of each x_n over `n_samples` samples of
+        the period, shape (n_osc,).
+    - `energy`: E = 1/2 sum_n A_n^2 (eq. (9) of the paper), shape ().
+    - `on_halc`: whether each oscillator sticks during the period (x_n' = v_d
+        exactly at a sample: the exact engine's stick), shape (n_osc,).
+    - `n_halc`: the number of them, shape ().
+    - `multipliers`: the Floquet multipliers by decreasing modulus, shape
+        (2 n_osc,): the eigenvalues of the exact monodromy matrix. Each
+        oscillator that sticks loses the perturbation of its velocity there, so
+        stick phases give multipliers at zero (`zero_multipliers` of them).
+    - `trivial`: index of the trivial multiplier (of the flow direction), shape ().
+    - `zero_multipliers`: multipliers of modulus below 1e-9, shape ().
+    - `stable`: all non-trivial multipliers inside the unit circle, shape ().
+    - `residual`: max-norm of the shooting residual, shape ().
+    - `converged`: whether Newton's method converged, shape ().
+
+    All quantities are dimensionless (eqs. (4)-(6)).
+    """
+
+    params: ChainParams
+    y0: State
+    period: Float[Array, ""]
+    amplitudes: Float[Array, " n_osc"]
+    energy: Float[Array, ""]
+    on_halc: Bool[Array, " n_osc"]
+    n_halc: Int[Array, ""]
+    multipliers: Complex[Array, " 2n"]
+    trivial: Int[Array, ""]
+    zero_multipliers: Int[Array, ""]
+    stable: Bool[Array, ""]
+    residual: Float[Array, ""]
+    converged: Bool[Array, ""]
+
+
+def describe_exact_orbit(params: ChainParams, u: Float[Array, " 2n+1"],
+                         options: ExactShooting, converged=True) -> ExactOrbit:
+    """The `ExactOrbit` of the shooting unknowns `u` (traceable)."""
+    y0, period = unpack(u)
+    m = exact_monodromy(params, y0, period, options)
+    modes = initial_modes(params, y0)
+    direction = jnp.reshape(mode_field(0.0, (y0, None), (params, modes))[0], (-1,))
+    multipliers, trivial = deflated_multipliers(m, direction)
+    ts = period * jnp.linspace(0.0, 1.0, options.n_samples + 1)[1:]
+    ys, status = nonsmooth_flow(params, y0, ts, options.flow)
+    ys = jnp.where(status == Status.ok, ys, jnp.nan)
+    amplitudes = 0.5 * (ys[:, 0].max(0) - ys[:, 0].min(0))
+    on_halc = jnp.any(ys[:, 1] == params.v_d, axis=0)
+    others = jnp.where(jnp.arange(multipliers.size) == trivial, 0.0, jnp.abs(multipliers))
+    residual = jnp.max(jnp.abs(exact_shooting_residual(u, params, options)))
+    return ExactOrbit(
+        params=params, y0=y0, period=period, amplitudes=amplitudes,
+        energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc, n_halc=jnp.sum(on_halc),
+        multipliers=multipliers, trivial=trivial,
+        zero_multipliers=jnp.sum(jnp.abs(multipliers) < 1e-9), stable=jnp.all(others < 1),
+        residual=residual, converged=jnp.asarray(converged) & (residual <= 1e3 * options.newton_tol))
+
+
+@eqx.filter_jit
+def _solve(params, u0, options):
+    tol = options.newton_tol
+    sol = optx.root_find(lambda u, p: exact_shooting_residual(u, p, options),
+                         optx.Newton(rtol=tol, atol=tol), u0, params,
+                         max_steps=options.newton_steps, throw=False)
+    return describe_exact_orbit(params, sol.value, options,
+                                sol.result == optx.RESULTS.successful)
+
+
+def exact_periodic_orbit(params: ChainParams, y0: State, period: float,
+                         options: ExactShooting = ExactShooting(), *,
+                         throw: bool = True) -> ExactOrbit:
+    """Solve for a periodic orbit of the exact stick/slip switch model (eq. (5) with
+    the friction law of eqs. (1)-(2), stick exact) by single shooting on the exact
+    engine: optimistix's Newton method on `exact_shooting_residual` (state and
+    period, phase condition x_n'(0) = 0), its Jacobian by forward-mode
+    differentiation through every switch. Its Floquet multipliers are the
+    eigenvalues of the exact monodromy matrix (`exact_monodromy`), with no eps:
+    the limit that the smoothed model's multipliers approach as eps -> 0.
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `y0`: a guess of a state on the orbit, shape (2, n_osc); a state from a long
+        simulation, for instance. Its velocity x_n' (n = `options.phase_oscillator`)
+        is set to 0 first.
+    - `period`: a guess of the period (> 0).
+    - `options`: `ExactShooting`.
+    - `throw`: raise if Newton's method does not converge (default); otherwise
+        return the orbit with `converged=False`.
+
+    **Returns:**
+
+    An `ExactOrbit`.
+
+    **Raises:**
+
+    `ValidationError` for a guess of the wrong shape, a non-positive period or a
+    phase oscillator outside the chain; `RuntimeError` if Newton's method does not
+    converge and `throw=True`.
+    """
+    orbit = _solve(params, shooting_guess(params, y0, period, options), options)
+    if throw and not bool(orbit.converged):
+        raise RuntimeError("exact shooting did not converge: start from a state closer to "
+                           "the orbit (after a longer simulation) or a better period guess")
+    return orbit

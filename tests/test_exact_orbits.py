@@ -1,0 +1,55 @@
+"""Periodic orbits of the exact switch model by shooting on the exact engine (issue
+56, item 1): the single oscillator's stick-slip cycle against the independent
+scipy cycle, its exact Floquet multipliers, and Newton's convergence from
+perturbed starts."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxchain as jc
+from helpers import scipy_stick_slip_cycle
+
+ONE = jc.ChainParams(n_osc=1, v_d=1.5, xi=0.05)
+
+
+@pytest.fixture(scope="module")
+def guess():
+    """A turning point x' = 0 near the cycle's maximum, from a simulation, and the
+    scipy cycle's (amplitude, period)."""
+    obs = jc.simulate_nonsmooth(ONE, jnp.array([[2.0], [0.0]]),
+                                jc.NonsmoothOptions.reference(t_end=100.0, transient=50.0))
+    return float(obs.x_max[1, 0]), scipy_stick_slip_cycle(ONE)
+
+
+@pytest.mark.numerics
+@pytest.mark.parametrize("dx, period_factor", [(0.01, 1.02), (-0.05, 0.97), (0.08, 1.04)])
+def test_exact_stick_slip_cycle_from_perturbed_starts_is_the_scipy_cycle(guess, dx,
+                                                                         period_factor):
+    """Shooting on the exact engine from starts perturbed in x(0) and T converges to
+    the cycle that scipy finds event by event (`scipy_stick_slip_cycle`): the
+    period to 1e-9 (the flow at rtol 1e-12), the amplitude to 1e-6 (read from 4096
+    samples of the period: a maximum between samples is missed by at most
+    A (pi/4096)^2 / 2 = 5e-7). Its Floquet multipliers are exact: the trivial one
+    is 1 and the other 0, since one stick phase per period forgets the state (the
+    Poincare map x(0) -> x(T) on x' = 0 is constant near the orbit, its derivative
+    zero)."""
+    x_max, (amplitude, period) = guess
+    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max + dx], [0.0]]),
+                                    period * period_factor)
+    assert bool(orbit.converged)
+    np.testing.assert_allclose(float(orbit.period), period, rtol=1e-9)
+    np.testing.assert_allclose(float(orbit.amplitudes[0]), amplitude, rtol=1e-6)
+    multipliers = np.asarray(orbit.multipliers)
+    assert abs(multipliers[int(orbit.trivial)] - 1) < 1e-8
+    assert int(orbit.zero_multipliers) == 1 and np.abs(multipliers).min() < 1e-9
+    assert int(orbit.n_halc) == 1 and bool(orbit.stable)
+
+
+def test_exact_shooting_refuses_bad_input_in_one_line():
+    with pytest.raises(ValueError, match="y0 must have shape"):
+        jc.exact_periodic_orbit(ONE, jnp.zeros((2, 2)), 6.0)
+    with pytest.raises(ValueError, match="period"):
+        jc.exact_periodic_orbit(ONE, jnp.zeros((2, 1)), -1.0)
+    with pytest.raises(ValueError, match="adjoint"):
+        jc.ExactShooting(flow=jc.NonsmoothOptions.reference(adjoint="reverse"))
