@@ -140,7 +140,7 @@ def initial_carry(params: ChainParams, y0: State, options, observed: tuple) -> C
 
 def _root(fn, t0, t1, tol):
     """The root of fn on [t0, t1] (fn(t0) > 0 >= fn(t1); else t1), Chandrupatla's
-    method, differentiable by the implicit function theorem."""
+    method (its value: `_switch_point` gives its derivatives)."""
     return optx.root_find(lambda t, _: fn(t), Chandrupatla(atol=tol), t1,
                           options=dict(lower=t0, upper=t1), throw=False).value
 
@@ -173,17 +173,30 @@ def _turning_points(interp, c: Carry, y_end, t0, t_end):
     return jax.lax.cond(jnp.any(turns), locate, none)
 
 
-def _on_dense_output(interp, params, modes, t):
-    """The dense output at t, (y, work), whose derivative in t is the vector field
-    there rather than the interpolating polynomial's: the derivative of a switch
-    time (the implicit function theorem divides by the guard's rate) and of the
-    state at it are then those of the flow, to the integration tolerance, where
-    the polynomial's own slope is a few orders less accurate (it enters the
-    saltation matrix of a slip reversal, whose acceleration jumps)."""
-    fixed = jax.lax.stop_gradient(t)
+def _switch_point(interp, params, modes, t0, t1, tol):
+    """The switch within a step: its time, the root of the smallest guard on the
+    step's dense output (Chandrupatla's method, `_root`), and the state (y, work)
+    there. Their derivatives are those of the implicit function theorem written
+    out: d tau = -dg / (dg/dt), with g the guard at the dense output's state at
+    the fixed root and dg/dt the guard's rate along the vector field there, not
+    along the interpolating polynomial, whose slope is a few orders less accurate
+    (it would enter the saltation matrix of a slip reversal, whose acceleration
+    jumps); the state there moves with tau along the vector field. One vector
+    field evaluation per switch."""
+    fixed = jax.lax.stop_gradient(
+        _root(lambda t: guard(params, interp.evaluate(t)[0], modes), t0, t1, tol))
     state = interp.evaluate(fixed)
     rate = mode_field(fixed, state, (params, modes))
-    return jax.tree.map(lambda y, r: y + r * (t - fixed), state, rate)
+    g, g_rate = jax.jvp(lambda y: guard(params, y, modes), (state[0],), (rate[0],))
+    # the shift's value is 0; a tangential guard (rate 0, where no derivative
+    # exists) or a branch that vmap computes in a lane without a switch (whose
+    # values may not be finite) leaves the time and the state as they are
+    inverse = jax.lax.stop_gradient(1.0 / jnp.where(g_rate == 0, 1.0, g_rate))
+    shift = jnp.where(jnp.isfinite(g) & jnp.isfinite(inverse),
+                      (g - jax.lax.stop_gradient(g)) * inverse, 0.0)
+    tau = fixed - shift
+    return tau, jax.tree.map(lambda y, r: y - jnp.where(jnp.isfinite(r), r, 0.0) * shift,
+                             state, rate)
 
 
 def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
@@ -213,12 +226,9 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
     def located():
         """The switch (its time, the state there, the new modes), the turning
         points before it, and the samples observed."""
-        tau = jax.lax.cond(event, lambda: _root(
-            lambda t: guard(params, _on_dense_output(interp, params, c.modes, t)[0],
-                            c.modes), t0, t1,
-            options.root_tol), lambda: t1)
-        y, work = jax.lax.cond(event, lambda: _on_dense_output(interp, params, c.modes, tau),
-                               lambda: end)
+        tau, (y, work) = jax.lax.cond(
+            event, lambda: _switch_point(interp, params, c.modes, t0, t1, options.root_tol),
+            lambda: (t1, end))
         turn_ts, turn_ys = jax.lax.cond(
             observe, lambda: _turning_points(interp, c, y, t0, tau),
             lambda: (jnp.full(c.modes.shape, -jnp.inf),
