@@ -53,3 +53,28 @@ def test_exact_shooting_refuses_bad_input_in_one_line():
         jc.exact_periodic_orbit(ONE, jnp.zeros((2, 1)), -1.0)
     with pytest.raises(ValueError, match="adjoint"):
         jc.ExactShooting(flow=jc.NonsmoothOptions.reference(adjoint="reverse"))
+
+
+@pytest.mark.numerics
+def test_smoothed_multipliers_approach_the_exact_ones_as_eps_falls(guess):
+    """Two oscillators in phase on a ring (the coupling idle: each is the single
+    oscillator's cycle): the exact Floquet multipliers are 1 (trivial), two zeros
+    (each oscillator's stick forgets its velocity) and one real multiplier of the
+    anti-phase perturbation. The smoothed model's multipliers, from shooting at
+    eps = 1e-2, 1e-3 and 1e-4 (an independent flow and solver), approach it: the
+    distance falls by at least 5 per decade of eps (it falls as eps) and is
+    within 2e-4 at eps = 1e-4."""
+    x_max, (_, period) = guess
+    pair = jc.ChainParams(n_osc=2, v_d=1.5, xi=0.05)
+    exact = jc.exact_periodic_orbit(pair, jnp.array([[x_max, x_max], [0.0, 0.0]]), period)
+    multipliers = np.asarray(exact.multipliers)
+    assert int(exact.zero_multipliers) == 2
+    assert abs(multipliers[int(exact.trivial)] - 1) < 1e-8
+    critical = multipliers[np.argmax(np.where(np.arange(4) == int(exact.trivial), 0,
+                                              np.abs(multipliers)))]
+    distances = []
+    for eps in (1e-2, 1e-3, 1e-4):
+        smoothed = jc.periodic_orbit(pair, exact.y0, float(exact.period), eps=eps)
+        distances.append(abs(complex(smoothed.critical_multiplier) - critical))
+    assert distances[0] > 5 * distances[1] > 25 * distances[2]
+    assert distances[2] < 2e-4
