@@ -131,6 +131,7 @@ from ._bifurcation.exact_orbit import (
     exact_periodic_orbit as exact_periodic_orbit, ExactOrbit as ExactOrbit,
     ExactShooting as ExactShooting, exact_monodromy as exact_monodromy,
     exact_shooting_residual as exact_shooting_residual,
+    exact_cycle_problem as exact_cycle_problem,
 )
 from ._bifurcation.continuation import (
     continuation as continuation, ContinuationProblem as ContinuationProblem,

@@ -78,3 +78,32 @@ def test_smoothed_multipliers_approach_the_exact_ones_as_eps_falls(guess):
         distances.append(abs(complex(smoothed.critical_multiplier) - critical))
     assert distances[0] > 5 * distances[1] > 25 * distances[2]
     assert distances[2] < 2e-4
+
+
+@pytest.mark.numerics
+def test_exact_cycles_continued_in_v_d_are_the_scipy_cycles_up_to_the_existence_limit(guess):
+    """Pseudo-arclength continuation of the exact stick-slip cycle in v_d
+    (`exact_cycle_problem`): at every converged point below the existence limit
+    (`stick_slip_existence_limit`, independent: an arc integrated by diffrax) the
+    period is scipy's cycle's to 1e-8 (0.02 below the limit and lower), the cycle stable with its non-trivial
+    multiplier 0; the cycle exists up to 1e-3 below the limit, where its slip arc
+    comes to graze v_rel = 0 (the branch leaves the range there, it does not fail)."""
+    x_max, (_, period) = guess
+    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
+    limit = jc.stick_slip_existence_limit(ONE)
+    branch = jc.continuation(jc.exact_cycle_problem(orbit), jc.PseudoArclength(),
+                             jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0,
+                                                    p_max=limit - 1e-3, max_points=30))
+    p = np.asarray(branch.p)[np.asarray(branch.converged)]
+    # the cycle exists all the way: the run ends by leaving the range, not by failing
+    assert branch.stop == jc.Status.left_parameter_range and p.max() > limit - 1e-2
+    # scipy's event finds a return that grazes the belt speed unreliably (it misses
+    # it within 1e-3 of the limit and takes the next): compare 0.02 below it
+    compared = np.flatnonzero(p < limit - 0.02)
+    assert compared.size >= 4
+    for k in compared[np.linspace(0, compared.size - 1, 4).astype(int)]:
+        chain = jc.ChainParams(n_osc=1, v_d=float(p[k]), xi=0.05)
+        np.testing.assert_allclose(float(branch.records.period[k]),
+                                   scipy_stick_slip_cycle(chain)[1], rtol=1e-8)
+    assert np.asarray(branch.stable).all()
+    assert np.abs(np.asarray(branch.records.multipliers)).min(axis=1).max() < 1e-9

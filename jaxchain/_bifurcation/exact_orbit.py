@@ -16,7 +16,8 @@ from .._engine.status import Status
 from .._errors import ValidationError
 from .._physics.custom_types import State
 from .._physics.params import ChainParams
-from .shooting import deflated_multipliers, shooting_guess, unpack
+from .continuation import ContinuationProblem
+from .shooting import deflated_multipliers, pack, shooting_guess, unpack
 
 
 class ExactShooting(eqx.Module):
@@ -221,3 +222,40 @@ def exact_periodic_orbit(params: ChainParams, y0: State, period: float,
         raise RuntimeError("exact shooting did not converge: start from a state closer to "
                            "the orbit (after a longer simulation) or a better period guess")
     return orbit
+
+
+class ExactShootingResidual(eqx.Module):
+    """`exact_shooting_residual` with its options, as a `ContinuationProblem`
+    residual (equal options give equal residuals: continuation compiles once)."""
+
+    options: ExactShooting
+
+    def __call__(self, u, params):
+        return exact_shooting_residual(u, params, self.options)
+
+
+class DescribeExactOrbit(eqx.Module):
+    """`describe_exact_orbit` with its options, as a `ContinuationProblem` record."""
+
+    options: ExactShooting
+
+    def __call__(self, u, params):
+        return describe_exact_orbit(params, u, self.options)
+
+
+def exact_cycle_problem(orbit: ExactOrbit, options: ExactShooting = ExactShooting(),
+                        where="v_d") -> ContinuationProblem:
+    """The `ContinuationProblem` of the exact periodic orbits through `orbit`:
+    unknowns (y0, T) of `exact_shooting_residual`, records `describe_exact_orbit`
+    (exact Floquet multipliers, stability, n_HALC), to follow with `continuation`
+    (pseudo-arclength, Keller 1977) in any parameter.
+
+    **Arguments:**
+
+    - `orbit`: a converged `ExactOrbit`.
+    - `options`: `ExactShooting` of every point.
+    - `where`: the continued parameter, a name or a lens (default the belt speed).
+    """
+    return ContinuationProblem(
+        residual=ExactShootingResidual(options), u0=pack(orbit.y0, orbit.period),
+        params=orbit.params, where=where, describe=DescribeExactOrbit(options))
