@@ -133,17 +133,19 @@ def _weighted_final_state(v_d, xi, y0, options):
 def test_chain_of_four_gradients_through_every_switch_are_finite_differences(adjoint):
     """The gradient of a weighted final state of a ring of four in v_d, xi and the
     eight initial coordinates, through 17 switches of every kind: forward mode
-    (`jax.jacfwd`) and reverse mode (`jax.grad`, checkpointed loops) against
-    central differences of the exact engine at rtol 1e-12 (h = 1e-6: noise
+    (`jax.jacfwd`) and reverse mode (`jax.grad`, nested checkpointed loops), under
+    `jax.jit`, against central differences of the exact engine at rtol 1e-12 (h =
+    1e-6: noise
     ~1e-12/h = 1e-6 of the value, truncation ~h^2; hence 1e-5 of the largest
     derivative)."""
     options = jc.NonsmoothOptions.reference(t_end=12.0, transient=0.0, adjoint=adjoint)
     inputs = (1.2, 0.05, jnp.asarray(RING4_Y0))
-    # Not under an outer jax.jit in reverse mode: there the checkpointed loops'
-    # recomputation disagrees with the run it differentiates (0.04 here, 2e-7 over
-    # one time unit), a defect of the reverse mode left open (issue 55's note).
+    # Under jax.jit, with jaxchain's XLA flags (`configure`), as a user's gradient
+    # step runs it: reverse mode through equinox's checkpointed loop was wrong
+    # there by 0.04 (XLA's small-while-loop kernels), and right without the jit.
     differentiate = jax.grad if adjoint == "reverse" else jax.jacfwd
-    got = differentiate(_weighted_final_state, argnums=(0, 1, 2))(*inputs, options)
+    got = jax.jit(differentiate(_weighted_final_state, argnums=(0, 1, 2)),
+                  static_argnums=3)(*inputs, options)
     got = np.concatenate([np.ravel(g) for g in got])
     reference = jc.NonsmoothOptions.reference(t_end=12.0, transient=0.0)
     value = jax.jit(_weighted_final_state, static_argnums=3)

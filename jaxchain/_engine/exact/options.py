@@ -36,9 +36,9 @@ class NonsmoothOptions(AbstractHorizon):
         default) or "dopri8".
     - `adjoint`: the mode of automatic differentiation the run is built for:
         "forward" (the default: `jax.jvp`, `jax.jacfwd`; plain loops) or "reverse"
-        (`jax.grad`, `jax.vjp`; checkpointed loops whose memory is bounded however
-        many steps a chunk takes, at about twice the run time of the
-        derivative). A run is computed the same either way.
+        (`jax.grad`, `jax.vjp`; nested checkpointed loops whose memory is bounded
+        however many steps and chunks a run takes). A run is computed the same
+        either way.
     - `root_tol`: absolute tolerance on event times of the bracketed root find
         (Chandrupatla's method) that locates them on the dense output.
     - `switch_tol`: at a switch, every oscillator whose guard (relative velocity or

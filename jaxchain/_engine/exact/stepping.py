@@ -28,6 +28,8 @@ switch, and at each it applies the saltation matrix (Leine and Nijmeijer, 2004,
 Section 7.1) without forming it.
 """
 
+import math
+
 import diffrax
 import equinox as eqx
 import equinox.internal as eqxi
@@ -52,6 +54,55 @@ SOLVERS = {"tsit5": diffrax.Tsit5, "dopri5": diffrax.Dopri5, "dopri8": diffrax.D
 
 _TERM = diffrax.ODETerm(mode_field)
 
+# Reverse mode evaluates the vector field through a LAPACK call (`_REVERSE_TERM`).
+# jaxchain's XLA flag (`_setup.XLA_FLAGS`) lets XLA's CPU backend compile a while
+# loop whose buffers are small into one kernel (its small-while-loop hoisting), and
+# that kernel computed wrong values for some of the loops of a reverse-mode run
+# under an outer `jax.jit`: the error estimates of the Runge-Kutta stage loops
+# (hence other steps and switches), the cotangents of the stage loops inside a
+# checkpointed loop's backward pass. The gradients of tests/test_saltation.py's
+# ring of four were off by up to 0.72, and right without the flag or without the
+# `jit`. XLA never hoists a loop that holds a custom call, so no loop of the step
+# that evaluates the field, nor one around it, becomes such a kernel; forward-mode
+# runs, whose loops compute right values, keep the kernels and their speed.
+
+
+def _lapack_one() -> Float[Array, ""]:
+    """1.0, from a LAPACK call (the Cholesky factor of [[1]]): a custom call, which
+    XLA's CPU backend never hoists into a small-while-loop kernel."""
+    return jnp.linalg.cholesky(jnp.ones((1, 1)))[0, 0]
+
+
+@jax.custom_vjp
+def _unhoisted(x):
+    return x * _lapack_one()
+
+
+def _unhoisted_fwd(x):
+    return _unhoisted(x), None
+
+
+def _unhoisted_bwd(_, ct):
+    return (ct * _lapack_one(),)
+
+
+_unhoisted.defvjp(_unhoisted_fwd, _unhoisted_bwd)
+
+
+def _reverse_field(t, state, args):
+    """`mode_field`, each value multiplied by 1.0 from a custom call in the forward and
+    the backward pass (`_unhoisted`): no loop that evaluates it, nor one around such
+    a loop, is compiled as a small-while-loop kernel."""
+    return jax.tree.map(_unhoisted, mode_field(t, state, args))
+
+
+_REVERSE_TERM = diffrax.ODETerm(_reverse_field)
+
+
+def _term(options) -> diffrax.ODETerm:
+    """The term of a run: `_REVERSE_TERM` for reverse mode."""
+    return _REVERSE_TERM if options.adjoint == "reverse" else _TERM
+
 #: Newton iterations that locate a turning point from the secant within a step:
 #: the error squares at each, from the secant's O(h^2) to rounding in three.
 _NEWTON = 4
@@ -62,7 +113,10 @@ OBSERVERS = (Extrema(),)
 
 #: How the loops of a run are built for each mode of differentiation
 #: (`NonsmoothOptions.adjoint`): (the Runge-Kutta stages, the steps of a chunk).
-_LOOPS = {"forward": ("lax", "lax"), "reverse": ("bounded", "checkpointed")}
+#: Reverse mode runs the steps too in equinox's bounded loop (`_base`): faster to
+#: compile and run than its checkpointed loop here (20 s against 26 s for the cycle
+#: gradients of tests/test_nonsmooth.py).
+_LOOPS = {"forward": ("lax", "lax"), "reverse": ("bounded", "bounded")}
 
 
 def _solver(options) -> diffrax.AbstractAdaptiveSolver:
@@ -119,10 +173,10 @@ def initial_carry(params: ChainParams, y0: State, options, observed: tuple) -> C
     solver, controller = _solver(options), _controller(options)
     modes = initial_modes(params, y0)
     state = (y0, jnp.zeros(2))
-    tnext, controller_state = controller.init(_TERM, 0.0, options.t_end, state, None,
+    tnext, controller_state = controller.init(_term(options), 0.0, options.t_end, state, None,
                                               (params, modes), solver.func,
-                                              solver.error_order(_TERM))
-    solver_state = solver.init(_TERM, 0.0, tnext, state, (params, modes))
+                                              solver.error_order(_term(options)))
+    solver_state = solver.init(_term(options), 0.0, tnext, state, (params, modes))
     dt, solver_state, controller_state = jax.lax.stop_gradient(
         (jnp.asarray(tnext, float), solver_state, controller_state))
     size = options.log_size
@@ -211,11 +265,11 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
     t1 = jnp.where(t1 > t_stop - 100 * jnp.finfo(float).eps * abs(t_stop), t_stop, t1)
     start = (c.y, c.work)
     end, error, dense, solver_state, solver_result = solver.step(
-        _TERM, t0, t1, start, args, c.solver_state, c.made_jump)
+        _term(options), t0, t1, start, args, c.solver_state, c.made_jump)
     error = jax.tree.map(lambda e: jnp.where(jnp.isnan(e), jnp.inf, e), error)
     keep, next_t0, next_t1, _, controller_state, controller_result = \
         controller.adapt_step_size(t0, t1, start, end, args, error,
-                                   solver.error_order(_TERM), c.controller_state)
+                                   solver.error_order(_term(options)), c.controller_state)
     interp = solver.interpolation_cls(t0=t0, t1=t1, **dense)
 
     # the earliest switch within the step, if the smallest guard has fallen through 0
@@ -289,14 +343,24 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
     )
 
 
+def _base(max_steps: int) -> int:
+    """The length of each of the two nested scans of a bounded loop that covers
+    `max_steps`: sqrt(max_steps), so that the backward pass keeps about 2
+    sqrt(max_steps) states and recomputes each step once more (two-level
+    checkpointing; sixteen, equinox's default, nests five levels for the default
+    budget and takes twice the time to compile and run)."""
+    return max(2, math.isqrt(max_steps - 1) + 1)
+
+
 def chunk(params: ChainParams, options, progress: bool, observe, c: Carry, t_stop) -> Carry:
     """Advance to t_stop, step by step through every switch (`observe`: see
     `_step`); the step budget (`max_steps`) and the switch budget (`max_events`,
     more means chattering) are per chunk. For reverse-mode differentiation the
-    steps run in equinox's checkpointed loop, which stores a bounded number of
-    states and recomputes the others (recursive checkpointing, Griewank and
-    Walther, "Evaluating Derivatives", 2nd ed., SIAM 2008, Ch. 12): memory does not
-    grow with the steps of a chunk."""
+    steps run in equinox's bounded loop: two nested scans of sqrt(`max_steps`)
+    steps (`_base`), the outer checkpointed, so that the backward pass keeps about
+    2 sqrt(`max_steps`) states and recomputes the others (two-level checkpointing,
+    Griewank and Walther, "Evaluating Derivatives", 2nd ed., SIAM 2008, Ch. 12):
+    memory does not grow with the steps taken, nor with the chunks of a run."""
     c = eqx.tree_at(lambda d: (d.chunk_events, d.chunk_steps), c,
                     (jnp.array(0), jnp.array(0)))
 
@@ -306,8 +370,8 @@ def chunk(params: ChainParams, options, progress: bool, observe, c: Carry, t_sto
 
     kind = _LOOPS[options.adjoint][1]
     c = eqxi.while_loop(cond, lambda d: _step(params, options, observe, t_stop, d), c,
-                        max_steps=options.max_steps if kind == "checkpointed" else None,
-                        kind=kind)
+                        max_steps=None if kind == "lax" else options.max_steps,
+                        kind=kind, base=_base(options.max_steps))
     status = jnp.where((c.status == Status.ok) & (c.t < t_stop),
                        jnp.where(c.chunk_steps >= options.max_steps, Status.max_steps_reached,
                                  Status.event_not_resolved), c.status)
