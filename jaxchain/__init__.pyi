@@ -133,6 +133,10 @@ from ._bifurcation.exact_orbit import (
     exact_shooting_residual as exact_shooting_residual,
     exact_cycle_problem as exact_cycle_problem,
 )
+from ._bifurcation.grazing import (
+    stick_slip_grazing as stick_slip_grazing, grazing_curve as grazing_curve,
+    GrazingPoint as GrazingPoint,
+)
 from ._bifurcation.continuation import (
     continuation as continuation, ContinuationProblem as ContinuationProblem,
     PseudoArclength as PseudoArclength, ContinuationOptions as ContinuationOptions,

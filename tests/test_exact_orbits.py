@@ -107,3 +107,34 @@ def test_exact_cycles_continued_in_v_d_are_the_scipy_cycles_up_to_the_existence_
                                    scipy_stick_slip_cycle(chain)[1], rtol=1e-8)
     assert np.asarray(branch.stable).all()
     assert np.abs(np.asarray(branch.records.multipliers)).min(axis=1).max() < 1e-9
+    # where the branch ends: the grazing point, by Newton's method on its defining
+    # condition (x' = v_d and x'' = 0 at the end of the slip arc) from the branch's
+    # last point and from two points further down, is the closed-form limit (its
+    # bisection to 1e-10, Newton's tolerance 1e-12, both arcs at rtol 1e-12)
+    for near in (p.max(), limit - 0.02, limit - 0.2):
+        grazing = jc.stick_slip_grazing(ONE, "v_d", near=float(near))
+        assert bool(grazing.converged) and abs(float(grazing.value) - limit) < 1e-8, near
+
+
+@pytest.mark.numerics
+def test_grazing_curves_against_xi_and_the_friction_ratio_are_the_existence_limits():
+    """The two-parameter curves of grazing (`grazing_curve`, natural continuation of
+    the grazing point) over the landed fold-curve grid (xi 0.03 ... 0.10 at the
+    default mu_st; mu_st/mu_d 1.6 ... 2.4 at xi 0.05) against the closed-form
+    existence limit at every point; the default point is on both curves."""
+    point = jc.stick_slip_grazing(ONE, "v_d", near=1.7)
+    mu_d = float(ONE.friction.mu_d)
+    for where, values in (("xi", np.asarray(jc.BISTABLE_XI_VALUES)),
+                          ("mu_st", mu_d * np.asarray(jc.BISTABLE_RATIO_VALUES))):
+        curve = jc.grazing_curve(point, where, values)
+        limits = [jc.stick_slip_existence_limit(jc.with_parameter(ONE, where, v))
+                  for v in values]
+        assert np.asarray(curve.converged).all()
+        np.testing.assert_allclose(np.asarray(curve.value), limits, rtol=0, atol=1e-8)
+
+
+def test_grazing_needs_a_stick_slip_cycle_to_start_from():
+    with pytest.raises(jc.ValidationError, match="n_osc = 1"):
+        jc.stick_slip_grazing(jc.ChainParams(n_osc=2), "v_d")
+    with pytest.raises(ValueError, match="no stick-slip cycle"):
+        jc.stick_slip_grazing(ONE, "v_d", near=2.5)

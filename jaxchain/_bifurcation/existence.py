@@ -13,14 +13,20 @@ from .._physics.params import chain_or_default, ChainParams, with_parameter
 from .._errors import ValidationError
 
 
+def stick_exit_state(params: ChainParams):
+    """Where the single oscillator leaves stick: x' = v_d and the force needed to
+    stick, k x + 2 xi v_d, at the static friction (eq. (2)), shape (2, 1)."""
+    exit_x = (static_friction(params) - 2 * params.xi * params.v_d) / params.stiffness
+    return jnp.stack([jnp.atleast_1d(exit_x), jnp.atleast_1d(params.v_d)])
+
+
 def _slip_arc_peak(v_d, args):
     """max (x' - v_d) on the slip arc that leaves stick, before it would cross the
     belt speed: positive where the arc returns to stick, zero at grazing. `args` is
     (params, rtol)."""
     params, rtol = args
     p = with_parameter(params, "v_d", v_d)
-    exit_x = (static_friction(p) - 2 * p.xi * v_d) / p.stiffness
-    exit_state = jnp.stack([jnp.atleast_1d(exit_x), jnp.atleast_1d(v_d)])
+    exit_state = stick_exit_state(p)
 
     def field(t, y, p):
         """Slip behind the belt, F = +(P_n/P) mu(|v_rel|), continued past v_rel = 0 as
