@@ -165,5 +165,13 @@ def test_the_commands_run_the_exact_engine_or_refuse_it_in_one_line(tmp_path, ca
     assert out["engine"] == "exact" and "eps" not in out and "solver" not in out
     one = jc.simulate(CHAIN, START, engine=jc.Exact(EXACT))
     assert out["runs"][0]["n_halc"][0] == int(one.n_halc)
-    assert_usage_error(["boundaries", "--engine", "exact", "--out", str(tmp_path / "b")],
+    assert (out["rtol"], out["atol"]) == (jc.NonsmoothOptions().rtol, jc.NonsmoothOptions().atol)
+    # --rtol and --atol typed on the command line are the exact engine's tolerances
+    # (they were ignored, the defaults shown being the smoothed engine's)
+    assert jc.main(argv[:-3] + ["--rtol", "1e-3", "--atol", "1e-3", "--out",
+                                str(tmp_path / "loose"), "--json"]) == 0
+    loose = json.loads(capsys.readouterr().out)
+    assert (loose["rtol"], loose["atol"]) == (1e-3, 1e-3)
+    assert loose["runs"][0]["energy"] != out["runs"][0]["energy"]
+    assert_usage_error(["snake", "--engine", "exact", "--out", str(tmp_path / "b")],
                        "--engine exact", capsys)

@@ -3,6 +3,8 @@
 scipy cycle, its exact Floquet multipliers, and Newton's convergence from
 perturbed starts."""
 
+import json
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -133,8 +135,48 @@ def test_grazing_curves_against_xi_and_the_friction_ratio_are_the_existence_limi
         np.testing.assert_allclose(np.asarray(curve.value), limits, rtol=0, atol=1e-8)
 
 
+@pytest.mark.numerics
+@pytest.mark.parametrize("where", ["xi", "mu_st"])
+def test_grazing_slope_is_the_derivative_of_the_existence_limit(where):
+    """`grazing_slope` (the implicit function theorem on the defining condition)
+    against central differences of the closed-form existence limit (h = 1e-5, the
+    limit bisected to 1e-12: noise 1e-7, truncation 1e-10 of the slope)."""
+    point = jc.stick_slip_grazing(ONE, "v_d", near=1.7)
+    q, h = float(jc.parameter_value(ONE, where)), 1e-5
+    limits = [jc.stick_slip_existence_limit(jc.with_parameter(ONE, where, q + s * h),
+                                            lower=float(point.value) - 0.1, tol=1e-12)
+              for s in (1, -1)]
+    fd = (limits[0] - limits[1]) / (2 * h)
+    assert abs(jc.grazing_slope(point, where) - fd) < 1e-6 * abs(fd)
+
+
+@pytest.mark.numerics
+def test_boundaries_command_with_the_exact_engine_reports_grazing(tmp_path, capsys):
+    """`jaxchain boundaries --engine exact`: the Hopf point (closed form) and the
+    grazing point, found from steady sliding's Hopf point without a start, in the
+    smoothed run's keys (fold_vd and the curves), each grazing value the closed-form
+    existence limit there."""
+    assert jc.main(["boundaries", "--engine", "exact", "--json", "--xi-values", "0.05,0.06",
+                    "--ratio-values", "1.8,2.0", "--no-progress", "--out", str(tmp_path)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert set(out["outputs"]) == {"bistable_region.png", "boundaries.json"}
+    assert out["engine"] == "exact" and out["boundary"] == "grazing"
+    assert abs(out["hopf_vd"] - 0.5 * np.log(10)) < 1e-12
+    assert abs(out["fold_vd"] - jc.stick_slip_existence_limit(ONE)) < 1e-8
+    for key, where, scale in (("xi_curve", "xi", 1.0), ("ratio_curve", "mu_st", 0.5)):
+        curve = out[key]
+        values = curve["xi" if where == "xi" else "mu_st/mu_d"]
+        limits = [jc.stick_slip_existence_limit(jc.with_parameter(ONE, where, v * scale))
+                  for v in values]
+        np.testing.assert_allclose(curve["fold_vd"], limits, rtol=0, atol=1e-8)
+    assert out["ratio_curve"]["d_fold_vd"][1] == pytest.approx(out["d_fold_vd_d_ratio"],
+                                                              rel=1e-9)
+
+
 def test_grazing_needs_a_stick_slip_cycle_to_start_from():
     with pytest.raises(jc.ValidationError, match="n_osc = 1"):
         jc.stick_slip_grazing(jc.ChainParams(n_osc=2), "v_d")
     with pytest.raises(ValueError, match="no stick-slip cycle"):
         jc.stick_slip_grazing(ONE, "v_d", near=2.5)
+    with pytest.raises(jc.ValidationError, match="give near"):
+        jc.stick_slip_grazing(ONE, "xi")

@@ -4,6 +4,7 @@ point of the exact continuation, and followed in a second parameter."""
 
 import diffrax
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -103,8 +104,9 @@ def stick_slip_grazing(params: ChainParams, where: str = "v_d", near: float | No
     - `where`: the parameter, a name that `with_parameter` takes ("v_d", "xi",
         "mu_st", ...).
     - `near`: a value of `where` at which the stick-slip cycle exists, near the
-        grazing value (the last point of a continuation); the value in `params`
-        by default.
+        grazing value (the last point of a continuation). By default (`where`
+        "v_d" only) the last of the belt speeds from the Hopf point up in steps of
+        `MARCH_STEP` at which the exact engine's arc returns to stick.
     - `tol`: Newton's tolerance (rtol = atol) on the duration and the value.
     - `rtol`: integration tolerance of the slip arc (rtol = atol).
 
@@ -114,20 +116,56 @@ def stick_slip_grazing(params: ChainParams, where: str = "v_d", near: float | No
 
     **Raises:**
 
-    `ValidationError` for n_osc != 1 or an unknown parameter; `ValueError` when the
-    cycle does not return to stick at `near` (no stick-slip cycle there).
+    `ValidationError` for n_osc != 1, an unknown parameter, or no `near` for a
+    parameter other than v_d; `ValueError` when the cycle does not return to stick
+    at `near` (no stick-slip cycle there) or, without `near`, at the Hopf point.
     """
     if params.n_osc != 1:
         raise ValidationError(f"stick_slip_grazing takes one oscillator (n_osc = 1), got "
                               f"n_osc = {params.n_osc}; see single_oscillator")
-    value = float(parameter_value(params, where)) if near is None else float(near)
-    start = with_parameter(params, where, value)
-    options = NonsmoothOptions.reference(t_end=200.0, transient=0.0)
-    time = float(_return_time(start, options))
+    if near is None:
+        if where != "v_d":
+            raise ValidationError(f"stick_slip_grazing in {where}: give near, a value of "
+                                  f"{where} with a stick-slip cycle")
+        near, time = _march(params)
+    else:
+        near = float(near)
+        time = float(_return_time(with_parameter(params, where, near), _RETURN))
     if not np.isfinite(time):
-        raise ValueError(f"no return to stick from the stick exit at {where} = {value}: "
+        raise ValueError(f"no return to stick from the stick exit at {where} = {near}: "
                          f"no stick-slip cycle there to start from")
-    return _solve(params, where, jnp.array([time, value]), tol, rtol)
+    return _solve(params, where, jnp.array([time, near]), tol, rtol)
+
+
+#: The exact engine's run from the stick exit that finds the first return to stick.
+_RETURN = NonsmoothOptions.reference(t_end=200.0, transient=0.0)
+
+#: The steps of `_march` in v_d.
+MARCH_STEP = 0.05
+
+
+def _march(params: ChainParams) -> tuple[float, float]:
+    """A start near the grazing point in v_d: from the Hopf point of steady sliding
+    (`hopf_speed`), where the stick-slip cycle exists whenever steady sliding loses
+    stability there subcritically, up in steps of `MARCH_STEP` while the exact
+    engine's arc from the stick exit returns to stick (natural-parameter stepping);
+    the last such v_d and its return time.
+
+    **Raises:** `ValueError` when there is no Hopf point, or no return to stick at
+    it."""
+    from .hopf import hopf_speed  # a default start
+
+    v_d = hopf_speed(params)
+    if not v_d > 0:
+        raise ValueError(f"no Hopf point of steady sliding to start from (v_d,H = {v_d:.3g}): "
+                         f"give near, a value with a stick-slip cycle")
+    last = (v_d, float(_return_time(with_parameter(params, "v_d", v_d), _RETURN)))
+    for _ in range(400):
+        time = float(_return_time(with_parameter(params, "v_d", last[0] + MARCH_STEP), _RETURN))
+        if not np.isfinite(time):
+            break
+        last = (last[0] + MARCH_STEP, time)
+    return last
 
 
 def _solve(params, where, z0, tol, rtol) -> GrazingPoint:
@@ -182,3 +220,26 @@ def grazing_curve(point: GrazingPoint, other: str, values, *, tol: float = 1e-12
     return GrazingPoint(params=point.params, where=point.where,
                         **{name: jnp.stack([getattr(f, name) for f in found])
                            for name in ("value", "time", "residual", "converged")})
+
+
+def grazing_slope(point: GrazingPoint, other: str) -> float:
+    """The derivative of the grazing value in another parameter: the implicit function
+    theorem on the defining condition F(time, value; q) = 0 of `stick_slip_grazing`,
+    d(time, value)/dq = -(dF/d(time, value))^-1 dF/dq, both Jacobians by forward-mode
+    differentiation through the slip arc.
+
+    **Arguments:** `point`: a converged `GrazingPoint` (one point, not a curve);
+    `other`: the parameter, a name that `with_parameter` takes.
+
+    **Returns:** d value / d other, dimensionless.
+
+    **Raises:** `ValidationError` for a point that did not converge.
+    """
+    if not bool(point.converged):
+        raise ValidationError("grazing_slope takes a converged GrazingPoint")
+    z = jnp.array([point.time, point.value])
+    rtol = 1e-12
+    jac_z = jax.jacfwd(_tangency)(z, (point.params, point.where, rtol))
+    jac_q = parameter_value(jax.jacfwd(lambda p: _tangency(z, (p, point.where, rtol)))(
+        point.params), other)
+    return float(-jnp.linalg.solve(jac_z, jnp.reshape(jac_q, (2,)))[1])

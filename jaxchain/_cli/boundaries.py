@@ -7,11 +7,12 @@ import time
 from .._engine.engines import Smoothed
 from .._studies.bistable_range import (BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES,
                                        FIG3A_OPTIONS, bistable_range, fig3a_simulations)
+from .._studies.grazing_range import exact_bistable_range
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_solver_options, comma_list, param_default, positive_float, report,
-                     show_progress, simulation_options, smoothed_only)
+                     show_progress, simulation_options)
 
 HELP = "Hopf and fold belt speeds of the bistable range (gradients, continuation)"
 DESCRIPTION = """\
@@ -35,7 +36,15 @@ stick-slip are both stable (the paper brackets it by simulation, 1.1 < v_d < 1.8
 
 Writes <out>/bifurcation_single.png (Fig. 3(a) with simulation dots),
 <out>/bistable_region.png and <out>/boundaries.json. The solver options set the
-simulation dots; shooting keeps its own tight tolerances."""
+simulation dots; shooting keeps its own tight tolerances.
+
+With --engine exact, the exact stick/slip switch model instead: its Hopf point (the
+closed form) and the grazing point where the stick-slip cycle ends (Newton's method
+on its defining condition, x' = v_d and x'' = 0 at the end of the slip arc), and
+both against xi and mu_st/mu_d, in the JSON keys of the smoothed run's fold
+(fold_vd, xi_curve, ratio_curve; boundary "grazing"), beside the closed-form
+existence limit. The smoothed run reports that limit beside its fold, with the
+difference."""
 
 
 def add_parser(sub):
@@ -65,8 +74,6 @@ def add_parser(sub):
 
 
 def run(args) -> None:
-    smoothed_only(args, "the boundaries are found by Newton on the smoothed model's "
-                        "Floquet multipliers and gradients")
     params = chain_params(args, args.n_osc, xi=args.xi)
     for name in ("xi_values", "ratio_values"):
         values = getattr(args, name)
@@ -74,6 +81,8 @@ def run(args) -> None:
             raise UsageError(f"--{name.replace('_', '-')}: give positive numbers, got {values}")
     if min(args.ratio_values) <= 1:
         raise UsageError("--ratio-values: mu_st/mu_d must be > 1 for a Hopf point")
+    if args.engine == "exact":
+        return _run_exact(args, params)
     outputs = Outputs(args, data=["boundaries.json"],
                       figures=["bifurcation_single", "bistable_region"])
     progress = show_progress(args)
@@ -108,6 +117,49 @@ def run(args) -> None:
                          f"curves (null in {outputs.path('boundaries.json')})")
 
 
+def _run_exact(args, params) -> None:
+    """--engine exact: the Hopf and grazing points of the exact switch model
+    (`exact_bistable_range`), in the JSON keys of the smoothed run's fold."""
+    outputs = Outputs(args, data=["boundaries.json"], figures=["bistable_region"])
+    start = time.perf_counter()
+    s, (curves_xi, curves_ratio) = exact_bistable_range(
+        params, xi_values=sorted(args.xi_values), ratio_values=sorted(args.ratio_values))
+    mu_d = float(params.friction.mu_d) if curves_ratio is not None else None
+    limits = [s[c]["existence_limit_nonsmooth"] for c in ("xi_curve", "ratio_curve") if c in s]
+    outputs.figure(plot_bistable_region(curves_xi, curves_ratio, mu_d, None, limits,
+                                        fold_label="grazing (exact model)"),
+                   "bistable_region")
+    s |= {"wall_time_s": time.perf_counter() - start}
+    report(s, outputs, "boundaries.json", args.json, _print_exact, s["wall_time_s"])
+    missing = sum(f is None for c in ("xi_curve", "ratio_curve") if c in s
+                  for f in s[c]["fold_vd"])
+    if missing:
+        raise RunsFailed(f"the grazing point was not found at {missing} points of the "
+                         f"two-parameter curves (null in {outputs.path('boundaries.json')})")
+
+
+def _curves(s: dict):
+    """The two-parameter curves of a summary, as (the parameter's name, the curve)."""
+    return [(name, s[key]) for key, name in (("xi_curve", "xi"), ("ratio_curve", "mu_st/mu_d"))
+            if key in s]
+
+
+def _print_exact(s: dict) -> None:
+    print("single oscillator, exact switch model:")
+    print(f"  Hopf     v_d = {s['hopf_vd']:.10f}")
+    print(f"  grazing  v_d = {s['fold_vd']:.10f}  (slip arc {s['grazing_arc_time']:.6f}); "
+          f"closed-form existence limit {s['existence_limit_nonsmooth']:.10f}, difference "
+          f"{s['fold_minus_existence_limit']:+.1e}")
+    for name, c in _curves(s):
+        print(f"  {name:>10}  Hopf v_d   grazing v_d   d/d{name}   grazing - limit")
+        for v, h, f, d, e in zip(c[name], c["hopf_vd"], c["fold_vd"], c["d_fold_vd"],
+                                 c["fold_minus_existence_limit"]):
+            if f is None:
+                print(f"  {v:>10g}  {h:.6f}   not found")
+            else:
+                print(f"  {v:>10g}  {h:.6f}   {f:.8f}    {d:+.5f}    {e:+.1e}")
+
+
 def _print_summary(s: dict) -> None:
     d = s["design"]
     print(f"single oscillator, eps = {s['eps']:g}:")
@@ -127,10 +179,7 @@ def _print_summary(s: dict) -> None:
              f"; d/d(mu_st/mu_d): {s['d_hopf_vd_d_ratio']:.4f}, {s['d_fold_vd_d_ratio']:.4f}")
     print(f"  d v_d,H/d xi = {s['d_hopf_vd_d_xi']:.4f}, d v_d,fold/d xi = "
           f"{s['d_fold_vd_d_xi']:.4f}{ratio}")
-    for key, name in (("xi_curve", "xi"), ("ratio_curve", "mu_st/mu_d")):
-        if key not in s:
-            continue
-        c = s[key]
+    for name, c in _curves(s):
         print(f"  {name:>10}  Hopf v_d   fold v_d   non-smooth limit   fold - limit")
         for v, h, f, e in zip(c[name], c["hopf_vd"], c["fold_vd"],
                               c["existence_limit_nonsmooth"]):

@@ -4,6 +4,7 @@ table."""
 
 import argparse
 import contextlib
+import dataclasses
 import importlib
 import json
 import logging
@@ -19,6 +20,7 @@ import numpy as np
 
 from .._engine.solver.controller import CONTROLLERS
 from .._engine.engines import ENGINES, AbstractEngine, as_engine
+from .._engine.exact.options import NonsmoothOptions
 from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams
 from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
@@ -218,17 +220,25 @@ def engine_of(args, options: SimulationOptions, params: ChainParams | None = Non
               ) -> AbstractEngine:
     """The engine that --engine names, with the command's solver and eps (--solver,
     --eps, the smoothed engine's; "auto" resolved with `params`) and `options` (the
-    exact engine takes their horizon, with its own tolerances)."""
+    exact engine takes their horizon, and its own tolerances unless --rtol or
+    --atol was typed)."""
     if getattr(args, "engine", "smoothed") == "exact":
-        return as_engine("exact", options=options)
+        engine = as_engine("exact", options=options)
+        # --rtol, --atol typed on the command line set the exact engine's tolerances
+        # too; their defaults are the smoothed engine's
+        given = {name: getattr(args, name) for name in getattr(args, "typed_tolerances", ())}
+        return dataclasses.replace(engine, options=dataclasses.replace(engine.options, **given))
     return as_engine("smoothed", args.solver, options, params, eps=args.eps)
 
 
 def engine_record(args) -> dict:
     """The engine of a command for its JSON: its name, with eps and the solver for
-    the smoothed one."""
+    the smoothed one, the tolerances for the exact one."""
     if args.engine == "smoothed":
         return {"engine": "smoothed", "eps": args.eps, "solver": args.solver}
+    if hasattr(args, "rtol"):
+        options = engine_of(args, SimulationOptions()).options
+        return {"engine": args.engine, "rtol": options.rtol, "atol": options.atol}
     return {"engine": args.engine}
 
 
@@ -250,14 +260,26 @@ def smoothed_only(args, what: str) -> None:
         raise UsageError(f"--engine {args.engine}: {what}; run it with --engine smoothed")
 
 
+class _Typed(argparse.Action):
+    """Store the value, and the option's name in `typed_tolerances`: an option
+    typed on the command line, not left at its default."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        namespace.typed_tolerances = (*getattr(namespace, "typed_tolerances", ()), self.dest)
+
+
 def add_tolerance_options(g, rtol: float = DEFAULTS.rtol, atol: float = DEFAULTS.atol
                           ) -> None:
     """--rtol, --atol (defaults `rtol`, `atol`) and --controller, in the argument
     group (or parser) `g`."""
-    g.add_argument("--rtol", type=positive_float, default=rtol,
-                   help=f"relative tolerance (default {rtol:g})")
-    g.add_argument("--atol", type=positive_float, default=atol,
-                   help=f"absolute tolerance (default {atol:g})")
+    exact = NonsmoothOptions()
+    g.add_argument("--rtol", type=positive_float, default=rtol, action=_Typed,
+                   help=f"relative tolerance (default {rtol:g}; with --engine exact "
+                        f"{exact.rtol:g})")
+    g.add_argument("--atol", type=positive_float, default=atol, action=_Typed,
+                   help=f"absolute tolerance (default {atol:g}; with --engine exact "
+                        f"{exact.atol:g})")
     g.add_argument("--controller", choices=list(CONTROLLERS), default=DEFAULTS.controller,
                    help=f"step-size controller (default {DEFAULTS.controller}: a PI "
                         "controller that may shrink after an accepted step and, after "

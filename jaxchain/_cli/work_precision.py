@@ -23,7 +23,8 @@ oscillator (window [200, 400]) and the chain of N = 20 with one oscillator excit
 (eq. (8), window [1000, 1500]). Errors are measured against the event-driven
 non-smooth reference: on the amplitudes and E over the window, and on the
 trajectory at t = 20, before it diverges. Compilation is timed apart from the run.
-scipy's LSODA and Radau and the reference at looser tolerances are outside points.
+scipy's LSODA and Radau, and the exact engine (the stick/slip switch model: the
+reference at looser tolerances, method "exact" in the CSV) are outside points.
 
 Writes <out>/work_precision.csv as it goes, each row with a hash of everything
 that determines it (a later run with the same --out reuses only rows of equal

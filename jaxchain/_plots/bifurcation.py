@@ -65,7 +65,7 @@ def plot_limit_cycle_branch(branch, hopf_vd: float, fold_vd: float, fold_energy:
 
 
 def plot_bistable_region(curves_xi, curves_ratio, mu_d: float | None, design=None,
-                         limits=None, fig=None):
+                         limits=None, fig=None, fold_label: str = "fold of limit cycles"):
     """The bistable range of belt speeds (between the Hopf point and the fold)
     against the damping ratio xi and, for eq. (1), against mu_st/mu_d. The fold is
     drawn along its continued branch, with markers at the requested values.
@@ -80,6 +80,7 @@ def plot_bistable_region(curves_xi, curves_ratio, mu_d: float | None, design=Non
         sequences, or None.
     - `fig`: a matplotlib Figure or SubFigure to draw the panels on; a new figure
         if None.
+    - `fold_label`: the legend of the upper edge (the exact model's is grazing).
 
     **Returns:**
 
@@ -103,7 +104,7 @@ def plot_bistable_region(curves_xi, curves_ratio, mu_d: float | None, design=Non
             fold_vd = np.asarray(branch.u)[ok, (branch.u.shape[1] - 1) // 2]
             ax.plot(on, fold_vd, "-", color="C2", lw=1,
                     label="fold, continued" if i == 0 else None)
-        ax.plot(x, fold, "s", color="C2", label="fold of limit cycles")
+        ax.plot(x, fold, "s", color="C2", label=fold_label)
         if limits is not None:
             ax.plot(x, limits[ax is not axes[0]], "x", color="k",
                     label="non-smooth existence limit")

@@ -5,7 +5,7 @@ import numpy as np
 from .._engine.status import Status
 from .canvas import panel_figure
 
-_MARKERS = {"scipy LSODA": "s", "scipy Radau": "D", "reference": "*"}
+_MARKERS = {"scipy LSODA": "s", "scipy Radau": "D", "exact": "*"}
 
 
 def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_error",
@@ -13,7 +13,7 @@ def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_er
     """One panel per eps, one line per diffrax solver over its rtols (wall time
     against `error`, log-log), and the outside points in black: scipy's LSODA and
     Radau at the same eps, and the exact engine at its own tolerances (rows
-    "reference"; black stars joined, in every panel: it has no eps). Failed runs
+    "exact"; black stars joined, in every panel: it has no eps). Failed runs
     are marked x at the top of their panel.
 
     **Arguments:**
@@ -53,9 +53,9 @@ def plot_work_precision(rows: list[dict], scene: str, error: str = "amplitude_er
                         color=colors[solver])
         for method, marker in _MARKERS.items():
             pts = [r for r in ok if r["method"] == method
-                   and (method == "reference" or float(r["eps"]) == eps)]
+                   and (method == "exact" or float(r["eps"]) == eps)]
             if pts:
-                exact = method == "reference"
+                exact = method == "exact"
                 if exact:
                     pts.sort(key=lambda r: float(r["rtol"]), reverse=True)
                 ax.plot([float(r["wall_s"]) for r in pts],

@@ -180,7 +180,8 @@ def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
         > 0, dimensionless) is that of every Hopf point, shooting and fold, and
         its solver that of the design's check by simulation (which keeps its own
         horizon, `DESIGN_CHECK_OPTIONS`). The exact engine is refused: the edges
-        are found by Newton's method on the smoothed model.
+        are found by Newton's method on the smoothed model (the exact model's are
+        `exact_bistable_range`'s).
     - `progress`: show tqdm bars.
 
     **Returns:**
@@ -218,7 +219,8 @@ def _check_bistable(params: ChainParams | None, target, engine) -> tuple[ChainPa
     params = chain_or_default(params)
     check_positive("target", target)
     engine = _smoothed_engine(engine, "bistable_range (Newton's method on the smoothed "
-                                     "model's Hopf points and Floquet multipliers)")
+                                     "model's Hopf points and Floquet multipliers; "
+                                     "exact_bistable_range is the exact model's)")
     return params, engine
 
 

@@ -261,7 +261,7 @@ def _row_settings(scene: Scene, method: str, eps: float, rtol: float, *,
 
     - `scene`: the scene.
     - `method`: a name in `SOLVERS` (optionally "/" and a name in `CONTROLLERS`),
-        "scipy <method>" or "reference".
+        "scipy <method>" or "exact" (the exact engine).
     - `eps`, `rtol`: the point of the grid.
     - `max_steps`, `scipy_budget_s`: as for `work_precision`.
 
@@ -271,7 +271,7 @@ def _row_settings(scene: Scene, method: str, eps: float, rtol: float, *,
     """
     out = {"scene": scene, "y0": scene.y0(), "params": scene.params(),
            "reference": _reference_options(scene, REFERENCE_RTOL)}
-    if method == "reference":
+    if method == "exact":
         return out | {"options": _reference_options(scene, rtol)}
     out["eps"] = eps
     if method.startswith("scipy "):
@@ -306,9 +306,9 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
     failure counts as a new one.
 
     The outside points are `scipy.integrate.solve_ivp` (LSODA, Radau) at
-    `SCIPY_EPS` x `SCIPY_RTOLS`, and the reference itself at `REFERENCE_RTOLS`
-    (method "reference", eps 0), its error taken against the reference at
-    `REFERENCE_RTOL`.
+    `SCIPY_EPS` x `SCIPY_RTOLS`, and the exact engine at `REFERENCE_RTOLS` (method
+    "exact", eps 0: the reference at looser tolerances), its error taken against
+    the reference at `REFERENCE_RTOL`.
 
     **Arguments:**
 
@@ -450,7 +450,7 @@ def _scene(store: CsvStore, rows: list[dict], scene: Scene, solvers, rtols, eps,
 
     if reference_points:
         for r in REFERENCE_RTOLS:
-            point("reference", 0.0, r, r, functools.partial(reference_point, r))
+            point("exact", 0.0, r, r, functools.partial(reference_point, r))
     for solver in solvers:
         failed_eps = None
         for e in eps:
