@@ -12,7 +12,8 @@ the rows that are periodic (the reference's two halves of the window agree to
 1e-6, `half_difference`). Run: `python benchmarks/exact_engine.py [--quick] [--pairs]`
 (--quick: t in [0, 3000], observed after 2000; --pairs: first the table of the
 exact engine's Runge-Kutta pairs and tolerances, one trajectory of rows k = 1
-and 3 over [0, 3000] against Dopri8 at 1e-13, by which its defaults were chosen). Exits with status 1 if the exact
+and 3 over [0, 3000] against Dopri8 at 1e-13, by which its defaults were chosen).
+Exits with status 1 if the exact
 engine is slower than the smoothed one, or if its n_HALC or periodic amplitudes
 differ from the reference's by more than 1e-5.
 """
@@ -30,7 +31,7 @@ jc.configure()  # float64, one CPU device per core, the XLA flags
 
 def _timed(run):
     start = time.perf_counter()
-    first = run()
+    run()  # the first run, with compilation
     cold = time.perf_counter() - start
     start = time.perf_counter()
     ds = run()

@@ -68,11 +68,12 @@ def main() -> None:
         previous = smoothed
         m = np.asarray(smoothed.multipliers)
         trivial = int(np.argmin(np.abs(m - 1)))
+        distance = _distance(np.delete(exact_m, int(exact.trivial)), np.delete(m, trivial))
         print(f"eps {eps:g}: period {float(smoothed.period):.10f} (exact "
               f"{float(smoothed.period) - float(exact.period):+.1e}), converged "
               f"{bool(smoothed.converged)}; leading "
               f"{np.array2string(_leading(m, trivial), precision=8)}; distance from the "
-              f"exact set {_distance(np.delete(exact_m, int(exact.trivial)), np.delete(m, trivial)):.2e}")
+              f"exact set {distance:.2e}")
     print(f"wall {time.perf_counter() - start:.1f} s")
 
 

@@ -161,7 +161,8 @@ def test_stribeck_stick_slip_cycle_against_the_exact_switch_model():
                      options=jc.SimulationOptions(t_end=400.0, transient=300.0))
     assert int(obs["n_halc"]) == 1
     assert abs(float(obs["amplitudes"][0]) / amplitude - 1) < 5e-3
-    ref = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions.reference(t_end=400.0, transient=300.0))
+    ref = jc.simulate_nonsmooth(params, y0,
+                                jc.NonsmoothOptions.reference(t_end=400.0, transient=300.0))
     assert abs(float(ref.amplitudes[0]) / amplitude - 1) < 1e-6
     times = np.asarray(obs["peak_times"])[0]
     measured = np.median(np.diff(times[np.isfinite(times)]))

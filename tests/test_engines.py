@@ -15,7 +15,8 @@ from helpers import assert_usage_error
 CHAIN = jc.ChainParams(n_osc=2, v_d=1.5)
 START = jc.OutOfPhaseExcitation.eq8([False, True])
 HORIZON = jc.SimulationOptions(t_end=300.0, transient=150.0)
-EXACT = jc.NonsmoothOptions.reference(t_end=300.0, transient=150.0, chunk_length=HORIZON.chunk_length)
+EXACT = jc.NonsmoothOptions.reference(t_end=300.0, transient=150.0,
+                                      chunk_length=HORIZON.chunk_length)
 
 
 @pytest.mark.numerics

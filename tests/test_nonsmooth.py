@@ -31,7 +31,8 @@ def test_stick_exit_time_and_oscillator_match_the_stick_force_formula():
     first = int(np.argmax(f))
     t_exit = float((p.friction.mu_st - f[first]) / p.v_d)
     y0 = np.stack([x, np.full(3, p.v_d)])
-    obs = jc.simulate_nonsmooth(p, y0, jc.NonsmoothOptions.reference(t_end=t_exit + 0.1, transient=0.0))
+    obs = jc.simulate_nonsmooth(
+        p, y0, jc.NonsmoothOptions.reference(t_end=t_exit + 0.1, transient=0.0))
     logged = np.asarray(obs.log_osc) >= 0
     assert int(obs.log_osc[logged][0]) == first
     assert jc.SWITCH_KINDS[int(obs.log_kind[logged][0])] == "stick to slip"

@@ -172,7 +172,8 @@ def describe_exact_orbit(params: ChainParams, u: Float[Array, " 2n+1"],
         energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc, n_halc=jnp.sum(on_halc),
         multipliers=multipliers, trivial=trivial,
         zero_multipliers=jnp.sum(jnp.abs(multipliers) < 1e-9), stable=jnp.all(others < 1),
-        residual=residual, converged=jnp.asarray(converged) & (residual <= 1e3 * options.newton_tol))
+        residual=residual,
+        converged=jnp.asarray(converged) & (residual <= 1e3 * options.newton_tol))
 
 
 @eqx.filter_jit

@@ -2,8 +2,8 @@
 dense output of a step.
 
 The smallest guard changes sign within the step at whose end the engine finds it
-below zero (`stepping.py`), so the switch time is bracketed; `optimistix.Bisection` halves that bracket
-about 45 times to reach 1e-13 from a step of order one. Chandrupatla's method
+below zero (`stepping.py`), so the switch time is bracketed; `optimistix.Bisection`
+halves that bracket about 45 times to reach 1e-13 from a step of order one. Chandrupatla's method
 (T. R. Chandrupatla, "A new hybrid quadratic/bisection algorithm for finding the
 zero of a nonlinear function without using derivatives", Advances in Engineering
 Software 28 (1997) 145-149) keeps the bracket, but takes an inverse quadratic
