@@ -88,8 +88,9 @@ def test_exact_cycles_continued_in_v_d_are_the_scipy_cycles_up_to_the_existence_
     (`exact_cycle_problem`): at every converged point below the existence limit
     (`stick_slip_existence_limit`, independent: an arc integrated by diffrax) the
     period is scipy's cycle's to 1e-8 (0.02 below the limit and lower), the cycle
-    stable with its non-trivial multiplier 0; the cycle exists up to 1e-3 below the limit, where its slip arc
-    comes to graze v_rel = 0 (the branch leaves the range there, it does not fail)."""
+    stable with its non-trivial multiplier 0; the cycle exists up to 1e-3 below the
+    limit, where its slip arc comes to graze v_rel = 0 (the branch leaves the range
+    there, it does not fail)."""
     x_max, (_, period) = guess
     orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
     limit = jc.stick_slip_existence_limit(ONE)
