@@ -133,6 +133,14 @@ from ._bifurcation.exact_orbit import (
     exact_shooting_residual as exact_shooting_residual,
     exact_cycle_problem as exact_cycle_problem,
 )
+from ._bifurcation.deflation import (
+    distinct_orbits as distinct_orbits, deflated_orbit as deflated_orbit,
+    DeflatedOrbit as DeflatedOrbit, deflation as deflation, Deflation as Deflation,
+    chain_symmetries as chain_symmetries, orbit_samples as orbit_samples,
+)
+from ._bifurcation.branch_switching import (
+    switch_branch as switch_branch, branch_direction as branch_direction,
+)
 from ._bifurcation.grazing import (
     stick_slip_grazing as stick_slip_grazing, grazing_curve as grazing_curve,
     grazing_slope as grazing_slope, GrazingPoint as GrazingPoint,

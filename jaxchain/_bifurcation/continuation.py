@@ -200,6 +200,7 @@ def _record(problem: ContinuationProblem, z):
 
 def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = PseudoArclength(),
                  options: ContinuationOptions = ContinuationOptions(), *,
+                 tangent: Float[Array, " n+1"] | None = None,
                  progress: bool = False) -> Branch:
     """Follow the branch of solutions of `problem` from `problem.u0` by
     pseudo-arclength continuation (`PseudoArclength`), detecting folds (dp/ds
@@ -214,6 +215,9 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
     - `problem`: a `ContinuationProblem`.
     - `algorithm`: `PseudoArclength`.
     - `options`: `ContinuationOptions`.
+    - `tangent`: the direction in (u, p) to start along, shape (n + 1,) (a switched
+        branch's, `switch_branch`); by default along p, signed by
+        `options.direction`.
     - `progress`: show a tqdm bar, one tick per point.
 
     **Returns:**
@@ -231,7 +235,8 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
     if not residual <= 1e3 * algorithm.newton_tol:
         raise ValueError(f"problem.u0 is not a solution at the given parameters (residual "
                          f"{residual:.3g}); solve for it first")
-    start = jnp.zeros(z.size).at[-1].set(float(options.direction))
+    start = (jnp.zeros(z.size).at[-1].set(float(options.direction)) if tangent is None
+             else jnp.asarray(tangent, dtype=float))
     tangent = _tangent(problem, z, start)
     zs, tangents, converged, records = [z], [tangent], [True], [_record(problem, z)]
     ds, stop = options.ds, Status.max_points_reached

@@ -1,0 +1,83 @@
+"""Branch switching at the symmetry-breaking branch point of the ring of two: the
+two-site state (both oscillators on the HALC, equal amplitudes) meets a Floquet
+multiplier +1 without a fold; the switched branch breaks the symmetry and is the
+same branch whatever the step off the branch point."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+import jaxchain as jc
+
+from helpers import internal
+
+RING = jc.ChainParams(n_osc=2, v_d=1.5)
+SHOOTING = jc.ShootingOptions(root_finder="levenberg-marquardt", phase_oscillator=0)
+
+
+@pytest.fixture(scope="module")
+def branch_point():
+    """The two-site state simulated from eq. (8), continued up in v_d to its first
+    branch point."""
+    found = internal("snake start orbits")(
+        RING, (1,), options=jc.SimulationOptions(t_end=2000.0, transient=1500.0))
+    orbit, _, reason = found[1]
+    assert reason is None
+    orbit = jc.periodic_orbit(RING, orbit.y0, float(orbit.period), SHOOTING)
+    assert abs(float(orbit.amplitudes[0] - orbit.amplitudes[1])) < 1e-6  # symmetric
+    problem = jc.limit_cycle_problem(orbit, SHOOTING)
+    branch = jc.continuation(problem, options=jc.ContinuationOptions(
+        ds=0.02, ds_max=0.1, p_min=1.0, p_max=2.0, max_points=12))
+    points = [b for b in jc.locate_bifurcations(problem, branch) if b.kind == "branch point"]
+    assert points and abs(points[0].multiplier - 1) < 1e-4
+    return problem, branch, points[0]
+
+
+def _switched(problem, branch, point, step):
+    new, tangent = jc.switch_branch(problem, branch, point, step=step)
+    return new, jc.continuation(new, options=jc.ContinuationOptions(
+        ds=step, ds_max=0.05, p_min=1.0, p_max=2.0, max_points=8), tangent=tangent)
+
+
+def test_switched_branch_breaks_the_symmetry_and_converges_under_refinement(branch_point):
+    """Off the branch point by 0.02 and by 0.01 in arclength: each switched branch
+    has unequal amplitudes, their difference growing away from the branch point
+    (a pitchfork: ~ sqrt(|v_d - v_b|)), while the followed branch keeps them
+    equal; at v_d 0.002 below the branch point both switched branches give, by
+    shooting from their nearest point, the same orbit to 1e-7."""
+    problem, branch, point = branch_point
+    followed = np.asarray(branch.records.amplitudes)
+    assert np.max(np.abs(followed[:, 0] - followed[:, 1])) < 1e-6
+    target = jc.with_parameter(RING, "v_d", float(point.p) - 0.002)
+    orbits = []
+    for step in (0.02, 0.01):
+        new, switched = _switched(problem, branch, point, step)
+        assert residual(new) < 1e-6  # a solution, off the followed branch
+        amplitudes = np.asarray(switched.records.amplitudes)
+        split = np.abs(amplitudes[:, 0] - amplitudes[:, 1])
+        assert np.all(split > 1e-5) and split[-1] > 10 * split[0]
+        p = np.asarray(switched.p)[np.asarray(switched.converged)]
+        assert p.min() < float(target.v_d)  # reaches the comparison point
+        u = np.asarray(switched.u)[np.asarray(switched.converged)]
+        near = u[np.argmin(np.abs(p - float(target.v_d)))]
+        orbits.append(jc.periodic_orbit(target, near[:-1].reshape(2, -1), float(near[-1]),
+                                        SHOOTING))
+    a, b = orbits
+    assert abs(float(a.amplitudes[0] - a.amplitudes[1])) > 1e-4
+    np.testing.assert_allclose(np.asarray(a.y0), np.asarray(b.y0), atol=1e-7)
+    assert abs(float(a.period - b.period)) < 1e-7
+
+
+def residual(problem) -> float:
+    z = np.concatenate([np.asarray(problem.u0), [float(problem.value())]])
+    return float(np.max(np.abs(np.asarray(problem(z)))))
+
+
+def test_switching_needs_a_branch_point(branch_point):
+    problem, branch, point = branch_point
+    with pytest.raises(ValueError, match="step"):
+        jc.switch_branch(problem, branch, point, step=0.0)
+    fold = dataclasses.replace(point, kind="fold")
+    with pytest.raises(ValueError, match="branch point"):
+        jc.switch_branch(problem, branch, fold)

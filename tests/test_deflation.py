@@ -1,0 +1,115 @@
+"""Deflation (Farrell, Birkisson and Funke 2015) on the ring of three at v_d = 1.5,
+where simulation from eq. (8) with one and with two excited oscillators ends on two
+different stable states: repeated deflation from one start finds the state that
+simulation finds from it, then further periodic orbits that are none of its
+symmetric copies, each a periodic orbit of an independent integrator (scipy)."""
+
+import numpy as np
+import jax.numpy as jnp
+import pytest
+from scipy.integrate import solve_ivp
+
+import jaxchain as jc
+
+from helpers import internal, reference_rhs
+
+RING = jc.ChainParams(n_osc=3, v_d=1.5)
+#: The starts settle within 1500 time units on three oscillators.
+START = jc.SimulationOptions(t_end=2000.0, transient=1500.0)
+SHOOTING = jc.ShootingOptions(root_finder="levenberg-marquardt", phase_oscillator=1)
+
+
+@pytest.fixture(scope="module")
+def simulated():
+    """The states that simulation reaches from eq. (8) with k = 1 and 2 excited,
+    refined by shooting: {k: PeriodicOrbit}."""
+    found = internal("snake start orbits")(RING, (1, 2), options=START)
+    assert all(reason is None for _, _, reason in found.values())
+    return {k: orbit for k, (orbit, _, _) in found.items()}
+
+
+def packed(y0, period):
+    """Shooting unknowns (x_1..x_N, x_1'..x_N', T)."""
+    return jnp.concatenate([jnp.ravel(jnp.asarray(y0)), jnp.atleast_1d(period)])
+
+
+def eq8_start(k):
+    """Eq. (8) with k excited and T = 2 pi, the phase oscillator's velocity 0."""
+    y0 = jnp.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, k))(RING))
+    return packed(y0.at[1, SHOOTING.phase_oscillator].set(0.0), 2 * np.pi)
+
+
+def scipy_return(u) -> float:
+    """max |y(T) - y(0)| of the orbit u = (y0, T) integrated by scipy's DOP853 on eq.
+    (5) written out independently (`reference_rhs`)."""
+    y0, period = np.asarray(u[:-1]), float(u[-1])
+    sol = solve_ivp(reference_rhs(RING), (0.0, period), y0, method="DOP853", rtol=1e-11,
+                    atol=1e-12)
+    return float(np.max(np.abs(sol.y[:, -1] - y0)))
+
+
+def copies_distance(a, b) -> float:
+    """The deflation distance of orbit b from orbit a and its symmetric copies."""
+    problem = jc.limit_cycle_problem(_orbit(a), SHOOTING)
+    return float(jc.deflation(problem, [a]).distances(b)[0])
+
+
+def _orbit(u):
+    return jc.periodic_orbit(RING, jnp.reshape(u[:-1], (2, -1)), float(u[-1]), SHOOTING)
+
+
+@pytest.mark.numerics
+@pytest.mark.parametrize("scale", [0.0, 1e-6, 1e-4])
+def test_repeated_deflation_from_one_start_finds_distinct_orbits(simulated, scale):
+    """From eq. (8) with two excited (perturbed by a relative `scale`, with the phase
+    condition kept), nothing known: first the two-site state that simulation
+    reaches from that start (the same period to 1e-7, two solves at Newton's
+    tolerance 1e-9), then, with it and all six
+    of its copies under the ring's rotations and reflections deflated, from the
+    same start, two more orbits: periodic for scipy to 1e-6, none a copy of
+    another or of the states found before, and not stable (simulation does not
+    show them)."""
+    start = eq8_start(2)
+    noise = np.random.default_rng(1).standard_normal(start.shape)
+    start = (start * (1 + scale * noise)).at[3 + SHOOTING.phase_oscillator].set(0.0)
+    problem = jc.limit_cycle_problem(simulated[1], SHOOTING)
+    found = jc.distinct_orbits(problem, start, count=3)
+    assert len(found) == 3
+    assert abs(float(found[0][-1]) - float(simulated[2].period)) < 1e-7  # two Newton solves
+    assert copies_distance(packed(simulated[2].y0, simulated[2].period),
+                           found[0]) < 1e-6
+    for u in found[1:]:
+        assert scipy_return(u) < 1e-6
+        assert not bool(_orbit(u).stable)
+    for i in range(3):
+        for j in range(i):
+            assert copies_distance(found[j], found[i]) > 1e-2
+
+
+@pytest.mark.numerics
+def test_deflating_the_state_of_a_start_leads_elsewhere(simulated):
+    """Shooting from eq. (8) with one excited reaches the one-site state, as
+    simulation does from there; with that state deflated (the other state,
+    simulation's two-site one, not) the same start gives another orbit, periodic
+    for scipy, that is no copy of the one-site state."""
+    start = eq8_start(1)
+    one = packed(simulated[1].y0, simulated[1].period)
+    problem = jc.limit_cycle_problem(simulated[1], SHOOTING)
+    plain = jc.distinct_orbits(problem, start, count=1)
+    assert copies_distance(one, plain[0]) < 1e-6
+    (other,) = jc.distinct_orbits(problem, start, [one], count=1)
+    assert copies_distance(one, other) > 1e-2 and scipy_return(other) < 1e-6
+
+
+def test_symmetries_of_the_ring_and_bad_arguments(simulated):
+    """The dihedral group on the homogeneous ring (2N distinct permutations), the
+    identity alone on a free line; clear errors for bad arguments."""
+    perms = np.asarray(jc.chain_symmetries(jc.ChainParams(n_osc=5)))
+    assert perms.shape == (10, 5) and {tuple(sorted(p)) for p in perms} == {tuple(range(5))}
+    assert np.asarray(jc.chain_symmetries(jc.ChainParams(n_osc=5, boundary="free"))).shape \
+        == (1, 5)
+    problem = jc.limit_cycle_problem(simulated[1], SHOOTING)
+    with pytest.raises(ValueError, match="count"):
+        jc.distinct_orbits(problem, problem.u0, count=0)
+    with pytest.raises(ValueError, match="n_samples"):
+        jc.deflation(problem, n_samples=4)
