@@ -174,5 +174,5 @@ def test_the_commands_run_the_exact_engine_or_refuse_it_in_one_line(tmp_path, ca
     loose = json.loads(capsys.readouterr().out)
     assert (loose["rtol"], loose["atol"]) == (1e-3, 1e-3)
     assert loose["runs"][0]["energy"] != out["runs"][0]["energy"]
-    assert_usage_error(["snake", "--engine", "exact", "--out", str(tmp_path / "b")],
+    assert_usage_error(["mistuning", "--engine", "exact", "--out", str(tmp_path / "b")],
                        "--engine exact", capsys)

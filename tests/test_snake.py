@@ -78,6 +78,32 @@ def test_continuation_reproduces_itself_from_a_perturbed_start(one_site):
     assert len(ns) == 1 and abs(float(ns[0].p) - low) < 1e-6
 
 
+@pytest.mark.slow
+def test_exact_one_site_branch_ends_where_the_exact_simulation_says(one_site, tmp_path,
+                                                                     capsys):
+    """The same branch on the exact stick/slip model (`jaxchain snake --engine
+    exact`: exact shooting, exact multipliers, exact simulations), started at v_d
+    1.34: its low end is a Neimark-Sacker point too, and direct simulation on the
+    exact engine (event by event, not shooting) keeps the state just inside and
+    loses it just outside. The smoothed model's point (eps 1e-3, the fixture) lies
+    within 0.01 of it, the smoothing error of the landed boundaries (issue 56); the
+    exact multipliers change by less than 1e-8 at 100 times looser tolerances."""
+    argv = ["snake", "--engine", "exact", "--n-osc", "4", "--vd", "1.34", "--sites", "1",
+            "--vd-min", "1.28", "--vd-max", "1.37", "--max-points", "12",
+            "--out", str(tmp_path), "--json"]
+    assert jc.main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["engine"] == "exact" and "eps" not in doc
+    (branch,) = doc["branches"]
+    low = branch["stable_range_ends"][0][0]
+    assert low["type"] == "Neimark-Sacker" and abs(low["multiplier"][1]) > 1e-3
+    checks = [c for c in branch["simulation_check"] if c["end"] == "Neimark-Sacker"]
+    assert {c["side"]: c["agrees"] for c in checks} == {"inside": True, "outside": True}
+    assert branch["multiplier_accuracy"]["critical_difference"] < 1e-8
+    smoothed = one_site[0]["summary"]["branches"][0]["stable_range_ends"][0][0]
+    assert smoothed["type"] == "Neimark-Sacker" and abs(smoothed["v_d"] - low["v_d"]) < 0.01
+
+
 def test_stored_branches_are_read_back_only_for_equal_settings(one_site):
     found, out = one_site
     again = jc.localized_branches(RING, (1,), continuation_options=OPTIONS, out=out,

@@ -17,7 +17,7 @@ from .._errors import ValidationError
 from .._physics.custom_types import State
 from .._physics.params import ChainParams
 from .continuation import ContinuationProblem
-from .shooting import deflated_multipliers, pack, shooting_guess, unpack
+from .shooting import critical_multiplier, deflated_multipliers, pack, shooting_guess, unpack
 
 
 class ExactShooting(eqx.Module):
@@ -109,6 +109,19 @@ def exact_monodromy(params: ChainParams, y0: State, period, options: ExactShooti
     return jax.jacfwd(end)(jnp.reshape(y0, (-1,)))
 
 
+def exact_floquet_multipliers(params: ChainParams, y0: State, period,
+                              options: ExactShooting) -> tuple[Complex[Array, " 2n"], Array]:
+    """The exact Floquet multipliers of the orbit through `y0` with period `period`:
+    the eigenvalues of `exact_monodromy` by decreasing modulus, the trivial one (of
+    the flow direction, the vector field at y0) deflated from the rest
+    (`deflated_multipliers`). Returns (multipliers, shape (2 n_osc,); the index of
+    the trivial one, shape ())."""
+    m = exact_monodromy(params, y0, period, options)
+    modes = initial_modes(params, y0)
+    direction = jnp.reshape(mode_field(0.0, (y0, None), (params, modes))[0], (-1,))
+    return deflated_multipliers(m, direction)
+
+
 class ExactOrbit(eqx.Module):
     """A periodic orbit of the exact switch model and its exact stability.
 
@@ -151,15 +164,17 @@ class ExactOrbit(eqx.Module):
     residual: Float[Array, ""]
     converged: Bool[Array, ""]
 
+    @property
+    def critical_multiplier(self) -> Complex[Array, ""]:
+        """The largest non-trivial multiplier in modulus (batched like `trivial`)."""
+        return critical_multiplier(self.multipliers, self.trivial)
+
 
 def describe_exact_orbit(params: ChainParams, u: Float[Array, " 2n+1"],
                          options: ExactShooting, converged=True) -> ExactOrbit:
     """The `ExactOrbit` of the shooting unknowns `u` (traceable)."""
     y0, period = unpack(u)
-    m = exact_monodromy(params, y0, period, options)
-    modes = initial_modes(params, y0)
-    direction = jnp.reshape(mode_field(0.0, (y0, None), (params, modes))[0], (-1,))
-    multipliers, trivial = deflated_multipliers(m, direction)
+    multipliers, trivial = exact_floquet_multipliers(params, y0, period, options)
     ts = period * jnp.linspace(0.0, 1.0, options.n_samples + 1)[1:]
     ys, status = nonsmooth_flow(params, y0, ts, options.flow)
     ys = jnp.where(status == Status.ok, ys, jnp.nan)

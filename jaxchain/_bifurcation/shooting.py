@@ -236,8 +236,15 @@ class PeriodicOrbit(eqx.Module):
     @property
     def critical_multiplier(self) -> Complex[Array, ""]:
         """The largest non-trivial multiplier in modulus (batched like `trivial`)."""
-        index = jnp.where(self.trivial == 0, 1, 0)
-        return jnp.take_along_axis(self.multipliers, index[..., None], axis=-1)[..., 0]
+        return critical_multiplier(self.multipliers, self.trivial)
+
+
+def critical_multiplier(multipliers: Complex[Array, "... 2n"], trivial: Array
+                        ) -> Complex[Array, "..."]:
+    """The largest multiplier in modulus other than the trivial one, of multipliers
+    sorted by decreasing modulus (batched like `trivial`)."""
+    index = jnp.where(trivial == 0, 1, 0)
+    return jnp.take_along_axis(multipliers, index[..., None], axis=-1)[..., 0]
 
 
 def describe_orbit(params: ChainParams, u: Float[Array, " 2n+1"], options: ShootingOptions,

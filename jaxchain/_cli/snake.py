@@ -12,7 +12,7 @@ from .._plots.snake import plot_snake
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_solver_options, comma_list, one_belt_speed, positive_float, positive_int,
-                     report, show_progress, simulation_options, smoothed_only)
+                     engine_of, engine_record, report, show_progress, simulation_options)
 
 HELP = "continuation of the localized periodic states (the snake), with stability"
 DESCRIPTION = """\
@@ -39,7 +39,13 @@ Writes <out>/snake.png, <out>/snake.json and each branch to
 <out>/snake/branch_k<k>.nc as it finishes; a second run with the same settings
 reads the stored branches back (--resume). --sweep DIR/sweep.zarr draws the points
 of a `jaxchain sweep` underneath. The solver options set the simulations (the
-starts and the checks); shooting keeps its own tight tolerances."""
+starts and the checks); shooting keeps its own tight tolerances.
+
+With --engine exact, the exact stick/slip switch model throughout: simulations on
+the exact engine, shooting by Newton's method with the exact engine's derivative
+through every switch (its saltation matrices), and the exact Floquet multipliers
+(stick phases give multipliers at zero); their accuracy is checked at 100x looser
+tolerances, the exact engine's being near rounding already (1e-12)."""
 
 
 def _start(text: str):
@@ -87,7 +93,6 @@ def add_parser(sub):
 
 
 def run(args) -> None:
-    smoothed_only(args, "the branches are continued by shooting on the smoothed model")
     params = chain_params(args, args.n_osc, v_d=args.vd)
     asked = default_starts(params.graph) if args.sites is None else args.sites
     sites = [k for k in asked if isinstance(k, str) or k <= params.n_osc]
@@ -106,18 +111,21 @@ def run(args) -> None:
     start = time.perf_counter()
     options = dataclasses.replace(SNAKE_CONTINUATION, p_min=args.vd_min, p_max=args.vd_max,
                                   max_points=args.max_points)
-    found = localized_branches(params, sites, continuation_options=options,
-                               start_options=simulation_options(
+    smoothed = args.engine == "smoothed"
+    found = localized_branches(params, sites, engine=args.engine, continuation_options=options,
+                               start_options=engine_of(args, simulation_options(
                                    args, t_end=SNAKE_START.t_end,
-                                   transient=SNAKE_START.transient),
-                               solver=args.solver, eps=args.eps,
+                                   transient=SNAKE_START.transient), params).options,
+                               solver=args.solver if smoothed else None,
+                               eps=args.eps if smoothed else None,
                                simulation_check=not args.no_simulation,
                                out=outputs.path("snake"), progress=show_progress(args))
+    model = f"eps = {args.eps:g}" if smoothed else "the exact stick/slip model"
     outputs.figure(plot_snake(found["datasets"], sweep,
-                              title=f"N = {params.n_osc}, eps = {args.eps:g}: stable solid, "
+                              title=f"N = {params.n_osc}, {model}: stable solid, "
                                     "unstable dashed"), "snake")
     s = found["summary"] | {"wall_time_s": time.perf_counter() - start,
-                            "eps": args.eps, "n_osc": params.n_osc, "solver": args.solver}
+                            "n_osc": params.n_osc} | engine_record(args)
     report(s, outputs, "snake.json", args.json, _print_summary, s["wall_time_s"])
     disagree = [c for b in s["branches"] for c in b.get("simulation_check", [])
                 if c["agrees"] is False]

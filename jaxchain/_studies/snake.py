@@ -9,28 +9,23 @@ import dataclasses
 import json
 from pathlib import Path
 
-import diffrax
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from .._engine.progress import tqdm
 from .._bifurcation.bifurcations import locate_bifurcations
 from .._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
-from .._bifurcation.limit_cycles import limit_cycle_problem
-from .._bifurcation.shooting import (ShootingOptions, floquet_multipliers, flow, periodic_orbit,
-                                    unpack)
+from .._bifurcation.shooting import unpack
 from .._sweeps.ensemble import ensemble
-from .._engine.engines import as_engine
 from .._engine.options import SimulationOptions
 from .._engine.observers.crossings import downward_crossings
 from .._physics.chain import Graph
-from .._physics.forces import DEFAULT_EPS
 from .._physics.initial import GivenState, OutOfPhaseExcitation, centre_site, excited_block
 from .._physics.params import chain_or_default, ChainParams, with_parameter
 from .._physics.record import chain_record
 from .._engine.simulate import simulate
 from .._engine.solver.registry import DEFAULT_SOLVER
+from .snake_orbits import snake_orbits
 from .._sweeps.result_store import read_dataset, write_dataset
 from .._errors import ValidationError
 from .._engine.status import Status
@@ -110,9 +105,6 @@ def check_starts(graph: Graph, starts) -> tuple:
     return starts
 
 
-#: Shooting on a chain: Levenberg-Marquardt converges from a simulated state.
-SNAKE_SHOOTING = ShootingOptions(root_finder="levenberg-marquardt")
-
 #: The starting simulations: a chain of 20 settles slowly (the paper removes
 #: 10^4 time units of transient); after 2500 the four- and eight-site states of
 #: eq. (8) at v_d = 1.5 are not yet periodic to the shooting tolerance.
@@ -123,24 +115,23 @@ SNAKE_CONTINUATION = ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.0, p_max=2
                                          max_points=150)
 
 
-def _downward_crossings(params: ChainParams, y, options: ShootingOptions, eps,
-                        horizon: float = 40.0) -> tuple[np.ndarray, np.ndarray, list]:
-    """The flow from `y`, smoothed at `eps`, sampled every 1e-3 over `horizon`:
-    (times, states, and for each oscillator the sample indices where x_n' passes
-    from + to -, the intervals of `downward_crossings`)."""
+def _downward_crossings(orbits, params: ChainParams, y, horizon: float = 40.0
+                        ) -> tuple[np.ndarray, np.ndarray, list]:
+    """The flow of the engine of `orbits` (`snake_orbits`) from `y`, sampled every
+    1e-3 over `horizon`: (times, states, and for each oscillator the sample indices
+    where x_n' passes from + to -, the intervals of `downward_crossings`)."""
     ts = np.linspace(0.0, horizon, int(round(horizon * 1000)) + 1)
-    ys = np.asarray(flow(params, jnp.asarray(y), horizon, options,
-                         diffrax.SaveAt(ts=jnp.asarray(ts)), eps=eps).ys)
+    ys = orbits.samples(params, y, ts)
     mask, _ = downward_crossings(ts, ys[:, 0], ys[:, 1], np.ones(ts.size, dtype=bool))
     mask = np.asarray(mask)
     return ts, ys, [np.flatnonzero(mask[:, n]) for n in range(mask.shape[1])]
 
 
-def _turning_point(params: ChainParams, y: np.ndarray, oscillator: int,
-                   options: ShootingOptions, eps) -> tuple[np.ndarray, float] | None:
+def _turning_point(orbits, params: ChainParams, y: np.ndarray, oscillator: int
+                   ) -> tuple[np.ndarray, float] | None:
     """A state where x_n' passes from + to - (n = `oscillator`), and the time to the
-    next such crossing (`_downward_crossings`, smoothed at `eps`)."""
-    ts, ys, down = _downward_crossings(params, y, options, eps)
+    next such crossing (`_downward_crossings` on the engine of `orbits`)."""
+    ts, ys, down = _downward_crossings(orbits, params, y)
     down = down[oscillator]
     if down.size < 2:
         return None
@@ -148,8 +139,8 @@ def _turning_point(params: ChainParams, y: np.ndarray, oscillator: int,
 
 
 def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions = SNAKE_START,
-                 shooting: ShootingOptions = SNAKE_SHOOTING, solver=DEFAULT_SOLVER,
-                 eps=DEFAULT_EPS, progress: bool = False):
+                 engine: str = "smoothed", shooting=None, solver=DEFAULT_SOLVER, eps=None,
+                 progress: bool = False):
     """Periodic localized states of the chain at `params.v_d`, refined by shooting
     from direct simulation: eq. (8) with k oscillators excited (`excited_block`),
     integrated over `options`, then a turning point of the oscillator of largest
@@ -163,31 +154,43 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
         named one-site starts (`start_site`: "corner", "edge", "interior" on a
         lattice, "site:N"); `default_starts` by default.
     - `options`: `SimulationOptions` of the simulations.
-    - `shooting`: `ShootingOptions` (its `phase_oscillator` is replaced).
-    - `solver`: the solver of the simulations (`SOLVERS`; shooting has its own).
-    - `eps`: the smoothing velocity of tanh(v_rel/eps), a finite number > 0,
-        shape (), dimensionless (a fraction of x_0 omega_n): that of the smoothed
-        engine of the simulations (`Smoothed.eps`) and of shooting; `DEFAULT_EPS`
-        by default.
+    - `engine`: "smoothed" (eq. (5) with tanh(v_rel/eps)) or "exact" (the stick/slip
+        switch model) for the simulations and shooting.
+    - `shooting`: `ShootingOptions` (smoothed) or `ExactShooting` (exact); its
+        `phase_oscillator` is replaced (`SNAKE_SHOOTING`, `EXACT_SNAKE_SHOOTING` by
+        default).
+    - `solver`: the smoothed engine's solver of the simulations (`SOLVERS`;
+        shooting has its own).
+    - `eps`: the smoothed engine's smoothing velocity of tanh(v_rel/eps), a finite
+        number > 0, shape (), dimensionless (a fraction of x_0 omega_n), of the
+        simulations and of shooting; `DEFAULT_EPS` when None. None for the exact
+        engine.
     - `progress`: progress bars.
 
     **Returns:**
 
-    A dict k -> (`PeriodicOrbit` or None, the simulation's n_HALC and energy, why
-    it failed or None). A start fails when the simulated state is not periodic
-    (irregular: shooting does not converge) or never turns.
+    A dict k -> (`PeriodicOrbit` or `ExactOrbit`, or None; the simulation's n_HALC
+    and energy; why it failed or None). A start fails when the simulated state is
+    not periodic (irregular: shooting does not converge) or never turns.
 
     **Raises:**
 
-    `ValidationError` for a k outside 1..n_osc or eps <= 0.
+    `ValidationError` for a k outside 1..n_osc, eps <= 0, eps given to the exact
+    engine or shooting options of the other engine.
     """
+    orbits = snake_orbits(engine, shooting, eps, solver, params)
+    return _start_orbits(orbits, params, sites, options, progress)
+
+
+def _start_orbits(orbits, params: ChainParams, sites, options: SimulationOptions,
+                  progress: bool) -> dict:
+    """`start_orbits` on the engine of `orbits` (`snake_orbits`)."""
     sites = check_starts(params.graph, sites)
     masks = np.stack([start_mask(params.graph, k) for k in sites])
     ics = OutOfPhaseExcitation(excited=jnp.asarray(masks),
                                velocity=jnp.zeros(len(sites)), base_sign=-1.0)
-    engine = as_engine("smoothed", solver, options, params, eps=eps)
-    eps = engine.eps
-    ds = ensemble(params, [float(params.v_d)], ics, engine=engine, progress=progress)
+    ds = ensemble(params, [float(params.v_d)], ics, engine=orbits.simulation(options, params),
+                  progress=progress)
     out = {}
     for i, k in enumerate(sites):
         amplitudes = ds["amplitudes"].values[0, i]
@@ -197,12 +200,11 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
             out[k] = (None, sim, "the simulation failed")
             continue
         n = int(np.argmax(amplitudes))
-        opts = dataclasses.replace(shooting, phase_oscillator=n)
-        guess = _turning_point(params, ds["y_final"].values[0, i], n, opts, eps)
+        guess = _turning_point(orbits, params, ds["y_final"].values[0, i], n)
         if guess is None:
             out[k] = (None, sim, "no turning point: steady sliding")
             continue
-        orbit = periodic_orbit(params, guess[0], guess[1], opts, eps=eps, throw=False)
+        orbit = orbits.shoot(params, guess[0], guess[1], n)
         reason = None if bool(orbit.converged) else (
             f"shooting did not converge (residual {float(orbit.residual):.2g}): the "
             f"simulated state is not periodic")
@@ -236,7 +238,8 @@ def _branch_dataset(k: int, problem, branch, bifurcations) -> xr.Dataset:
                    for b in bifurcations])})
 
 
-def _follow_branch(orbit, options: ShootingOptions, continuation_options: ContinuationOptions,
+def _follow_branch(orbits, orbit, phase_oscillator: int,
+                   continuation_options: ContinuationOptions,
                    algorithm: PseudoArclength = PseudoArclength(), *, k: int = 0,
                    progress: bool = False) -> xr.Dataset:
     """Continue the branch of periodic orbits through `orbit` over v_d both ways
@@ -253,7 +256,7 @@ def _follow_branch(orbit, options: ShootingOptions, continuation_options: Contin
     """
     import xarray as xr
 
-    problem = limit_cycle_problem(orbit, options)
+    problem = orbits.problem(orbit, phase_oscillator)
     halves, found = [], []
     for direction in (-1, 1):
         opts = dataclasses.replace(continuation_options, direction=direction)
@@ -336,12 +339,11 @@ def _connections(branches: dict, tol: float = 1e-3) -> dict:
     return out
 
 
-def _phase_lags(params: ChainParams, y, sites, options: ShootingOptions, eps
-                ) -> np.ndarray | None:
+def _phase_lags(orbits, params: ChainParams, y, sites) -> np.ndarray | None:
     """The phase of each oscillator of `sites` relative to the first, in periods
     (0 to 1): from the first turning point (x_n' from + to -) of each
-    (`_downward_crossings`, smoothed at `eps`)."""
-    ts, _, down = _downward_crossings(params, y, options, eps)
+    (`_downward_crossings` on the engine of `orbits`)."""
+    ts, _, down = _downward_crossings(orbits, params, y)
     if any(down[n].size < 2 for n in sites):
         return None
     first = np.asarray([ts[down[n][0]] for n in sites])
@@ -349,14 +351,13 @@ def _phase_lags(params: ChainParams, y, sites, options: ShootingOptions, eps
     return np.mod((first - first[0]) / period, 1.0)
 
 
-def _check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict, *,
+def _check_by_simulation(orbits, params: ChainParams, branch: xr.Dataset, segment: dict, *,
                          delta: float = 0.03, perturbation: float = 1e-3, seed: int = 0,
-                         shooting: ShootingOptions = SNAKE_SHOOTING,
                          options: SimulationOptions = SimulationOptions(t_end=5000.0,
-                                                                        transient=4500.0),
-                         solver=DEFAULT_SOLVER, eps=DEFAULT_EPS) -> list[dict]:
-    """Direct simulation (the smoothed engine at `eps`, with `solver` over
-    `options`) just inside and just outside each end of a stable segment that a
+                                                                        transient=4500.0)
+                         ) -> list[dict]:
+    """Direct simulation (the engine of `orbits`, over `options`) just inside and
+    just outside each end of a stable segment that a
     bifurcation ends, each from an orbit of the branch with its positions
     perturbed by `perturbation`:
 
@@ -402,18 +403,17 @@ def _check_by_simulation(params: ChainParams, branch: xr.Dataset, segment: dict,
             y_orbit, _ = unpack(jnp.asarray(branch["u"].values[start]))
             a = branch["amplitudes"].values[start]
             sites = np.flatnonzero(a > 0.5 * a.max())
-            lags = _phase_lags(with_parameter(params, "v_d", float(v[start])), y_orbit, sites,
-                               shooting, eps)
+            lags = _phase_lags(orbits, with_parameter(params, "v_d", float(v[start])), y_orbit,
+                               sites)
             y0 = np.asarray(y_orbit).copy()
             y0[0] += perturbation * rng.standard_normal(y0.shape[1])
             p = with_parameter(params, "v_d", float(vd))
-            obs = simulate(p, GivenState(jnp.asarray(y0)),
-                           engine=as_engine("smoothed", solver, options, p, eps=eps))
+            obs = simulate(p, GivenState(jnp.asarray(y0)), engine=orbits.simulation(options, p))
             amp = np.asarray(obs.amplitudes)
             sim_sites = np.flatnonzero(amp > 0.5 * amp.max())
             lag_difference = None
             if np.array_equal(sites, sim_sites) and lags is not None:
-                sim_lags = _phase_lags(p, obs.y_final, sites, shooting, eps)
+                sim_lags = _phase_lags(orbits, p, obs.y_final, sites)
                 if sim_lags is not None:
                     d = np.mod(sim_lags - lags, 1.0)
                     lag_difference = float(np.max(np.minimum(d, 1 - d)))
@@ -469,16 +469,12 @@ def _unstable_point(v, stable, growth, beyond, last, end, delta, perturbation
     return float(v[k]), k, float(growth[k])
 
 
-_multipliers = eqx.filter_jit(floquet_multipliers)
-
-
-def _multiplier_accuracy(params: ChainParams, branch: xr.Dataset, points,
-                         shooting: ShootingOptions = SNAKE_SHOOTING, factor: float = 100.0,
-                         eps=DEFAULT_EPS) -> dict:
+def _multiplier_accuracy(orbits, params: ChainParams, branch: xr.Dataset, points) -> dict:
     """How accurate the branch's Floquet multipliers are: at the given points, the
-    multipliers again from the same orbits (of the flow smoothed at `eps`) with the
-    flow's tolerances divided by `factor`; the difference estimates the error at
-    the branch's tolerances.
+    multipliers again from the same orbits with the flow's tolerances divided by
+    `orbits.check_factor` (100 tighter on the smoothed engine; 100 looser on the
+    exact one, already near rounding, where the difference bounds the error); the
+    difference estimates the error at the branch's tolerances.
 
     **Returns:**
 
@@ -486,34 +482,31 @@ def _multiplier_accuracy(params: ChainParams, branch: xr.Dataset, points,
     multiplier (`critical_difference`) and of its modulus (`modulus_difference`),
     and the largest |trivial multiplier - 1| at each tolerance.
     """
-    tight = dataclasses.replace(shooting, rtol=shooting.rtol / factor,
-                                atol=shooting.atol / factor)
+    factor = orbits.check_factor
     v = branch["v_d"].values
     critical, modulus, trivial = [], [], ([], [])
     for i in sorted(set(int(i) for i in points)):
-        y0, period = unpack(jnp.asarray(branch["u"].values[i]))
         p = with_parameter(params, "v_d", float(v[i]))
         got = []
-        for options, errors in zip((shooting, tight), trivial):
-            values, index = _multipliers(p, y0, period, options, eps)
-            values = np.asarray(values)
+        for f, errors in zip((1.0, factor), trivial):
+            values, index = orbits.multipliers(p, branch["u"].values[i], f)
             errors.append(abs(values[int(index)] - 1))
             got.append(np.delete(values, int(index)))
         first = got[0][0]  # the critical multiplier, and its match at the tight tolerance
         second = got[1][np.argmin(np.abs(got[1] - first))]
         critical.append(abs(first - second))
         modulus.append(abs(abs(first) - abs(second)))
-    return {"points": len(critical), "rtol": [shooting.rtol, tight.rtol],
+    return {"points": len(critical), "rtol": [orbits.rtol(), orbits.rtol(factor)],
             "critical_difference": float(max(critical, default=np.nan)),
             "modulus_difference": float(max(modulus, default=np.nan)),
             "trivial_error": [float(max(e, default=np.nan)) for e in trivial]}
 
 
 def localized_branches(params: ChainParams | None = None, sites=None, *,
-                       shooting: ShootingOptions = SNAKE_SHOOTING,
+                       engine: str = "smoothed", shooting=None,
                        continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
                        start_options: SimulationOptions = SNAKE_START,
-                       solver=DEFAULT_SOLVER, eps=DEFAULT_EPS, simulation_check: bool = True,
+                       solver=DEFAULT_SOLVER, eps=None, simulation_check: bool = True,
                        out: Path | None = None, progress: bool = False) -> dict:
     """The snake: each localized periodic state that simulation finds at
     `params.v_d` (eq. (8) with k excited, for k in `sites`), refined by shooting,
@@ -529,12 +522,17 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     - `sites`: the starts: numbers of excited oscillators (eq. (8)'s block or a
         graph's patch) or named one-site starts (`start_site`); `default_starts`
         by default (the corner, edge and interior one-site states on a lattice).
-    - `shooting`: `ShootingOptions` of every orbit.
+    - `engine`: "smoothed" (eq. (5) with tanh(v_rel/eps)) or "exact" (the stick/slip
+        switch model: exact shooting, exact Floquet multipliers, simulations on
+        the exact engine) for every orbit, branch and simulation.
+    - `shooting`: `ShootingOptions` (smoothed) or `ExactShooting` (exact) of every
+        orbit (`SNAKE_SHOOTING`, `EXACT_SNAKE_SHOOTING` by default).
     - `continuation_options`: `ContinuationOptions` (direction is set both ways).
     - `start_options`: `SimulationOptions` of the starting simulations.
-    - `solver`: the solver of the simulations, the starts and the checks
-        (`SOLVERS`); shooting has its own (`shooting.solver`).
-    - `eps`: the smoothing velocity of tanh(v_rel/eps), a finite number > 0,
+    - `solver`: the smoothed engine's solver of the simulations, the starts and the
+        checks (`SOLVERS`); shooting has its own (`shooting.solver`).
+    - `eps`: the smoothed engine's smoothing velocity of tanh(v_rel/eps) (None:
+        `DEFAULT_EPS`; None for the exact engine), a finite number > 0,
         shape (), dimensionless (a fraction of x_0 omega_n): that of the smoothed
         engine of every simulation (`Smoothed.eps`) and of every orbit, branch and
         multiplier; `DEFAULT_EPS` by default. Stored branches are read back only
@@ -554,43 +552,44 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
 
     **Raises:**
 
-    `ValidationError` for bad sites, options or eps.
+    `ValidationError` for bad sites, options or eps, an unknown engine, eps given
+    to the exact engine or shooting options of the other engine.
     """
-    params, sites, eps = _check_branches(params, sites, solver, eps)
-    run = _run_branches(params, sites, shooting, continuation_options, start_options, solver,
-                        eps, simulation_check, out, progress)
+    params, sites, orbits = _check_branches(params, sites, engine, shooting, solver, eps)
+    run = _run_branches(orbits, params, sites, continuation_options, start_options,
+                        simulation_check, out, progress)
     return _branches_summary(*run)
 
 
-def _check_branches(params: ChainParams | None, sites, solver, eps) -> tuple:
-    """The chain (the paper's ring where None), the starts (`check_starts`) and eps
-    (checked by the smoothed engine it sets)."""
+def _check_branches(params: ChainParams | None, sites, engine, shooting, solver, eps
+                    ) -> tuple:
+    """The chain (the paper's ring where None), the starts (`check_starts`) and the
+    orbits of the engine (`snake_orbits`, which checks eps and the options)."""
     params = chain_or_default(params)
-    eps = as_engine("smoothed", solver, None, params, eps=eps).eps
-    return params, check_starts(params.graph, sites), eps
+    orbits = snake_orbits(engine, shooting, eps, solver, params)
+    return params, check_starts(params.graph, sites), orbits
 
 
-def _run_branches(params: ChainParams, sites: tuple, shooting, continuation_options,
-                  start_options, solver, eps, simulation_check, out, progress) -> tuple:
+def _run_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
+                  start_options, simulation_check, out, progress) -> tuple:
     """The branches (`_find_branches`), then the checks of their stable ranges
     (`_stable_range_checks`): (datasets, starts, failed starts, checks)."""
-    datasets, starts, failed = _find_branches(params, sites, shooting, continuation_options,
-                                              start_options, solver, eps, out, progress)
-    checks = _stable_range_checks(params, datasets, shooting, solver, eps, simulation_check,
+    datasets, starts, failed = _find_branches(orbits, params, sites, continuation_options,
+                                              start_options, out, progress)
+    checks = _stable_range_checks(orbits, params, datasets, simulation_check,
                                   progress)
     return datasets, starts, failed, checks
 
 
-def _find_branches(params: ChainParams, sites: tuple, shooting, continuation_options,
-                   start_options, solver, eps, out, progress) -> tuple[dict, dict, dict]:
+def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
+                   start_options, out, progress) -> tuple[dict, dict, dict]:
     """The branch of each start: read back from `out` where stored with the same
     settings, else started by simulation and shooting (`start_orbits`), continued
     (`_follow_branch`) and stored. Returns (label -> branch dataset, start -> the
     simulation's n_HALC and energy, start -> why it has no periodic orbit)."""
     datasets, starts, failed = {}, {}, {}
-    settings = {"chain": chain_record(params), "eps": float(eps), "shooting": shooting,
-                "continuation": continuation_options, "start": start_options,
-                "solver": solver if isinstance(solver, str) else type(solver).__name__}
+    settings = {"chain": chain_record(params), **orbits.settings(),
+                "continuation": continuation_options, "start": start_options}
     paths = {k: None if out is None else Path(out) / (
         f"branch_{k}.nc" if isinstance(k, str) else f"branch_k{k}.nc").replace(":", "")
         for k in sites}
@@ -603,18 +602,15 @@ def _find_branches(params: ChainParams, sites: tuple, shooting, continuation_opt
         else:
             todo.append(k)
     if todo:
-        for k, (orbit, sim, reason) in start_orbits(params, todo, options=start_options,
-                                                    shooting=shooting, solver=solver,
-                                                    eps=eps, progress=progress).items():
+        for k, (orbit, sim, reason) in _start_orbits(orbits, params, todo, start_options,
+                                                     progress).items():
             starts[k] = sim
             if orbit is None:
                 failed[k] = reason
                 continue
-            opts = dataclasses.replace(
-                shooting, phase_oscillator=int(np.argmax(np.asarray(orbit.amplitudes))))
             mask = start_mask(params.graph, k)
-            ds = _follow_branch(orbit, opts, continuation_options, k=int(mask.sum()),
-                                progress=progress)
+            ds = _follow_branch(orbits, orbit, int(np.argmax(np.asarray(orbit.amplitudes))),
+                                continuation_options, k=int(mask.sum()), progress=progress)
             ds = ds.assign_attrs(start=_start_label(k),
                                  start_sites=np.flatnonzero(mask).tolist(),
                                  start_vd=float(params.v_d),
@@ -627,7 +623,7 @@ def _find_branches(params: ChainParams, sites: tuple, shooting, continuation_opt
     return datasets, starts, failed
 
 
-def _stable_range_checks(params: ChainParams, datasets: dict, shooting, solver, eps,
+def _stable_range_checks(orbits, params: ChainParams, datasets: dict,
                          simulation_check: bool, progress: bool) -> dict:
     """For each branch (by label): its stable ranges (`stable_ranges`), the accuracy
     of its multipliers at their ends and at its start (`_multiplier_accuracy`), and
@@ -640,11 +636,10 @@ def _stable_range_checks(params: ChainParams, datasets: dict, shooting, solver, 
         ends = [i for r in ranges for pair in r["points"] for i in pair if i is not None]
         start = int(np.argmin(np.abs(ds["v_d"].values - ds.attrs["start_vd"])))
         out[label] = {"ranges": ranges, "multiplier_accuracy": _multiplier_accuracy(
-            params, ds, ends + [start], shooting, eps=eps)}
+            orbits, params, ds, ends + [start])}
         if simulation_check:
             out[label]["simulation_check"] = [
-                c for r in ranges for c in _check_by_simulation(params, ds, r, shooting=shooting,
-                                                                solver=solver, eps=eps)]
+                c for r in ranges for c in _check_by_simulation(orbits, params, ds, r)]
         bar.update()
     bar.close()
     return out

@@ -24,7 +24,8 @@ from ..._engine.options import SimulationOptions
 from ..._physics.forces import DEFAULT_EPS
 from ..._physics.initial import OutOfPhaseExcitation, initial_states
 from ..._physics.params import ChainParams, stack_chains, with_parameter
-from ..snake import SNAKE_SHOOTING, _turning_point
+from ..snake import _turning_point
+from ..snake_orbits import SNAKE_SHOOTING, SmoothedOrbits
 from ..._sweeps.result_store import read_dataset, write_dataset
 from ..._checks import check_count
 from ..._errors import ValidationError
@@ -182,7 +183,8 @@ def localized_orbit(params: ChainParams, site: int, *,
     if int(obs.status) != Status.ok or int(obs.n_halc) == 0:
         return None, None
     opts = dataclasses.replace(shooting, phase_oscillator=int(site))
-    guess = _turning_point(params, np.asarray(obs.y_final), int(site), opts, engine.eps)
+    guess = _turning_point(SmoothedOrbits(opts, engine.eps, None), params,
+                           np.asarray(obs.y_final), int(site))
     if guess is None:
         return None, None
     orbit = periodic_orbit(params, guess[0], guess[1], opts, eps=engine.eps, throw=False)
