@@ -301,10 +301,10 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              # jitted entry points, whose traces a test counts (test_compile_once.py)
              "simulation program": ("jaxchain._engine.simulate", "_run_jit"),
              "Hopf modes": ("jaxchain._bifurcation.hopf", "_hopf_modes"),
-             "shooting solve": ("jaxchain._bifurcation.shooting", "_solve"),
+             "shooting solve": ("jaxchain._bifurcation.shooting", "_root"),
              "continuation corrector": ("jaxchain._bifurcation.continuation", "_correct"),
              "continuation tangent": ("jaxchain._bifurcation.continuation", "_tangent"),
-             "continuation records": ("jaxchain._bifurcation.continuation", "_describe"),
+             "continuation records": ("jaxchain._bifurcation.continuation", "describe_point"),
              "slip arc peak": ("jaxchain._bifurcation.existence", "_peak"),
              # the progress bar every bar of jaxchain is (test_examples.py)
              "progress bar": ("jaxchain._engine.progress", "progress_bar"),

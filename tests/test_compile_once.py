@@ -83,7 +83,7 @@ def test_shooting_compiles_once_for_five_xi(monkeypatch):
         orbit = jc.periodic_orbit(params, jnp.array([[2.2], [0.0]]), 6.3, options, eps=1e-2,
                                   throw=False)
         assert _periodicity_error(params, orbit.y0, orbit.period, 1e-2) < 1e-5, xi
-    assert traces == ["_solve"]
+    assert traces == ["_root"]
 
 
 @pytest.mark.numerics
@@ -104,7 +104,7 @@ def test_continuation_compiles_once_for_five_problems(monkeypatch):
         assert v_d != float(params.v_d)  # it moved along the branch
         moved = jc.with_parameter(params, "v_d", v_d)
         assert _periodicity_error(moved, u[:-1], u[-1], 1e-2) < 1e-5, xi
-    assert traces == [["_correct"], ["_tangent"], ["_describe"]]
+    assert traces == [["_correct"], ["_tangent"], ["describe_point"]]
 
 
 @pytest.mark.numerics

@@ -184,8 +184,13 @@ def _correct(problem: ContinuationProblem, algorithm: PseudoArclength, predicted
 
 
 @eqx.filter_jit
-def _describe(problem: ContinuationProblem, z):
-    return problem.describe(z[:-1], problem.at(z[-1]))
+def describe_point(describe: Callable, u, params: ChainParams, p, where="v_d"):
+    """`describe(u, params with the parameter `where` set to p)`, compiled once for
+    each describe module (its static options), shape of u and kind of params: the
+    records of continuation and the results of shooting (`periodic_orbit`,
+    `exact_periodic_orbit`) share one program, the largest of a periodic orbit's
+    (multipliers, samples)."""
+    return describe(u, with_parameter(params, where, p))
 
 
 class _Stable(eqx.Module):
@@ -195,7 +200,7 @@ class _Stable(eqx.Module):
 def _record(problem: ContinuationProblem, z):
     if problem.describe is None:
         return _Stable(stable=jnp.asarray(True))
-    return _describe(problem, z)
+    return describe_point(problem.describe, z[:-1], problem.params, z[-1], problem.where)
 
 
 def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = PseudoArclength(),

@@ -16,7 +16,7 @@ from .._engine.status import Status
 from .._errors import ValidationError
 from .._physics.custom_types import State
 from .._physics.params import ChainParams
-from .continuation import ContinuationProblem
+from .continuation import ContinuationProblem, describe_point
 from .shooting import critical_multiplier, deflated_multipliers, pack, shooting_guess, unpack
 
 
@@ -192,13 +192,19 @@ def describe_exact_orbit(params: ChainParams, u: Float[Array, " 2n+1"],
 
 
 @eqx.filter_jit
-def _solve(params, u0, options):
+def _root(params, u0, options):
     tol = options.newton_tol
     sol = optx.root_find(lambda u, p: exact_shooting_residual(u, p, options),
                          optx.Newton(rtol=tol, atol=tol), u0, params,
                          max_steps=options.newton_steps, throw=False)
-    return describe_exact_orbit(params, sol.value, options,
-                                sol.result == optx.RESULTS.successful)
+    return sol.value, sol.result == optx.RESULTS.successful
+
+
+def _solve(params, u0, options):
+    u, ok = _root(params, u0, options)
+    # the record by continuation's own program (`describe_point`), compiled once
+    orbit = describe_point(DescribeExactOrbit(options), u, params, params.v_d)
+    return eqx.tree_at(lambda o: o.converged, orbit, orbit.converged & ok)
 
 
 def exact_periodic_orbit(params: ChainParams, y0: State, period: float,

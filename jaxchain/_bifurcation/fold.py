@@ -7,7 +7,7 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
 from .._physics.params import ChainParams
-from .continuation import Branch, ContinuationProblem, _describe
+from .continuation import Branch, ContinuationProblem, describe_point
 
 
 class FoldPoint(eqx.Module):
@@ -122,5 +122,5 @@ def fold_point(problem: ContinuationProblem, near: Branch | Float[Array, " n+1"]
     if throw and not bool(ok):
         raise RuntimeError("the fold's extended system did not converge: start nearer "
                            "the fold (a smaller continuation step)")
-    record = _describe(problem, jnp.concatenate([u, p[None]]))
+    record = describe_point(problem.describe, u, problem.params, p, problem.where)
     return FoldPoint(p=p, u=u, null_vector=w, record=record, converged=ok)

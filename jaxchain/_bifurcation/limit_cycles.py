@@ -12,7 +12,7 @@ from .._physics.params import ChainParams, with_parameter
 from .continuation import ContinuationProblem
 from .hopf import check_eps, critical_mode, hopf_point
 from .lyapunov_coefficient import first_lyapunov_coefficient
-from .shooting import (PeriodicOrbit, ShootingOptions, describe_orbit, pack,
+from .shooting import (DescribeOrbit, PeriodicOrbit, ShootingOptions, pack,
                        periodic_orbit, shooting_residual)
 from .._checks import check_positive
 from .._errors import ValidationError
@@ -32,17 +32,6 @@ class ShootingResidual(eqx.Module):
 
     def __call__(self, u, params):
         return shooting_residual(u, params, self.options, self.eps)
-
-
-class DescribeOrbit(eqx.Module):
-    """`describe_orbit` with its options and smoothing velocity bound, as a
-    `ContinuationProblem` record (fields as `ShootingResidual`)."""
-
-    options: ShootingOptions
-    eps: Float[Array, ""] = eqx.field(converter=check_eps, default=DEFAULT_EPS)
-
-    def __call__(self, u, params):
-        return describe_orbit(params, u, self.options, eps=self.eps)
 
 
 def problem_eps(problem: ContinuationProblem) -> Float[Array, ""]:

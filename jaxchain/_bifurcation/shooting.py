@@ -14,6 +14,7 @@ from .._physics.model import Model, model_field, vector_field
 from .._physics.params import ChainParams
 from .._physics.stick import min_slip_speed, sticks
 from .._checks import check_positive
+from .continuation import describe_point
 from .hopf import check_eps
 from .._errors import ValidationError
 
@@ -266,8 +267,19 @@ def describe_orbit(params: ChainParams, u: Float[Array, " 2n+1"], options: Shoot
         residual=residual, converged=jnp.asarray(converged))
 
 
+class DescribeOrbit(eqx.Module):
+    """`describe_orbit` with its options and smoothing velocity bound, as a
+    `ContinuationProblem` record (fields as `ShootingResidual`)."""
+
+    options: ShootingOptions
+    eps: Float[Array, ""] = eqx.field(converter=check_eps, default=DEFAULT_EPS)
+
+    def __call__(self, u, params):
+        return describe_orbit(params, u, self.options, eps=self.eps)
+
+
 @eqx.filter_jit
-def _solve(params, eps, u0, options):
+def _root(params, eps, u0, options):
     def fn(u, p):
         return shooting_residual(u, p, options, eps)
 
@@ -279,12 +291,17 @@ def _solve(params, eps, u0, options):
         sol = optx.least_squares(fn, optx.LevenbergMarquardt(rtol=tol, atol=tol), u0, params,
                                  options={"jac": "fwd"}, max_steps=5 * options.newton_steps,
                                  throw=False)
-    orbit = describe_orbit(params, sol.value, options, sol.result == optx.RESULTS.successful,
-                           eps)
+    return sol.value, sol.result == optx.RESULTS.successful
+
+
+def _solve(params, eps, u0, options):
+    u, ok = _root(params, eps, u0, options)
+    # the record by continuation's own program (`describe_point`), compiled once
+    orbit = describe_point(DescribeOrbit(options, eps), u, params, params.v_d)
     # Levenberg-Marquardt also stops at a local minimum of the residual: only a root
     # counts as converged.
     return eqx.tree_at(lambda o: o.converged, orbit,
-                       orbit.converged & (orbit.residual <= 1e3 * tol))
+                       ok & (orbit.residual <= 1e3 * options.newton_tol))
 
 
 def shooting_guess(params: ChainParams, y0: State, period, options) -> Float[Array, " 2n+1"]:
