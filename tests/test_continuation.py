@@ -216,3 +216,40 @@ def test_boundaries_command_json_and_figures(tmp_path, capsys):
     for name, path in out["outputs"].items():
         if name.endswith(".png"):
             assert Path(path).stat().st_size > 10_000
+
+
+class _Switching(eqx.Module):
+    """A record whose critical multiplier jumps from 0.5 to 2 where v_d passes 1.3,
+    and whose count of zero multipliers (stick phases) drops from 1 to 0 there
+    unless `keep_zero`."""
+
+    multipliers: jnp.ndarray
+    trivial: jnp.ndarray
+    zero_multipliers: jnp.ndarray
+    stable: jnp.ndarray
+
+    @property
+    def critical_multiplier(self):
+        return self.multipliers[..., 1]
+
+
+@pytest.mark.parametrize("keep_zero, kind", [(False, "sliding"), (True, "grazing")])
+def test_a_jumping_multiplier_is_a_discontinuity_induced_bifurcation(keep_zero, kind):
+    """On the line u = v_d, records built to jump at v_d = 1.3: the change of stability
+    is located within the bisection's resolution and named by the segment structure
+    (the exact model's sliding or grazing), never a multiplier crossing (the located
+    multiplier, 0.5, is nowhere near the unit circle)."""
+    def describe(u, p):
+        beyond = p.v_d > 1.3
+        m = jnp.where(beyond, 2.0, 0.5) + 0j
+        zeros = jnp.where(beyond & (not keep_zero), 0, 1)
+        return _Switching(multipliers=jnp.stack([1.0 + 0j, m]), trivial=jnp.asarray(0),
+                          zero_multipliers=zeros, stable=~beyond)
+
+    problem = jc.ContinuationProblem(residual=lambda u, p: u - p.v_d, u0=jnp.array([1.0]),
+                                     params=jc.ChainParams(n_osc=1, v_d=1.0),
+                                     describe=describe)
+    branch = jc.continuation(problem, options=jc.ContinuationOptions(
+        ds=0.1, ds_max=0.1, max_points=8))
+    (point,) = jc.locate_bifurcations(problem, branch)
+    assert point.kind == kind and abs(float(point.p) - 1.3) < 1e-6

@@ -16,7 +16,12 @@ from .._errors import ValidationError
 #: multiplier: +1 with a turning point in p (fold of limit cycles), +1 without one
 #: (branch point: a symmetry-breaking pitchfork or transcritical point, where another
 #: branch crosses), -1 (period doubling), a complex pair (Neimark-Sacker, torus).
-BIFURCATION_KINDS = ("fold", "branch point", "period doubling", "Neimark-Sacker")
+BIFURCATION_KINDS = ("fold", "branch point", "period doubling", "Neimark-Sacker", "sliding",
+                     "grazing", "multiplier jump")
+
+#: A change of stability whose critical multiplier still jumps by more than this
+#: across the bisection's last interval is discontinuity-induced, not a crossing.
+JUMP = 1e-2
 
 
 class BifurcationPoint(eqx.Module):
@@ -55,13 +60,15 @@ def _bisect(test, s_hi: float, steps: int, f_hi: float):
     f_hi (the test function at the next point of the branch) of opposite signs.
     test(s) gives (value, corrected point) or None where the corrector fails.
     Returns (s, width of the last interval, the corrected point of the last
-    successful trial nearest the change), or (None, 0, None) when the ends have
-    no sign change."""
+    successful trial nearest the change, and the last corrected points on either
+    side of it, (f, z) or None), or (None, 0, None, None) when the ends have no
+    sign change."""
     lo, hi = 0.0, s_hi
     first = test(lo)
     if first is None or np.sign(first[0]) == np.sign(f_hi):
-        return None, 0.0, None
+        return None, 0.0, None, None
     f_lo, best = first
+    sides = [first, None]
     for _ in range(steps):
         mid = 0.5 * (lo + hi)
         trial = test(mid)
@@ -70,10 +77,25 @@ def _bisect(test, s_hi: float, steps: int, f_hi: float):
             continue
         best = trial[1]
         if np.sign(trial[0]) == np.sign(f_lo):
-            lo = mid
+            lo, sides[0] = mid, trial
         else:
-            hi = mid
-    return 0.5 * (lo + hi), hi - lo, best
+            hi, sides[1] = mid, trial
+    return 0.5 * (lo + hi), hi - lo, best, sides
+
+
+def _discontinuity(problem: ContinuationProblem, sides) -> str:
+    """The kind of a change of stability across which the critical multiplier jumps
+    (a discontinuity-induced bifurcation; di Bernardo, Budd, Champneys and Kowalczyk,
+    *Piecewise-smooth Dynamical Systems* (2008), ch. 8; Leine and Nijmeijer (2004),
+    ch. 8): on the exact model "sliding" where the number of zero multipliers (of
+    stick phases) changes, a stick phase appearing or vanishing, else "grazing"; on
+    the smoothed model, which has no switches, "multiplier jump" (too steep for the
+    bisection to resolve at its eps)."""
+    records = [_record(problem, z) for _, z in sides]
+    if not hasattr(records[0], "zero_multipliers"):
+        return "multiplier jump"
+    zeros = [int(r.zero_multipliers) for r in records]
+    return "sliding" if zeros[0] != zeros[1] else "grazing"
 
 
 def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
@@ -89,7 +111,10 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
     the test function is dp/ds (fold) or |mu| - 1 (the critical multiplier mu).
     This needs no extended system, so it converges where many multipliers crowd
     near +1 (a weakly coupled chain). The kind follows from the multiplier at the
-    located point (`BIFURCATION_KINDS`).
+    located point (`BIFURCATION_KINDS`), unless the multiplier jumps by more than
+    `JUMP` across the last interval: a discontinuity-induced bifurcation of the
+    exact model, "sliding" where a stick phase appears or vanishes (the count of
+    zero multipliers changes) and "grazing" otherwise (`_discontinuity`).
 
     **Arguments:**
 
@@ -135,13 +160,17 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
             f_hi = float(tangents[i + 1, -1])
         else:
             f_hi = float(np.abs(np.asarray(branch.records.critical_multiplier)[i + 1]) - 1)
-        s, width, z = _bisect(test, s_hi, steps, f_hi)
+        s, width, z, sides = _bisect(test, s_hi, steps, f_hi)
         if z is None:
             continue
+        if sides[1] is None:  # no trial beyond the change: the branch's next point
+            sides[1] = (f_hi, zs[i + 1])
         record = _record(problem, z)
         _, m = _critical(record)
         if i in folds:
             kind = "fold"
+        elif sides[1] is not None and abs(sides[1][0] - sides[0][0]) > JUMP:
+            kind = _discontinuity(problem, sides)
         elif abs(m.imag) > 1e-6 * max(1.0, abs(m)) and abs(m.imag) > 1e-3:
             kind = "Neimark-Sacker"
         elif m.real < 0:
