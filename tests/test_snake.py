@@ -150,3 +150,5 @@ def test_snake_command_json_and_bad_options(tmp_path, capsys):
         assert int(ds["n_halc"].values[i]) == int(sticks.sum()) == 1, i
     assert_usage_error(["snake", "--sites", "0"], "--sites", capsys)
     assert_usage_error(["snake", "--vd", "3"], "--vd", capsys)
+    # "all" is every k = 1 ... N, accepted as starts: the error is the belt speed's
+    assert_usage_error(["snake", "--sites", "all", "--vd", "3"], "--vd must lie", capsys)

@@ -31,6 +31,9 @@ which the paper's Fig. 3(b) only suggests by simulation ("snaking"):
   - folds of limit cycles, branch points, period doubling and Neimark-Sacker
     points, classified by the critical multiplier and located by bisection along
     the branch;
+  - at each branch point, branch switching: the other branch through it, along
+    the kernel direction of the continuation's Jacobian that the followed branch
+    does not take, followed away from it (--no-switch skips it);
   - which branches meet (the same orbit up to the chain's symmetries), and
     direct simulation just inside and outside each end of each stable range
     (--no-simulation skips it).
@@ -73,7 +76,8 @@ def add_parser(sub):
                         "(0-based), or corner, edge, interior on a lattice (default 1, 2, "
                         "4, ... up to N/2, and N: "
                         f"{','.join(map(str, default_sites(20)))} on the ring of 20, those "
-                        "above N dropped; corner,edge,interior on a lattice)")
+                        "above N dropped; corner,edge,interior on a lattice); all: every k "
+                        "= 1 ... N")
     g.add_argument("--vd-min", type=positive_float, default=1.0,
                    help="smallest belt speed of the branches (default 1.0)")
     g.add_argument("--vd-max", type=positive_float, default=2.2,
@@ -83,6 +87,9 @@ def add_parser(sub):
                         f"{SNAKE_CONTINUATION.max_points})")
     g.add_argument("--no-simulation", action="store_true",
                    help="skip the check by direct simulation at the ends of stable ranges")
+    g.add_argument("--no-switch", action="store_true",
+                   help="do not follow the other branch at each branch point (branch "
+                        "switching along the kernel direction the branch does not take)")
     g.add_argument("--sweep", type=Path, default=None, metavar="STORE",
                    help="a sweep store (jaxchain sweep's sweep.zarr) to draw underneath")
     add_solver_options(p.add_argument_group("solver of the simulations"))
@@ -94,7 +101,8 @@ def add_parser(sub):
 
 def run(args) -> None:
     params = chain_params(args, args.n_osc, v_d=args.vd)
-    asked = default_starts(params.graph) if args.sites is None else args.sites
+    asked = (default_starts(params.graph) if args.sites is None else
+             list(range(1, params.n_osc + 1)) if args.sites == ["all"] else args.sites)
     sites = [k for k in asked if isinstance(k, str) or k <= params.n_osc]
     try:
         sites = list(check_starts(params.graph, sites))
@@ -118,6 +126,7 @@ def run(args) -> None:
                                    transient=SNAKE_START.transient), params).options,
                                solver=args.solver if smoothed else None,
                                eps=args.eps if smoothed else None,
+                               switch=not args.no_switch,
                                simulation_check=not args.no_simulation,
                                out=outputs.path("snake"), progress=show_progress(args))
     model = f"eps = {args.eps:g}" if smoothed else "the exact stick/slip model"

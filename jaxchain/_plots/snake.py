@@ -8,7 +8,8 @@ import numpy as np
 from .canvas import single_axes
 from .bifurcation import _segments
 
-_MARKERS = {"fold": "o", "branch point": "s", "period doubling": "D", "Neimark-Sacker": "^"}
+_MARKERS = {"fold": "o", "branch point": "s", "period doubling": "D", "Neimark-Sacker": "^",
+            "sliding": "v", "grazing": "P", "multiplier jump": "*"}
 
 
 def plot_snake(datasets: dict, sweep=None, title: str = "", ax=None):
@@ -42,7 +43,8 @@ def plot_snake(datasets: dict, sweep=None, title: str = "", ax=None):
         v, e, st = ds["v_d"].values, ds["energy"].values, ds["stable"].values
         for x, y, stable in _segments(v, e, st):
             ax.plot(x, y, "-" if stable else "--", color=c, lw=1.8 if stable else 1.0,
-                    label=f"{label} excited" if stable and label not in seen else None)
+                    label=(f"{label}" if "switched" in label else f"{label} excited")
+                    if stable and label not in seen else None)
             seen.add(label) if stable else None
         for b in json.loads(ds.attrs["bifurcations"]):
             kind = b["type"]

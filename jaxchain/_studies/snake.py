@@ -14,6 +14,7 @@ import numpy as np
 
 from .._engine.progress import tqdm
 from .._bifurcation.bifurcations import locate_bifurcations
+from .._bifurcation.branch_switching import switch_branch
 from .._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
 from .._bifurcation.shooting import unpack
 from .._sweeps.ensemble import ensemble
@@ -241,14 +242,17 @@ def _branch_dataset(k: int, problem, branch, bifurcations) -> xr.Dataset:
 def _follow_branch(orbits, orbit, phase_oscillator: int,
                    continuation_options: ContinuationOptions,
                    algorithm: PseudoArclength = PseudoArclength(), *, k: int = 0,
-                   progress: bool = False) -> xr.Dataset:
+                   switch: bool = False, progress: bool = False
+                   ) -> tuple[xr.Dataset, list[xr.Dataset]]:
     """Continue the branch of periodic orbits through `orbit` over v_d both ways
     (pseudo-arclength, `continuation`), join the two halves in the order of the
-    branch, and locate its bifurcations (`locate_bifurcations`).
+    branch, and locate its bifurcations (`locate_bifurcations`); with `switch`, at
+    each branch point follow the other branch through it (`_switched_branch`).
 
     **Returns:**
 
-    An `xarray.Dataset` over the converged points (dim `point`, coordinate `v_d`):
+    (the branch, the switched branches). Each an `xarray.Dataset` over the
+    converged points (dim `point`, coordinate `v_d`):
     energy (eq. (9)), period, n_halc, stable, the largest non-trivial |multiplier|,
     the trivial multiplier's distance from 1, amplitudes (point, osc) and the
     shooting unknowns u; attributes `bifurcations` (JSON list of type, v_d, energy,
@@ -257,13 +261,16 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
     import xarray as xr
 
     problem = orbits.problem(orbit, phase_oscillator)
-    halves, found = [], []
+    halves, switched = [], []
     for direction in (-1, 1):
         opts = dataclasses.replace(continuation_options, direction=direction)
         branch = continuation(problem, algorithm, opts, progress=progress)
         bifs = locate_bifurcations(problem, branch, algorithm)
         halves.append(_branch_dataset(k, problem, branch, bifs))
-        found.append(bifs)
+        if switch:
+            switched += [_switched_branch(problem, branch, b, continuation_options, algorithm,
+                                          k=k, progress=progress)
+                         for b in bifs if b.kind == "branch point"]
     down, up = halves
     joined = xr.concat([down.isel(point=slice(None, None, -1)), up.isel(point=slice(1, None))],
                        dim="point", data_vars="all")
@@ -272,9 +279,29 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
     bifs = ([b | {"after": last - b["after"] - 1} for b in json.loads(down.attrs["bifurcations"])]
             [::-1] + [b | {"after": last + b["after"]} for b in
                       json.loads(up.attrs["bifurcations"])])
-    return joined.assign_attrs(down.attrs | {
+    joined = joined.assign_attrs(down.attrs | {
         "bifurcations": json.dumps(bifs),
         "stop": json.dumps({"low": down.attrs["stop"], "high": up.attrs["stop"]})})
+    return joined, [ds for ds in switched if ds is not None]
+
+
+def _switched_branch(problem, branch, point, continuation_options: ContinuationOptions,
+                     algorithm: PseudoArclength, *, k: int, progress: bool
+                     ) -> xr.Dataset | None:
+    """The other branch through the branch point `point` of `branch`, stepped onto
+    by `switch_branch` (the kernel direction the followed branch does not take)
+    and continued away from it for `continuation_options.max_points` points, with
+    its bifurcations; attributes `switched_from_vd` and those of `_branch_dataset`.
+    None where the step onto it does not converge."""
+    try:
+        new, tangent = switch_branch(problem, branch, point, algorithm=algorithm)
+    except RuntimeError:
+        return None
+    other = continuation(new, algorithm, continuation_options, tangent=tangent,
+                         progress=progress)
+    ds = _branch_dataset(k, new, other, locate_bifurcations(new, other, algorithm))
+    return ds.assign_attrs(switched_from_vd=float(point.p),
+                           stop=json.dumps({"away": ds.attrs["stop"]}))
 
 
 def stable_ranges(branch: xr.Dataset) -> list[dict]:
@@ -506,7 +533,8 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
                        engine: str = "smoothed", shooting=None,
                        continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
                        start_options: SimulationOptions = SNAKE_START,
-                       solver=DEFAULT_SOLVER, eps=None, simulation_check: bool = True,
+                       solver=DEFAULT_SOLVER, eps=None, switch: bool = True,
+                       simulation_check: bool = True,
                        out: Path | None = None, progress: bool = False) -> dict:
     """The snake: each localized periodic state that simulation finds at
     `params.v_d` (eq. (8) with k excited, for k in `sites`), refined by shooting,
@@ -537,6 +565,9 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
         engine of every simulation (`Smoothed.eps`) and of every orbit, branch and
         multiplier; `DEFAULT_EPS` by default. Stored branches are read back only
         for an equal eps.
+    - `switch`: at each branch point of a branch, switch onto the other branch
+        through it and follow that too (`switch_branch`: the kernel direction that
+        the followed branch does not take; labelled "k=<k> switched <j>").
     - `simulation_check`: check every stable range by direct simulation.
     - `out`: a folder: each branch is stored there as `branch_k<k>.nc` (or
         `branch_<name>.nc`) with the key
@@ -556,7 +587,7 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     to the exact engine or shooting options of the other engine.
     """
     params, sites, orbits = _check_branches(params, sites, engine, shooting, solver, eps)
-    run = _run_branches(orbits, params, sites, continuation_options, start_options,
+    run = _run_branches(orbits, params, sites, continuation_options, start_options, switch,
                         simulation_check, out, progress)
     return _branches_summary(*run)
 
@@ -571,34 +602,35 @@ def _check_branches(params: ChainParams | None, sites, engine, shooting, solver,
 
 
 def _run_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
-                  start_options, simulation_check, out, progress) -> tuple:
+                  start_options, switch, simulation_check, out, progress) -> tuple:
     """The branches (`_find_branches`), then the checks of their stable ranges
     (`_stable_range_checks`): (datasets, starts, failed starts, checks)."""
     datasets, starts, failed = _find_branches(orbits, params, sites, continuation_options,
-                                              start_options, out, progress)
+                                              start_options, switch, out, progress)
     checks = _stable_range_checks(orbits, params, datasets, simulation_check,
                                   progress)
     return datasets, starts, failed, checks
 
 
 def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
-                   start_options, out, progress) -> tuple[dict, dict, dict]:
-    """The branch of each start: read back from `out` where stored with the same
-    settings, else started by simulation and shooting (`start_orbits`), continued
+                   start_options, switch, out, progress) -> tuple[dict, dict, dict]:
+    """The branch of each start, and with `switch` the branches switched onto at
+    its branch points: read back from `out` where stored with the same settings,
+    else started by simulation and shooting (`start_orbits`), continued
     (`_follow_branch`) and stored. Returns (label -> branch dataset, start -> the
     simulation's n_HALC and energy, start -> why it has no periodic orbit)."""
     datasets, starts, failed = {}, {}, {}
     settings = {"chain": chain_record(params), **orbits.settings(),
-                "continuation": continuation_options, "start": start_options}
+                "continuation": continuation_options, "start": start_options,
+                "switch": bool(switch)}
     paths = {k: None if out is None else Path(out) / (
         f"branch_{k}.nc" if isinstance(k, str) else f"branch_k{k}.nc").replace(":", "")
         for k in sites}
     todo = []
     for k in sites:
-        stored = None if out is None else read_dataset(paths[k], "snake branch", k=k,
-                                                       **settings)
-        if stored is not None:
-            datasets[_start_label(k)] = stored
+        stored = [] if out is None else _read_branches(paths[k], k, settings)
+        if stored:
+            datasets |= {_branch_label(k, j): ds for j, ds in enumerate(stored)}
         else:
             todo.append(k)
     if todo:
@@ -609,18 +641,47 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
                 failed[k] = reason
                 continue
             mask = start_mask(params.graph, k)
-            ds = _follow_branch(orbits, orbit, int(np.argmax(np.asarray(orbit.amplitudes))),
-                                continuation_options, k=int(mask.sum()), progress=progress)
-            ds = ds.assign_attrs(start=_start_label(k),
-                                 start_sites=np.flatnonzero(mask).tolist(),
-                                 start_vd=float(params.v_d),
-                                 start_energy=float(orbit.energy),
-                                 start_n_halc=int(orbit.n_halc))
-            if out is not None:
-                Path(out).mkdir(parents=True, exist_ok=True)
-                write_dataset(ds, paths[k], "snake branch", k=k, **settings)
-            datasets[_start_label(k)] = ds
+            ds, switched = _follow_branch(
+                orbits, orbit, int(np.argmax(np.asarray(orbit.amplitudes))),
+                continuation_options, k=int(mask.sum()), switch=switch, progress=progress)
+            found = [ds.assign_attrs(start_vd=float(params.v_d),
+                                     start_energy=float(orbit.energy),
+                                     start_n_halc=int(orbit.n_halc), switched=len(switched))]
+            found += [sw.assign_attrs(start_vd=sw.attrs["switched_from_vd"],
+                                      start_energy=float(sw["energy"].values[0]),
+                                      start_n_halc=int(sw["n_halc"].values[0]))
+                      for sw in switched]
+            found = [f.assign_attrs(start=_start_label(k),
+                                    start_sites=np.flatnonzero(mask).tolist()) for f in found]
+            for j, f in enumerate(found):
+                if out is not None:
+                    Path(out).mkdir(parents=True, exist_ok=True)
+                    write_dataset(f, _switched_path(paths[k], j), "snake branch", k=k,
+                                  switched=j, **settings)
+                datasets[_branch_label(k, j)] = f
     return datasets, starts, failed
+
+
+def _branch_label(start, j: int) -> str:
+    """The label of the branch of a start (j = 0) or of the j-th branch switched
+    onto from it."""
+    return _start_label(start) + ("" if j == 0 else f" switched {j}")
+
+
+def _switched_path(path: Path | None, j: int) -> Path | None:
+    """The file of the j-th branch switched onto from the branch stored at `path`."""
+    return path if path is None or j == 0 else path.with_name(f"{path.stem}_switched{j}.nc")
+
+
+def _read_branches(path: Path, k, settings: dict) -> list:
+    """The stored branch of start k and the branches switched onto from it, or []
+    if any of them is missing or was made with other settings."""
+    first = read_dataset(path, "snake branch", k=k, switched=0, **settings)
+    if first is None:
+        return []
+    rest = [read_dataset(_switched_path(path, j), "snake branch", k=k, switched=j, **settings)
+            for j in range(1, int(first.attrs.get("switched", 0)) + 1)]
+    return [] if any(r is None for r in rest) else [first] + rest
 
 
 def _stable_range_checks(orbits, params: ChainParams, datasets: dict,
@@ -649,6 +710,11 @@ def _branches_summary(datasets: dict, starts: dict, failed: dict, checks: dict) 
     """The result of `localized_branches`: its JSON-ready summary, one entry per
     branch with what `_stable_range_checks` found, and the datasets."""
     links = _connections(datasets)
+    for label, ds in datasets.items():  # a switched branch meets its own at the branch point
+        parent = ds.attrs["start"] if "switched" in label else None
+        if parent in datasets:
+            links[label].append(parent)
+            links[parent].append(label)
     branches = []
     for label, ds in datasets.items():
         ranges = checks[label]["ranges"]
@@ -666,6 +732,7 @@ def _branches_summary(datasets: dict, starts: dict, failed: dict, checks: dict) 
                  "stop": json.loads(ds.attrs["stop"]),
                  "start": {"v_d": ds.attrs["start_vd"], "energy": ds.attrs["start_energy"],
                            "n_halc": ds.attrs["start_n_halc"]},
+                 "switched_from_vd": ds.attrs.get("switched_from_vd"),
                  "largest_trivial_multiplier_error": float(
                      ds["trivial_multiplier_error"].max())}
         entry |= {k: v for k, v in checks[label].items() if k != "ranges"}
