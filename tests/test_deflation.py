@@ -113,3 +113,29 @@ def test_symmetries_of_the_ring_and_bad_arguments(simulated):
         jc.distinct_orbits(problem, problem.u0, count=0)
     with pytest.raises(ValueError, match="n_samples"):
         jc.deflation(problem, n_samples=4)
+    with pytest.raises(ValueError, match="deflate"):
+        jc.localized_branches(RING, (1,), deflate=-1)
+
+
+def test_the_snake_follows_the_orbits_that_deflation_finds(tmp_path):
+    """`localized_branches(deflate=2)` from eq. (8) with two excited: besides the
+    branch of the simulated state, the branches of two further orbits at the start's
+    v_d, each a periodic orbit for scipy and no symmetric copy of the others; all
+    stored and read back."""
+    kwargs = dict(continuation_options=jc.ContinuationOptions(
+        ds=0.02, ds_max=0.05, p_min=1.45, p_max=1.55, max_points=3),
+        start_options=START, simulation_check=False, deflate=2, out=tmp_path)
+    found = jc.localized_branches(RING, (2,), **kwargs)
+    labels = ["k=2", "k=2 deflated 1", "k=2 deflated 2"]
+    assert list(found["datasets"]) == labels
+    starts = []
+    for label in labels:
+        ds = found["datasets"][label]
+        starts.append(ds["u"].values[int(np.argmin(np.abs(ds["v_d"].values - 1.5)))])
+    for u in starts[1:]:
+        assert scipy_return(u) < 1e-6
+    for i in range(3):
+        for j in range(i):
+            assert copies_distance(starts[j], starts[i]) > 1e-2
+    again = jc.localized_branches(RING, (2,), **kwargs)
+    assert list(again["datasets"]) == labels

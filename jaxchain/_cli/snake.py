@@ -34,6 +34,10 @@ which the paper's Fig. 3(b) only suggests by simulation ("snaking"):
   - at each branch point, branch switching: the other branch through it, along
     the kernel direction of the continuation's Jacobian that the followed branch
     does not take, followed away from it (--no-switch skips it);
+  - with --deflate M, deflation (Farrell, Birkisson and Funke 2015) from each
+    start's eq. (8) state: up to M further periodic orbits at --vd, none of those
+    found before, each followed as a branch of its own, so that branches that
+    meet no followed one are found too;
   - which branches meet (the same orbit up to the chain's symmetries), and
     direct simulation just inside and outside each end of each stable range
     (--no-simulation skips it).
@@ -87,6 +91,11 @@ def add_parser(sub):
                         f"{SNAKE_CONTINUATION.max_points})")
     g.add_argument("--no-simulation", action="store_true",
                    help="skip the check by direct simulation at the ends of stable ranges")
+    g.add_argument("--deflate", type=int, default=0, metavar="M",
+                   help="at --vd, up to M further periodic orbits from the eq. (8) state "
+                        "of each start by deflation (every orbit found so far, its copies "
+                        "under the ring's symmetries and steady sliding deflated), each "
+                        "followed as a branch of its own (default 0: none)")
     g.add_argument("--no-switch", action="store_true",
                    help="do not follow the other branch at each branch point (branch "
                         "switching along the kernel direction the branch does not take)")
@@ -126,7 +135,7 @@ def run(args) -> None:
                                    transient=SNAKE_START.transient), params).options,
                                solver=args.solver if smoothed else None,
                                eps=args.eps if smoothed else None,
-                               switch=not args.no_switch,
+                               switch=not args.no_switch, deflate=args.deflate,
                                simulation_check=not args.no_simulation,
                                out=outputs.path("snake"), progress=show_progress(args))
     model = f"eps = {args.eps:g}" if smoothed else "the exact stick/slip model"

@@ -16,7 +16,8 @@ from .._engine.progress import tqdm
 from .._bifurcation.bifurcations import locate_bifurcations
 from .._bifurcation.branch_switching import switch_branch
 from .._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
-from .._bifurcation.shooting import unpack
+from .._bifurcation.deflation import distinct_orbits
+from .._bifurcation.shooting import pack, unpack
 from .._sweeps.ensemble import ensemble
 from .._engine.options import SimulationOptions
 from .._engine.observers.crossings import downward_crossings
@@ -534,6 +535,7 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
                        continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
                        start_options: SimulationOptions = SNAKE_START,
                        solver=DEFAULT_SOLVER, eps=None, switch: bool = True,
+                       deflate: int = 0,
                        simulation_check: bool = True,
                        out: Path | None = None, progress: bool = False) -> dict:
     """The snake: each localized periodic state that simulation finds at
@@ -568,6 +570,10 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     - `switch`: at each branch point of a branch, switch onto the other branch
         through it and follow that too (`switch_branch`: the kernel direction that
         the followed branch does not take; labelled "k=<k> switched <j>").
+    - `deflate`: at `params.v_d`, up to this many further periodic orbits from the
+        eq. (8) state of each start by deflation (`distinct_orbits`), every orbit
+        found so far deflated; each is followed as a branch of its own, labelled
+        "k=<k> deflated <j>" (0: none).
     - `simulation_check`: check every stable range by direct simulation.
     - `out`: a folder: each branch is stored there as `branch_k<k>.nc` (or
         `branch_<name>.nc`) with the key
@@ -587,8 +593,10 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     to the exact engine or shooting options of the other engine.
     """
     params, sites, orbits = _check_branches(params, sites, engine, shooting, solver, eps)
+    if not (isinstance(deflate, int) and deflate >= 0):
+        raise ValidationError(f"deflate must be a whole number >= 0, got {deflate!r}")
     run = _run_branches(orbits, params, sites, continuation_options, start_options, switch,
-                        simulation_check, out, progress)
+                        deflate, simulation_check, out, progress)
     return _branches_summary(*run)
 
 
@@ -602,86 +610,125 @@ def _check_branches(params: ChainParams | None, sites, engine, shooting, solver,
 
 
 def _run_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
-                  start_options, switch, simulation_check, out, progress) -> tuple:
+                  start_options, switch, deflate, simulation_check, out, progress) -> tuple:
     """The branches (`_find_branches`), then the checks of their stable ranges
     (`_stable_range_checks`): (datasets, starts, failed starts, checks)."""
     datasets, starts, failed = _find_branches(orbits, params, sites, continuation_options,
-                                              start_options, switch, out, progress)
+                                              start_options, switch, deflate, out, progress)
     checks = _stable_range_checks(orbits, params, datasets, simulation_check,
                                   progress)
     return datasets, starts, failed, checks
 
 
 def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
-                   start_options, switch, out, progress) -> tuple[dict, dict, dict]:
-    """The branch of each start, and with `switch` the branches switched onto at
-    its branch points: read back from `out` where stored with the same settings,
-    else started by simulation and shooting (`start_orbits`), continued
-    (`_follow_branch`) and stored. Returns (label -> branch dataset, start -> the
-    simulation's n_HALC and energy, start -> why it has no periodic orbit)."""
+                   start_options, switch, deflate, out, progress) -> tuple[dict, dict, dict]:
+    """The branch of each start, with `deflate` the branches of the further orbits
+    that deflation finds from its eq. (8) state (`_deflated_orbits`), and with
+    `switch` the branches switched onto at their branch points: read back from
+    `out` where stored with the same settings, else started by simulation and
+    shooting (`start_orbits`), continued (`_follow_branch`) and stored. Returns
+    (label -> branch dataset, start -> the simulation's n_HALC and energy, start ->
+    why it has no periodic orbit)."""
     datasets, starts, failed = {}, {}, {}
     settings = {"chain": chain_record(params), **orbits.settings(),
                 "continuation": continuation_options, "start": start_options,
-                "switch": bool(switch)}
+                "switch": bool(switch), "deflate": int(deflate)}
     paths = {k: None if out is None else Path(out) / (
         f"branch_{k}.nc" if isinstance(k, str) else f"branch_k{k}.nc").replace(":", "")
         for k in sites}
     todo = []
     for k in sites:
-        stored = [] if out is None else _read_branches(paths[k], k, settings)
-        if stored:
-            datasets |= {_branch_label(k, j): ds for j, ds in enumerate(stored)}
-        else:
+        stored = {} if out is None else _read_branches(paths[k], k, _start_label(k), settings)
+        datasets |= stored
+        if not stored:
             todo.append(k)
-    if todo:
-        for k, (orbit, sim, reason) in _start_orbits(orbits, params, todo, start_options,
-                                                     progress).items():
-            starts[k] = sim
-            if orbit is None:
-                failed[k] = reason
-                continue
-            mask = start_mask(params.graph, k)
+    if not todo:
+        return datasets, starts, failed
+    found = _start_orbits(orbits, params, todo, start_options, progress)
+    deflated = _deflated_orbits(orbits, params, found, deflate) if deflate else {}
+    for k, (orbit, sim, reason) in found.items():
+        starts[k] = sim
+        if orbit is None:
+            failed[k] = reason
+            continue
+        mask = start_mask(params.graph, k)
+        runs = [(_start_label(k), paths[k], orbit, float(params.v_d))]
+        runs += [(f"{_start_label(k)} deflated {j}", _numbered(paths[k], "deflated", j), o,
+                  float(params.v_d)) for j, o in enumerate(deflated.get(k, []), 1)]
+        for n, (label, path, start, vd) in enumerate(runs):
             ds, switched = _follow_branch(
-                orbits, orbit, int(np.argmax(np.asarray(orbit.amplitudes))),
+                orbits, start, int(np.argmax(np.asarray(start.amplitudes))),
                 continuation_options, k=int(mask.sum()), switch=switch, progress=progress)
-            found = [ds.assign_attrs(start_vd=float(params.v_d),
-                                     start_energy=float(orbit.energy),
-                                     start_n_halc=int(orbit.n_halc), switched=len(switched))]
-            found += [sw.assign_attrs(start_vd=sw.attrs["switched_from_vd"],
-                                      start_energy=float(sw["energy"].values[0]),
-                                      start_n_halc=int(sw["n_halc"].values[0]))
-                      for sw in switched]
-            found = [f.assign_attrs(start=_start_label(k),
-                                    start_sites=np.flatnonzero(mask).tolist()) for f in found]
-            for j, f in enumerate(found):
+            first = ds.assign_attrs(start_vd=vd, start_energy=float(start.energy),
+                                    start_n_halc=int(start.n_halc), switched=len(switched),
+                                    deflated=len(runs) - 1 if n == 0 else 0)
+            branches = [first] + [sw.assign_attrs(start_vd=sw.attrs["switched_from_vd"],
+                                                  start_energy=float(sw["energy"].values[0]),
+                                                  start_n_halc=int(sw["n_halc"].values[0]))
+                                  for sw in switched]
+            for j, b in enumerate(branches):
+                b = b.assign_attrs(start=label, start_sites=np.flatnonzero(mask).tolist())
                 if out is not None:
                     Path(out).mkdir(parents=True, exist_ok=True)
-                    write_dataset(f, _switched_path(paths[k], j), "snake branch", k=k,
-                                  switched=j, **settings)
-                datasets[_branch_label(k, j)] = f
+                    write_dataset(b, _numbered(path, "switched", j), "snake branch", k=k,
+                                  label=label, switched=j, **settings)
+                datasets[label if j == 0 else f"{label} switched {j}"] = b
     return datasets, starts, failed
 
 
-def _branch_label(start, j: int) -> str:
-    """The label of the branch of a start (j = 0) or of the j-th branch switched
-    onto from it."""
-    return _start_label(start) + ("" if j == 0 else f" switched {j}")
+def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int) -> dict:
+    """Further periodic orbits at `params.v_d` by deflation (`distinct_orbits`, Farrell,
+    Birkisson and Funke 2015): from the eq. (8) state of each start k (T = 2 pi),
+    with every orbit found so far deflated (the starts' own, those of earlier k,
+    their symmetric copies, steady sliding), up to `count` each; each refined by
+    shooting with the phase condition on its oscillator of largest amplitude.
+    Returns k -> [orbit, ...]."""
+    known = [pack(o.y0, o.period) for o, _, _ in found.values() if o is not None]
+    out = {}
+    for k, (orbit, _, _) in found.items():
+        if orbit is None:
+            continue
+        n = int(np.argmax(np.asarray(orbit.amplitudes)))
+        problem = orbits.problem(orbit, n)
+        y0 = jnp.asarray(OutOfPhaseExcitation.eq8(start_mask(params.graph, k))(params))
+        start = pack(y0.at[1, n].set(0.0), 2 * np.pi)
+        new = distinct_orbits(problem, start, known, count=count)
+        known += new
+        out[k] = []
+        for u in new:
+            y, period = unpack(u)
+            shot = orbits.shoot(params, y, period, n)
+            m = int(np.argmax(np.asarray(shot.amplitudes)))
+            if m != n:  # the phase condition on the oscillator that vibrates most
+                guess = _turning_point(orbits, params, np.asarray(y), m)
+                shot = None if guess is None else orbits.shoot(params, guess[0], guess[1], m)
+            if shot is not None and bool(shot.converged):
+                out[k].append(shot)
+    return out
 
 
-def _switched_path(path: Path | None, j: int) -> Path | None:
-    """The file of the j-th branch switched onto from the branch stored at `path`."""
-    return path if path is None or j == 0 else path.with_name(f"{path.stem}_switched{j}.nc")
+def _numbered(path: Path | None, what: str, j: int) -> Path | None:
+    """The file of the j-th branch of kind `what` (switched, deflated) beside the
+    branch stored at `path` (j = 0: that branch)."""
+    return path if path is None or j == 0 else path.with_name(f"{path.stem}_{what}{j}.nc")
 
 
-def _read_branches(path: Path, k, settings: dict) -> list:
-    """The stored branch of start k and the branches switched onto from it, or []
-    if any of them is missing or was made with other settings."""
-    first = read_dataset(path, "snake branch", k=k, switched=0, **settings)
+def _read_branches(path: Path, k, label: str, settings: dict) -> dict:
+    """The stored branch `label` of start k, the branches switched onto from it and
+    the deflated branches of the start with theirs (label -> dataset), or {} if any
+    of them is missing or was made with other settings."""
+    first = read_dataset(path, "snake branch", k=k, label=label, switched=0, **settings)
     if first is None:
-        return []
-    rest = [read_dataset(_switched_path(path, j), "snake branch", k=k, switched=j, **settings)
-            for j in range(1, int(first.attrs.get("switched", 0)) + 1)]
-    return [] if any(r is None for r in rest) else [first] + rest
+        return {}
+    out = {label: first}
+    for j in range(1, int(first.attrs.get("switched", 0)) + 1):
+        out[f"{label} switched {j}"] = read_dataset(_numbered(path, "switched", j),
+                                                    "snake branch", k=k, label=label,
+                                                    switched=j, **settings)
+    for j in range(1, int(first.attrs.get("deflated", 0)) + 1):
+        out |= _read_branches(_numbered(path, "deflated", j), k, f"{label} deflated {j}",
+                              settings) or {"missing": None}
+    return {} if any(ds is None for ds in out.values()) else out
 
 
 def _stable_range_checks(orbits, params: ChainParams, datasets: dict,
