@@ -110,3 +110,26 @@ def test_the_snake_switches_branches_at_its_branch_points(branch_point, tmp_path
     assert list(again["datasets"]) == labels
     assert np.array_equal(again["datasets"]["k=1 switched 1"]["u"].values,
                           found["datasets"]["k=1 switched 1"]["u"].values)
+
+
+def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch):
+    """The first start's continuation raises (as it did where the start's phase
+    condition was not the problem's): that start is reported with the reason, the
+    other start's branch is computed."""
+    follow = internal("snake branch")
+    calls = []
+
+    def first_fails(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise ValueError("problem.u0 is not a solution")
+        return follow(*args, **kwargs)
+
+    replace_internal(monkeypatch, "snake branch", first_fails)
+    found = jc.localized_branches(
+        RING, (1, 2), continuation_options=jc.ContinuationOptions(ds=0.02, max_points=2),
+        start_options=jc.SimulationOptions(t_end=2000.0, transient=1500.0),
+        simulation_check=False, switch=False)
+    assert [b["label"] for b in found["summary"]["branches"]] == ["k=2"]
+    (flagged,) = found["summary"]["not_periodic"]
+    assert flagged["excited"] == 1 and "continuation failed" in flagged["reason"]

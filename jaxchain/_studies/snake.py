@@ -202,6 +202,7 @@ def _start_orbits(orbits, params: ChainParams, sites, options: SimulationOptions
             out[k] = (None, sim, "the simulation failed")
             continue
         n = int(np.argmax(amplitudes))
+        sim["phase_oscillator"] = n  # of the orbit's phase condition
         guess = _turning_point(orbits, params, ds["y_final"].values[0, i], n)
         if guess is None:
             out[k] = (None, sim, "no turning point: steady sliding")
@@ -652,14 +653,19 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
             failed[k] = reason
             continue
         mask = start_mask(params.graph, k)
-        runs = [(_start_label(k), paths[k], orbit, float(params.v_d))]
-        runs += [(f"{_start_label(k)} deflated {j}", _numbered(paths[k], "deflated", j), o,
-                  float(params.v_d)) for j, o in enumerate(deflated.get(k, []), 1)]
-        for n, (label, path, start, vd) in enumerate(runs):
-            ds, switched = _follow_branch(
-                orbits, start, int(np.argmax(np.asarray(start.amplitudes))),
-                continuation_options, k=int(mask.sum()), switch=switch, progress=progress)
-            first = ds.assign_attrs(start_vd=vd, start_energy=float(start.energy),
+        runs = [(_start_label(k), paths[k], orbit, sim["phase_oscillator"])]
+        runs += [(f"{_start_label(k)} deflated {j}", _numbered(paths[k], "deflated", j), o, m)
+                 for j, (o, m) in enumerate(deflated.get(k, []), 1)]
+        for n, (label, path, start, phase) in enumerate(runs):
+            try:
+                ds, switched = _follow_branch(orbits, start, phase, continuation_options,
+                                              k=int(mask.sum()), switch=switch,
+                                              progress=progress)
+            except (ValueError, RuntimeError) as err:  # flagged; the other branches go on
+                key = k if n == 0 else label
+                starts[key], failed[key] = sim, f"continuation failed: {err}"
+                continue
+            first = ds.assign_attrs(start_vd=float(params.v_d), start_energy=float(start.energy),
                                     start_n_halc=int(start.n_halc), switched=len(switched),
                                     deflated=len(runs) - 1 if n == 0 else 0)
             branches = [first] + [sw.assign_attrs(start_vd=sw.attrs["switched_from_vd"],
@@ -682,13 +688,13 @@ def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int) -> di
     with every orbit found so far deflated (the starts' own, those of earlier k,
     their symmetric copies, steady sliding), up to `count` each; each refined by
     shooting with the phase condition on its oscillator of largest amplitude.
-    Returns k -> [orbit, ...]."""
+    Returns k -> [(orbit, its phase oscillator), ...]."""
     known = [pack(o.y0, o.period) for o, _, _ in found.values() if o is not None]
     out = {}
-    for k, (orbit, _, _) in found.items():
+    for k, (orbit, sim, _) in found.items():
         if orbit is None:
             continue
-        n = int(np.argmax(np.asarray(orbit.amplitudes)))
+        n = sim["phase_oscillator"]
         problem = orbits.problem(orbit, n)
         y0 = jnp.asarray(OutOfPhaseExcitation.eq8(start_mask(params.graph, k))(params))
         start = pack(y0.at[1, n].set(0.0), 2 * np.pi)
@@ -703,7 +709,7 @@ def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int) -> di
                 guess = _turning_point(orbits, params, np.asarray(y), m)
                 shot = None if guess is None else orbits.shoot(params, guess[0], guess[1], m)
             if shot is not None and bool(shot.converged):
-                out[k].append(shot)
+                out[k].append((shot, m))
     return out
 
 
