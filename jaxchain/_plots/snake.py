@@ -55,5 +55,6 @@ def plot_snake(datasets: dict, sweep=None, title: str = "", ax=None):
     ax.set_ylabel("energy $E = \\frac{1}{2}\\sum A_n^2$ (eq. (9))")
     ax.set_yscale("symlog", linthresh=1.0)
     ax.set_title(title or "localized periodic states: stable solid, unstable dashed")
-    ax.legend(fontsize=8, loc="upper left")
+    if ax.get_legend_handles_labels()[0]:  # nothing stable and no bifurcation: no legend
+        ax.legend(fontsize=8, loc="upper left")
     return fig
