@@ -731,10 +731,15 @@ def _read_branches(path: Path, k, label: str, settings: dict) -> dict:
         out[f"{label} switched {j}"] = read_dataset(_numbered(path, "switched", j),
                                                     "snake branch", k=k, label=label,
                                                     switched=j, **settings)
+    if any(ds is None for ds in out.values()):
+        return {}
     for j in range(1, int(first.attrs.get("deflated", 0)) + 1):
-        out |= _read_branches(_numbered(path, "deflated", j), k, f"{label} deflated {j}",
-                              settings) or {"missing": None}
-    return {} if any(ds is None for ds in out.values()) else out
+        deflated = _read_branches(_numbered(path, "deflated", j), k, f"{label} deflated {j}",
+                                  settings)
+        if not deflated:
+            return {}
+        out |= deflated
+    return out
 
 
 def _stable_range_checks(orbits, params: ChainParams, datasets: dict,
