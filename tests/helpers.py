@@ -291,6 +291,7 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "snake start orbits": ("jaxchain._studies.snake", "start_orbits"),
              "snake starts": ("jaxchain._studies.snake", "_start_orbits"),
              "snake branch": ("jaxchain._studies.snake", "_follow_branch"),
+             "snake switched branch": ("jaxchain._studies.snake", "_switched_branch"),
              "orbit description": ("jaxchain._bifurcation.shooting", "describe_orbit"),
              "mistuning design problems": ("jaxchain._studies.mistuning.pattern_design",
                                            "design_problems"),

@@ -126,10 +126,28 @@ def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch):
         return follow(*args, **kwargs)
 
     replace_internal(monkeypatch, "snake branch", first_fails)
+    # k = 2 first: the branch that is computed is then k = 1's, on the shooting
+    # options (its phase oscillator) whose programs the tests above compiled.
     found = jc.localized_branches(
-        RING, (1, 2), continuation_options=jc.ContinuationOptions(ds=0.02, max_points=2),
+        RING, (2, 1), continuation_options=jc.ContinuationOptions(ds=0.02, max_points=2),
         start_options=jc.SimulationOptions(t_end=2000.0, transient=1500.0),
         simulation_check=False, switch=False)
-    assert [b["label"] for b in found["summary"]["branches"]] == ["k=2"]
+    assert [b["label"] for b in found["summary"]["branches"]] == ["k=1"]
     (flagged,) = found["summary"]["not_periodic"]
-    assert flagged["excited"] == 1 and "continuation failed" in flagged["reason"]
+    assert flagged["excited"] == 2 and "continuation failed" in flagged["reason"]
+
+
+def test_a_switch_that_fails_is_reported_with_its_branch_point(branch_point, monkeypatch):
+    """Where the step onto the other branch does not converge (`switch_branch` raises
+    RuntimeError), the snake keeps the branch point's v_d and the reason, for the
+    followed branch's `failed_switches`, instead of dropping it silently."""
+    problem, branch, point = branch_point
+
+    def fails(*args, **kwargs):
+        raise RuntimeError("switching did not converge")
+
+    monkeypatch.setattr("jaxchain._studies.snake.switch_branch", fails)
+    failure = internal("snake switched branch")(
+        problem, branch, point, jc.ContinuationOptions(max_points=2), jc.PseudoArclength(),
+        k=2, progress=False)
+    assert failure == {"v_d": float(point.p), "reason": "switching did not converge"}

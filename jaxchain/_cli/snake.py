@@ -163,6 +163,8 @@ def _print_summary(s: dict) -> None:
         for r in b["stable_range_ends"]:
             print("   ends: " + "; ".join(f"{e['type']} at {_number(e['v_d'], '.5f')}"
                                           for e in r))
+        for f in b.get("failed_switches", []):
+            print(f"   switch at the branch point v_d = {f['v_d']:.5f} failed: {f['reason']}")
         for c in b.get("simulation_check", []):
             verdict = ("agrees" if c["agrees"] else "DISAGREES" if c["agrees"] is False else
                        f"undecided: growth {_number(c['expected_growth'], '.3g')} over the "

@@ -258,7 +258,9 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
     energy (eq. (9)), period, n_halc, stable, the largest non-trivial |multiplier|,
     the trivial multiplier's distance from 1, amplitudes (point, osc) and the
     shooting unknowns u; attributes `bifurcations` (JSON list of type, v_d, energy,
-    multiplier, n_halc, and `after`: the index of the point before it) and `stop`.
+    multiplier, n_halc, and `after`: the index of the point before it), `stop`, and
+    `failed_switches` (JSON list of the branch points where the switch failed: v_d,
+    reason).
     """
     import xarray as xr
 
@@ -273,6 +275,7 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
             switched += [_switched_branch(problem, branch, b, continuation_options, algorithm,
                                           k=k, progress=progress)
                          for b in bifs if b.kind == "branch point"]
+    failures = [sw for sw in switched if isinstance(sw, dict)]
     down, up = halves
     joined = xr.concat([down.isel(point=slice(None, None, -1)), up.isel(point=slice(1, None))],
                        dim="point", data_vars="all")
@@ -283,8 +286,9 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
                       json.loads(up.attrs["bifurcations"])])
     joined = joined.assign_attrs(down.attrs | {
         "bifurcations": json.dumps(bifs),
-        "stop": json.dumps({"low": down.attrs["stop"], "high": up.attrs["stop"]})})
-    return joined, [ds for ds in switched if ds is not None]
+        "stop": json.dumps({"low": down.attrs["stop"], "high": up.attrs["stop"]}),
+        "failed_switches": json.dumps(failures)})
+    return joined, [ds for ds in switched if not isinstance(ds, dict)]
 
 
 def _switched_branch(problem, branch, point, continuation_options: ContinuationOptions,
@@ -294,11 +298,13 @@ def _switched_branch(problem, branch, point, continuation_options: ContinuationO
     by `switch_branch` (the kernel direction the followed branch does not take)
     and continued away from it for `continuation_options.max_points` points, with
     its bifurcations; attributes `switched_from_vd` and those of `_branch_dataset`.
-    None where the step onto it does not converge."""
+    Where the step onto it does not converge, the failure instead: a dict of the
+    branch point's v_d and the reason, which the followed branch keeps
+    (`failed_switches`)."""
     try:
         new, tangent = switch_branch(problem, branch, point, algorithm=algorithm)
-    except RuntimeError:
-        return None
+    except RuntimeError as err:
+        return {"v_d": float(point.p), "reason": str(err)}
     other = continuation(new, algorithm, continuation_options, tangent=tangent,
                          progress=progress)
     ds = _branch_dataset(k, new, other, locate_bifurcations(new, other, algorithm))
@@ -791,6 +797,7 @@ def _branches_summary(datasets: dict, starts: dict, failed: dict, checks: dict) 
                  "start": {"v_d": ds.attrs["start_vd"], "energy": ds.attrs["start_energy"],
                            "n_halc": ds.attrs["start_n_halc"]},
                  "switched_from_vd": ds.attrs.get("switched_from_vd"),
+                 "failed_switches": json.loads(ds.attrs.get("failed_switches", "[]")),
                  "largest_trivial_multiplier_error": float(
                      ds["trivial_multiplier_error"].max())}
         entry |= {k: v for k, v in checks[label].items() if k != "ranges"}
