@@ -1,4 +1,3 @@
-import gc
 import os
 import shutil
 import tempfile
@@ -40,15 +39,6 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 import jaxchain  # noqa: E402
 
 jaxchain.configure()  # float64 and the XLA flags, as a user's first call
-
-# Tracing a program makes many short-lived Python objects, and the collector's full
-# passes walk every object that the imports and the compiled programs keep: the
-# modules imported so far are left out of those passes (`gc.freeze`) and the
-# youngest generation is collected less often. 3 to 6 % less time on the
-# trace-heavy test files, the same peak memory (measured on test_simulate.py,
-# test_mistuning_design.py, test_continuation.py and test_hopf.py, one process).
-gc.freeze()
-gc.set_threshold(100_000, 50, 100)
 
 
 def pytest_unconfigure(config):

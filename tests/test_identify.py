@@ -155,6 +155,8 @@ def test_noise_free_records_give_the_parameters_and_offsets(clean_records):
     for label, value in zip(result.labels, result.values):
         assert value == pytest.approx(TRUE[label], rel=1e-3), label
     np.testing.assert_allclose(result.offsets, offsets, atol=1e-3)
+    # the printed table says which model was fitted (identify's command prints it)
+    assert result.summary().splitlines()[0] == "fitted by the smoothed model, eps = 1e-05"
 
 
 @pytest.mark.numerics

@@ -342,8 +342,12 @@ class Identification:
         return out
 
     def summary(self) -> str:
-        """The fitted parameters with their standard errors, as a table."""
-        lines = [f"{'parameter':<12}{'value':>14}{'std. error':>14}{'rel.':>9}"]
+        """The fitted model (engine, eps) and the fitted parameters with their
+        standard errors, as a table."""
+        model = ("the exact stick/slip model" if self.engine == "exact" else
+                 f"the smoothed model, eps = {self.eps:g}")
+        lines = [f"fitted by {model}",
+                 f"{'parameter':<12}{'value':>14}{'std. error':>14}{'rel.':>9}"]
         for label, v, s in zip(self.labels, self.values, self.standard_errors):
             rel = f"{abs(s / v):8.2%}" if v else "       -"
             lines.append(f"{label:<12}{v:14.6g}{s:14.3g} {rel}")
