@@ -43,11 +43,12 @@ def plot_snake(datasets: dict, sweep=None, title: str = "", ax=None):
     # `excited`; a switched or deflated branch has its start's): with every k of a
     # long ring on one axes, a colour map and its colour bar say more than a legend.
     ks = [int(ds.attrs.get("excited", i + 1)) for i, ds in enumerate(datasets.values())]
+    several = len(set(ks)) > 1
     norm = plt.Normalize(min(ks, default=1) - 0.5, max(ks, default=1) + 0.5)
-    cmap = plt.get_cmap("viridis" if len(set(ks)) > 1 else "tab10")
+    cmap = plt.get_cmap("viridis" if several else "tab10")
     seen = set()
     for k, ds in zip(ks, datasets.values()):
-        c = cmap(norm(k)) if len(set(ks)) > 1 else cmap(0)
+        c = cmap(norm(k)) if several else cmap(0)
         v, e, st = ds["v_d"].values, ds["energy"].values, ds["stable"].values
         for x, y, stable in _segments(v, e, st):
             style = "stable" if stable else "unstable"
@@ -61,7 +62,7 @@ def plot_snake(datasets: dict, sweep=None, title: str = "", ax=None):
             ax.plot(b["v_d"], b["energy"], _MARKERS.get(kind, "x"), mfc="none", mec="k",
                     ms=7, label=kind if kind not in seen else None, zorder=5)
             seen.add(kind)
-    if len(set(ks)) > 1:
+    if several:
         bar = ax.figure.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax)
         bar.set_label("sites excited at the start (eq. (8), k)")
         bar.locator = MaxNLocator(integer=True)
