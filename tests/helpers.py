@@ -303,6 +303,7 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "ensemble lanes": ("jaxchain._sweeps.ensemble", "run_lanes"),
              # jitted entry points, whose traces a test counts (test_compile_once.py)
              "simulation program": ("jaxchain._engine.simulate", "_run_jit"),
+             "Jacobian program": ("jaxchain._physics.model", "_jacobian"),
              "Hopf modes": ("jaxchain._bifurcation.hopf", "_hopf_modes"),
              "shooting solve": ("jaxchain._bifurcation.shooting", "_root"),
              "continuation corrector": ("jaxchain._bifurcation.continuation", "_correct"),

@@ -64,6 +64,29 @@ def test_simulate_compiles_once_for_five_eps(monkeypatch):
 
 
 @pytest.mark.numerics
+def test_jacobian_compiles_once_for_five_eps(monkeypatch):
+    """`jacobian` runs as one program with eps traced: at a state where oscillator 0
+    slips at 2e-3 against the belt, where eps acts, each eps changes its friction
+    entry by more than 1 and each Jacobian is the central difference of eq. (5)
+    written in NumPy (`reference_rhs`)."""
+    traces = trace_once(monkeypatch, "Jacobian program")
+    params = jc.ChainParams(n_osc=3)
+    y = np.array(jc.steady_sliding(params))
+    y[1] = params.v_d + np.array([2e-3, -0.3, 0.4])
+    z, h = y.ravel(), 1e-8
+    entries = []
+    for eps in (1e-2, 5e-3, 3e-3, 2e-3, 1e-3):
+        f = reference_rhs(params, eps)
+        fd = np.stack([(f(0.0, z + h * e) - f(0.0, z - h * e)) / (2 * h) for e in np.eye(6)],
+                      axis=1)
+        jac = np.asarray(jc.jacobian(params, y, eps=eps))
+        assert np.allclose(jac, fd, rtol=1e-5, atol=1e-5), eps
+        entries.append(jac[3, 3])
+    assert traces == ["_jacobian"]
+    assert np.min(np.abs(np.diff(entries))) > 1
+
+
+@pytest.mark.numerics
 def test_hopf_point_compiles_once_for_five_xi(monkeypatch):
     traces = trace_once(monkeypatch, "Hopf modes")
     for xi in FIVE:

@@ -238,8 +238,14 @@ def grazing_slope(point: GrazingPoint, other: str) -> float:
     if not bool(point.converged):
         raise ValidationError("grazing_slope takes a converged GrazingPoint")
     z = jnp.array([point.time, point.value])
+    return float(_slope(z, point.params, point.where, other))
+
+
+@eqx.filter_jit
+def _slope(z, params: ChainParams, where: str, other: str) -> Float[Array, ""]:
+    """`grazing_slope` as one compiled program (not op by op)."""
     rtol = 1e-12
-    jac_z = jax.jacfwd(_tangency)(z, (point.params, point.where, rtol))
-    jac_q = parameter_value(jax.jacfwd(lambda p: _tangency(z, (p, point.where, rtol)))(
-        point.params), other)
-    return float(-jnp.linalg.solve(jac_z, jnp.reshape(jac_q, (2,)))[1])
+    jac_z = jax.jacfwd(_tangency)(z, (params, where, rtol))
+    jac_q = parameter_value(jax.jacfwd(lambda p: _tangency(z, (p, where, rtol)))(params),
+                            other)
+    return -jnp.linalg.solve(jac_z, jnp.reshape(jac_q, (2,)))[1]

@@ -13,7 +13,7 @@ from .._engine.checks import check_params, real_array
 from .._physics.forces import DEFAULT_EPS, friction_coefficient
 from .._physics.friction import ExponentialDecay, as_parameter
 from .._physics.params import is_homogeneous_ring
-from .._physics.model import jacobian
+from .._physics.model import as_value, jacobian
 from .._physics.params import ChainParams, with_parameter
 from .._errors import ValidationError
 
@@ -79,6 +79,12 @@ def mode_eigenvalues(params: ChainParams, eps=DEFAULT_EPS) -> Complex[Array, "n_
 
     `ValidationError` unless the chain is the homogeneous ring.
     """
+    return _mode_eigenvalues(params, as_value(eps))
+
+
+@eqx.filter_jit
+def _mode_eigenvalues(params: ChainParams, eps) -> Complex[Array, "n_osc 2"]:
+    """`mode_eigenvalues` as one compiled program (not op by op)."""
     blocks = _fourier_blocks(params, eps)
     half_trace = 0.5 * (blocks[:, 0, 0] + blocks[:, 1, 1])
     det = blocks[:, 0, 0] * blocks[:, 1, 1] - blocks[:, 0, 1] * blocks[:, 1, 0]
@@ -105,6 +111,12 @@ def steady_sliding_eigenvalues(params: ChainParams, eps=DEFAULT_EPS
     Shape (2 n_osc,), complex, sorted by decreasing real part (then imaginary
     part), dimensionless (per unit of time, eq. (4)).
     """
+    return _steady_sliding_eigenvalues(params, as_value(eps))
+
+
+@eqx.filter_jit
+def _steady_sliding_eigenvalues(params: ChainParams, eps) -> Complex[Array, " 2n_osc"]:
+    """`steady_sliding_eigenvalues` as one compiled program (not op by op)."""
     if is_homogeneous_ring(params):
         values = jnp.reshape(mode_eigenvalues(params, eps), (-1,))
     else:

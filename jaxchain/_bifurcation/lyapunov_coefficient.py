@@ -2,13 +2,14 @@
 
 import itertools
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
 from jaxtyping import Array, Float
 
 from .._physics.forces import DEFAULT_EPS
-from .._physics.model import jacobian, steady_sliding, vector_field
+from .._physics.model import as_value, jacobian, steady_sliding, vector_field
 from .._physics.params import ChainParams
 from .hopf import critical_mode
 
@@ -76,6 +77,12 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0, *, eps=DEFAUL
 
     `ValidationError` for a bad mode.
     """
+    return _first_lyapunov_coefficient(params, mode, as_value(eps))
+
+
+@eqx.filter_jit
+def _first_lyapunov_coefficient(params: ChainParams, mode: int, eps) -> Float[Array, ""]:
+    """`first_lyapunov_coefficient` as one compiled program (not op by op)."""
     n = params.n_osc
     omega, q, p = critical_mode(params, mode, eps)
 

@@ -4,6 +4,7 @@ non-smooth reference and the energy) and the friction law evaluated with the
 chain's loads: smoothed by tanh(v_rel/eps) for the smoothed model, or with the
 slip direction for the non-smooth reference (eq. (2))."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -176,6 +177,12 @@ def stiffness_matrix(params: ChainParams) -> Float[Array, "n_osc n_osc"]:
 
     Shape (n_osc, n_osc), dimensionless.
     """
+    return _stiffness_matrix(params)
+
+
+@eqx.filter_jit
+def _stiffness_matrix(params: ChainParams) -> Float[Array, "n_osc n_osc"]:
+    """`stiffness_matrix` as one compiled program (not op by op)."""
     n = params.n_osc
     coupling = jax.jacfwd(lambda x: coupling_force(params, x))(jnp.zeros(n))
     return jnp.diag(jnp.broadcast_to(params.stiffness, (n,))) + coupling
