@@ -160,6 +160,11 @@ class Branch(eqx.Module):
         return self.tangent[:, -1]
 
 
+def _stacked(arrays) -> np.ndarray:
+    """Arrays of one shape stacked on a new leading axis, in NumPy."""
+    return np.stack([np.asarray(a) for a in arrays])
+
+
 @eqx.filter_jit
 def _tangent(problem: ContinuationProblem, z, previous):
     """Unit tangent of the branch at z: the null vector of [G_u, G_p], oriented
@@ -271,13 +276,16 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
             stop = Status.left_parameter_range
             break
     bar.close()
-    zs, tangents = jnp.stack(zs), jnp.stack(tangents)
+    # Stacked on the host: on the device every operation would compile for each
+    # number of points.
+    zs, tangents = _stacked(zs), _stacked(tangents)
     ok = np.asarray(converged)
-    records = jax.tree.map(lambda *xs: jnp.stack(xs), *records)
+    records = jax.tree.map(lambda *xs: jnp.asarray(_stacked(xs)), *records)
     stable = np.asarray(records.stable)
-    tp = np.asarray(tangents[ok, -1])
+    tp = tangents[ok, -1]
     return Branch(
-        p=zs[:, -1], u=zs[:, :-1], tangent=tangents, converged=jnp.asarray(ok),
+        p=jnp.asarray(zs[:, -1]), u=jnp.asarray(zs[:, :-1]), tangent=jnp.asarray(tangents),
+        converged=jnp.asarray(ok),
         records=records if problem.describe is not None else None,
         stable=jnp.asarray(stable),
         folds=tuple(int(i) for i in np.nonzero(np.sign(tp[1:]) != np.sign(tp[:-1]))[0]),

@@ -3,6 +3,7 @@
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
@@ -111,9 +112,8 @@ def fold_point(problem: ContinuationProblem, near: Branch | Float[Array, " n+1"]
         if not near.folds:
             raise ValueError("the branch has no fold: continue it further (raise "
                              "max_points, p_max or p_min)")
-        good = jnp.nonzero(near.converged)[0]
-        i = good[near.folds[0]]
-        z = jnp.concatenate([near.u[i], near.p[i][None]])
+        i = np.flatnonzero(np.asarray(near.converged))[near.folds[0]]
+        z = jnp.asarray(np.append(np.asarray(near.u)[i], np.asarray(near.p)[i]))
     else:
         z = jnp.asarray(near, dtype=float)
     solution, ok = solve_fold(problem, _fold_start(problem, z), tol)
