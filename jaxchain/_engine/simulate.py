@@ -15,6 +15,7 @@ from .._physics.initial import AbstractInitialCondition, GivenState
 from .observables import Observables, check_observers
 from .observers.base import AbstractObserver
 from .options import SimulationOptions
+from .programs import compiled
 from .progress import progress_bar
 from .._physics.params import ChainParams
 
@@ -76,6 +77,11 @@ def simulate(params: ChainParams, y0: AbstractInitialCondition | State,
                    progress)
 
 
+def _initial_state(y0: AbstractInitialCondition, params: ChainParams) -> State:
+    """The initial state of one run, as one compiled program (`compiled`)."""
+    return y0(params)
+
+
 def _single(fn, name, params, y0, solver, options, engine, extra, throw, progress):
     """One checked run of `fn(params, y, engine, *extra, progress)` under a progress
     bar, raising on failure when `throw`."""
@@ -83,7 +89,7 @@ def _single(fn, name, params, y0, solver, options, engine, extra, throw, progres
     engine = as_engine(engine, solver, options, params)
     if not isinstance(y0, AbstractInitialCondition):
         y0 = GivenState(y0)
-    y = y0(params)
+    y = compiled(_initial_state, y0, params)
     with progress_bar(engine.n_chunks(), name, progress):
         out = fn(params, y, engine, *extra, progress)
     status = int(out["status"] if isinstance(out, dict) else out.status)

@@ -92,7 +92,8 @@ def _alternating_signs(graph: Graph) -> np.ndarray:
 class AbstractInitialCondition(eqx.Module):
     """An initial state of the chain that may depend on the parameters (for example
     on the belt speed, through steady sliding). Batch several by giving the array
-    fields a leading axis; `ensemble` vmaps over it."""
+    fields a leading axis; `ensemble` vmaps over it. `__call__` is traced
+    (`simulate` and `ensemble` compile it): write it with `jax.numpy`."""
 
     @abc.abstractmethod
     def __call__(self, params: ChainParams) -> State:
