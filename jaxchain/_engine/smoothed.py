@@ -51,22 +51,20 @@ def terms(solver: diffrax.AbstractSolver):
     return diffrax.ODETerm(model_field)
 
 
-def _advance(terms_, solver, args, options, observers, progress, tangent, n_samples, carry,
-             t0, t1, observed):
-    """Integrate one chunk [t0, t1] and, if it lies in the `observed` window, hand it
-    to the observers: its `n_samples` (static) dense samples and, with a `tangent`
-    (static) carried beside the state, the log of its growth (the tangent is
-    renormalised after every chunk). A chunk of the transient samples nowhere but
-    at t1 (same shapes, one compiled copy of the solve for every chunk) and its
-    samples are not observed."""
+def _advance(terms_, solver, args, options, observers, progress, tangent, carry, t0, t1,
+             n_samples):
+    """Integrate one chunk [t0, t1] and hand it to the observers: its `n_samples`
+    dense samples (if any) and, with a `tangent` (static) carried beside the state,
+    the log of its growth (it is then renormalised)."""
     y, solver_state, controller_state, made_jump, states, steps, status = carry
     # Once a chunk has failed the rest of the run is skipped (a zero-length solve),
     # so a failed lane does not hold up the others under vmap.
     t1 = jnp.where(status == Status.ok, t1, t0)
-    ts = t0 + (t1 - t0) * jnp.linspace(0.0, 1.0, n_samples)
-    if observed is not True:
-        ts = jnp.where(observed, ts, t1)
-    subs = [diffrax.SubSaveAt(t1=True), diffrax.SubSaveAt(ts=ts)]
+    subs = [diffrax.SubSaveAt(t1=True)]
+    ts = None
+    if n_samples:
+        ts = t0 + (t1 - t0) * jnp.linspace(0.0, 1.0, n_samples)
+        subs.append(diffrax.SubSaveAt(ts=ts))
     if tangent:
         # The solver state holds f of the state, stale once the tangent is rescaled:
         # it starts afresh each chunk (one more evaluation of f per chunk).
@@ -82,20 +80,15 @@ def _advance(terms_, solver, args, options, observers, progress, tangent, n_samp
             made_jump=made_jump,
         )
     y_end = sol.ys[0][-1]
-    samples = sol.ys[1]
+    samples = None if ts is None else sol.ys[1]
     log_growth = None
     if tangent:
         norm = jnp.sqrt(jnp.sum(y_end[1] ** 2))
         log_growth = jnp.log(norm)
         y_end = jnp.stack([y_end[0], y_end[1] / norm])
-        samples = samples[:, 0]
+        samples = None if ts is None else samples[:, 0]
     chunk = Chunk(t0=t0, t1=t1, ts=ts, ys=samples, log_growth=log_growth)
-    if observed is True:
-        states = observe_chunk(observers, states, chunk, args, options)
-    else:
-        states = jax.lax.cond(observed,
-                              lambda s: observe_chunk(observers, s, chunk, args, options),
-                              lambda s: s, states)
+    states = observe_chunk(observers, states, chunk, args, options)
     state_end = y_end[0] if tangent else y_end
     # Where a failed solve stopped: its t1 save holds the time it reached.
     mean_step = (sol.ts[0][-1] - t0) / jnp.maximum(sol.stats["num_steps"], 1)
@@ -135,7 +128,7 @@ def _initial_states(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: Py
     `diffrax.diffeqsolve` makes them when it is given none (each one's `init`, the
     controller choosing the first step), for the first chunk [t0, t1]: so that the
     first chunk too is a step of the scan over chunks, and the run compiles one copy
-    of the solve. Not differentiated (diffrax stops the
+    of the solve per phase instead of two. Not differentiated (diffrax stops the
     gradient of the states it makes itself)."""
     controller = step_size_controller(options)
     tnext, controller_state = controller.init(terms_, t0, t1, y0, None, args, solver.func,
@@ -144,17 +137,13 @@ def _initial_states(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: Py
     return jax.lax.stop_gradient((solver_state, controller_state))
 
 
-def _chunks(options: SimulationOptions) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
-    """The chunks of a run (`AbstractHorizon.phases`: the transient, then the observed
-    window) as arrays of their starts, lengths and whether each is observed, with
-    the number of dense samples of an observed chunk (every `sample_dt`)."""
-    phases = options.phases()
-    starts = np.concatenate([start + length * np.arange(count)
-                             for start, length, count, _ in phases])
-    lengths = np.concatenate([np.full(count, length) for _, length, count, _ in phases])
-    observed = np.concatenate([np.full(count, obs) for _, _, count, obs in phases])
-    (length,) = [length for _, length, _, obs in phases if obs]
-    return starts, lengths, observed, int(np.ceil(length / options.sample_dt)) + 1
+def _spans(options: SimulationOptions) -> list[tuple[float, float, int, int]]:
+    """The phases of a run (`AbstractHorizon.phases`) as (start, chunk length,
+    number of chunks, samples per chunk): the transient (not sampled), then the
+    observed window."""
+    return [(start, length, count,
+             int(np.ceil(length / options.sample_dt)) + 1 if observed else 0)
+            for start, length, count, observed in options.phases()]
 
 
 def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
@@ -195,25 +184,21 @@ def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
     if tangent:
         y = jnp.stack([y0, lyapunov[0].initial_tangent(y0)])
         terms_ = _with_tangent(terms_)
-    starts, lengths, observed, n_samples = _chunks(options)
+    spans = _spans(options)
     solver_state, controller_state = _initial_states(terms_, solver, y, args, options,
-                                                     starts[0], starts[0] + lengths[0])
+                                                     spans[0][0], spans[0][0] + spans[0][1])
     carry = (y, solver_state, controller_state, jnp.array(False), states, jnp.array(0),
              status)
+    # Every chunk of a phase is one step of its scan, the first too (its solver and
+    # controller states made above): one compiled copy of the solve per phase.
+    for start, length, count, samples in spans:
+        t0s = start + length * jnp.arange(count)
 
-    # One scan over every chunk of the run, the first too (its solver and controller
-    # states made above), each chunk's start, length and whether it is observed as
-    # its inputs: one compiled copy of the solve (a third less to compile than one
-    # copy per phase; the exact engine's `run_nonsmooth` scans its chunks alike).
-    every = bool(observed.all())  # no transient: no chunk to leave unobserved
+        def body(c, t0, length=length, samples=samples):
+            return _advance(terms_, solver, args, options, observers, progress,
+                            tangent, c, t0, t0 + length, samples), None
 
-    def body(c, xs):
-        t0, length, obs = xs
-        return _advance(terms_, solver, args, options, observers, progress, tangent,
-                        n_samples, c, t0, t0 + length, True if every else obs), None
-
-    carry, _ = jax.lax.scan(body, carry, (jnp.asarray(starts), jnp.asarray(lengths),
-                                          jnp.asarray(observed)))
+        carry, _ = jax.lax.scan(body, carry, t0s)
     y_final, _, _, _, states, steps, status = carry
     if tangent:
         y_final = y_final[0]
