@@ -79,7 +79,6 @@ def test_a_mistuned_chain_has_the_modes_of_its_dense_stiffness_matrix(boundary):
     assert np.allclose(np.sort(eig.imag[eig.imag > 0]), omega, atol=1e-12)
 
 
-@pytest.mark.numerics
 def test_mistuning_is_recorded_and_rebuilds_the_same_chain():
     p = jc.mistune(jc.ChainParams(n_osc=5, boundary="free"), 0.01, 7)
     draws = np.asarray(jax.random.normal(jax.random.key(7), (5,), dtype=float))
@@ -90,7 +89,6 @@ def test_mistuning_is_recorded_and_rebuilds_the_same_chain():
         jc.with_parameter(p, "stiffness", np.ones(5))
 
 
-@pytest.mark.numerics
 def test_no_mistuning_gives_bitwise_the_homogeneous_ring():
     """sigma = 0 keeps the paper's ring, bit for bit (the same compiled run), on a
     stick-slipping ring of 2."""

@@ -165,7 +165,6 @@ def test_failed_runs_give_valid_json_with_nulls_and_exit_1(tmp_path, capsys):
     assert res["energy"] == [None, None] and res["n_halc"] == [-1, -1]
 
 
-@pytest.mark.numerics
 @pytest.mark.skipif(SCRIPT is None, reason="the jaxchain console script is not installed")
 def test_installed_command_table_and_usage_error(localized_small, tmp_path):
     """The console script as a user runs it, in a fresh process. It keeps the

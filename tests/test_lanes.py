@@ -112,7 +112,6 @@ def test_the_queue_compiles_its_program_once_for_every_cpu_device(every_device):
     assert every_device["two_compiles"] == 0
 
 
-@pytest.mark.numerics
 def test_given_costs_only_order_the_lanes():
     """The lanes' costs (`costs=`, as an ensemble computes them with the initial
     states) change the order in which the queue takes the lanes, not their results:

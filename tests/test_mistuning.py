@@ -152,7 +152,6 @@ def test_the_single_site_state_s_frequency_damping_and_linear_decay(study):
     assert abs(gamma - expected[0]) < 5 * np.hypot(error, expected_error[0])
 
 
-@pytest.mark.numerics
 def test_resume_after_a_lost_chain_gives_the_same_study(study, tmp_path, capsys):
     """A run killed before its last chain (its store missing) and the study's
     files lost: --resume recomputes them, the lost chain on a Dask cluster, and the

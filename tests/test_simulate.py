@@ -114,7 +114,6 @@ def test_single_oscillator_cycle_converges_to_nonsmooth_stick_slip_cycle():
     assert slip_errors[default] < 0.1
 
 
-@pytest.mark.numerics
 def test_sticks_on_constructed_velocity_signals():
     """`min_slip_speed` and `sticks` on velocity signals whose closest approach to
     the belt speed is known: a quasi-static stick phase below and above the belt

@@ -127,7 +127,6 @@ def _assert_cf_store(store, copy) -> None:
     assert_cf_compliant(copy)
 
 
-@pytest.mark.numerics
 def test_sweeping_eta_c_through_a_lens_equals_separate_runs(monkeypatch):
     """eta_c swept by `where=lambda p: p.eta_c` equals one ensemble per value (the
     same compiled run per trajectory: equal to the last bit). The engine never gets
@@ -151,7 +150,6 @@ def test_sweeping_eta_c_through_a_lens_equals_separate_runs(monkeypatch):
             np.testing.assert_array_equal(row[name].values, one[name].values, name)
 
 
-@pytest.mark.numerics
 def test_sweeping_the_engine_s_eps_equals_separate_runs():
     """eps, the smoothed engine's setting (not a field of the chain), swept by name
     equals one ensemble per value with `Smoothed(eps=...)` (the same compiled run

@@ -441,7 +441,6 @@ def test_key_changes_with_static_values_shapes_and_code(monkeypatch):
     assert _key(x, base) != key
 
 
-@pytest.mark.numerics
 def test_kept_program_matches_the_function_and_survives_a_damaged_file(folder):
     options = jc.SimulationOptions(t_end=50.0, transient=25.0)
     x = jnp.arange(3.0)
