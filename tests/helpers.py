@@ -22,8 +22,10 @@ SHORT = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=100.0)
 def reference_rhs(params: jc.ChainParams, eps: float = 1e-3):
     """Eq. (5) written out oscillator by oscillator with NumPy, independently of
     `jc.vector_field`, for scipy and for comparison, smoothed at `eps` (the
-    smoothed engine's default, 1e-3, unless given)."""
+    smoothed engine's default, 1e-3, unless given), with the ground springs of
+    `params.stiffness` (1 + delta_n)."""
     n = params.n_osc
+    k = np.broadcast_to(np.asarray(params.stiffness, dtype=float), (n,))
 
     def rhs(t, y):
         x, v = y[:n], y[n:]
@@ -33,7 +35,7 @@ def reference_rhs(params: jc.ChainParams, eps: float = 1e-3):
             v_rel = v[i] - params.v_d
             mu = eq1_mu(params)(abs(v_rel))
             force = -mu * np.tanh(v_rel / eps)
-            a[i] = (-2 * params.xi * v[i] - x[i]
+            a[i] = (-2 * params.xi * v[i] - k[i] * x[i]
                     - params.eta_c * (2 * x[i] - left - right) + force)
         return np.concatenate([v, a])
 

@@ -12,6 +12,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
+import jaxchain._bifurcation.shooting as shooting_module
 from helpers import (internal, internal_name, reference_rhs, replace_internal,
                      scipy_slip_arc)
 
@@ -64,6 +65,28 @@ def test_simulate_compiles_once_for_five_eps(monkeypatch):
 
 
 @pytest.mark.numerics
+def test_simulate_compiles_once_for_three_mistuning_draws(monkeypatch):
+    """A draw's record (`ChainParams.mistuning`, its seed) is static but no part of
+    the program: three draws compile simulate once. Each run is its own chain's:
+    against scipy (LSODA) on eq. (5) with that draw's ground springs, to 1e-6, and
+    the draws end more than 1e-3 apart."""
+    traces = trace_once(monkeypatch, "simulation program")
+    options = jc.SimulationOptions(t_end=20.0, transient=10.0, chunk_length=10.0, rtol=1e-10,
+                                   atol=1e-12)
+    finals = []
+    for seed in range(3):
+        params = jc.mistune(jc.ChainParams(n_osc=2), 0.05, seed)
+        y0 = np.asarray(jc.OutOfPhaseExcitation.eq8([True, False])(params))
+        obs = jc.simulate(params, y0, engine=jc.Smoothed(options=options, eps=1e-2))
+        ref = solve_ivp(reference_rhs(params, 1e-2), (0.0, options.t_end), y0.ravel(),
+                        method="LSODA", rtol=1e-10, atol=1e-12)
+        assert np.allclose(np.ravel(obs.y_final), ref.y[:, -1], rtol=0, atol=1e-6), seed
+        finals.append(np.ravel(obs.y_final))
+    assert traces == ["_run_jit"]
+    assert min(np.abs(a - b).max() for i, a in enumerate(finals) for b in finals[:i]) > 1e-3
+
+
+@pytest.mark.numerics
 def test_jacobian_compiles_once_for_five_eps(monkeypatch):
     """`jacobian` runs as one program with eps traced: at a state where oscillator 0
     slips at 2e-3 against the belt, where eps acts, each eps changes its friction
@@ -112,10 +135,13 @@ def test_shooting_compiles_once_for_five_xi(monkeypatch):
 @pytest.mark.numerics
 def test_continuation_compiles_once_for_five_problems(monkeypatch):
     """A new `limit_cycle_problem` for each xi: its residual and records are equal
-    modules, not new lambdas, so the corrector, tangent and records trace once.
+    modules, not new lambdas, so the corrector, tangent and records trace once; the
+    shooting that starts each branch makes its record by the same program.
     The continued point is a periodic orbit at its belt speed, by scipy."""
     traces = [trace_once(monkeypatch, what) for what in (
         "continuation corrector", "continuation tangent", "continuation records")]
+    # shooting's results are records of the same program (`periodic_orbit`)
+    monkeypatch.setattr(shooting_module, "describe_point", internal("continuation records"))
     options = jc.ShootingOptions(rtol=1e-6, atol=1e-8, n_samples=64)
     for xi in FIVE:
         params = jc.ChainParams(n_osc=1, xi=xi)

@@ -203,7 +203,7 @@ def _root(params, u0, options):
 def _solve(params, u0, options):
     u, ok = _root(params, u0, options)
     # the record by continuation's own program (`describe_point`), compiled once
-    orbit = describe_point(DescribeExactOrbit(options), u, params, params.v_d)
+    orbit = describe_point(DescribeExactOrbit(options), u, params, params.v_d, "v_d")
     return eqx.tree_at(lambda o: o.converged, orbit, orbit.converged & ok)
 
 

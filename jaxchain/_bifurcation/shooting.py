@@ -297,7 +297,7 @@ def _root(params, eps, u0, options):
 def _solve(params, eps, u0, options):
     u, ok = _root(params, eps, u0, options)
     # the record by continuation's own program (`describe_point`), compiled once
-    orbit = describe_point(DescribeOrbit(options, eps), u, params, params.v_d)
+    orbit = describe_point(DescribeOrbit(options, eps), u, params, params.v_d, "v_d")
     # Levenberg-Marquardt also stops at a local minimum of the residual: only a root
     # counts as converged.
     return eqx.tree_at(lambda o: o.converged, orbit,

@@ -17,7 +17,7 @@ from .observers.base import AbstractObserver
 from .options import SimulationOptions
 from .programs import compiled
 from .progress import progress_bar
-from .._physics.params import ChainParams
+from .._physics.params import ChainParams, without_records
 
 
 def _run(params: ChainParams, y0: State, engine: AbstractEngine,
@@ -89,6 +89,7 @@ def _single(fn, name, params, y0, solver, options, engine, extra, throw, progres
     engine = as_engine(engine, solver, options, params)
     if not isinstance(y0, AbstractInitialCondition):
         y0 = GivenState(y0)
+    params = without_records(params)  # one program for every mistuning draw
     y = compiled(_initial_state, y0, params)
     with progress_bar(engine.n_chunks(), name, progress):
         out = fn(params, y, engine, *extra, progress)

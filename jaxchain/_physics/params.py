@@ -405,6 +405,16 @@ def revalidated(law: AbstractFrictionLaw) -> AbstractFrictionLaw:
     return type(law)(**{f.name: getattr(law, f.name) for f in dataclasses.fields(law)})
 
 
+def without_records(params: ChainParams) -> ChainParams:
+    """`params` without its records (`mistuning`, `scales`), which say where its
+    values came from and which no equation reads: the chain that a compiled program
+    takes. A record is static, part of a program's key, so each mistuning draw (its
+    seed) or system of units would otherwise compile the same program again."""
+    if params.mistuning is None and params.scales is None:
+        return params
+    return with_fields(params, mistuning=None, scales=None)
+
+
 def stack_chains(chains: list[ChainParams]) -> ChainParams:
     """A batch of chains, the named route to an ensemble over chains (for example
     100 mistuning draws): every array field gains a leading lane axis, shape
