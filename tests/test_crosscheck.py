@@ -10,7 +10,9 @@ import xarray as xr
 import jaxchain as jc
 from helpers import assert_cf_compliant, replace_internal, scipy_stick_slip_cycle
 
-SMALL = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=150.0)
+#: The horizon of the command test below (the default chunks: two of 150 in each
+#: phase), so that the command runs the programs these tests compiled.
+SMALL = jc.SimulationOptions(t_end=600.0, transient=300.0)
 #: Long enough for the localized state of a 4-ring to settle to a periodic orbit.
 SETTLED = jc.SimulationOptions(t_end=1200.0, transient=600.0, chunk_length=150.0)
 
