@@ -176,6 +176,10 @@ def localized_orbit(params: ChainParams, site: int, *,
     """
     from ..._engine.simulate import simulate
 
+    if np.ndim(params.stiffness) == 0:
+        # one stiffness per oscillator, as a mistuned ring has them: the programs of
+        # the homogeneous ring are then those of every mistuned ring of its size
+        params = with_parameter(params, "stiffness", jnp.full(params.n_osc, params.stiffness))
     engine = as_engine("smoothed", None, options, params, eps=eps)
     mask = np.arange(params.n_osc) == site
     y0 = OutOfPhaseExcitation(excited=jnp.asarray(mask), velocity=0.0, base_sign=-1.0)(params)

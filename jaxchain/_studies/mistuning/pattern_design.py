@@ -15,7 +15,7 @@ from jaxtyping import Array, Float
 from ..._bifurcation.fold import solve_fold
 from ..._physics.forces import DEFAULT_EPS
 from ..._physics.initial import excited_block
-from ..._physics.params import chain_or_default, ChainParams, with_parameter
+from ..._physics.params import chain_or_default, ChainParams
 from .edges import localized_fold
 from ..._checks import check_count, check_positive
 from ..._errors import ValidationError
@@ -311,9 +311,8 @@ def design_problems(params: ChainParams, budget: float, *, eps=DEFAULT_EPS):
     if not (isinstance(budget, (int, float)) and 0 < budget < 1):
         raise ValidationError(f"budget must lie in (0, 1), got {budget!r}")
     centre = int(np.flatnonzero(excited_block(n, 1, "ring"))[0])
-    # one stiffness per oscillator, as the patterns give it: the fold's programs
-    # are then those of every mistuned ring of the same size
-    params = with_parameter(params, "stiffness", jnp.full(n, params.stiffness))
+    # (`localized_orbit` gives the ring one stiffness per oscillator, as the patterns
+    # give it: the fold's programs are those of every mistuned ring of its size)
     fold, problem = localized_fold(params, centre, eps=eps)
     if fold is None:
         raise RuntimeError("no fold of the single-site state was found from "
