@@ -168,7 +168,10 @@ def localized_orbit(params: ChainParams, site: int, *,
     **Returns:**
 
     (`PeriodicOrbit`, the `ShootingOptions` of its phase condition), or
-    (None, None) when the simulated state is not periodic or does not vibrate.
+    (None, None) when the simulated state is not periodic or does not vibrate. The
+    orbit's chain has one stiffness per oscillator, shape (n_osc,), also where
+    `params` gives one for all (the programs of a ring of its size are then those
+    of each of its mistuned draws).
 
     **Raises:**
 
