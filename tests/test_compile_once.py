@@ -12,7 +12,6 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
-import jaxchain._bifurcation.shooting as shooting_module
 from helpers import (internal, internal_name, reference_rhs, replace_internal,
                      scipy_slip_arc)
 
@@ -141,7 +140,7 @@ def test_continuation_compiles_once_for_five_problems(monkeypatch):
     traces = [trace_once(monkeypatch, what) for what in (
         "continuation corrector", "continuation tangent", "continuation records")]
     # shooting's results are records of the same program (`periodic_orbit`)
-    monkeypatch.setattr(shooting_module, "describe_point", internal("continuation records"))
+    replace_internal(monkeypatch, "shooting records", internal("continuation records"))
     options = jc.ShootingOptions(rtol=1e-6, atol=1e-8, n_samples=64)
     for xi in FIVE:
         params = jc.ChainParams(n_osc=1, xi=xi)
