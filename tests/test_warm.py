@@ -232,6 +232,33 @@ def test_over_its_memory_bound_it_replaces_itself_and_stop_ends_it(tmp_path):
         _stop_all(env)
 
 
+def test_stop_never_signals_a_process_that_has_a_dead_warm_process_s_id(tmp_path):
+    """A warm process killed without clean-up leaves its state file; the system may
+    give its id to another process of the user (ids are reused). That process is
+    not the warm process: `status` does not list it, `stop` leaves it running and
+    removes the stale files."""
+    env = _new_env()
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(300)"])
+    try:
+        place = Path(env["TMPDIR"], f"jaxchain-{os.getuid()}")
+        place.mkdir(mode=0o700)
+        now = time.time()
+        stale = {"pid": other.pid, "start": "0", "version": "0", "prefix": sys.prefix,
+                 "python": sys.executable, "state": "idle", "since": now, "started": now,
+                 "served": 0, "rss_mb": 1.0, "max_mb": 1024.0, "idle_limit_s": 120.0}
+        (place / "stale.json").write_text(json.dumps(stale))
+        assert _states(env) == []
+        (place / "stale.json").write_text(json.dumps(stale))
+        stop = _command(["server", "stop", "--json"], env, tmp_path)
+        assert stop.returncode == 0 and json.loads(stop.stdout)["stopped"] == []
+        assert other.poll() is None, "stop signalled the process that has the old id"
+        assert not (place / "stale.json").exists()
+    finally:
+        other.kill()
+        other.wait()
+        _stop_all(env)
+
+
 def test_no_warm_process_under_ci_or_a_batch_scheduler_unless_asked(tmp_path):
     from jaxchain._cli.warm import enabled
 

@@ -3,6 +3,7 @@ user, shown and stopped. Standard library only: it runs at once, in the command'
 own process, and never starts a warm process."""
 
 import argparse
+import contextlib
 import json
 import os
 import signal
@@ -10,7 +11,7 @@ import sys
 import time
 
 from .parser import Parser, UsageError
-from .warm import enabled, states
+from .warm import alive, enabled, states
 
 HELP = "show or stop the warm processes that keep JAX loaded between commands"
 DESCRIPTION = """\
@@ -84,12 +85,12 @@ def _stop(args) -> None:
             raise UsageError(f"--pid {args.pid}: no warm process of this user has this id "
                              f"(jaxchain server status lists them)")
     for s in found:
-        _signal(s["pid"], signal.SIGTERM)
+        _signal(s, signal.SIGTERM)
     end = time.monotonic() + STOP_S
-    while any(_alive(s["pid"]) for s in found) and time.monotonic() < end:
+    while any(_alive(s) for s in found) and time.monotonic() < end:
         time.sleep(0.05)
     for s in found:
-        _signal(s["pid"], signal.SIGKILL)
+        _signal(s, signal.SIGKILL)
     states()  # removes the files of the killed ones
     pids = [s["pid"] for s in found]
     if args.json:
@@ -101,19 +102,18 @@ def _stop(args) -> None:
         print("no warm process of this user is running")
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    return True
+def _alive(state: dict) -> bool:
+    """Whether the warm process of `state` still runs: its id, held by the process
+    that started when it did (an id given to another process since is not it)."""
+    return alive(state["pid"], state.get("start"))
 
 
-def _signal(pid: int, sig) -> None:
-    try:
-        os.kill(pid, sig)
-    except ProcessLookupError:
-        pass
+def _signal(state: dict, sig) -> None:
+    """Send `sig` to the warm process of `state`, if it still runs; never to a
+    process that has its old id."""
+    if _alive(state):
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(state["pid"], sig)
 
 
 def run_alone(argv: list[str]) -> int:

@@ -276,17 +276,33 @@ def _starting(base: str) -> bool:
         return False
     if not text:
         return age < 5
-    return _alive_pid(int(text)) and age < 120
+    return alive(int(text)) and age < 120
 
 
-def _alive_pid(pid: int) -> bool:
+def alive(pid: int, start: str | None = None) -> bool:
+    """Whether process `pid` is alive and, given its `start` (`process_start`),
+    still the same process: an id that the system has given to another process
+    since (ids are reused, 32768 of them by default on Linux) is not."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
-    except PermissionError:
-        return True
-    return True
+    except PermissionError:  # another user's: not a warm process of this user
+        return False
+    now = process_start(pid)
+    return start is None or now is None or now == start
+
+
+def process_start(pid: int | None = None) -> str | None:
+    """When process `pid` (this one by default) started, in the system's clock
+    ticks since boot (field 22 of /proc/PID/stat): with its id, it names one
+    process. None where the system does not tell (no /proc)."""
+    try:
+        with open(f"/proc/{pid or 'self'}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return fields[19]  # the fields after the name start at field 3
+    except (OSError, IndexError):
+        return None
 
 
 def _command_name(argv: list[str]) -> str:
@@ -367,7 +383,7 @@ def states() -> list[dict]:
             state = json.loads(open(path).read())
         except (OSError, ValueError):
             continue
-        if not _alive_pid(state["pid"]):
+        if not alive(state["pid"], state.get("start")):
             for suffix in (".json", ".sock", ".pid", ".log"):
                 with contextlib.suppress(OSError):
                     os.unlink(path[:-5] + suffix)

@@ -41,7 +41,7 @@ import warnings
 
 from .._setup import VERSION
 from .._sweeps.atomic import write_text
-from .warm import IDLE_S, MAX_MB, key, receive, rss_mb, send, spawn
+from .warm import IDLE_S, MAX_MB, key, process_start, receive, rss_mb, send, spawn
 
 #: Seconds between two checks, while idle, that the code and packages are unchanged.
 STALE_CHECK_S = 2.0
@@ -74,7 +74,8 @@ class _Warm:
 
     def state(self, state: str, **extra) -> None:
         """Write `<base>.json` (`jaxchain._cli.warm.states` reads it)."""
-        record = {"pid": os.getpid(), "version": VERSION, "prefix": sys.prefix,
+        record = {"pid": os.getpid(), "start": process_start(), "version": VERSION,
+                  "prefix": sys.prefix,
                   "python": sys.executable, "state": state, "since": time.time(),
                   "started": self.started, "served": self.served, "rss_mb": rss_mb(),
                   "max_mb": self.max_mb, "idle_limit_s": self.idle_s} | extra
