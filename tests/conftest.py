@@ -1,3 +1,4 @@
+import faulthandler
 import os
 import shutil
 import tempfile
@@ -41,7 +42,25 @@ import jaxchain  # noqa: E402
 jaxchain.configure()  # float64 and the XLA flags, as a user's first call
 
 
+#: Seconds after which the pytest-xdist controller prints the stack of each of its
+#: threads, and again each time as long: a whole pass takes about 12 minutes, so
+#: a run still going then hangs, and the log names where the controller waits (a
+#: test that runs too long names its own place: `faulthandler_timeout`).
+CONTROLLER_DUMP_S = 2400
+
+
+def _xdist_controller(config) -> bool:
+    return not hasattr(config, "workerinput") and bool(config.getoption("numprocesses", None))
+
+
+def pytest_configure(config):
+    if _xdist_controller(config):  # the workers' own timer is per test (pytest's)
+        faulthandler.dump_traceback_later(CONTROLLER_DUMP_S, repeat=True)
+
+
 def pytest_unconfigure(config):
+    if _xdist_controller(config):
+        faulthandler.cancel_dump_traceback_later()
     if _CACHE_OWNER and not hasattr(config, "workerinput"):
         shutil.rmtree(os.environ["JAX_COMPILATION_CACHE_DIR"], ignore_errors=True)
 
