@@ -4,6 +4,8 @@ change is reported with its name, not as a wrong step size deep in a run."""
 
 import diffrax
 import equinox as eqx
+import jax
+import jax.numpy as jnp
 import pytest
 
 from jaxchain._engine import compat as _compat
@@ -37,3 +39,27 @@ def test_errors_as_nan_is_undone_on_exit():
     with _compat.errors_as_nan():
         assert eqx._errors.EQX_ON_ERROR == "nan"
     assert eqx._errors.EQX_ON_ERROR == before
+
+
+#: What a failing check raises: equinox's error, or under `jax.jit` XLA's, which
+#: carries its message.
+RAISED = (eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError)
+
+
+def _checked(x):
+    return eqx.error_if(x, jnp.sum(x) > 100.0, "the sum is too large")
+
+
+def test_a_check_traced_as_nan_raises_again_after_the_block():
+    """A check traced inside `errors_as_nan` gives NaN there; the same check (same
+    shapes, same message) traced after the block raises again, eagerly and under
+    `jax.jit`, and one traced raising before the block gives NaN inside it."""
+    big = jnp.full(3, 50.0)
+    with pytest.raises(RAISED, match="too large"):
+        jax.jit(_checked)(big)  # traced raising first
+    with _compat.errors_as_nan():
+        assert jnp.isnan(jax.jit(lambda x: _checked(x) + 0.0)(big)).all()
+    with pytest.raises(RAISED, match="too large"):
+        _checked(big)
+    with pytest.raises(RAISED, match="too large"):
+        jax.jit(lambda x: _checked(x) * 1.0)(big)

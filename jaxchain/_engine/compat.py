@@ -41,14 +41,28 @@ def errors_as_nan():
     its arguments) as NaN substitution instead of equinox's default, a host callback
     that raises. equinox reads its private `_errors.EQX_ON_ERROR` at trace time; it
     is set for the tracing inside the block and restored at once (under a lock, as
-    devices may trace in parallel threads)."""
+    devices may trace in parallel threads).
+
+    equinox traces each check in a compiled function of its own
+    (`_errors.branched_error_if_impl_jit`), whose trace JAX keeps by the check's
+    shapes and message, not by the mode: its traces are dropped on entry (a check
+    traced before, raising, would otherwise come back with its host callback) and
+    on exit (a later check of the same shapes, in the user's code or jaxchain's,
+    would otherwise return NaN instead of raising)."""
     with _errors_lock:
         before = eqx._errors.EQX_ON_ERROR
+        _error_traces().clear_cache()
         eqx._errors.EQX_ON_ERROR = "nan"
         try:
             yield
         finally:
             eqx._errors.EQX_ON_ERROR = before
+            _error_traces().clear_cache()
+
+
+def _error_traces():
+    """The compiled function in which equinox traces its checks (private)."""
+    return eqx._errors.branched_error_if_impl_jit._cached
 
 
 def check_compatible() -> None:
@@ -65,6 +79,9 @@ def check_compatible() -> None:
         raise RuntimeError(f"jaxchain._engine.compat: {what} ({versions}); "
                            "update jaxchain/_engine/compat.py")
 
+    if not callable(getattr(getattr(getattr(eqx._errors, "branched_error_if_impl_jit", None),
+                                    "_cached", None), "clear_cache", None)):
+        fail("equinox._errors.branched_error_if_impl_jit._cached.clear_cache is gone")
     controller = diffrax.PIDController(rtol=1e-6, atol=1e-6)
     if not callable(getattr(controller, "_get_error_order", None)):
         fail("diffrax.PIDController._get_error_order is gone")
