@@ -4,6 +4,7 @@ each traced at all (the patched function is the one the entry point calls), and
 each value is used (the results against an independent reference)."""
 
 import functools
+import inspect
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -23,7 +24,7 @@ def trace_once(monkeypatch, what) -> list:
     internals, `helpers.internal`) by the same function, jitted anew, that raises
     if it is traced more than once; return the list to which each trace appends
     the function's name, so that a test can tell that it was traced at all."""
-    fn, name = internal(what).__wrapped__, internal_name(what)
+    fn, name = inspect.unwrap(internal(what)), internal_name(what)
     traces = []
 
     @functools.wraps(fn)
@@ -168,3 +169,39 @@ def test_existence_limit_compiles_once_for_five_xi(monkeypatch):
             arc = scipy_slip_arc(jc.ChainParams(n_osc=1, xi=xi, v_d=limit + d))
             assert (arc.status == 1) == returns, (xi, d)
     assert traces == ["_peak"]
+
+
+def test_bifurcation_programs_hold_no_host_callback(monkeypatch):
+    """JAX keeps no program that calls back into Python in its persistent
+    compilation cache, and equinox's checks (in diffrax, lineax and optimistix)
+    are such callbacks by default: the programs of shooting, continuation, the
+    Hopf point and the existence limit trace them as NaN (`checks_as_nan`), so
+    that the next process (a command, a notebook) loads them instead of compiling
+    them again. Each program is lowered at the arguments it was called with, and
+    its text holds no callback; the results are those of a periodic orbit (by
+    scipy), as above."""
+    names = ("shooting solve", "continuation corrector", "continuation tangent",
+             "continuation records", "Hopf modes", "slip arc peak")
+    programs, calls = {what: internal(what) for what in names}, {}
+
+    def recording(what):
+        def call(*args, **kwargs):
+            calls[what] = (args, kwargs)
+            return programs[what](*args, **kwargs)
+        return call
+
+    for what in names:
+        replace_internal(monkeypatch, what, recording(what))
+    replace_internal(monkeypatch, "shooting records", recording("continuation records"))
+    params = jc.ChainParams(n_osc=1, xi=FIVE[0])
+    options = jc.ShootingOptions(rtol=1e-6, atol=1e-8, n_samples=64)
+    orbit = jc.periodic_orbit(params, jnp.array([[2.2], [0.0]]), 6.3, options, eps=1e-2)
+    branch = jc.continuation(jc.limit_cycle_problem(orbit, options),
+                             options=jc.ContinuationOptions(ds=0.01, max_points=2))
+    assert bool(branch.converged[-1])
+    assert _periodicity_error(orbit.params, orbit.y0, orbit.period, 1e-2) < 1e-5
+    assert 1.0 < jc.hopf_vd(params) < jc.stick_slip_existence_limit(params, tol=1e-6)
+    assert set(calls) == set(names)
+    for what, (args, kwargs) in calls.items():
+        text = programs[what].lower(*args, **kwargs).as_text()
+        assert "callback" not in text, what

@@ -172,12 +172,18 @@ def test_cycle_gradients_against_finite_differences_of_scipy(adjoint):
     implicit function theorem's, that of the amplitude x at a turning point's
     fixed time (x' = 0 there)."""
     options = jc.NonsmoothOptions.reference(t_end=40.0, transient=20.0, adjoint=adjoint)
-    jac = jax.jit(jax.jacrev(_cycle, argnums=(0, 1)) if adjoint == "reverse"
-                  else jax.jacfwd(_cycle, argnums=(0, 1)), static_argnums=2)
+
+    def cycle(v_d, xi, options):  # the value beside the derivative, from one program
+        value = _cycle(v_d, xi, options)
+        return value, value
+
+    jac = jax.jit(jax.jacrev(cycle, argnums=(0, 1), has_aux=True) if adjoint == "reverse"
+                  else jax.jacfwd(cycle, argnums=(0, 1), has_aux=True), static_argnums=2)
     h = 1e-4
     for v_d in (1.2, 1.5, 1.7):
-        got = np.stack([np.asarray(d) for d in jac(v_d, 0.05, options)], axis=1)
-        value = np.asarray(_cycle(v_d, 0.05, options))
+        derivatives, value = jac(v_d, 0.05, options)
+        got = np.stack([np.asarray(d) for d in derivatives], axis=1)
+        value = np.asarray(value)
         ref = np.array(scipy_stick_slip_cycle(jc.ChainParams(n_osc=1, v_d=v_d, xi=0.05)))
         np.testing.assert_allclose(value, ref, rtol=1e-8)
         fd = _scipy_cycle_derivatives(v_d, 0.05, h)

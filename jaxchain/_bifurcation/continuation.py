@@ -11,6 +11,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
+from .._engine.compat import checks_as_nan
 from .._engine.progress import tqdm
 from .._physics.params import ChainParams, parameter_value, with_parameter
 from .._errors import ValidationError
@@ -165,6 +166,7 @@ def _stacked(arrays) -> np.ndarray:
     return np.stack([np.asarray(a) for a in arrays])
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _tangent(problem: ContinuationProblem, z, previous):
     """Unit tangent of the branch at z: the null vector of [G_u, G_p], oriented
@@ -172,10 +174,13 @@ def _tangent(problem: ContinuationProblem, z, previous):
     jac = jax.jacfwd(problem)(z)
     bordered = jnp.concatenate([jac, previous[None]], axis=0)
     rhs = jnp.zeros(z.size).at[-1].set(1.0)
-    t = lx.linear_solve(lx.MatrixLinearOperator(bordered), rhs, lx.LU()).value
+    # throw=False: lineax builds its check when the program is lowered, after
+    # checks_as_nan's trace; a singular system gives NaN either way
+    t = lx.linear_solve(lx.MatrixLinearOperator(bordered), rhs, lx.LU(), throw=False).value
     return t / jnp.linalg.norm(t)
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _correct(problem: ContinuationProblem, algorithm: PseudoArclength, predicted, tangent):
     def equations(z, _):
@@ -188,6 +193,7 @@ def _correct(problem: ContinuationProblem, algorithm: PseudoArclength, predicted
     return sol.value, ok, sol.stats["num_steps"], jnp.linalg.norm(sol.value - predicted)
 
 
+@checks_as_nan
 @eqx.filter_jit
 def describe_point(describe: Callable, u, params: ChainParams, p, where):
     """`describe(u, params with the parameter `where` set to p)`, compiled once for

@@ -12,6 +12,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
+from .._engine.compat import checks_as_nan
 from .._engine.exact.solve import nonsmooth_flow
 from .._errors import ValidationError
 from .._physics.model import steady_sliding
@@ -185,6 +186,7 @@ class DeflatedOrbit(eqx.Module):
     found: Bool[Array, ""]
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _deflated_solve(problem: ContinuationProblem, params, operator: Deflation, u0):
     options = problem.residual.options

@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Complex, Float, Int
 
+from .._engine.compat import checks_as_nan
 from .._engine.exact.options import NonsmoothOptions
 from .._engine.exact.solve import nonsmooth_flow
 from .._engine.exact.switching import initial_modes, mode_field
@@ -191,6 +192,7 @@ def describe_exact_orbit(params: ChainParams, u: Float[Array, " 2n+1"],
         converged=jnp.asarray(converged) & (residual <= 1e3 * options.newton_tol))
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _root(params, u0, options):
     tol = options.newton_tol

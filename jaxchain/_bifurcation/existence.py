@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from .._engine.compat import checks_as_nan, errors_as_nan
 from .._physics.forces import friction_coefficient, static_friction
 from .._physics.model import stick_force
 from .._physics.params import chain_or_default, ChainParams, with_parameter
@@ -57,7 +58,7 @@ def _slip_arc_peak(v_d, args):
     return sol.ys[-1, 1, 0] - v_d
 
 
-_peak = eqx.filter_jit(_slip_arc_peak)
+_peak = checks_as_nan(eqx.filter_jit(_slip_arc_peak))
 
 #: The time after the stick exit before which the slip arc's peak is not looked for
 #: (`_slip_arc_peak`): x'' there is about -k v_d EXIT_GUARD, far above rounding, and
@@ -132,11 +133,12 @@ def stick_slip_existence_limit(params: ChainParams | None = None,
     # the peak is resolved only to more than tol (v0 = 1e-3: the friction changes
     # within 1e-3 of stick, where the arc grazes), the second never holds; the
     # bracket still halves every step, so after BISECTION_STEPS it is far below tol.
-    sol = optx.root_find(_slip_arc_peak, optx.Bisection(rtol=0.0, atol=tol),
-                         jnp.asarray(0.5 * (lower + upper)), args,
-                         options={"lower": jnp.asarray(lower, dtype=float),
-                                  "upper": jnp.asarray(upper, dtype=float)},
-                         max_steps=BISECTION_STEPS, throw=False)
+    with errors_as_nan():  # a program without host callbacks, kept in the cache
+        sol = optx.root_find(_slip_arc_peak, optx.Bisection(rtol=0.0, atol=tol),
+                             jnp.asarray(0.5 * (lower + upper)), args,
+                             options={"lower": jnp.asarray(lower, dtype=float),
+                                      "upper": jnp.asarray(upper, dtype=float)},
+                             max_steps=BISECTION_STEPS, throw=False)
     if sol.result not in (optx.RESULTS.successful, optx.RESULTS.nonlinear_max_steps_reached):
         raise RuntimeError(f"bisection for the existence limit failed: {sol.result}")
     return float(sol.value)

@@ -7,6 +7,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
+from .._engine.compat import checks_as_nan
 from .._physics.params import ChainParams
 from .continuation import Branch, ContinuationProblem, describe_point
 
@@ -63,6 +64,7 @@ def _fold_start(problem: ContinuationProblem, z: Float[Array, " n+1"]) -> Float[
     return jnp.concatenate([z, _null_vector(problem, z)])
 
 
+@checks_as_nan
 @eqx.filter_jit
 def solve_fold(problem: ContinuationProblem, start: Float[Array, " 2n+1"],
                tol: float = 1e-9, max_steps: int = 30):

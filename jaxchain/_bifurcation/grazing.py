@@ -10,6 +10,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Bool, Float
 
+from .._engine.compat import checks_as_nan
 from .._engine.exact.options import NonsmoothOptions
 from .._engine.exact.solve import run_nonsmooth
 from .._engine.exact.switching import SWITCH_KINDS, mode_field
@@ -68,6 +69,7 @@ def _tangency(z, args):
     return jnp.stack([y[1, 0] - p.v_d, dy[1, 0]])
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _return_time(params: ChainParams, options: NonsmoothOptions):
     """The time from the stick exit to the first return to stick (slip to stick) by
@@ -79,8 +81,8 @@ def _return_time(params: ChainParams, options: NonsmoothOptions):
     return jnp.where(jnp.isfinite(first), first, jnp.nan)
 
 
-_newton = eqx.filter_jit(lambda z, args, tol: optx.root_find(
-    _tangency, optx.Newton(rtol=tol, atol=tol), z, args, max_steps=50, throw=False))
+_newton = checks_as_nan(eqx.filter_jit(lambda z, args, tol: optx.root_find(
+    _tangency, optx.Newton(rtol=tol, atol=tol), z, args, max_steps=50, throw=False)))
 
 
 def stick_slip_grazing(params: ChainParams, where: str = "v_d", near: float | None = None,
@@ -241,6 +243,7 @@ def grazing_slope(point: GrazingPoint, other: str) -> float:
     return float(_slope(z, point.params, point.where, other))
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _slope(z, params: ChainParams, where: str, other: str) -> Float[Array, ""]:
     """`grazing_slope` as one compiled program (not op by op)."""

@@ -9,6 +9,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Complex, Float
 
+from .._engine.compat import checks_as_nan
 from .._engine.checks import check_params, real_array
 from .._physics.forces import DEFAULT_EPS, friction_coefficient
 from .._physics.friction import ExponentialDecay, as_parameter
@@ -242,6 +243,7 @@ def _mode_growth(v_d, args):
     return growth_rates(with_parameter(params, "v_d", v_d), eps)[k]
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _hopf_modes(params: ChainParams, eps, guess, rtol, atol):
     solver = optx.Newton(rtol=rtol, atol=atol)
@@ -314,6 +316,7 @@ def _leading_growth(v_d, args):
     return leading_growth_rate(with_parameter(params, "v_d", v_d), eps)
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _hopf_leading(params: ChainParams, eps, guess, rtol, atol):
     """The Hopf point of any chain: Newton's method (optimistix) on the leading

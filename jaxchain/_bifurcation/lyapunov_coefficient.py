@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import lineax as lx
 from jaxtyping import Array, Float
 
+from .._engine.compat import checks_as_nan
 from .._physics.forces import DEFAULT_EPS
 from .._physics.model import as_value, jacobian, steady_sliding, vector_field
 from .._physics.params import ChainParams
@@ -80,6 +81,7 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0, *, eps=DEFAUL
     return _first_lyapunov_coefficient(params, mode, as_value(eps))
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _first_lyapunov_coefficient(params: ChainParams, mode: int, eps) -> Float[Array, ""]:
     """`first_lyapunov_coefficient` as one compiled program (not op by op)."""
@@ -90,7 +92,10 @@ def _first_lyapunov_coefficient(params: ChainParams, mode: int, eps) -> Float[Ar
     a = jacobian(params, y=jnp.reshape(y, (2, -1)), eps=eps).astype(complex)
 
     def solve(matrix, vector):
-        return lx.linear_solve(lx.MatrixLinearOperator(matrix), vector, lx.LU()).value
+        # throw=False: lineax builds its check when the program is lowered, after
+        # checks_as_nan's trace; a singular system gives NaN either way
+        return lx.linear_solve(lx.MatrixLinearOperator(matrix), vector, lx.LU(),
+                               throw=False).value
 
     def inner(u, v):
         return jnp.vdot(u, v)

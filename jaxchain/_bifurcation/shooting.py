@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Complex, Float
 
+from .._engine.compat import checks_as_nan, errors_as_nan
 from .._physics.custom_types import State
 from .._physics.forces import DEFAULT_EPS
 from .._physics.model import Model, model_field, vector_field
@@ -88,12 +89,14 @@ def flow(params: ChainParams, y0: State, period, options: ShootingOptions,
         dimensionless (a fraction of x_0 omega_n); the smoothed engine's
         (`Smoothed.eps`), `DEFAULT_EPS` by default.
     """
-    return diffrax.diffeqsolve(
-        diffrax.ODETerm(model_field), options.solver, 0.0, period, None, y0,
-        Model(params, eps),
-        saveat=saveat, max_steps=options.max_steps, adjoint=diffrax.ForwardMode(),
-        stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
-        throw=False)
+    with errors_as_nan():  # diffrax's checks of its arguments: no host callback
+        return diffrax.diffeqsolve(
+            diffrax.ODETerm(model_field), options.solver, 0.0, period, None, y0,
+            Model(params, eps),
+            saveat=saveat, max_steps=options.max_steps, adjoint=diffrax.ForwardMode(),
+            stepsize_controller=diffrax.PIDController(rtol=options.rtol,
+                                                      atol=options.atol),
+            throw=False)
 
 
 def pack(y0: State, period) -> Float[Array, " 2n+1"]:
@@ -278,6 +281,7 @@ class DescribeOrbit(eqx.Module):
         return describe_orbit(params, u, self.options, eps=self.eps)
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _root(params, eps, u0, options):
     def fn(u, p):

@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .._engine.compat import checks_as_nan
 from .._physics.forces import DEFAULT_EPS
 from .._physics.params import ChainParams, parameter_value, with_parameter
 from .continuation import (Branch, ContinuationOptions, ContinuationProblem, PseudoArclength,
@@ -42,6 +43,7 @@ def hopf_vd_and_derivative(params: ChainParams, where: Callable | str, value, *,
                                    check_eps(eps))
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _hopf_vd_and_derivative(params, where, value, eps):
     hopf, derivative = jax.jvp(lambda x: hopf_vd(with_parameter(params, where, x), eps=eps),
@@ -49,6 +51,7 @@ def _hopf_vd_and_derivative(params, where, value, eps):
     return hopf, jnp.where(jnp.isnan(hopf), jnp.nan, derivative)
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _derivative(problem: ContinuationProblem, where, value, solution):
     def solve(v):

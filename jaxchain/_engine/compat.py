@@ -4,7 +4,9 @@ equinox changes these parts, one test names what changed instead of a wrong step
 size or a host callback showing up somewhere in the engine."""
 
 import contextlib
+import functools
 import threading
+from collections.abc import Callable
 from importlib.metadata import version
 
 import diffrax
@@ -32,7 +34,7 @@ def unpack_pid_state(state) -> tuple:
     return inv_error, prev_inv_error, at_dtmin
 
 
-_errors_lock = threading.Lock()
+_errors_lock = threading.RLock()  # re-entrant: blocks nest (a traced function's own engine run)
 
 
 @contextlib.contextmanager
@@ -58,6 +60,29 @@ def errors_as_nan():
         finally:
             eqx._errors.EQX_ON_ERROR = before
             _error_traces().clear_cache()
+
+
+def checks_as_nan(program: Callable) -> Callable:
+    """A compiled function of jaxchain (`checks_as_nan(eqx.filter_jit(fn))`), called
+    inside `errors_as_nan`: traced, lowered and compiled with equinox's checks (in
+    diffrax, lineax and optimistix) as NaN. Its failures are a status or NaN, never
+    an exception. JAX keeps no program with a host callback, equinox's default
+    check, in its persistent compilation cache: without this, every process (a
+    command, a notebook, a test worker) compiled the bifurcation programs anew.
+    The whole call is inside the block, not only the trace: lineax and
+    optimistix's implicit derivatives build their checks when the program is
+    lowered. `lower` lowers the program as a call does."""
+    @functools.wraps(program)
+    def call(*args, **kwargs):
+        with errors_as_nan():
+            return program(*args, **kwargs)
+
+    def lower(*args, **kwargs):
+        with errors_as_nan():
+            return program.lower(*args, **kwargs)
+
+    call.lower = lower
+    return call
 
 
 def _error_traces():

@@ -11,6 +11,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._engine.compat import checks_as_nan
 from .._bifurcation.continuation import ContinuationProblem
 from .._bifurcation.exact_orbit import (ExactShooting, exact_cycle_problem,
                                         exact_floquet_multipliers, exact_periodic_orbit)
@@ -29,8 +30,8 @@ SNAKE_SHOOTING = ShootingOptions(root_finder="levenberg-marquardt")
 #: Shooting on the exact engine: Newton's method, forward mode through every switch.
 EXACT_SNAKE_SHOOTING = ExactShooting()
 
-_multipliers = eqx.filter_jit(floquet_multipliers)
-_exact_multipliers = eqx.filter_jit(exact_floquet_multipliers)
+_multipliers = checks_as_nan(eqx.filter_jit(floquet_multipliers))
+_exact_multipliers = checks_as_nan(eqx.filter_jit(exact_floquet_multipliers))
 
 
 class SmoothedOrbits:

@@ -12,6 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from ..._engine.compat import checks_as_nan
 from ..._engine.checks import as_solver
 from ..._engine.options import SimulationOptions
 from ..._engine.solver.controller import CONTROLLERS
@@ -153,7 +154,7 @@ class _Problem(eqx.Module):
 
 #: Jitted, so that the integration is traced once (a jaxpr that vmap and the JVPs
 #: transform) rather than at every trace of the residual by the least-squares solver.
-_window_flow = eqx.filter_jit(window_flow)
+_window_flow = checks_as_nan(eqx.filter_jit(window_flow))
 
 
 @eqx.filter_custom_jvp
@@ -201,6 +202,7 @@ class _Answer(eqx.Module):
     g: jnp.ndarray  # d values / d theta
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _stage(problem: _Problem, u0, weighting, tol: float, max_iterations: int) -> _Answer:
     """One stage of the fit: Levenberg-Marquardt from `u0`, then, at its answer, the
@@ -230,6 +232,7 @@ def _stage(problem: _Problem, u0, weighting, tol: float, max_iterations: int) ->
                    values=values(theta), g=jax.jacfwd(values)(theta))
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _value_and_jacobian(quantity, unknowns: Unknowns, base: ChainParams, theta):
     """quantity(params(theta)) and its Jacobian in theta, in one compiled program."""

@@ -12,6 +12,7 @@ import numpy as np
 import optax
 from jaxtyping import Array, Float
 
+from ..._engine.compat import checks_as_nan
 from ..._bifurcation.fold import solve_fold
 from ..._physics.forces import DEFAULT_EPS
 from ..._physics.initial import excited_block
@@ -48,12 +49,14 @@ def _solve_at(problem, start, theta, shift, budget, zero_mean):
     return solve_fold(problem.with_params(_with_stiffness(problem.params, delta)), start)
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _solve(problem, start, theta, shift, budget, zero_mean):
     """Newton's method on the fold's extended system at the pattern theta."""
     return _solve_at(problem, start, theta, shift, budget, zero_mean)
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _tangent(problem, solution, theta, shift, step, budget, zero_mean):
     """d solution / d theta along `step` (forward mode through optimistix's
@@ -62,6 +65,7 @@ def _tangent(problem, solution, theta, shift, step, budget, zero_mean):
                    (theta,), (step,))[1]
 
 
+@checks_as_nan
 @eqx.filter_jit
 def _gradient(problem, solution, theta, shift, budget, zero_mean):
     """d fold / d theta, shape (period,): one forward-mode pass per variable
