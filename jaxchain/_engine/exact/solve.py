@@ -12,6 +12,7 @@ from jaxtyping import Array, Bool, Float, Int
 from ..._physics.custom_types import State
 from ..._physics.initial import AbstractInitialCondition, GivenState
 from ..._physics.params import ChainParams
+from ..compat import checks_as_nan
 from ..observers.base import no_partial_answers
 from ..observables import Observables
 from ..progress import progress_bar
@@ -262,6 +263,7 @@ def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State
     return obs
 
 
+@checks_as_nan
 @eqx.filter_jit
 def nonsmooth_flow(params: ChainParams, y0: State, ts, options: NonsmoothOptions):
     """The flow map of the exact switch model: the states at the times `ts` from
