@@ -174,8 +174,9 @@ def _tangent(problem: ContinuationProblem, z, previous):
     jac = jax.jacfwd(problem)(z)
     bordered = jnp.concatenate([jac, previous[None]], axis=0)
     rhs = jnp.zeros(z.size).at[-1].set(1.0)
-    # throw=False: lineax builds its check when the program is lowered, after
-    # checks_as_nan's trace; a singular system gives NaN either way
+    # throw=False: a singular system gives NaN either way, and lineax's check
+    # (built at lowering) would be a host callback wherever this is compiled
+    # outside checks_as_nan (inside a user's own jax.jit)
     t = lx.linear_solve(lx.MatrixLinearOperator(bordered), rhs, lx.LU(), throw=False).value
     return t / jnp.linalg.norm(t)
 

@@ -92,8 +92,9 @@ def _first_lyapunov_coefficient(params: ChainParams, mode: int, eps) -> Float[Ar
     a = jacobian(params, y=jnp.reshape(y, (2, -1)), eps=eps).astype(complex)
 
     def solve(matrix, vector):
-        # throw=False: lineax builds its check when the program is lowered, after
-        # checks_as_nan's trace; a singular system gives NaN either way
+        # throw=False: a singular system gives NaN either way, and lineax's check
+        # (built at lowering) would be a host callback wherever this is compiled
+        # outside checks_as_nan (inside a user's own jax.jit)
         return lx.linear_solve(lx.MatrixLinearOperator(matrix), vector, lx.LU(),
                                throw=False).value
 
