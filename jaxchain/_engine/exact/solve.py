@@ -294,12 +294,45 @@ def nonsmooth_flow(params: ChainParams, y0: State, ts, options: NonsmoothOptions
     (shape ()).
     """
 
+    c, ys = _flow(params, y0, ts, options)
+    return ys, c.status
+
+
+def _flow(params: ChainParams, y0: State, ts, options: NonsmoothOptions):
+    """The exact engine from `y0` to each time of `ts` in turn, observing nothing:
+    (the final carry, the states at `ts`)."""
+
     def body(c, t):
         c = chunk(params, options, False, False, c, t)
         return c, c.y
 
-    c, ys = jax.lax.scan(body, initial_carry(params, y0, options, ()), ts)
-    return ys, c.status
+    return jax.lax.scan(body, initial_carry(params, y0, options, ()), ts)
+
+
+@checks_as_nan
+@eqx.filter_jit
+def nonsmooth_switches(params: ChainParams, y0: State, t_end, options: NonsmoothOptions):
+    """The switches of the exact switch model from the state `y0` at t = 0 to
+    `t_end` (traced: one program for every horizon), as `run_nonsmooth` logs them.
+    Pure and traceable, like `nonsmooth_flow`.
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `y0`: the state at t = 0, shape (2, n_osc).
+    - `t_end`: the horizon (> 0), shape (), dimensionless (eq. (4)).
+    - `options`: `NonsmoothOptions` (static); its tolerances, budgets and log size
+        apply, its horizon does not.
+
+    **Returns:**
+
+    (time, oscillator, kind, status): the last `options.log_size` switches, oldest
+    first, each of shape (log_size,) (unused entries have time NaN and oscillator
+    and kind -1; kind indexes `SWITCH_KINDS`), and the run's `Status` as an
+    integer, shape ().
+    """
+    c, _ = _flow(params, y0, jnp.atleast_1d(t_end), options)
+    return _switch_log(c, options.log_size) + (c.status,)
 
 
 def nonsmooth_trajectory(params: ChainParams, y0: AbstractInitialCondition | State,
