@@ -73,6 +73,7 @@ from ._engine.exact.solve import (
     run_nonsmooth as run_nonsmooth,
     nonsmooth_trajectory as nonsmooth_trajectory,
     nonsmooth_flow as nonsmooth_flow,
+    nonsmooth_switches as nonsmooth_switches,
     NonsmoothObservables as NonsmoothObservables,
 )
 from ._engine.exact.options import NonsmoothOptions as NonsmoothOptions
@@ -144,6 +145,10 @@ from ._bifurcation.branch_switching import (
 from ._bifurcation.grazing import (
     stick_slip_grazing as stick_slip_grazing, grazing_curve as grazing_curve,
     grazing_slope as grazing_slope, GrazingPoint as GrazingPoint,
+)
+from ._bifurcation.sliding import (
+    locate_sliding as locate_sliding, SlidingPoint as SlidingPoint,
+    stick_phases as stick_phases,
 )
 from ._bifurcation.continuation import (
     continuation as continuation, ContinuationProblem as ContinuationProblem,

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-from helpers import scipy_stick_slip_cycle
+from helpers import scipy_slip_arc, scipy_stick_slip_cycle
 
 ONE = jc.ChainParams(n_osc=1, v_d=1.5, xi=0.05)
 
@@ -46,6 +46,30 @@ def test_exact_stick_slip_cycle_from_perturbed_starts_is_the_scipy_cycle(guess, 
     assert abs(multipliers[int(orbit.trivial)] - 1) < 1e-8
     assert int(orbit.zero_multipliers) == 1 and np.abs(multipliers).min() < 1e-9
     assert int(orbit.n_halc) == 1 and bool(orbit.stable)
+
+
+@pytest.mark.numerics
+def test_the_exact_cycle_s_stick_phase_is_the_scipy_stick(guess):
+    """The stick phase of the single oscillator's exact stick-slip cycle, read from
+    the exact engine's switch log over its orbit (`stick_phases`), is the stick of
+    the scipy cycle: from the return to the belt speed back to the stick exit
+    point, (x_exit - x_return) / v_d, to the period's 1e-9 (relative)."""
+    x_max, (_, period) = guess
+    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
+    arc = scipy_slip_arc(ONE)
+    stick = (arc.y[0, 0] - arc.y[0, -1]) / ONE.v_d
+    phases = jc.stick_phases(ONE, orbit.y0, orbit.period, jc.ExactShooting().flow)
+    assert abs(phases[0] - stick) < 1e-9 * period
+    # steady sliding has no stick phase
+    sliding = jc.ChainParams(n_osc=1, v_d=3.0, xi=0.05)
+    y = jc.steady_sliding(sliding)
+    assert np.isinf(jc.stick_phases(sliding, y, 6.0, jc.ExactShooting().flow)).all()
+
+
+def test_sliding_location_needs_exact_orbits_with_a_stick_phase():
+    problem = jc.ContinuationProblem(residual=lambda u, p: u, u0=jnp.zeros(3), params=ONE)
+    with pytest.raises(ValueError, match="exact_cycle_problem"):
+        jc.locate_sliding(problem, jnp.zeros(4))
 
 
 def test_exact_shooting_refuses_bad_input_in_one_line():

@@ -188,3 +188,49 @@ def test_cycle_gradients_against_finite_differences_of_scipy(adjoint):
         np.testing.assert_allclose(value, ref, rtol=1e-8)
         fd = _scipy_cycle_derivatives(v_d, 0.05, h)
         np.testing.assert_allclose(got, fd, rtol=1e-4, err_msg=f"v_d {v_d}")
+
+
+@pytest.mark.numerics
+@pytest.mark.parametrize("tol", [1e-6, 1e-9, 1e-12])
+def test_a_slip_arc_that_barely_reaches_the_belt_speed_switches_there(tol):
+    """A slip arc whose velocity rises only 1e-3 above v_d, for about 0.07 time
+    units, shorter than a step at loose tolerances: the relative velocity falls
+    through zero and rises again within one step, so that the guard is positive at
+    both of its ends. The switch must still be found where scipy (DOP853, rtol
+    1e-12, an event on x' = v_d) puts the crossing, to the accuracy that the
+    tolerance gives a crossing at this shallow angle. Before
+    the guard was checked inside each step (`_INTERIOR`), the engine slipped
+    through it at rtol 1e-6 (no switch, or a later one)."""
+    from scipy.integrate import solve_ivp
+    from scipy.optimize import brentq
+    from helpers import eq1_mu
+
+    p = jc.ChainParams(n_osc=1, v_d=1.5, xi=0.05)
+    mu = eq1_mu(p)
+
+    def slip(t, y):  # slip with x' < v_d (the engine's mode), continued beyond v_d
+        return [y[1], -2 * p.xi * y[1] - y[0] + mu(abs(p.v_d - y[1]))]
+
+    def peak_excess(x0, events=False):
+        def crossing(t, y):
+            return y[1] - p.v_d
+        crossing.direction = 1
+
+        def falling(t, y):  # the velocity's first maximum ends the search
+            return slip(t, y)[1]
+        falling.terminal, falling.direction = True, -1
+        sol = solve_ivp(slip, (0.0, 20.0), [x0, 0.0], method="DOP853", rtol=1e-12,
+                        atol=1e-12, events=[crossing, falling], dense_output=True)
+        return sol if events else sol.y[1, -1] - p.v_d - 1e-3
+
+    x0 = brentq(peak_excess, -1.0, -0.75, xtol=1e-14)  # from rest at x0 < 0
+    sol = peak_excess(x0, events=True)
+    t_cross = float(sol.t_events[0][0])
+    obs = jc.simulate_nonsmooth(p, jnp.array([[x0], [0.0]]), jc.NonsmoothOptions(
+        rtol=tol, atol=tol, t_end=t_cross + 1.0, transient=0.0))
+    logged = np.asarray(obs.log_kind) >= 0
+    assert logged.any(), "no switch: the slip arc went through v_d unseen"
+    # a velocity error e moves a crossing at acceleration a by e / a: the dense
+    # output (fourth order) is good to about 1e3 x tol after a few dozen steps
+    a_cross = slip(t_cross, sol.sol(t_cross))[1]
+    assert abs(float(obs.log_time[logged][0]) - t_cross) < 1e3 * tol / a_cross + 1e-9

@@ -104,6 +104,46 @@ def test_exact_one_site_branch_ends_where_the_exact_simulation_says(one_site, tm
     assert smoothed["type"] == "Neimark-Sacker" and abs(smoothed["v_d"] - low["v_d"]) < 0.01
 
 
+@pytest.mark.slow
+def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(tmp_path, capsys):
+    """Upwards in v_d the exact one-site branch of the ring of 4 ends at a sliding
+    bifurcation: the excited oscillator's stick phase shrinks like a square root,
+    d^2 ~ c (p* - v_d), and no orbit lies beyond. `locate_sliding` puts p* by the
+    secant method on d^2 = 0. Checked by direct simulation on the exact engine
+    (event by event over 80 periods from the branch's last orbit, not shooting):
+    just below p* the state keeps its stick phase, and the line through d^2 at
+    p* - 4e-5 and p* - 1e-5 meets zero at p* within 1e-6 (bisection on the flag
+    of the stick phase was 1e-5 off); just above it the stick is gone."""
+    argv = ["snake", "--engine", "exact", "--n-osc", "4", "--vd", "1.79", "--sites", "1",
+            "--vd-min", "1.75", "--vd-max", "1.85", "--max-points", "20", "--no-switch",
+            "--no-simulation", "--out", str(tmp_path), "--json"]
+    assert jc.main(argv) == 0
+    (branch,) = json.loads(capsys.readouterr().out)["branches"]
+    high = branch["stable_range_ends"][0][1]
+    assert high["type"] == "sliding" and high["width"] < 1e-8 and high["n_halc"] == 1
+    p_star = high["v_d"]
+    ds = xr.open_dataset(tmp_path / "snake" / "branch_k1.nc")
+    u = ds["u"].values[int(np.argmax(ds["v_d"].values))]
+    excited = int(ds.attrs["phase_oscillator"])  # the oscillator of largest amplitude
+
+    def stick(v_d):
+        obs = jc.simulate_nonsmooth(jc.with_parameter(RING, "v_d", v_d),
+                                    u[:-1].reshape(2, -1),
+                                    jc.NonsmoothOptions.reference(t_end=600.0,
+                                                                  transient=500.0))
+        t, osc, kind = (np.asarray(a) for a in (obs.log_time, obs.log_osc, obs.log_kind))
+        t, kind = t[osc == excited], kind[osc == excited]
+        phases = [t[i + 1] - t[i] for i in range(t.size - 1)
+                  if jc.SWITCH_KINDS[kind[i]] == "slip to stick"
+                  and jc.SWITCH_KINDS[kind[i + 1]] == "stick to slip"]
+        return phases[-1] if phases else None
+
+    (p1, d1), (p2, d2) = ((p_star - delta, stick(p_star - delta)) for delta in (4e-5, 1e-5))
+    assert d1 is not None and d2 is not None and d2 < d1
+    assert abs(p2 - d2**2 * (p2 - p1) / (d2**2 - d1**2) - p_star) < 1e-6
+    assert stick(p_star + 1e-5) is None
+
+
 def test_stored_branches_are_read_back_only_for_equal_settings(one_site):
     found, out = one_site
     again = jc.localized_branches(RING, (1,), continuation_options=OPTIONS, out=out,

@@ -10,6 +10,8 @@ from jaxtyping import Array, Complex, Float
 from .continuation import Branch, ContinuationProblem, PseudoArclength, _correct, _record, \
     _tangent
 from .._errors import ValidationError
+from .._engine.status import Status
+from .sliding import SlidingPoint, _phases, locate_sliding, vanishing_stick
 
 #: The kinds of codimension-one bifurcation of limit cycles (Kuznetsov, *Elements of
 #: Applied Bifurcation Theory*, 3rd ed. (2004), Sect. 5.4), by their critical
@@ -31,13 +33,15 @@ class BifurcationPoint(eqx.Module):
 
     - `kind`: one of `BIFURCATION_KINDS`.
     - `p`: the continued parameter there (dimensionless, eq. (6)).
-    - `z`: the solution (u, p) there, shape (n + 1,).
+    - `z`: the solution (u, p) there, shape (n + 1,); at a sliding bifurcation the
+        orbit nearest to it on the side of the stick phase (`locate_sliding`).
     - `multiplier`: the critical Floquet multiplier there (complex; modulus 1 up to
         the bisection's resolution).
     - `record`: `problem.describe` there (a `PeriodicOrbit` for limit cycles).
     - `after`: the index of the converged point of the branch after which it lies.
     - `width`: the arclength of the last bisection interval (the location's
-        resolution along the branch).
+        resolution along the branch); at a sliding bifurcation the secant method's
+        last change of p (`SlidingPoint.step`).
     """
 
     kind: str = eqx.field(static=True)
@@ -98,6 +102,17 @@ def _discontinuity(problem: ContinuationProblem, sides) -> str:
     return "sliding" if zeros[0] != zeros[1] else "grazing"
 
 
+def _sliding(problem: ContinuationProblem, algorithm: PseudoArclength, sides
+             ) -> SlidingPoint:
+    """The sliding bifurcation between the two sides of a change of stability
+    (`_discontinuity`), located by `locate_sliding` from the side whose orbit has
+    the extra stick phase (more zero multipliers)."""
+    zeros = [int(_record(problem, z).zero_multipliers) for _, z in sides]
+    stick, other = sides[int(np.argmax(zeros))][1], sides[int(np.argmin(zeros))][1]
+    return locate_sliding(problem, stick, algorithm,
+                          oscillator=vanishing_stick(problem, stick, other))
+
+
 def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
                         algorithm: PseudoArclength = PseudoArclength(), *,
                         steps: int = 24) -> tuple[BifurcationPoint, ...]:
@@ -114,7 +129,12 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
     located point (`BIFURCATION_KINDS`), unless the multiplier jumps by more than
     `JUMP` across the last interval: a discontinuity-induced bifurcation of the
     exact model, "sliding" where a stick phase appears or vanishes (the count of
-    zero multipliers changes) and "grazing" otherwise (`_discontinuity`).
+    zero multipliers changes) and "grazing" otherwise (`_discontinuity`). A
+    sliding bifurcation is then located on its own defining condition, the stick
+    phase's vanishing duration (`locate_sliding`); where that does not converge,
+    the bisection's point stays. An exact branch whose corrector failed beyond its
+    last orbit ends with the sliding bifurcation located from that orbit, if there
+    is one between it and the failed prediction (`after` is then the last point).
 
     **Arguments:**
 
@@ -167,16 +187,44 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
             sides[1] = (f_hi, zs[i + 1])
         record = _record(problem, z)
         _, m = _critical(record)
+        p = z[-1]
         if i in folds:
             kind = "fold"
         elif sides[1] is not None and abs(sides[1][0] - sides[0][0]) > JUMP:
             kind = _discontinuity(problem, sides)
+            point = _sliding(problem, algorithm, sides) if kind == "sliding" else None
+            if point is not None and point.converged:  # on its defining condition
+                p, z, width, record = point.p, point.z, float(point.step), point.record
+                _, m = _critical(record)
         elif abs(m.imag) > 1e-6 * max(1.0, abs(m)) and abs(m.imag) > 1e-3:
             kind = "Neimark-Sacker"
         elif m.real < 0:
             kind = "period doubling"
         else:
             kind = "branch point"
-        found.append(BifurcationPoint(kind=kind, p=z[-1], z=z, multiplier=jnp.asarray(m),
+        found.append(BifurcationPoint(kind=kind, p=p, z=z, multiplier=jnp.asarray(m),
                                       record=record, after=int(i), width=float(width)))
-    return tuple(found)
+    end = _sliding_end(problem, algorithm, branch, zs)
+    return tuple(found) + ((end,) if end is not None else ())
+
+
+def _sliding_end(problem: ContinuationProblem, algorithm: PseudoArclength, branch: Branch,
+                 zs) -> BifurcationPoint | None:
+    """The sliding bifurcation at the end of an exact branch whose corrector failed
+    beyond its last orbit (a branch of stick-slip orbits ends where a stick phase
+    vanishes, and no orbit of the same segments lies beyond), located by
+    `locate_sliding` from the last orbit, if it lies between that orbit and the
+    failed prediction after it; else None. `after` is the last point's index: no
+    point of the branch follows."""
+    if branch.stop != Status.newton_failed or not hasattr(branch.records, "zero_multipliers"):
+        return None
+    z, beyond = zs[-1], float(branch.p[-1])
+    if not np.isfinite(_phases(problem, z)).any():
+        return None
+    point = locate_sliding(problem, z, algorithm, delta=abs(beyond - float(z[-1])))
+    if not point.converged or not min(float(z[-1]), beyond) <= float(point.p) <= max(
+            float(z[-1]), beyond):
+        return None
+    _, m = _critical(point.record)
+    return BifurcationPoint(kind="sliding", p=point.p, z=point.z, multiplier=jnp.asarray(m),
+                            record=point.record, after=len(zs) - 1, width=float(point.step))

@@ -331,11 +331,13 @@ def stable_ranges(branch: xr.Dataset) -> list[dict]:
             j += 1
         ends = []
         for idx, other in ((i, i - 1), (j, j + 1)):
-            if not 0 <= other < stable.size:
-                ends.append(({"type": "end of branch", "v_d": float(v[idx])}, idx, None))
-                continue
-            # the bifurcation located between the two points, else an unlocated change
+            # the bifurcation located between the two points (or at the branch's
+            # end, beyond its last point), else an unlocated change
             between = [b for b in bifs if b["after"] == min(idx, other)]
+            if not 0 <= other < stable.size:
+                ends.append((between[0] if between else
+                             {"type": "end of branch", "v_d": float(v[idx])}, idx, None))
+                continue
             ends.append((between[0] if between else
                          {"type": "stability change", "v_d": float(0.5 * (v[idx] + v[other]))},
                          idx, other))

@@ -253,6 +253,26 @@ def _switch_point(interp, params, modes, t0, t1, tol):
                              state, rate)
 
 
+#: Interior points of each step at which the guard is checked as well as at its
+#: end, as DifferentialEquations.jl's `ContinuousCallback` checks `interp_points`
+#: (10 by default): a guard that falls through zero and rises again within one
+#: step is seen where it is below zero at one of them.
+_INTERIOR = 10
+
+
+def _first_fall(interp, params, modes, t0, t1, y_end):
+    """(t, fallen): the first of the step's interior points (`_INTERIOR`, evenly
+    spaced on its dense output) or its end where the smallest guard is <= 0, and
+    whether there is one; the step's end and False if none. The switch lies
+    between t0 and that point."""
+    ts = t0 + (t1 - t0) * jnp.arange(1, _INTERIOR + 1) / (_INTERIOR + 1)
+    inner = jax.vmap(lambda t: guard(params, interp.evaluate(t)[0], modes))(ts) <= 0
+    at_end = guard(params, y_end, modes) <= 0
+    first = jnp.argmax(inner)
+    return (jnp.where(inner.any(), jax.lax.stop_gradient(ts[first]), t1),
+            inner.any() | at_end)
+
+
 def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
     """One step of the loop (see the module docstring). `observe` (traced: the chunk
     lies in the observed window) adds the turning points and counts the stick time;
@@ -272,8 +292,12 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
                                    solver.error_order(_term(options)), c.controller_state)
     interp = solver.interpolation_cls(t0=t0, t1=t1, **dense)
 
-    # the earliest switch within the step, if the smallest guard has fallen through 0
-    event = keep & (guard(params, end[0], c.modes) <= 0)
+    # the earliest switch within the step: the smallest guard fallen through 0 at
+    # the step's end or at one of its interior points on the dense output (a slip
+    # phase that touches v_rel = 0 and turns back within one step has both ends
+    # positive), the step then ending at the first such point
+    t1, event = _first_fall(interp, params, c.modes, t0, t1, end[0])
+    event = keep & event
     at_end = keep & (t1 >= t_stop)
     turning = observe & keep & jnp.any((c.modes != 0) & (c.y[1] * end[0][1] < 0))
 

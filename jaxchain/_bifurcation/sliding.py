@@ -1,0 +1,233 @@
+"""Sliding bifurcations of periodic orbits of the exact switch model: where a stick
+phase of one oscillator shrinks to zero duration along a branch, located by the
+secant method on that defining condition."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._engine.exact.solve import nonsmooth_switches
+from .._engine.exact.switching import SWITCH_KINDS
+from .._engine.status import Status
+from .._errors import ValidationError
+from .continuation import ContinuationProblem, PseudoArclength, _correct, _record
+from .shooting import unpack
+
+_STICK = SWITCH_KINDS.index("slip to stick")
+_SLIP = SWITCH_KINDS.index("stick to slip")
+#: The fraction of the way to the secant method's root that each trial goes.
+_FRACTION = 0.5
+#: The secant's second orbit lies at least this fraction of the first's distance
+#: from the root away from the first.
+_SPREAD = 0.25
+#: Trials stop when the step towards the root has halved to this fraction of the
+#: way: the corrector fails that near the last orbit (or p* lies there).
+_WALL = 1e-3
+
+
+def stick_phases(params, y0, period, options) -> Float[np.ndarray, " n_osc"]:
+    """The duration of the shortest stick phase of each oscillator on the periodic
+    orbit of the exact switch model through `y0` with period `period`: every stick
+    phase that ends (stick to slip) in the second of two periods, from the switch
+    that began it (slip to stick), by the exact engine's switch log
+    (`nonsmooth_switches`).
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `y0`: a state on the orbit, shape (2, n_osc).
+    - `period`: its period T (> 0), dimensionless (eq. (4)).
+    - `options`: `NonsmoothOptions` of the run (`ExactShooting.flow`).
+
+    **Returns:**
+
+    Shape (n_osc,): inf for an oscillator without a complete stick phase there (it
+    never sticks, or never leaves stick); NaN everywhere if the run failed or its
+    log is too short for two periods.
+    """
+    time, osc, kind, status = (np.asarray(a) for a in
+                               nonsmooth_switches(params, y0, 2.0 * period, options))
+    n = params.n_osc
+    if int(status) != Status.ok or kind[0] >= 0 and time[0] > float(period):
+        return np.full(n, np.nan)  # failed, or the log has lost the first period
+    out = np.full(n, np.inf)
+    start = np.full(n, np.nan)  # the latest slip-to-stick switch of each oscillator
+    for t, i, k in zip(time, osc, kind):
+        if k == _STICK:
+            start[i] = t
+        elif k == _SLIP:
+            if t > period and np.isfinite(start[i]):
+                out[i] = min(out[i], t - start[i])
+            start[i] = np.nan
+    return out
+
+
+class SlidingPoint(eqx.Module):
+    """A sliding bifurcation of a branch of periodic orbits of the exact switch
+    model, located by `locate_sliding`.
+
+    **Fields:**
+
+    - `p`: the continued parameter there, where the stick phase's duration
+        vanishes, shape () (dimensionless, eq. (6)).
+    - `oscillator`: the oscillator whose stick phase vanishes (0-based).
+    - `z`: the orbit (u, p) nearest to it on the side where the stick phase
+        exists, shape (n + 1,).
+    - `stick`: the shortest stick phase of `oscillator` on that orbit, shape ().
+    - `record`: `problem.describe` of that orbit (an `ExactOrbit`).
+    - `step`: the last change of the secant method's estimate of p (its
+        resolution; inf if it did not converge), shape ().
+    - `iterations`: orbits solved, the first included.
+    - `converged`: whether the last change was below the tolerance.
+    """
+
+    p: Float[Array, ""]
+    oscillator: int = eqx.field(static=True)
+    z: Float[Array, " n+1"]
+    stick: Float[Array, ""]
+    record: eqx.Module
+    step: Float[Array, ""]
+    iterations: int = eqx.field(static=True)
+    converged: bool = eqx.field(static=True)
+
+
+def _phases(problem: ContinuationProblem, z) -> np.ndarray:
+    y0, period = unpack(z[:-1])
+    return stick_phases(problem.at(z[-1]), y0, period, problem.residual.options.flow)
+
+
+def vanishing_stick(problem: ContinuationProblem, z_stick, z_other) -> int:
+    """The oscillator whose stick phase exists at the orbit `z_stick` and not at
+    `z_other` (two orbits of `problem` on either side of a sliding bifurcation),
+    the one with the shortest such phase; where none is missing at `z_other`, the
+    oscillator with the shortest stick phase at `z_stick`."""
+    here, there = _phases(problem, z_stick), _phases(problem, z_other)
+    gone = np.isfinite(here) & ~np.isfinite(there)
+    return int(np.argmin(np.where(gone if gone.any() else np.isfinite(here), here, np.inf)))
+
+
+def _root(stick, previous: float) -> float:
+    """The secant method's root of g(p) from the orbit of smallest g and, of the
+    others, the one of smallest g that lies at least `_SPREAD` times the first's
+    distance from the previous root away from it (or the farthest, while there is
+    no root yet): trials that crowd near the last orbit that converges, where the
+    corrector fails just beyond, would make the secant ill-conditioned. NaN where
+    g does not fall towards a root."""
+    (p1, g1, _), rest = stick[0], stick[1:]
+    if not rest:
+        return np.nan
+    far = [q for q in rest if abs(q[0] - p1) >= _SPREAD * abs(previous - p1)]
+    p2, g2, _ = far[0] if np.isfinite(previous) and far else max(rest,
+                                                                 key=lambda q: abs(q[0] - p1))
+    return p1 - g1 * (p1 - p2) / (g1 - g2) if g2 > g1 else np.nan
+
+
+def _predict(stick, trial: float, root: float):
+    """The orbit predicted at p = `trial` from the two orbits that stick nearest to
+    it: linear in sqrt|p* - p| (p* = `root`), as an orbit whose stick phase
+    vanishes like a square root varies; the nearest orbit itself where there is no
+    root yet or the points do not lie on one side of it."""
+    (p1, _, z1), (p2, _, z2) = (sorted(stick, key=lambda q: abs(q[0] - trial)) * 2)[:2]
+    side = np.sign(root - np.array([p1, p2, trial]))
+    if len(stick) < 2 or not np.isfinite(root) or not (side == side[0]).all() or p1 == p2:
+        return z1.at[-1].set(trial)
+    s1, s2, st = np.sqrt(np.abs(root - np.array([p1, p2, trial])))
+    return (z1 + (st - s1) / (s2 - s1) * (z2 - z1)).at[-1].set(trial)
+
+
+def locate_sliding(problem: ContinuationProblem, z_stick,
+                   algorithm: PseudoArclength = PseudoArclength(), *,
+                   oscillator: int | None = None, xtol: float = 1e-9,
+                   delta: float = 1e-3, max_iterations: int = 40) -> SlidingPoint:
+    """Locate the sliding bifurcation at which a stick phase of one oscillator
+    vanishes, from an orbit of the exact switch model near it that has the phase.
+
+    The defining condition is the stick phase's duration d(p) = 0. It vanishes
+    like a square root, d(p)^2 ~ c (p* - p): the slip arc before the stick phase
+    arrives at v_rel = 0 ever more tangentially, where the force needed to stick is
+    ever nearer the static friction that ends it. So p* is a simple root of g(p) =
+    d(p)^2, on the side where the orbit sticks, and is found by the secant method
+    on g (superlinear; Dennis and Schnabel, *Numerical Methods for Unconstrained
+    Optimization and Nonlinear Equations* (1996), Sect. 2.6) through the two
+    orbits of smallest g (the second at least a quarter of the first's distance
+    from the root away, so that the secant stays well conditioned). Each g(p)
+    comes from the orbit solved at p: the pseudo-arclength corrector of `problem`
+    with p held, from the orbit predicted linearly in sqrt|p* - p| along the two
+    nearest orbits. Each trial goes half the way to the current root (d = 0
+    exactly is a degenerate orbit, and the prediction's error grows towards it),
+    and half as far again after a trial whose orbit does not converge or does not
+    stick (beyond p*, or another orbit). It stops when two successive roots differ
+    by less than `xtol`. di Bernardo, Budd, Champneys and Kowalczyk,
+    *Piecewise-smooth Dynamical Systems* (2008), Sect. 8.5, on sliding
+    bifurcations of periodic orbits.
+
+    **Arguments:**
+
+    - `problem`: the exact branch's `ContinuationProblem` (`exact_cycle_problem`).
+    - `z_stick`: a converged orbit (u, p) of the branch where the stick phase
+        exists, shape (n + 1,).
+    - `algorithm`: the corrector (`PseudoArclength`).
+    - `oscillator`: the oscillator whose stick phase vanishes (0-based); by default
+        the one with the shortest stick phase at `z_stick`.
+    - `xtol`: the tolerance on successive estimates of p*.
+    - `delta`: the distance from `z_stick`'s p of the first trials, which give the
+        second orbit of the secant method (p + delta, then p - delta).
+    - `max_iterations`: orbits solved at most.
+
+    **Returns:**
+
+    A `SlidingPoint`.
+
+    **Raises:**
+
+    `ValidationError` if `problem.residual` is not an exact shooting residual or
+    `z_stick` has no stick phase (of `oscillator`).
+    """
+    if not hasattr(getattr(problem.residual, "options", None), "flow"):
+        raise ValidationError("locate_sliding needs the ContinuationProblem of exact orbits "
+                              "(exact_cycle_problem)")
+    z = jnp.asarray(z_stick, dtype=float)
+    d = _phases(problem, z)
+    n = int(np.argmin(np.where(np.isfinite(d), d, np.inf))) if oscillator is None else oscillator
+    if not 0 <= n < d.size or not np.isfinite(d[n]):
+        raise ValidationError(f"z_stick has no stick phase of oscillator {n}")
+    held = jnp.zeros(z.size).at[-1].set(1.0)  # the corrector's constraint: p as predicted
+    stick = [(float(z[-1]), float(d[n]) ** 2, z)]  # (p, g, orbit) of orbits that stick
+    probes = [stick[0][0] + delta, stick[0][0] - delta]
+    root, change, fraction, iterations = np.nan, np.inf, _FRACTION, 1
+    while iterations < max_iterations:
+        if len(stick) < 2:
+            if not probes:
+                break
+            trial = probes.pop(0)
+        elif not np.isfinite(root):  # g does not fall towards a root from here
+            break
+        else:  # towards the root, never onto it (d = 0 there: a degenerate orbit)
+            (p1, _, _), (p2, _, _) = stick[:2]
+            span = 10 * abs(p1 - p2)
+            trial = p1 + fraction * float(np.clip(root - p1, -span, span))
+        iterations += 1
+        new, ok, _, _ = _correct(problem, algorithm, _predict(stick, trial, root), held)
+        dn = _phases(problem, new)[n] if bool(ok) else np.nan
+        if not (np.isfinite(dn) and dn > 0):  # beyond p*, or another orbit: step shorter
+            fraction /= 2
+            if fraction < _WALL:
+                break
+            continue
+        fraction = _FRACTION
+        stick.append((trial, dn**2, new))
+        stick.sort(key=lambda q: q[1])  # the smallest g first: nearest the root
+        estimate = _root(stick, root)
+        if not np.isfinite(estimate):
+            continue
+        previous, root = root, estimate
+        change = abs(root - previous)
+        if len(stick) > 2 and change < xtol:
+            break
+    converged = bool(change < xtol)
+    p, g, z = stick[0]
+    return SlidingPoint(p=jnp.asarray(root if np.isfinite(root) else p), oscillator=n, z=z,
+                        stick=jnp.asarray(np.sqrt(g)), record=_record(problem, z),
+                        step=jnp.asarray(change if converged else np.inf),
+                        iterations=iterations, converged=converged)
