@@ -260,17 +260,38 @@ def _switch_point(interp, params, modes, t0, t1, tol):
 _INTERIOR = 10
 
 
-def _first_fall(interp, params, modes, t0, t1, y_end):
+def _first_fall(interp, params, modes, t0, t1, y0, y_end):
     """(t, fallen): the first of the step's interior points (`_INTERIOR`, evenly
     spaced on its dense output) or its end where the smallest guard is <= 0, and
     whether there is one; the step's end and False if none. The switch lies
-    between t0 and that point."""
-    ts = t0 + (t1 - t0) * jnp.arange(1, _INTERIOR + 1) / (_INTERIOR + 1)
-    inner = jax.vmap(lambda t: guard(params, interp.evaluate(t)[0], modes))(ts) <= 0
+    between t0 and that point.
+
+    The interior points are looked at only where a slip guard can dip below zero
+    inside the step: some slipping oscillator approaches the belt speed at the
+    step's start and recedes from it at its end (its relative velocity has an
+    extremum inside), with its guard at both ends within h max|x''| of zero (no
+    deeper dip fits in the step). Elsewhere, on most steps, the check costs two
+    slopes of the dense output."""
     at_end = guard(params, y_end, modes) <= 0
-    first = jnp.argmax(inner)
-    return (jnp.where(inner.any(), jax.lax.stop_gradient(ts[first]), t1),
-            inner.any() | at_end)
+    h = t1 - t0
+
+    def slope(t):
+        return jax.jvp(lambda s: interp.evaluate(s)[0][1], (t,), (jnp.ones_like(t),))[1]
+
+    a0, a1 = slope(t0), slope(t1)
+    g0, g1 = modes * (y0[1] - params.v_d), modes * (y_end[1] - params.v_d)
+    dip = ((modes != 0) & (modes * a0 < 0) & (modes * a1 > 0)
+           & (jnp.minimum(g0, g1) <= h * jnp.maximum(jnp.abs(a0), jnp.abs(a1))))
+
+    def inside():
+        ts = t0 + h * jnp.arange(1, _INTERIOR + 1) / (_INTERIOR + 1)
+        fallen = jax.vmap(lambda t: guard(params, interp.evaluate(t)[0], modes))(ts) <= 0
+        return ts[jnp.argmax(fallen)], fallen.any()
+
+    t, fallen = jax.lax.cond(jnp.any(dip), inside, lambda: (t1, jnp.array(False)))
+    # a bracket only (the switch time's derivative is the implicit function
+    # theorem's, `_switch_point`); the step's own end keeps its derivative
+    return jnp.where(fallen, jax.lax.stop_gradient(t), t1), fallen | at_end
 
 
 def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
@@ -296,7 +317,7 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
     # the step's end or at one of its interior points on the dense output (a slip
     # phase that touches v_rel = 0 and turns back within one step has both ends
     # positive), the step then ending at the first such point
-    t1, event = _first_fall(interp, params, c.modes, t0, t1, end[0])
+    t1, event = _first_fall(interp, params, c.modes, t0, t1, c.y, end[0])
     event = keep & event
     at_end = keep & (t1 >= t_stop)
     turning = observe & keep & jnp.any((c.modes != 0) & (c.y[1] * end[0][1] < 0))
