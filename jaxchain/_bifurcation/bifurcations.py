@@ -11,7 +11,7 @@ from .continuation import Branch, ContinuationProblem, PseudoArclength, _correct
     _tangent
 from .._errors import ValidationError
 from .._engine.status import Status
-from .sliding import SlidingPoint, _phases, locate_sliding, vanishing_stick
+from .sliding import SlidingPoint, _phases, exact_problem, locate_sliding, vanishing_stick
 
 #: The kinds of codimension-one bifurcation of limit cycles (Kuznetsov, *Elements of
 #: Applied Bifurcation Theory*, 3rd ed. (2004), Sect. 5.4), by their critical
@@ -192,7 +192,8 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
             kind = "fold"
         elif sides[1] is not None and abs(sides[1][0] - sides[0][0]) > JUMP:
             kind = _discontinuity(problem, sides)
-            point = _sliding(problem, algorithm, sides) if kind == "sliding" else None
+            point = (_sliding(problem, algorithm, sides)
+                     if kind == "sliding" and exact_problem(problem) else None)
             if point is not None and point.converged:  # on its defining condition
                 p, z, width, record = point.p, point.z, float(point.step), point.record
                 _, m = _critical(record)
@@ -216,7 +217,7 @@ def _sliding_end(problem: ContinuationProblem, algorithm: PseudoArclength, branc
     `locate_sliding` from the last orbit, if it lies between that orbit and the
     failed prediction after it; else None. `after` is the last point's index: no
     point of the branch follows."""
-    if branch.stop != Status.newton_failed or not hasattr(branch.records, "zero_multipliers"):
+    if branch.stop != Status.newton_failed or not exact_problem(problem):
         return None
     z, beyond = zs[-1], float(branch.p[-1])
     if not np.isfinite(_phases(problem, z)).any():

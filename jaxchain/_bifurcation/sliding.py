@@ -92,6 +92,12 @@ class SlidingPoint(eqx.Module):
     converged: bool = eqx.field(static=True)
 
 
+def exact_problem(problem: ContinuationProblem) -> bool:
+    """Whether `problem` continues orbits of the exact switch model (its residual
+    carries `ExactShooting` options, as `exact_cycle_problem`'s)."""
+    return hasattr(getattr(problem.residual, "options", None), "flow")
+
+
 def _phases(problem: ContinuationProblem, z) -> np.ndarray:
     y0, period = unpack(z[:-1])
     return stick_phases(problem.at(z[-1]), y0, period, problem.residual.options.flow)
@@ -184,7 +190,7 @@ def locate_sliding(problem: ContinuationProblem, z_stick,
     `ValidationError` if `problem.residual` is not an exact shooting residual or
     `z_stick` has no stick phase (of `oscillator`).
     """
-    if not hasattr(getattr(problem.residual, "options", None), "flow"):
+    if not exact_problem(problem):
         raise ValidationError("locate_sliding needs the ContinuationProblem of exact orbits "
                               "(exact_cycle_problem)")
     z = jnp.asarray(z_stick, dtype=float)
