@@ -87,30 +87,34 @@ def _bisect(test, s_hi: float, steps: int, f_hi: float):
     return 0.5 * (lo + hi), hi - lo, best, sides
 
 
-def _discontinuity(problem: ContinuationProblem, sides) -> str:
+def _discontinuity(problem: ContinuationProblem, sides) -> tuple[str, list[int] | None]:
     """The kind of a change of stability across which the critical multiplier jumps
     (a discontinuity-induced bifurcation; di Bernardo, Budd, Champneys and Kowalczyk,
     *Piecewise-smooth Dynamical Systems* (2008), ch. 8; Leine and Nijmeijer (2004),
     ch. 8): on the exact model "sliding" where the number of zero multipliers (of
     stick phases) changes, a stick phase appearing or vanishing, else "grazing"; on
     the smoothed model, which has no switches, "multiplier jump" (too steep for the
-    bisection to resolve at its eps)."""
+    bisection to resolve at its eps). Returns (the kind, the count of zero
+    multipliers on each side, or None on the smoothed model)."""
     records = [_record(problem, z) for _, z in sides]
     if not hasattr(records[0], "zero_multipliers"):
-        return "multiplier jump"
+        return "multiplier jump", None
     zeros = [int(r.zero_multipliers) for r in records]
-    return "sliding" if zeros[0] != zeros[1] else "grazing"
+    return ("sliding" if zeros[0] != zeros[1] else "grazing"), zeros
 
 
-def _sliding(problem: ContinuationProblem, algorithm: PseudoArclength, sides
-             ) -> SlidingPoint:
+def _sliding(problem: ContinuationProblem, algorithm: PseudoArclength, sides,
+             zeros: list[int]) -> SlidingPoint | None:
     """The sliding bifurcation between the two sides of a change of stability
     (`_discontinuity`), located by `locate_sliding` from the side whose orbit has
-    the extra stick phase (more zero multipliers)."""
-    zeros = [int(_record(problem, z).zero_multipliers) for _, z in sides]
+    the extra stick phase (more zero multipliers, `zeros`); None where that orbit
+    shows no complete stick phase to follow (the bisection's point then stays)."""
     stick, other = sides[int(np.argmax(zeros))][1], sides[int(np.argmin(zeros))][1]
-    return locate_sliding(problem, stick, algorithm,
-                          oscillator=vanishing_stick(problem, stick, other))
+    try:
+        return locate_sliding(problem, stick, algorithm,
+                              oscillator=vanishing_stick(problem, stick, other))
+    except ValidationError:
+        return None
 
 
 def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
@@ -191,8 +195,8 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
         if i in folds:
             kind = "fold"
         elif sides[1] is not None and abs(sides[1][0] - sides[0][0]) > JUMP:
-            kind = _discontinuity(problem, sides)
-            point = (_sliding(problem, algorithm, sides)
+            kind, zeros = _discontinuity(problem, sides)
+            point = (_sliding(problem, algorithm, sides, zeros)
                      if kind == "sliding" and exact_problem(problem) else None)
             if point is not None and point.converged:  # on its defining condition
                 p, z, width, record = point.p, point.z, float(point.step), point.record
