@@ -70,6 +70,8 @@ def test_sliding_location_needs_exact_orbits_with_a_stick_phase():
     problem = jc.ContinuationProblem(residual=lambda u, p: u, u0=jnp.zeros(3), params=ONE)
     with pytest.raises(ValueError, match="exact_cycle_problem"):
         jc.locate_sliding(problem, jnp.zeros(4))
+    with pytest.raises(ValueError, match="period"):
+        jc.stick_phases(ONE, jnp.zeros((2, 1)), 0.0, jc.ExactShooting().flow)
 
 
 def test_exact_shooting_refuses_bad_input_in_one_line():

@@ -42,10 +42,17 @@ def stick_phases(params, y0, period, options) -> Float[np.ndarray, " n_osc"]:
 
     **Returns:**
 
-    Shape (n_osc,): inf for an oscillator without a complete stick phase there (it
-    never sticks, or never leaves stick); NaN everywhere if the run failed or its
-    log is too short for two periods.
+    Shape (n_osc,), dimensionless time (eq. (4)): inf for an oscillator without a
+    complete stick phase there (it never sticks, or never leaves stick); NaN
+    everywhere if the run failed or its log is too short for two periods.
+
+    **Raises:**
+
+    `ValidationError` (a `ValueError`) naming `period` if it is not a finite number
+    > 0.
     """
+    if not np.isfinite(float(period)) or float(period) <= 0:
+        raise ValidationError(f"period must be a finite number > 0, got {float(period)!r}")
     time, osc, kind, status = (np.asarray(a) for a in
                                nonsmooth_switches(params, y0, 2.0 * period, options))
     n = params.n_osc
