@@ -146,6 +146,33 @@ def test_exact_cycles_continued_in_v_d_are_the_scipy_cycles_up_to_the_existence_
 
 
 @pytest.mark.numerics
+def test_the_branch_continued_past_the_existence_limit_ends_there_in_a_sliding_point(guess):
+    """Continued beyond the existence limit, the exact branch's corrector fails past
+    it, and `locate_bifurcations` (the chains' method, nothing of the single
+    oscillator's closed form) ends it with a sliding bifurcation, the stick phase's
+    duration d vanishing (`locate_sliding`, the secant method on d^2 = 0), at the
+    closed-form limit (`stick_slip_existence_limit`: an arc integrated by diffrax,
+    bisected to 1e-10). For every friction law of jaxchain the slip force at
+    v_rel -> 0 is the static bound, so the slip arc meets v_rel = 0 tangentially
+    (x'' = 0 there: grazing) exactly where the force needed to stick is mu_st, where
+    the stick phase it begins has no duration: the grazing point of the cycle is
+    that sliding point (issue 56, acceptance 1 asks 1e-6)."""
+    x_max, (_, period) = guess
+    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
+    limit = jc.stick_slip_existence_limit(ONE)
+    problem = jc.exact_cycle_problem(orbit)
+    branch = jc.continuation(problem, jc.PseudoArclength(),
+                             jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0,
+                                                    p_max=limit + 0.05, max_points=30))
+    assert branch.stop == jc.Status.newton_failed
+    (end,) = jc.locate_bifurcations(problem, branch)
+    last = float(np.asarray(branch.p)[np.asarray(branch.converged)].max())
+    assert end.kind == "sliding" and end.after == int(np.asarray(branch.converged).sum()) - 1
+    assert last < float(end.p) and end.width < 1e-8
+    assert abs(float(end.p) - limit) < 1e-8
+
+
+@pytest.mark.numerics
 def test_grazing_curves_against_xi_and_the_friction_ratio_are_the_existence_limits():
     """The two-parameter curves of grazing (`grazing_curve`, natural continuation of
     the grazing point) over the landed fold-curve grid (xi 0.03 ... 0.10 at the

@@ -171,7 +171,12 @@ def locate_sliding(problem: ContinuationProblem, z_stick,
     exactly is a degenerate orbit, and the prediction's error grows towards it),
     and half as far again after a trial whose orbit does not converge or does not
     stick (beyond p*, or another orbit). It stops when two successive roots differ
-    by less than `xtol`. di Bernardo, Budd, Champneys and Kowalczyk,
+    by less than `xtol`. For every friction law of jaxchain (the slip force at
+    v_rel -> 0 is the static bound) p* is also where the slip arc meets v_rel = 0
+    tangentially (x'' = 0 there exactly when the force needed to stick is the
+    static bound): the grazing of the stick-slip orbit, such as the single
+    oscillator's existence limit (`stick_slip_existence_limit`), is this point.
+    di Bernardo, Budd, Champneys and Kowalczyk,
     *Piecewise-smooth Dynamical Systems* (2008), Sect. 8.5, on sliding
     bifurcations of periodic orbits.
 
