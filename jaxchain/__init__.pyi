@@ -148,7 +148,8 @@ from ._bifurcation.grazing import (
 )
 from ._bifurcation.sliding import (
     locate_sliding as locate_sliding, SlidingPoint as SlidingPoint,
-    stick_phases as stick_phases,
+    stick_phases as stick_phases, sliding_curve as sliding_curve,
+    SlidingCurve as SlidingCurve,
 )
 from ._bifurcation.continuation import (
     continuation as continuation, ContinuationProblem as ContinuationProblem,

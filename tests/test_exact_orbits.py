@@ -145,8 +145,22 @@ def test_exact_cycles_continued_in_v_d_are_the_scipy_cycles_up_to_the_existence_
         assert bool(grazing.converged) and abs(float(grazing.value) - limit) < 1e-8, near
 
 
+@pytest.fixture(scope="module")
+def past_the_limit(guess):
+    """The exact cycle's problem, and its branch continued in v_d from 1.5 to 0.05
+    beyond the existence limit (the corrector fails past the limit)."""
+    x_max, (_, period) = guess
+    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
+    problem = jc.exact_cycle_problem(orbit)
+    limit = jc.stick_slip_existence_limit(ONE)
+    return problem, jc.continuation(problem, jc.PseudoArclength(),
+                                    jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0,
+                                                           p_max=limit + 0.05, max_points=30))
+
+
 @pytest.mark.numerics
-def test_the_branch_continued_past_the_existence_limit_ends_there_in_a_sliding_point(guess):
+def test_the_branch_continued_past_the_existence_limit_ends_there_in_a_sliding_point(
+        past_the_limit):
     """Continued beyond the existence limit, the exact branch's corrector fails past
     it, and `locate_bifurcations` (the chains' method, nothing of the single
     oscillator's closed form) ends it with a sliding bifurcation, the stick phase's
@@ -157,19 +171,40 @@ def test_the_branch_continued_past_the_existence_limit_ends_there_in_a_sliding_p
     (x'' = 0 there: grazing) exactly where the force needed to stick is mu_st, where
     the stick phase it begins has no duration: the grazing point of the cycle is
     that sliding point (issue 56, acceptance 1 asks 1e-6)."""
-    x_max, (_, period) = guess
-    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
+    problem, branch = past_the_limit
     limit = jc.stick_slip_existence_limit(ONE)
-    problem = jc.exact_cycle_problem(orbit)
-    branch = jc.continuation(problem, jc.PseudoArclength(),
-                             jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0,
-                                                    p_max=limit + 0.05, max_points=30))
     assert branch.stop == jc.Status.newton_failed
     (end,) = jc.locate_bifurcations(problem, branch)
     last = float(np.asarray(branch.p)[np.asarray(branch.converged)].max())
     assert end.kind == "sliding" and end.after == int(np.asarray(branch.converged).sum()) - 1
     assert last < float(end.p) and end.width < 1e-8
     assert abs(float(end.p) - limit) < 1e-8
+
+
+@pytest.mark.numerics
+def test_sliding_curves_in_xi_and_mu_st_are_the_existence_limits(past_the_limit):
+    """The sliding point followed in a second parameter (`sliding_curve`, natural
+    continuation with `locate_sliding` at each value: the chains' method) over the
+    landed fold-curve grid (xi 0.03 ... 0.10; mu_st/mu_d 1.6 ... 2.4), where the
+    limit moves from 2.66 to 1.06, is the closed-form existence limit at every
+    point (issue 56, acceptance 1 asks 1e-5)."""
+    problem, branch = past_the_limit
+    ok = np.asarray(branch.converged)
+    last = jnp.concatenate([branch.u, branch.p[:, None]], axis=1)[ok][-1]
+    point = jc.locate_sliding(problem, last)
+    mu_d = float(ONE.friction.mu_d)
+    for where, values in (("xi", np.asarray(jc.BISTABLE_XI_VALUES)),
+                          ("mu_st", mu_d * np.asarray(jc.BISTABLE_RATIO_VALUES))):
+        curve = jc.sliding_curve(problem, point, where, values)
+        assert np.asarray(curve.converged).all() and float(np.max(curve.step)) < 1e-8, where
+        closed = [jc.stick_slip_existence_limit(jc.with_parameter(ONE, where, v))
+                  for v in values]
+        np.testing.assert_allclose(np.asarray(curve.p), closed, rtol=0, atol=1e-8,
+                                   err_msg=where)
+    with pytest.raises(ValueError, match="values"):
+        jc.sliding_curve(problem, point, "xi", [0.05, 0.04])
+    with pytest.raises(ValueError, match="margin"):
+        jc.sliding_curve(problem, point, "xi", [0.05], margin=0.0)
 
 
 @pytest.mark.numerics

@@ -11,6 +11,7 @@ from .._engine.exact.solve import nonsmooth_switches
 from .._engine.exact.switching import SWITCH_KINDS
 from .._engine.status import Status
 from .._errors import ValidationError
+from .._physics.params import parameter_value, with_parameter
 from .continuation import ContinuationProblem, PseudoArclength, _correct, _record
 from .shooting import unpack
 
@@ -249,3 +250,162 @@ def locate_sliding(problem: ContinuationProblem, z_stick,
                         stick=jnp.asarray(np.sqrt(g)), record=_record(problem, z),
                         step=jnp.asarray(change if converged else np.inf),
                         iterations=iterations, converged=converged)
+
+
+class SlidingCurve(eqx.Module):
+    """A two-parameter curve of sliding bifurcations (`sliding_curve`): the
+    continued parameter at which one oscillator's stick phase vanishes, against a
+    second parameter.
+
+    **Fields:**
+
+    - `other`: the second parameter's name.
+    - `values`: its values, shape (m,).
+    - `p`: the continued parameter at the sliding point for each, shape (m,)
+        (dimensionless, eq. (6)); NaN where it was not located.
+    - `z`: the orbit (u, p) nearest to each point on the side where the stick phase
+        exists, shape (m, n + 1).
+    - `step`: the secant method's last change of p at each (inf where it did not
+        converge), shape (m,).
+    - `converged`: whether each point converged, shape (m,).
+    - `oscillator`: the oscillator whose stick phase vanishes (0-based).
+    """
+
+    other: str = eqx.field(static=True)
+    values: Float[Array, " m"]
+    p: Float[Array, " m"]
+    z: Float[Array, "m n+1"]
+    step: Float[Array, " m"]
+    converged: Array
+    oscillator: int = eqx.field(static=True)
+
+
+def _at(problem: ContinuationProblem, other: str, value: float) -> ContinuationProblem:
+    """`problem` with the second parameter `other` set to `value`."""
+    return eqx.tree_at(lambda q: q.params, problem,
+                       with_parameter(problem.params, other, value))
+
+
+def _stick_side(problem, z, oscillator: int, guess: float, side: float, margin: float,
+                algorithm: PseudoArclength, tries: int = 8):
+    """An orbit of `problem` (the continued parameter held) on which `oscillator`
+    sticks, at `margin` from the sliding point predicted at `guess` on the stick
+    side (`side`, the sign of p - p* there), corrected from `z` (an orbit of a
+    neighbouring problem); the margin doubled while the orbit does not converge or
+    does not stick. Returns (the orbit, the margin), or (None, margin) if none
+    does."""
+    held = jnp.zeros(z.size).at[-1].set(1.0)
+    for _ in range(tries):
+        new, ok, _, _ = _correct(problem, algorithm, z.at[-1].set(guess + side * margin), held)
+        if bool(ok) and np.isfinite(_phases(problem, new)[oscillator]):
+            return new, margin
+        margin *= 2
+    return None, margin
+
+
+def _located(problem, other: str, value: float, path: list, oscillator: int, side: float,
+             margin: float, algorithm: PseudoArclength, xtol: float) -> SlidingPoint | None:
+    """The sliding point at `value` of `other`, predicted from the last two points of
+    `path` ((value, p*, orbit) followed so far; linearly), or None where it was not
+    located."""
+    if len(path) < 2 or path[-1][0] == path[-2][0]:
+        guess = path[-1][1]
+    else:  # the line through the last two points
+        (a0, p0, _), (a1, p1, _) = path[-2:]
+        guess = p1 + (p1 - p0) / (a1 - a0) * (value - a1)
+    here = _at(problem, other, value)
+    start, used = _stick_side(here, path[-1][2], oscillator, guess, side, margin, algorithm)
+    if start is None:
+        return None
+    found = locate_sliding(here, start, algorithm, oscillator=oscillator, xtol=xtol,
+                           delta=0.5 * used)
+    return found if found.converged else None
+
+
+def _advance(problem, other: str, path: list, target: float, oscillator: int, side: float,
+             margin: float, algorithm: PseudoArclength, xtol: float,
+             halvings: int = 6) -> SlidingPoint | None:
+    """Follow the sliding point from the last point of `path` to `target` of `other`,
+    in steps halved where a point is not located (at most `halvings` times),
+    appending each point located to `path`; the point at `target`, or None."""
+    start = path[-1][0]
+    h, found = target - start, None
+    while found is None or path[-1][0] != target:
+        value = target if abs(path[-1][0] + h - start) >= abs(target - start) else \
+            path[-1][0] + h
+        point = _located(problem, other, value, path, oscillator, side, margin, algorithm, xtol)
+        if point is None:
+            h /= 2
+            if abs(h) < abs(target - start) / 2**halvings or h == 0:
+                return None
+            continue
+        path.append((value, float(point.p), point.z))
+        found = point
+    return found
+
+
+def sliding_curve(problem: ContinuationProblem, point: SlidingPoint, other: str, values,
+                  algorithm: PseudoArclength = PseudoArclength(), *, xtol: float = 1e-9,
+                  margin: float = 1e-4) -> SlidingCurve:
+    """The sliding bifurcation of a branch of exact periodic orbits followed in a
+    second parameter: a two-parameter curve of sliding points (for the single
+    oscillator the curve of its existence limit, `grazing_curve`; for a localized
+    state of a chain the edge of its stick-slip cycle against xi, mu_st, ...), by
+    natural-parameter continuation (Seydel, *Practical Bifurcation and Stability
+    Analysis*, 3rd ed. (2010), Sect. 4.1; Kowalczyk and Piiroinen (2008), Physica
+    D 237, 1053, follow sliding bifurcations of friction oscillators in two
+    parameters). Outwards from the value nearest to that of `problem.params`, at
+    each value: the sliding point predicted from the previous two (linearly), an
+    orbit on its stick side at `margin` from it (the corrector with the continued
+    parameter held, from the previous point's orbit; the margin doubled until the
+    orbit sticks), then `locate_sliding` from there on the defining condition
+    d^2 = 0. Where that fails, the step in `other` is halved (up to six times),
+    through intermediate values that are not returned.
+
+    **Arguments:**
+
+    - `problem`: the exact branch's `ContinuationProblem` (`exact_cycle_problem`)
+        at the first point's parameters.
+    - `point`: a converged `SlidingPoint` of that problem (`locate_sliding`).
+    - `other`: the second parameter, a name that `with_parameter` takes.
+    - `values`: its values, shape (m,), increasing.
+    - `algorithm`: the corrector (`PseudoArclength`).
+    - `xtol`: `locate_sliding`'s tolerance on p.
+    - `margin`: the first distance in p from the predicted sliding point of the
+        orbit each location starts from.
+
+    **Returns:**
+
+    A `SlidingCurve`. Past a value whose point was not located, the points on that
+    side are NaN.
+
+    **Raises:**
+
+    `ValidationError` (a `ValueError`) for a `point` that did not converge, values
+    that are not increasing, a `margin` that is not > 0, or a problem that is not
+    exact (`locate_sliding`).
+    """
+    if not point.converged:
+        raise ValidationError("sliding_curve starts from a converged SlidingPoint")
+    values = np.asarray(values, dtype=float)
+    if values.ndim != 1 or values.size == 0 or np.any(np.diff(values) <= 0):
+        raise ValidationError("values must be a 1-D array of increasing values")
+    if not (np.isfinite(margin) and margin > 0):
+        raise ValidationError(f"margin must be a finite number > 0, got {margin!r}")
+    first = float(parameter_value(problem.params, other))
+    at = int(np.argmin(np.abs(values - first)))
+    side = float(np.sign(float(point.z[-1]) - float(point.p))) or -1.0
+    p = np.full(values.size, np.nan)
+    step = np.full(values.size, np.inf)
+    zs = np.full((values.size, point.z.size), np.nan)
+    for order in (range(at, values.size), range(at - 1, -1, -1)):
+        path = [(first, float(point.p), point.z)]  # (value, p*, orbit) followed so far
+        for k in order:
+            found = _advance(problem, other, path, float(values[k]), point.oscillator, side,
+                             margin, algorithm, xtol)
+            if found is None:
+                break
+            p[k], step[k], zs[k] = float(found.p), float(found.step), np.asarray(found.z)
+    return SlidingCurve(other=other, values=jnp.asarray(values), p=jnp.asarray(p),
+                        z=jnp.asarray(zs), step=jnp.asarray(step),
+                        converged=jnp.asarray(np.isfinite(p)), oscillator=point.oscillator)
