@@ -104,8 +104,21 @@ def test_exact_one_site_branch_ends_where_the_exact_simulation_says(one_site, tm
     assert smoothed["type"] == "Neimark-Sacker" and abs(smoothed["v_d"] - low["v_d"]) < 0.01
 
 
+@pytest.fixture(scope="module")
+def exact_one_site_end(tmp_path_factory):
+    """The exact one-site branch of the ring of 4 continued upwards from v_d 1.79 to
+    its end (`jaxchain snake --engine exact`): its summary and its stored branch."""
+    out = tmp_path_factory.mktemp("exact_end")
+    argv = ["snake", "--engine", "exact", "--n-osc", "4", "--vd", "1.79", "--sites", "1",
+            "--vd-min", "1.75", "--vd-max", "1.85", "--max-points", "20", "--no-switch",
+            "--no-simulation", "--out", str(out), "--json"]
+    assert jc.main(argv) == 0
+    (branch,) = json.loads((out / "snake.json").read_text())["branches"]
+    return branch, xr.load_dataset(out / "snake" / "branch_k1.nc")
+
+
 @pytest.mark.slow
-def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(tmp_path, capsys):
+def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(exact_one_site_end):
     """Upwards in v_d the exact one-site branch of the ring of 4 ends at a sliding
     bifurcation: the excited oscillator's stick phase shrinks like a square root,
     d^2 ~ c (p* - v_d), and no orbit lies beyond. `locate_sliding` puts p* by the
@@ -114,15 +127,10 @@ def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(tmp_path, cap
     just below p* the state keeps its stick phase, and the line through d^2 at
     p* - 4e-5 and p* - 1e-5 meets zero at p* within 1e-6 (bisection on the flag
     of the stick phase was 1e-5 off); just above it the stick is gone."""
-    argv = ["snake", "--engine", "exact", "--n-osc", "4", "--vd", "1.79", "--sites", "1",
-            "--vd-min", "1.75", "--vd-max", "1.85", "--max-points", "20", "--no-switch",
-            "--no-simulation", "--out", str(tmp_path), "--json"]
-    assert jc.main(argv) == 0
-    (branch,) = json.loads(capsys.readouterr().out)["branches"]
+    branch, ds = exact_one_site_end
     high = branch["stable_range_ends"][0][1]
     assert high["type"] == "sliding" and high["width"] < 1e-8 and high["n_halc"] == 1
     p_star = high["v_d"]
-    ds = xr.open_dataset(tmp_path / "snake" / "branch_k1.nc")
     u = ds["u"].values[int(np.argmax(ds["v_d"].values))]
     excited = int(ds.attrs["phase_oscillator"])  # the oscillator of largest amplitude
 
@@ -142,6 +150,37 @@ def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(tmp_path, cap
     assert d1 is not None and d2 is not None and d2 < d1
     assert abs(p2 - d2**2 * (p2 - p1) / (d2**2 - d1**2) - p_star) < 1e-6
     assert stick(p_star + 1e-5) is None
+
+
+@pytest.mark.slow
+def test_the_one_site_edge_tends_to_the_single_oscillator_s_limit_as_eta_c_vanishes(
+        exact_one_site_end):
+    """The one-site branch's sliding point (the edge of the excited oscillator's
+    stick-slip cycle) followed in the coupling (`sliding_curve`) tends to the
+    uncoupled oscillator's existence limit L (`stick_slip_existence_limit`, closed
+    form) as eta_c -> 0, quadratically: the neighbours respond at O(eta_c) and act
+    back at O(eta_c^2), so (L - p*) / eta_c^2 is the same at eta_c 0.0025 and 0.005
+    to within a few per cent (on the ring of 20 it runs 358.9, 355.5, 352.6 at
+    0.005, 0.01, 0.015), while L - p* itself changes fourfold."""
+    branch, ds = exact_one_site_end
+    ok = ds["critical_multiplier_abs"].values < 1  # stick-slip orbits, before the end
+    i = int(np.argmax(np.where(ok, ds["v_d"].values, -np.inf)))
+    u, v_d = ds["u"].values[i], float(ds["v_d"].values[i])
+    options = jc.ExactShooting(phase_oscillator=int(ds.attrs["phase_oscillator"]))
+    orbit = jc.exact_periodic_orbit(jc.with_parameter(RING, "v_d", v_d),
+                                    u[:-1].reshape(2, -1), u[-1], options)
+    problem = jc.exact_cycle_problem(orbit, options)
+    point = jc.locate_sliding(problem, np.append(u, v_d))
+    assert point.converged and abs(float(point.p) - branch["stable_range_ends"][0][1]["v_d"]) \
+        < 1e-8
+    values = [0.0025, 0.005, float(RING.eta_c)]
+    curve = jc.sliding_curve(problem, point, "eta_c", values)
+    assert np.asarray(curve.converged).all()
+    limit = jc.stick_slip_existence_limit(jc.ChainParams(n_osc=1))
+    gap = limit - np.asarray(curve.p)
+    assert (gap > 0).all() and gap[1] / gap[0] > 3.5
+    c = gap / np.asarray(values) ** 2
+    assert abs(c[0] - c[1]) < 0.03 * c[1], c
 
 
 def test_stored_branches_are_read_back_only_for_equal_settings(one_site):
