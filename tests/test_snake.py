@@ -107,11 +107,12 @@ def test_exact_one_site_branch_ends_where_the_exact_simulation_says(one_site, tm
 @pytest.fixture(scope="module")
 def exact_one_site_end(tmp_path_factory):
     """The exact one-site branch of the ring of 4 continued upwards from v_d 1.79 to
-    its end (`jaxchain snake --engine exact`): its summary and its stored branch."""
+    its end (`jaxchain snake --engine exact`, with its checks by simulation): its
+    summary and its stored branch."""
     out = tmp_path_factory.mktemp("exact_end")
     argv = ["snake", "--engine", "exact", "--n-osc", "4", "--vd", "1.79", "--sites", "1",
             "--vd-min", "1.75", "--vd-max", "1.85", "--max-points", "20", "--no-switch",
-            "--no-simulation", "--out", str(out), "--json"]
+            "--out", str(out), "--json"]
     assert jc.main(argv) == 0
     (branch,) = json.loads((out / "snake.json").read_text())["branches"]
     return branch, xr.load_dataset(out / "snake" / "branch_k1.nc")
@@ -126,10 +127,17 @@ def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(exact_one_sit
     (event by event over 80 periods from the branch's last orbit, not shooting):
     just below p* the state keeps its stick phase, and the line through d^2 at
     p* - 4e-5 and p* - 1e-5 meets zero at p* within 1e-6 (bisection on the flag
-    of the stick phase was 1e-5 off); just above it the stick is gone."""
+    of the stick phase was 1e-5 off); just above it the stick is gone. The command's
+    check by simulation treats the end as the end of the state (it crashed on a
+    bifurcation with no orbit beyond it)."""
     branch, ds = exact_one_site_end
     high = branch["stable_range_ends"][0][1]
     assert high["type"] == "sliding" and high["width"] < 1e-8 and high["n_halc"] == 1
+    # no orbit beyond the end: the command's own check simulates 0.03 past it, where
+    # the state is lost, and 0.03 inside, where it persists
+    checks = {c["side"]: c for c in branch["simulation_check"] if c["end"] == "sliding"}
+    assert checks["outside"]["v_d"] > high["v_d"] > checks["inside"]["v_d"]
+    assert checks["inside"]["agrees"] and checks["outside"]["agrees"]
     p_star = high["v_d"]
     u = ds["u"].values[int(np.argmax(ds["v_d"].values))]
     excited = int(ds.attrs["phase_oscillator"])  # the oscillator of largest amplitude

@@ -5,7 +5,7 @@ secant method on that defining condition."""
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from .._engine.exact.solve import nonsmooth_switches
 from .._engine.exact.switching import SWITCH_KINDS
@@ -276,7 +276,7 @@ class SlidingCurve(eqx.Module):
     p: Float[Array, " m"]
     z: Float[Array, "m n+1"]
     step: Float[Array, " m"]
-    converged: Array
+    converged: Bool[Array, " m"]
     oscillator: int = eqx.field(static=True)
 
 
@@ -331,8 +331,9 @@ def _advance(problem, other: str, path: list, target: float, oscillator: int, si
     start = path[-1][0]
     h, found = target - start, None
     while found is None or path[-1][0] != target:
-        value = target if abs(path[-1][0] + h - start) >= abs(target - start) else \
-            path[-1][0] + h
+        value = path[-1][0] + h  # one step on, never past the target
+        if abs(value - start) >= abs(target - start):
+            value = target
         point = _located(problem, other, value, path, oscillator, side, margin, algorithm, xtol)
         if point is None:
             h /= 2

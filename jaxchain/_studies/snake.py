@@ -399,8 +399,9 @@ def _check_by_simulation(orbits, params: ChainParams, branch: xr.Dataset, segmen
     perturbed by `perturbation`:
 
     - inside: at v_d = end -+ `delta`, from the segment's orbit nearest there;
-    - outside a fold (the state ceases to exist): at end +- `delta`, from the
-      orbit nearest the fold;
+    - outside a fold, or a bifurcation at the end of the branch with no orbit
+      beyond it (a sliding point where the corrector failed; the state ceases to
+      exist): at end +- `delta`, from the orbit nearest it;
     - outside a change of stability: on the unstable sheet beyond it, from its
       orbit where the perturbation grows to 100 within the horizon
       (`_unstable_point`; a weak instability needs |mu| to grow).
@@ -431,7 +432,9 @@ def _check_by_simulation(orbits, params: ChainParams, branch: xr.Dataset, segmen
         outward = np.sign(end["v_d"] - v[last]) or 1.0
         inside = _segment_point(v, stable, last, end["v_d"] - outward * delta)
         sides = [("inside", end["v_d"] - outward * delta, inside, None)]
-        if end["type"] == "fold":  # beyond a fold the state does not exist
+        if end["type"] == "fold" or beyond is None:
+            # beyond a fold, or a bifurcation that ends the branch (a sliding point
+            # past which the corrector failed), the state does not exist
             sides.append(("outside", end["v_d"] + outward * delta, last, None))
         else:
             sides.append(("outside",) + _unstable_point(v, stable, growth, beyond, last, end,
