@@ -5,6 +5,7 @@ same branch whatever the step off the branch point."""
 
 import dataclasses
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -139,15 +140,84 @@ def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch):
 
 def test_a_switch_that_fails_is_reported_with_its_branch_point(branch_point, monkeypatch):
     """Where the step onto the other branch does not converge (`switch_branch` raises
-    RuntimeError), the snake keeps the branch point's v_d and the reason, for the
-    followed branch's `failed_switches`, instead of dropping it silently."""
+    RuntimeError), the snake follows the orbits that deflation finds beside the
+    branch point; where that finds none either, it keeps the branch point's v_d and
+    the reason, for the followed branch's `failed_switches`, instead of dropping it
+    silently."""
     problem, branch, point = branch_point
 
     def fails(*args, **kwargs):
         raise RuntimeError("switching did not converge")
 
     monkeypatch.setattr("jaxchain._studies.snake.switch_branch", fails)
-    failure = internal("snake switched branch")(
-        problem, branch, point, jc.ContinuationOptions(max_points=2), jc.PseudoArclength(),
-        k=2, progress=False)
-    assert failure == {"v_d": float(point.p), "reason": "switching did not converge"}
+    switched = internal("snake switched branch")
+    args = (problem, branch, point, jc.ContinuationOptions(max_points=2), jc.PseudoArclength())
+    # deflation beside the branch point finds the other branch instead
+    rescued = switched(*args, k=2, progress=False)
+    assert rescued and all(ds.attrs["switched_from_vd"] == float(point.p) for ds in rescued)
+    monkeypatch.setattr("jaxchain._studies.snake.switch_by_deflation", lambda *a, **k: [])
+    assert switched(*args, k=2, progress=False) == [{
+        "v_d": float(point.p),
+        "reason": "switching did not converge; deflation beside it found no other orbit"}]
+
+
+def _pitchfork(symmetric: bool):
+    """u = (a, b, c): the trivial branch a = b = 0, c = v_d meets a branch point at
+    v_d = 1. With `symmetric`, G is equivariant under the rotations of the (a, b)
+    plane (O(2)), so both a and b are critical there; else only a is."""
+    def residual(u, p):
+        a, b, c = u
+        r2 = a**2 + b**2 if symmetric else a**2
+        return jnp.stack([(p.v_d - 1) * a - a * r2,
+                          (p.v_d - 1) * b - b * r2 if symmetric else b, c - p.v_d])
+    return jc.ContinuationProblem(residual=residual, u0=jnp.array([0.0, 0.0, 1.0]),
+                                  params=jc.ChainParams(n_osc=1, v_d=1.0))
+
+
+@pytest.mark.parametrize("symmetric, critical", [(False, [[1, 0, 0, 0]]),
+                                                 (True, [[1, 0, 0, 0], [0, 1, 0, 0]])])
+def test_critical_directions_are_the_kernel_less_the_branch(symmetric, critical):
+    """At the analytic branch point the kernel of [G_u, G_p] is the branch's tangent
+    (0, 0, 1, 1)/sqrt 2 and the critical plane of (a, b) (O(2)-symmetric) or the
+    line of a (no symmetry): `critical_directions` is an orthonormal basis of the
+    latter, whatever the sign of the tangent given."""
+    problem = _pitchfork(symmetric)
+    z = jnp.array([0.0, 0.0, 1.0, 1.0])
+    for sign in (1, -1):
+        got = jc.critical_directions(problem, z, sign * jnp.array([0.0, 0.0, 1.0, 1.0]))
+        assert got.shape == (len(critical), 4)
+        np.testing.assert_allclose(got @ got.T, np.eye(len(critical)), atol=1e-12)
+        projector = np.asarray(critical, dtype=float)
+        np.testing.assert_allclose(got @ projector.T @ projector, got, atol=1e-12)
+
+
+@pytest.mark.numerics
+def test_deflation_beside_the_branch_point_finds_keller_s_switched_orbit(branch_point):
+    """`switch_by_deflation` (the followed orbit deflated at v_d = v_b -+ 0.002,
+    shooting from it moved along the critical direction) finds the orbit that
+    Keller's step and continuation reach at v_b - 0.002 (another route: the
+    corrector along the kernel direction, then pseudo-arclength steps and shooting
+    at that v_d), up to the swap of the two oscillators, to shooting's tolerance;
+    the direction it returns points from the branch point to the orbit."""
+    problem, branch, point = branch_point
+    p = float(point.p) - 0.002
+    found = jc.switch_by_deflation(problem, branch, point, offset=0.002)
+    below = [(new, t) for new, t in found if abs(float(new.value()) - p) < 1e-12]
+    assert below
+    new, tangent = below[0]
+    assert residual(new) < 1e-6 and float(tangent[-1]) < 0
+    _, switched = _switched(problem, branch, point, 0.01)
+    ok = np.asarray(switched.converged)
+    u = np.asarray(switched.u)[ok][np.argmin(np.abs(np.asarray(switched.p)[ok] - p))]
+    keller = jc.periodic_orbit(jc.with_parameter(RING, "v_d", p), u[:-1].reshape(2, -1),
+                               float(u[-1]), SHOOTING)
+    deflated = jc.periodic_orbit(jc.with_parameter(RING, "v_d", p),
+                                 np.asarray(new.u0[:-1]).reshape(2, -1), float(new.u0[-1]),
+                                 SHOOTING)
+    assert abs(float(deflated.period - keller.period)) < 1e-7
+    # amplitudes from 4096 samples a period (ShootingOptions.n_samples): the sampled
+    # extremes of one orbit started at another phase (the swapped copy starts at the
+    # other oscillator's turning point) differ by up to |x''| dt^2 / 8, below 1e-6
+    np.testing.assert_allclose(np.sort(np.asarray(deflated.amplitudes)),
+                               np.sort(np.asarray(keller.amplitudes)), atol=2e-6)
+    assert abs(float(keller.amplitudes[0] - keller.amplitudes[1])) > 1e-4

@@ -2,7 +2,10 @@
 kernel direction of the continuation Jacobian that the followed branch does not
 take (Keller, *Numerical solution of bifurcation and nonlinear eigenvalue
 problems* (1977); Seydel, *Practical Bifurcation and Stability Analysis*, 3rd ed.
-(2010), Sect. 5.6)."""
+(2010), Sect. 5.6), or, where the kernel has more dimensions than that (a
+symmetric ring), by deflation from the followed branch's orbits beside it."""
+
+import itertools
 
 import equinox as eqx
 import jax
@@ -13,6 +16,7 @@ from jaxtyping import Array, Float
 from .._errors import ValidationError
 from .bifurcations import BifurcationPoint
 from .continuation import Branch, ContinuationProblem, PseudoArclength, _correct
+from .deflation import distinct_orbits
 
 
 @jax.jit
@@ -82,3 +86,98 @@ def switch_branch(problem: ContinuationProblem, branch: Branch, point: Bifurcati
                            f"not converge: try a smaller step")
     new = eqx.tree_at(lambda pr: pr.u0, problem.with_params(problem.at(z[-1])), z[:-1])
     return new, direction
+
+
+#: The critical singular values of [G_u, G_p] at a branch point are those below the
+#: largest gap among its `_CRITICAL` smallest ones.
+_CRITICAL = 4
+
+
+def critical_directions(problem: ContinuationProblem, z: Float[Array, " n+1"],
+                        tangent: Float[Array, " n+1"]) -> Float[np.ndarray, "k n+1"]:
+    """An orthonormal basis of the kernel of the continuation Jacobian [G_u, G_p] at
+    the branch point z, less the followed branch's `tangent`: the directions in
+    which other branches can leave. The kernel is spanned by the right singular
+    vectors of the critical singular values (those below the largest ratio between
+    neighbours among the four smallest) and the one that an n x (n + 1) matrix
+    always has. At a generic branch point k = 1; where the chain's symmetry makes a
+    Floquet multiplier +1 double (a two-dimensional irreducible representation of
+    the ring's dihedral group), k = 2 (Golubitsky, Stewart and Schaeffer,
+    *Singularities and Groups in Bifurcation Theory* II (1988), ch. XIII). Shape
+    (k, n + 1)."""
+    jac = np.asarray(jax.jacfwd(problem)(jnp.asarray(z, dtype=float)))
+    _, s, vt = np.linalg.svd(jac)
+    small = s[::-1][:_CRITICAL + 1]  # the smallest first
+    k = 1 + int(np.argmax(small[1:] / np.maximum(small[:-1], np.finfo(float).tiny)))
+    kernel = vt[-(k + 1):]  # k critical directions and the always-present one
+    t = np.asarray(tangent, dtype=float) / np.linalg.norm(tangent)
+    rest = kernel - np.outer(kernel @ t, t)
+    basis, _, _ = np.linalg.svd(rest.T, full_matrices=False)
+    return basis[:, :k].T
+
+
+def switch_by_deflation(problem: ContinuationProblem, branch: Branch, point: BifurcationPoint,
+                        *, offset: float = 0.01, amplitudes=(0.02, 0.1), count: int = 2,
+                        algorithm: PseudoArclength = PseudoArclength()
+                        ) -> list[tuple[ContinuationProblem, Float[Array, " n+1"]]]:
+    """Orbits of the other branches through a branch point, found by deflation
+    where Keller's step (`switch_branch`) fails: at p = p_b +- `offset`, the followed
+    branch's orbit there (the corrector with p held) is deflated with its symmetric
+    copies (`distinct_orbits`; Farrell, Birkisson and Funke (2015) find the branches
+    of a bifurcation this way), and shooting starts from it moved along each
+    critical direction (`critical_directions`, both signs) by each of `amplitudes`
+    times its size, until `count` orbits are found on that side. At a branch point
+    of a symmetric ring the critical directions form a plane in which only a few
+    lines, fixed by subgroups of the symmetries, carry branches; a direction off
+    them can make Keller's corrector diverge, while a deflated solve from near them
+    converges to an orbit of one of the branches.
+
+    **Arguments:**
+
+    - `problem`, `branch`, `point`: as for `switch_branch`.
+    - `offset`: the distance in p from the branch point of the two values searched
+        (> 0; dimensionless, eq. (6)).
+    - `amplitudes`: the sizes of the moves from the followed orbit, relative to its
+        state's norm, tried in turn.
+    - `count`: the most orbits kept on each side (>= 1).
+    - `algorithm`: `PseudoArclength` (the corrector of the followed orbit).
+
+    **Returns:**
+
+    A list of (the problem at an orbit found, the unit direction in (u, p) from the
+    branch point to it): pass each to `continuation(new, tangent=t)` to follow that
+    branch away from the branch point. Empty if none is found.
+
+    **Raises:**
+
+    `ValidationError` for a point that is not a branch point, an offset that is not
+    > 0 or a count < 1.
+    """
+    if point.kind != "branch point":
+        raise ValidationError(f"switch_by_deflation needs a branch point, got a {point.kind}")
+    if not offset > 0 or count < 1:
+        raise ValidationError(f"switch_by_deflation needs offset > 0 and count >= 1, got "
+                              f"{offset!r} and {count!r}")
+    ok = np.asarray(branch.converged)
+    tangent = branch.tangent[np.nonzero(ok)[0][point.after]]
+    directions = critical_directions(problem, point.z, tangent)[:, :-1]
+    held = jnp.zeros(point.z.size).at[-1].set(1.0)
+    out = []
+    for side in (1, -1):
+        p = float(point.p) + side * offset
+        followed, good, _, _ = _correct(problem, algorithm, point.z.at[-1].set(p), held)
+        if not bool(good):
+            continue
+        here = problem.with_params(problem.at(p))
+        known = [followed[:-1]]
+        size = float(jnp.linalg.norm(followed[:-2]))
+        for amplitude, c, sign in itertools.product(amplitudes, directions, (1, -1)):
+            if len(known) > count:
+                break
+            move = sign * amplitude * size * c / np.linalg.norm(c)
+            known += distinct_orbits(here, followed[:-1] + move, known, count=1)
+        for u in known[1:]:
+            z = jnp.append(u, p)
+            out.append((eqx.tree_at(lambda pr: pr.u0, here, u),
+                        (z - point.z) / jnp.linalg.norm(z - point.z)))
+    return out

@@ -33,7 +33,9 @@ which the paper's Fig. 3(b) only suggests by simulation ("snaking"):
     the branch;
   - at each branch point, branch switching: the other branch through it, along
     the kernel direction of the continuation's Jacobian that the followed branch
-    does not take, followed away from it (--no-switch skips it);
+    does not take, or, where that step fails (a symmetric ring's branch points,
+    with a larger kernel), the orbits that deflation finds 0.01 to either side;
+    each followed away from it (--no-switch skips it);
   - with --deflate M, deflation (Farrell, Birkisson and Funke 2015) from each
     start's eq. (8) state: up to M further periodic orbits at --vd, none of those
     found before, each followed as a branch of its own, so that branches that

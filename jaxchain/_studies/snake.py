@@ -14,7 +14,7 @@ import numpy as np
 
 from .._engine.progress import tqdm
 from .._bifurcation.bifurcations import locate_bifurcations
-from .._bifurcation.branch_switching import switch_branch
+from .._bifurcation.branch_switching import switch_branch, switch_by_deflation
 from .._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
 from .._bifurcation.deflation import distinct_orbits
 from .._bifurcation.shooting import pack, unpack
@@ -272,9 +272,9 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
         bifs = locate_bifurcations(problem, branch, algorithm)
         halves.append(_branch_dataset(k, problem, branch, bifs))
         if switch:
-            switched += [_switched_branch(problem, branch, b, continuation_options, algorithm,
-                                          k=k, progress=progress)
-                         for b in bifs if b.kind == "branch point"]
+            switched += [ds for b in bifs if b.kind == "branch point"
+                         for ds in _switched_branch(problem, branch, b, continuation_options,
+                                                    algorithm, k=k, progress=progress)]
     failures = [sw for sw in switched if isinstance(sw, dict)]
     down, up = halves
     joined = xr.concat([down.isel(point=slice(None, None, -1)), up.isel(point=slice(1, None))],
@@ -292,24 +292,31 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
 
 
 def _switched_branch(problem, branch, point, continuation_options: ContinuationOptions,
-                     algorithm: PseudoArclength, *, k: int, progress: bool
-                     ) -> xr.Dataset | None:
-    """The other branch through the branch point `point` of `branch`, stepped onto
-    by `switch_branch` (the kernel direction the followed branch does not take)
-    and continued away from it for `continuation_options.max_points` points, with
-    its bifurcations; attributes `switched_from_vd` and those of `_branch_dataset`.
-    Where the step onto it does not converge, the failure instead: a dict of the
-    branch point's v_d and the reason, which the followed branch keeps
-    (`failed_switches`)."""
+                     algorithm: PseudoArclength, *, k: int, progress: bool) -> list:
+    """The other branches through the branch point `point` of `branch`, each
+    continued away from it for `continuation_options.max_points` points, with its
+    bifurcations; attributes `switched_from_vd` and those of `_branch_dataset`.
+    The step onto the other branch is Keller's (`switch_branch`, the kernel
+    direction the followed branch does not take); where it does not converge (a
+    symmetric ring, where the kernel has more directions), the orbits that
+    deflation finds beside the branch point (`switch_by_deflation`). Where neither
+    finds one, the failure instead: a dict of the branch point's v_d and the
+    reason, which the followed branch keeps (`failed_switches`)."""
     try:
-        new, tangent = switch_branch(problem, branch, point, algorithm=algorithm)
+        starts = [switch_branch(problem, branch, point, algorithm=algorithm)]
     except RuntimeError as err:
-        return {"v_d": float(point.p), "reason": str(err)}
-    other = continuation(new, algorithm, continuation_options, tangent=tangent,
-                         progress=progress)
-    ds = _branch_dataset(k, new, other, locate_bifurcations(new, other, algorithm))
-    return ds.assign_attrs(switched_from_vd=float(point.p),
-                           stop=json.dumps({"away": ds.attrs["stop"]}))
+        starts = switch_by_deflation(problem, branch, point, algorithm=algorithm)
+        if not starts:
+            return [{"v_d": float(point.p), "reason": f"{err}; deflation beside it found no "
+                     "other orbit"}]
+    out = []
+    for new, tangent in starts:
+        other = continuation(new, algorithm, continuation_options, tangent=tangent,
+                             progress=progress)
+        ds = _branch_dataset(k, new, other, locate_bifurcations(new, other, algorithm))
+        out.append(ds.assign_attrs(switched_from_vd=float(point.p),
+                                   stop=json.dumps({"away": ds.attrs["stop"]})))
+    return out
 
 
 def stable_ranges(branch: xr.Dataset) -> list[dict]:
@@ -581,7 +588,9 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
         for an equal eps.
     - `switch`: at each branch point of a branch, switch onto the other branch
         through it and follow that too (`switch_branch`: the kernel direction that
-        the followed branch does not take; labelled "k=<k> switched <j>").
+        the followed branch does not take; where that fails, as at the branch
+        points of a symmetric ring, every orbit that `switch_by_deflation` finds
+        beside it; labelled "k=<k> switched <j>").
     - `deflate`: at `params.v_d`, up to this many further periodic orbits from the
         eq. (8) state of each start by deflation (`distinct_orbits`), every orbit
         found so far deflated; each is followed as a branch of its own, labelled
