@@ -106,16 +106,17 @@ def test_exact_one_site_branch_ends_where_the_exact_simulation_says(one_site, tm
 
 @pytest.fixture(scope="module")
 def exact_one_site_end(tmp_path_factory):
-    """The exact one-site branch of the ring of 4 continued upwards from v_d 1.79 to
-    its end (`jaxchain snake --engine exact`, with its checks by simulation): its
-    summary and its stored branch."""
+    """The exact one-site and whole-ring branches of the ring of 4 continued from v_d
+    1.72 up to their ends (`jaxchain snake --engine exact`, with its checks by
+    simulation): the summary of each (by k) and the stored one-site branch."""
     out = tmp_path_factory.mktemp("exact_end")
-    argv = ["snake", "--engine", "exact", "--n-osc", "4", "--vd", "1.79", "--sites", "1",
-            "--vd-min", "1.75", "--vd-max", "1.85", "--max-points", "20", "--no-switch",
+    argv = ["snake", "--engine", "exact", "--n-osc", "4", "--vd", "1.72", "--sites", "1,4",
+            "--vd-min", "1.7", "--vd-max", "1.85", "--max-points", "40", "--no-switch",
             "--out", str(out), "--json"]
     assert jc.main(argv) == 0
-    (branch,) = json.loads((out / "snake.json").read_text())["branches"]
-    return branch, xr.load_dataset(out / "snake" / "branch_k1.nc")
+    branches = json.loads((out / "snake.json").read_text())["branches"]
+    return ({b["excited"]: b for b in branches},
+            xr.load_dataset(out / "snake" / "branch_k1.nc"))
 
 
 @pytest.mark.slow
@@ -130,12 +131,12 @@ def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(exact_one_sit
     of the stick phase was 1e-5 off); just above it the stick is gone. The command's
     check by simulation treats the end as the end of the state (it crashed on a
     bifurcation with no orbit beyond it)."""
-    branch, ds = exact_one_site_end
-    high = branch["stable_range_ends"][0][1]
+    branches, ds = exact_one_site_end
+    high = branches[1]["stable_range_ends"][0][1]
     assert high["type"] == "sliding" and high["width"] < 1e-8 and high["n_halc"] == 1
     # no orbit beyond the end: the command's own check simulates 0.03 past it, where
     # the state is lost, and 0.03 inside, where it persists
-    checks = {c["side"]: c for c in branch["simulation_check"] if c["end"] == "sliding"}
+    checks = {c["side"]: c for c in branches[1]["simulation_check"] if c["end"] == "sliding"}
     assert checks["outside"]["v_d"] > high["v_d"] > checks["inside"]["v_d"]
     assert checks["inside"]["agrees"] and checks["outside"]["agrees"]
     p_star = high["v_d"]
@@ -161,6 +162,25 @@ def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(exact_one_sit
 
 
 @pytest.mark.slow
+def test_past_the_whole_ring_s_branch_point_the_check_sees_steady_sliding(
+        exact_one_site_end):
+    """The whole ring (all four on the HALC) loses stability at a branch point. Just
+    past it the command's check simulates from the unstable orbit, and the chain
+    decays to steady sliding, which is stable there: v_d lies above the ring's Hopf
+    point (`hopf_point`, the linearization of steady sliding, independent of any
+    simulation). Its vanishing oscillation keeps the orbit's pattern, which the
+    check had counted as the state persisting; the sites must stick (`on_halc`)."""
+    branches, _ = exact_one_site_end
+    ring = branches[4]
+    (end,) = [e for r in ring["stable_range_ends"] for e in r if e["type"] == "branch point"]
+    outside = next(c for c in ring["simulation_check"]
+                   if c["end"] == "branch point" and c["side"] == "outside")
+    assert outside["v_d"] > end["v_d"] > float(jc.hopf_point(RING, 1.0).v_d[0])
+    assert outside["sites_simulation"] == [] and not outside["persists"]
+    assert all(c["agrees"] for c in ring["simulation_check"])
+
+
+@pytest.mark.slow
 def test_the_one_site_edge_tends_to_the_single_oscillator_s_limit_as_eta_c_vanishes(
         exact_one_site_end):
     """The one-site branch's sliding point (the edge of the excited oscillator's
@@ -170,7 +190,7 @@ def test_the_one_site_edge_tends_to_the_single_oscillator_s_limit_as_eta_c_vanis
     back at O(eta_c^2), so (L - p*) / eta_c^2 is the same at eta_c 0.0025 and 0.005
     to within a few per cent (on the ring of 20 it runs 358.9, 355.5, 352.6 at
     0.005, 0.01, 0.015), while L - p* itself changes fourfold."""
-    branch, ds = exact_one_site_end
+    branches, ds = exact_one_site_end
     ok = ds["critical_multiplier_abs"].values < 1  # stick-slip orbits, before the end
     i = int(np.argmax(np.where(ok, ds["v_d"].values, -np.inf)))
     u, v_d = ds["u"].values[i], float(ds["v_d"].values[i])
@@ -179,8 +199,8 @@ def test_the_one_site_edge_tends_to_the_single_oscillator_s_limit_as_eta_c_vanis
                                     u[:-1].reshape(2, -1), u[-1], options)
     problem = jc.exact_cycle_problem(orbit, options)
     point = jc.locate_sliding(problem, np.append(u, v_d))
-    assert point.converged and abs(float(point.p) - branch["stable_range_ends"][0][1]["v_d"]) \
-        < 1e-8
+    assert point.converged and abs(
+        float(point.p) - branches[1]["stable_range_ends"][0][1]["v_d"]) < 1e-8
     values = [0.0025, 0.005, float(RING.eta_c)]
     curve = jc.sliding_curve(problem, point, "eta_c", values)
     assert np.asarray(curve.converged).all()

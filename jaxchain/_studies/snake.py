@@ -414,7 +414,8 @@ def _check_by_simulation(orbits, params: ChainParams, branch: xr.Dataset, segmen
       (`_unstable_point`; a weak instability needs |mu| to grow).
 
     The state persists when the simulation ends with the oscillators of the
-    starting orbit on the HALC (amplitude above half the largest) and, among them,
+    starting orbit on the HALC (amplitude above half the largest, and sticking in
+    each period where the orbit's sites do: `on_halc`) and, among them,
     the same phase lags within 0.05 of a period (a symmetry-breaking instability
     keeps the sites and changes their phases); it is lost otherwise.
 
@@ -457,7 +458,11 @@ def _check_by_simulation(orbits, params: ChainParams, branch: xr.Dataset, segmen
             p = with_parameter(params, "v_d", float(vd))
             obs = simulate(p, GivenState(jnp.asarray(y0)), engine=orbits.simulation(options, p))
             amp = np.asarray(obs.amplitudes)
-            sim_sites = np.flatnonzero(amp > 0.5 * amp.max())
+            # where the orbit's sites stick, the simulation's must too: a chain that
+            # decays to steady sliding keeps the orbit's pattern in its vanishing
+            # oscillation, on no HALC
+            halc = np.asarray(obs.on_halc) | (int(branch["n_halc"].values[start]) == 0)
+            sim_sites = np.flatnonzero((amp > 0.5 * amp.max()) & halc)
             lag_difference = None
             if np.array_equal(sites, sim_sites) and lags is not None:
                 sim_lags = _phase_lags(orbits, p, obs.y_final, sites)
