@@ -405,7 +405,8 @@ def _check_by_simulation(orbits, params: ChainParams, branch: xr.Dataset, segmen
     bifurcation ends, each from an orbit of the branch with its positions
     perturbed by `perturbation`:
 
-    - inside: at v_d = end -+ `delta`, from the segment's orbit nearest there;
+    - inside: at v_d = end -+ `delta` (at most half the segment's length, so as
+      to stay on it), from the segment's orbit nearest there;
     - outside a fold, or a bifurcation at the end of the branch with no orbit
       beyond it (a sliding point where the corrector failed; the state ceases to
       exist): at end +- `delta`, from the orbit nearest it;
@@ -438,8 +439,10 @@ def _check_by_simulation(orbits, params: ChainParams, branch: xr.Dataset, segmen
         if end["type"] == "end of branch":
             continue
         outward = np.sign(end["v_d"] - v[last]) or 1.0
-        inside = _segment_point(v, stable, last, end["v_d"] - outward * delta)
-        sides = [("inside", end["v_d"] - outward * delta, inside, None)]
+        # inside, but not past the segment's other end: at most half its length in
+        reach = min(delta, 0.5 * abs(segment["v_d"][1] - segment["v_d"][0]))
+        inside = _segment_point(v, stable, last, end["v_d"] - outward * reach)
+        sides = [("inside", end["v_d"] - outward * reach, inside, None)]
         if end["type"] == "fold" or beyond is None:
             # beyond a fold, or a bifurcation that ends the branch (a sliding point
             # past which the corrector failed), the state does not exist
