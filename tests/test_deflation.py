@@ -11,7 +11,7 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 
-from helpers import internal, reference_rhs
+from helpers import internal, reference_rhs, replace_internal
 
 RING = jc.ChainParams(n_osc=3, v_d=1.5)
 #: The starts settle within 1500 time units on three oscillators.
@@ -144,3 +144,37 @@ def test_the_snake_follows_the_orbits_that_deflation_finds(tmp_path):
             assert copies_distance(starts[j], starts[i]) > 1e-2
     again = jc.localized_branches(RING, (2,), **kwargs)
     assert list(again["datasets"]) == labels
+
+
+def test_a_start_that_is_not_periodic_is_deflated_from_its_eq8_state(tmp_path,
+                                                                      monkeypatch):
+    """A start whose simulated state is not periodic (here the one-site start, its
+    orbit withheld) keeps its reason, and deflation still searches from its eq. (8)
+    state (with the two-site start's orbit deflated, the problem borrowed from it):
+    the orbit found is followed as "k=1 deflated 1". It is a periodic orbit for
+    scipy, with one oscillator on the HALC, and no symmetric copy of the other
+    branches' orbits."""
+    starts = internal("snake starts")
+
+    def one_site_not_periodic(*args, **kwargs):
+        found = starts(*args, **kwargs)
+        _, sim, _ = found[1]
+        found[1] = (None, sim, "shooting did not converge: the simulated state is not "
+                    "periodic")
+        return found
+
+    replace_internal(monkeypatch, "snake starts", one_site_not_periodic)
+    found = jc.localized_branches(RING, (2, 1), continuation_options=jc.ContinuationOptions(
+        ds=0.02, ds_max=0.05, p_min=1.45, p_max=1.55, max_points=3), start_options=START,
+        simulation_check=False, deflate=1, out=tmp_path)
+    labels = list(found["datasets"])
+    assert "k=1 deflated 1" in labels and "k=1" not in labels and labels[0] == "k=2"
+    assert [n["excited"] for n in found["summary"]["not_periodic"]] == [1]
+    at = {}
+    for label in labels:
+        ds = found["datasets"][label]
+        i = int(np.argmin(np.abs(ds["v_d"].values - 1.5)))
+        at[label] = (ds["u"].values[i], int(ds["n_halc"].values[i]))
+    u, n_halc = at.pop("k=1 deflated 1")
+    assert scipy_return(u) < 1e-6 and n_halc == 1
+    assert all(copies_distance(other, u) > 1e-2 for other, _ in at.values())

@@ -37,9 +37,10 @@ which the paper's Fig. 3(b) only suggests by simulation ("snaking"):
     with a larger kernel), the orbits that deflation finds 0.01 to either side;
     each followed away from it (--no-switch skips it);
   - with --deflate M, deflation (Farrell, Birkisson and Funke 2015) from each
-    start's eq. (8) state: up to M further periodic orbits at --vd, none of those
-    found before, each followed as a branch of its own, so that branches that
-    meet no followed one are found too;
+    start's eq. (8) state, a start whose simulated state is not periodic included:
+    up to M further periodic orbits at --vd, none of those found before, each
+    followed as a branch of its own, so that branches that meet no followed one
+    are found too;
   - which branches meet (the same orbit up to the chain's symmetries), and
     direct simulation just inside and outside each end of each stable range
     (--no-simulation skips it).

@@ -677,25 +677,28 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
     deflated = _deflated_orbits(orbits, params, found, deflate) if deflate else {}
     for k, (orbit, sim, reason) in found.items():
         starts[k] = sim
+        mask = start_mask(params.graph, k)
+        # a start whose simulated state is not periodic keeps its reason, and the
+        # orbits that deflation finds from its eq. (8) state are followed still
+        runs = [] if orbit is None else [(_start_label(k), paths[k], orbit,
+                                          sim["phase_oscillator"])]
         if orbit is None:
             failed[k] = reason
-            continue
-        mask = start_mask(params.graph, k)
-        runs = [(_start_label(k), paths[k], orbit, sim["phase_oscillator"])]
         runs += [(f"{_start_label(k)} deflated {j}", _numbered(paths[k], "deflated", j), o, m)
                  for j, (o, m) in enumerate(deflated.get(k, []), 1)]
-        for n, (label, path, start, phase) in enumerate(runs):
+        for label, path, start, phase in runs:
+            own = label == _start_label(k)  # the start's own branch, not a deflated one
             try:
                 ds, switched = _follow_branch(orbits, start, phase, continuation_options,
                                               k=int(mask.sum()), switch=switch,
                                               progress=progress)
             except (ValueError, RuntimeError) as err:  # flagged; the other branches go on
-                key = k if n == 0 else label
+                key = k if own else label
                 starts[key], failed[key] = sim, f"continuation failed: {err}"
                 continue
             first = ds.assign_attrs(start_vd=float(params.v_d), start_energy=float(start.energy),
                                     start_n_halc=int(start.n_halc), switched=len(switched),
-                                    deflated=len(runs) - 1 if n == 0 else 0)
+                                    deflated=len(deflated.get(k, [])) if own else 0)
             branches = [first] + [sw.assign_attrs(start_vd=sw.attrs["switched_from_vd"],
                                                   start_energy=float(sw["energy"].values[0]),
                                                   start_n_halc=int(sw["n_halc"].values[0]))
@@ -713,17 +716,21 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
 def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int) -> dict:
     """Further periodic orbits at `params.v_d` by deflation (`distinct_orbits`, Farrell,
     Birkisson and Funke 2015): from the eq. (8) state of each start k (T = 2 pi),
-    with every orbit found so far deflated (the starts' own, those of earlier k,
-    their symmetric copies, steady sliding), up to `count` each; each refined by
+    those whose simulated state is not periodic included, with every orbit found so
+    far deflated (the starts' own, those of earlier k, their symmetric copies,
+    steady sliding), up to `count` each; each refined by
     shooting with the phase condition on its oscillator of largest amplitude.
     Returns k -> [(orbit, its phase oscillator), ...]."""
     known = [pack(o.y0, o.period) for o, _, _ in found.values() if o is not None]
+    # the shooting problem of a start whose state is not periodic: another start's,
+    # with the phase condition on its own oscillator (only the residual is used)
+    template = next((o for o, _, _ in found.values() if o is not None), None)
     out = {}
     for k, (orbit, sim, _) in found.items():
-        if orbit is None:
+        n = (sim or {}).get("phase_oscillator")
+        if template is None or n is None:
             continue
-        n = sim["phase_oscillator"]
-        problem = orbits.problem(orbit, n)
+        problem = orbits.problem(template if orbit is None else orbit, n)
         y0 = jnp.asarray(OutOfPhaseExcitation.eq8(start_mask(params.graph, k))(params))
         start = pack(y0.at[1, n].set(0.0), 2 * np.pi)
         new = distinct_orbits(problem, start, known, count=count)
