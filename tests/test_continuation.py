@@ -253,3 +253,28 @@ def test_a_jumping_multiplier_is_a_discontinuity_induced_bifurcation(keep_zero, 
         ds=0.1, ds_max=0.1, max_points=8))
     (point,) = jc.locate_bifurcations(problem, branch)
     assert point.kind == kind and abs(float(point.p) - 1.3) < 1e-6
+
+
+def test_a_branch_point_where_the_corrector_fails_around_it_is_interpolated():
+    """On the curve u = (v_d - 1)^2, records whose critical multiplier exp(v_d - 1)
+    crosses +1 at v_d = 1, and a corrector that fails within 2e-3 of it, as it does
+    beside the branch points of the ring of 20 (there [G_u, G_p] is nearly singular):
+    the branch point is located within 1e-5 of v_d = 1, the zero of the linear
+    interpolation between the converged points either side (its error here is
+    |f''/ 2 f'| (2e-3)^2 = 2e-6), not at the edge of the failures 2e-3 away."""
+    def residual(u, p):
+        return jnp.where(jnp.abs(p.v_d - 1) < 2e-3, jnp.nan, u - (p.v_d - 1) ** 2)
+
+    def describe(u, p):
+        m = jnp.exp(p.v_d - 1) + 0j
+        return _Switching(multipliers=jnp.stack([1.0 + 0j, m]), trivial=jnp.asarray(0),
+                          zero_multipliers=jnp.asarray(0), stable=jnp.abs(m) < 1)
+
+    problem = jc.ContinuationProblem(residual=residual, u0=jnp.array([0.2025]),
+                                     params=jc.ChainParams(n_osc=1, v_d=0.55),
+                                     describe=describe)
+    branch = jc.continuation(problem, options=jc.ContinuationOptions(
+        ds=0.1, ds_max=0.1, max_points=10))
+    (point,) = jc.locate_bifurcations(problem, branch)
+    assert point.kind == "branch point" and abs(float(point.p) - 1) < 1e-5
+    assert abs(float(point.z[-1]) - 1) >= 2e-3  # a converged trial, outside the failures

@@ -34,7 +34,9 @@ class BifurcationPoint(eqx.Module):
     - `kind`: one of `BIFURCATION_KINDS`.
     - `p`: the continued parameter there (dimensionless, eq. (6)).
     - `z`: the solution (u, p) there, shape (n + 1,); at a sliding bifurcation the
-        orbit nearest to it on the side of the stick phase (`locate_sliding`).
+        orbit nearest to it on the side of the stick phase (`locate_sliding`), and
+        where the corrector fails around the point (a branch point) the converged
+        trial nearest to it.
     - `multiplier`: the critical Floquet multiplier there (complex; modulus 1 up to
         the bisection's resolution).
     - `record`: `problem.describe` there (a `PeriodicOrbit` for limit cycles).
@@ -63,28 +65,35 @@ def _bisect(test, s_hi: float, steps: int, f_hi: float):
     """Bisection on s in [0, s_hi] for a sign change of test(s), test(0) and
     f_hi (the test function at the next point of the branch) of opposite signs.
     test(s) gives (value, corrected point) or None where the corrector fails.
+    Where it fails at the midpoint, the points a quarter of the interval to either
+    side are tried; where they fail too, the bisection stops: around a branch point
+    [G_u, G_p] is nearly singular and the corrector fails on an interval about it
+    (2e-3 in v_d on the two-site branch of the ring of 20), which no bisection
+    step can enter.
     Returns (s, width of the last interval, the corrected point of the last
-    successful trial nearest the change, and the last corrected points on either
-    side of it, (f, z) or None), or (None, 0, None, None) when the ends have no
-    sign change."""
+    successful trial nearest the change, the last corrected points on either side
+    of it, (f, z) or None, and whether it stopped at the corrector's failures), or
+    (None, 0, None, None, False) when the ends have no sign change."""
     lo, hi = 0.0, s_hi
     first = test(lo)
     if first is None or np.sign(first[0]) == np.sign(f_hi):
-        return None, 0.0, None, None
+        return None, 0.0, None, None, False
     f_lo, best = first
     sides = [first, None]
     for _ in range(steps):
-        mid = 0.5 * (lo + hi)
-        trial = test(mid)
-        if trial is None:  # the corrector failed: shrink towards the known side
-            hi = mid
-            continue
+        for fraction in (0.5, 0.25, 0.75):
+            mid = lo + fraction * (hi - lo)
+            trial = test(mid)
+            if trial is not None:
+                break
+        else:
+            return 0.5 * (lo + hi), hi - lo, best, sides, True
         best = trial[1]
         if np.sign(trial[0]) == np.sign(f_lo):
             lo, sides[0] = mid, trial
         else:
             hi, sides[1] = mid, trial
-    return 0.5 * (lo + hi), hi - lo, best, sides
+    return 0.5 * (lo + hi), hi - lo, best, sides, False
 
 
 def _discontinuity(problem: ContinuationProblem, sides) -> tuple[str, list[int] | None]:
@@ -129,7 +138,11 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
     is z_i + s t_i corrected onto the branch (the pseudo-arclength corrector), and
     the test function is dp/ds (fold) or |mu| - 1 (the critical multiplier mu).
     This needs no extended system, so it converges where many multipliers crowd
-    near +1 (a weakly coupled chain). The kind follows from the multiplier at the
+    near +1 (a weakly coupled chain). Where the corrector fails all around the
+    change (a branch point, where [G_u, G_p] is nearly singular), the bisection
+    stops outside that interval, and p is the zero of the test function's linear
+    interpolation between the converged points either side (regula falsi; `width`
+    is then their distance in arclength). The kind follows from the multiplier at the
     located point (`BIFURCATION_KINDS`), unless the multiplier jumps by more than
     `JUMP` across the last interval: a discontinuity-induced bifurcation of the
     exact model, "sliding" where a stick phase appears or vanishes (the count of
@@ -184,7 +197,7 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
             f_hi = float(tangents[i + 1, -1])
         else:
             f_hi = float(np.abs(np.asarray(branch.records.critical_multiplier)[i + 1]) - 1)
-        s, width, z, sides = _bisect(test, s_hi, steps, f_hi)
+        s, width, z, sides, stopped = _bisect(test, s_hi, steps, f_hi)
         if z is None:
             continue
         if sides[1] is None:  # no trial beyond the change: the branch's next point
@@ -192,6 +205,9 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
         record = _record(problem, z)
         _, m = _critical(record)
         p = z[-1]
+        if stopped:  # regula falsi between the converged points either side
+            (f_a, z_a), (f_b, z_b) = sides
+            p = z_a[-1] + (z_b[-1] - z_a[-1]) * f_a / (f_a - f_b)
         if i in folds:
             kind = "fold"
         elif sides[1] is not None and abs(sides[1][0] - sides[0][0]) > JUMP:
