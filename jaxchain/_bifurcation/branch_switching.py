@@ -19,28 +19,16 @@ from .continuation import Branch, ContinuationProblem, PseudoArclength, _correct
 from .deflation import distinct_orbits
 
 
-@jax.jit
-def _kernel(jac, tangent):
-    # the two right singular vectors of the smallest singular values span the
-    # kernel of [G_u, G_p] at a branch point (one of them is the branch's tangent)
-    _, _, vt = jnp.linalg.svd(jac)
-    basis = vt[-2:]
-    c = basis @ tangent
-    other = basis.T @ jnp.stack([-c[1], c[0]])
-    return other / jnp.linalg.norm(other)
-
-
 def branch_direction(problem: ContinuationProblem, z: Float[Array, " n+1"],
                      tangent: Float[Array, " n+1"]) -> Float[Array, " n+1"]:
     """The unit direction in (u, p) of the other branch through the branch point z:
     in the two-dimensional kernel of the Jacobian [G_u, G_p] there (the right
     singular vectors of its two smallest singular values), the direction orthogonal
-    to the followed branch's `tangent`. Shape (n + 1,). At a symmetry-breaking
-    pitchfork of periodic orbits (a Floquet multiplier through +1 without a fold)
-    the other branch leaves perpendicular to the followed one (Seydel 2010, Sect.
-    5.6)."""
-    jac = jax.jacfwd(problem)(jnp.asarray(z, dtype=float))
-    return _kernel(jac, jnp.asarray(tangent, dtype=float))
+    to the followed branch's `tangent` (`critical_directions` with one direction).
+    Shape (n + 1,). At a symmetry-breaking pitchfork of periodic orbits (a Floquet
+    multiplier through +1 without a fold) the other branch leaves perpendicular to
+    the followed one (Seydel 2010, Sect. 5.6)."""
+    return jnp.asarray(critical_directions(problem, z, tangent, count=1)[0])
 
 
 def switch_branch(problem: ContinuationProblem, branch: Branch, point: BifurcationPoint, *,
@@ -94,7 +82,8 @@ _CRITICAL = 4
 
 
 def critical_directions(problem: ContinuationProblem, z: Float[Array, " n+1"],
-                        tangent: Float[Array, " n+1"]) -> Float[np.ndarray, "k n+1"]:
+                        tangent: Float[Array, " n+1"], *, count: int | None = None
+                        ) -> Float[np.ndarray, "k n+1"]:
     """An orthonormal basis of the kernel of the continuation Jacobian [G_u, G_p] at
     the branch point z, less the followed branch's `tangent`: the directions in
     which other branches can leave. The kernel is spanned by the right singular
@@ -103,17 +92,20 @@ def critical_directions(problem: ContinuationProblem, z: Float[Array, " n+1"],
     always has. At a generic branch point k = 1; where the chain's symmetry makes a
     Floquet multiplier +1 double (a two-dimensional irreducible representation of
     the ring's dihedral group), k = 2 (Golubitsky, Stewart and Schaeffer,
-    *Singularities and Groups in Bifurcation Theory* II (1988), ch. XIII). Shape
-    (k, n + 1)."""
+    *Singularities and Groups in Bifurcation Theory* II (1988), ch. XIII); `count`
+    sets k instead. Each direction's largest component is positive (the sign of a
+    singular vector is otherwise arbitrary). Shape (k, n + 1)."""
     jac = np.asarray(jax.jacfwd(problem)(jnp.asarray(z, dtype=float)))
     _, s, vt = np.linalg.svd(jac)
     small = s[::-1][:_CRITICAL + 1]  # the smallest first
-    k = 1 + int(np.argmax(small[1:] / np.maximum(small[:-1], np.finfo(float).tiny)))
+    k = count or 1 + int(np.argmax(small[1:] / np.maximum(small[:-1], np.finfo(float).tiny)))
     kernel = vt[-(k + 1):]  # k critical directions and the always-present one
     t = np.asarray(tangent, dtype=float) / np.linalg.norm(tangent)
     rest = kernel - np.outer(kernel @ t, t)
     basis, _, _ = np.linalg.svd(rest.T, full_matrices=False)
-    return basis[:, :k].T
+    directions = basis[:, :k].T
+    largest = directions[np.arange(k), np.argmax(np.abs(directions), axis=1)]
+    return directions * np.sign(largest)[:, None]
 
 
 def switch_by_deflation(problem: ContinuationProblem, branch: Branch, point: BifurcationPoint,
