@@ -65,11 +65,11 @@ def _bisect(test, s_hi: float, steps: int, f_hi: float):
     """Bisection on s in [0, s_hi] for a sign change of test(s), test(0) and
     f_hi (the test function at the next point of the branch) of opposite signs.
     test(s) gives (value, corrected point) or None where the corrector fails.
-    Where it fails at the midpoint, the points a quarter of the interval to either
-    side are tried; where they fail too, the bisection stops: around a branch point
-    [G_u, G_p] is nearly singular and the corrector fails on an interval about it
-    (2e-3 in v_d on the two-site branch of the ring of 20), which no bisection
-    step can enter.
+    Where it fails at the midpoint, the points at a quarter and an eighth of the
+    interval from either end are tried, nearest the middle first; where they all
+    fail, the bisection stops: around a branch point [G_u, G_p] is nearly singular
+    and the corrector fails on an interval about it (2e-3 in v_d on the two-site
+    branch of the ring of 20), which no bisection step can enter.
     Returns (s, width of the last interval, the corrected point of the last
     successful trial nearest the change, the last corrected points on either side
     of it, (f, z) or None, and whether it stopped at the corrector's failures), or
@@ -81,7 +81,7 @@ def _bisect(test, s_hi: float, steps: int, f_hi: float):
     f_lo, best = first
     sides = [first, None]
     for _ in range(steps):
-        for fraction in (0.5, 0.25, 0.75):
+        for fraction in (0.5, 0.25, 0.75, 0.125, 0.875):
             mid = lo + fraction * (hi - lo)
             trial = test(mid)
             if trial is not None:
