@@ -153,7 +153,8 @@ def _predict(stick, trial: float, root: float):
 def locate_sliding(problem: ContinuationProblem, z_stick,
                    algorithm: PseudoArclength = PseudoArclength(), *,
                    oscillator: int | None = None, xtol: float = 1e-9,
-                   delta: float = 1e-3, max_iterations: int = 40) -> SlidingPoint:
+                   delta: float = 1e-3, max_iterations: int = 40,
+                   seeds=()) -> SlidingPoint:
     """Locate the sliding bifurcation at which a stick phase of one oscillator
     vanishes, from an orbit of the exact switch model near it that has the phase.
 
@@ -193,6 +194,12 @@ def locate_sliding(problem: ContinuationProblem, z_stick,
     - `delta`: the distance from `z_stick`'s p of the first trials, which give the
         second orbit of the secant method (p + delta, then p - delta).
     - `max_iterations`: orbits solved at most.
+    - `seeds`: further converged orbits (u, p) with the stick phase, each of shape
+        (n + 1,), such as the branch's points before `z_stick`: the secant method
+        starts from them, with no trial at +- `delta`. Near a sliding point where
+        another orbit, without the stick phase, lies on the same side (the branch
+        turns there), a trial predicted from `z_stick` alone can converge to that
+        one.
 
     **Returns:**
 
@@ -213,8 +220,15 @@ def locate_sliding(problem: ContinuationProblem, z_stick,
         raise ValidationError(f"z_stick has no stick phase of oscillator {n}")
     held = jnp.zeros(z.size).at[-1].set(1.0)  # the corrector's constraint: p as predicted
     stick = [(float(z[-1]), float(d[n]) ** 2, z)]  # (p, g, orbit) of orbits that stick
-    probes = [stick[0][0] + delta, stick[0][0] - delta]
-    root, change, fraction, iterations = np.nan, np.inf, _FRACTION, 1
+    for seed in seeds:
+        seed = jnp.asarray(seed, dtype=float)
+        d_seed = _phases(problem, seed)[n]
+        if np.isfinite(d_seed) and d_seed > 0:
+            stick.append((float(seed[-1]), float(d_seed) ** 2, seed))
+    stick.sort(key=lambda q: q[1])
+    probes = [] if len(stick) > 1 else [stick[0][0] + delta, stick[0][0] - delta]
+    root = _root(stick, np.nan)
+    change, fraction, iterations = np.inf, _FRACTION, 1
     while iterations < max_iterations:
         if len(stick) < 2:
             if not probes:
