@@ -180,6 +180,25 @@ def test_the_branch_continued_past_the_existence_limit_meets_a_sliding_point_the
 
 
 @pytest.mark.numerics
+def test_the_sliding_point_from_the_branch_s_own_orbits_needs_no_trial_beside_them(
+        past_the_limit):
+    """`locate_sliding` seeded with the branch's orbits nearest the limit (the
+    secant method starts from them) puts the sliding point at the closed-form limit
+    to 1e-8 with its first trials at +- 10 in v_d, where no orbit exists: the seeds
+    alone lead it there. Beside a sliding point where the branch turns (the
+    stick-slip cycle meets the cycle without stick), a trial predicted from one orbit
+    can converge to the other cycle; the seeds avoid such trials."""
+    problem, branch = past_the_limit
+    limit = jc.stick_slip_existence_limit(ONE)
+    ok = np.asarray(branch.converged)
+    zs = np.concatenate([np.asarray(branch.u), np.asarray(branch.p)[:, None]], axis=1)[ok]
+    sticking = zs[(zs[:, -1] < limit) & np.asarray(branch.records.n_halc == 1)]
+    nearest = sticking[np.argsort(limit - sticking[:, -1])[:3]]
+    point = jc.locate_sliding(problem, nearest[0], delta=10.0, seeds=nearest[1:])
+    assert point.converged and abs(float(point.p) - limit) < 1e-8
+
+
+@pytest.mark.numerics
 def test_sliding_curves_in_xi_and_mu_st_are_the_existence_limits(past_the_limit):
     """The sliding point followed in a second parameter (`sliding_curve`, natural
     continuation with `locate_sliding` at each value: the chains' method) over the
