@@ -136,22 +136,22 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
     the largest non-trivial Floquet multiplier leaves the unit circle, the point is
     located by bisection on the arclength s along the tangent t_i: each trial point
     is z_i + s t_i corrected onto the branch (the pseudo-arclength corrector), and
-    the test function is dp/ds (fold) or |mu| - 1 (the critical multiplier mu).
-    This needs no extended system, so it converges where many multipliers crowd
-    near +1 (a weakly coupled chain). Where the corrector fails all around the
-    change (a branch point, where [G_u, G_p] is nearly singular), the bisection
-    stops outside that interval, and p is the zero of the test function's linear
-    interpolation between the converged points either side (regula falsi; `width`
-    is then their distance in arclength). The kind follows from the multiplier at the
-    located point (`BIFURCATION_KINDS`), unless the multiplier jumps by more than
-    `JUMP` across the last interval: a discontinuity-induced bifurcation of the
-    exact model, "sliding" where a stick phase appears or vanishes (the count of
-    zero multipliers changes) and "grazing" otherwise (`_discontinuity`). A
-    sliding bifurcation is then located on its own defining condition, the stick
-    phase's vanishing duration (`locate_sliding`); where that does not converge,
-    the bisection's point stays. An exact branch whose corrector failed beyond its
-    last orbit ends with the sliding bifurcation located from that orbit, if there
-    is one between it and the failed prediction (`after` is then the last point).
+    the test function is dp/ds (fold) or |mu| - 1 (the critical multiplier mu). This
+    needs no extended system, so it converges where many multipliers crowd near +1
+    (a weakly coupled chain). Where the corrector fails all around the change (a
+    branch point, where [G_u, G_p] is nearly singular), the bisection stops outside
+    that interval, and p is the zero of the test function's linear interpolation
+    between the converged points either side (regula falsi; `width` is then their
+    distance in arclength). The kind follows from the multiplier at the located
+    point (`BIFURCATION_KINDS`), unless the multiplier jumps by more than `JUMP`
+    across the last interval: a discontinuity-induced bifurcation of the exact
+    model, "sliding" where a stick phase appears or vanishes (the count of zero
+    multipliers changes) and "grazing" otherwise (`_discontinuity`). A sliding
+    bifurcation is then located on its own defining condition, the stick phase's
+    vanishing duration (`locate_sliding`); where that does not converge, the
+    bisection's point stays. An exact branch whose corrector failed beyond its last
+    orbit ends with the sliding bifurcation located from that orbit, if there is one
+    between it and the failed prediction (`after` is then the last point).
 
     **Arguments:**
 
@@ -235,8 +235,8 @@ def _sliding_end(problem: ContinuationProblem, algorithm: PseudoArclength, branc
     beyond its last orbit (a branch of stick-slip orbits ends where a stick phase
     vanishes, and no orbit of the same segments lies beyond), located by
     `locate_sliding` from the last orbit and the two before it, if it lies between
-    that orbit and the failed prediction after it; else None. `after` is the last point's index: no
-    point of the branch follows."""
+    that orbit and the failed prediction after it; else None. `after` is the last
+    point's index: no point of the branch follows."""
     if branch.stop != Status.newton_failed or not exact_problem(problem):
         return None
     z, beyond = zs[-1], float(branch.p[-1])
