@@ -92,7 +92,8 @@ def test_the_two_site_branch_point_is_where_shooting_at_fixed_v_d_crosses(ring8)
 def test_the_branch_switched_at_the_two_site_branch_point_breaks_the_symmetry(ring8):
     """The other branch through the two-site branch point: its two sites' amplitudes
     differ, by more the further it runs from the branch point (a pitchfork), while
-    on the followed branch they are equal."""
+    on the followed branch they are equal. It ends where the weaker site's stick
+    phase vanishes, a sliding point located just beyond its last orbit."""
     _, branches, folder = ring8
     followed = xr.load_dataset(folder / "branch_k2.nc")["amplitudes"].values
     assert np.max(np.abs(followed[:, 4] - followed[:, 5])) < 1e-8
@@ -101,3 +102,6 @@ def test_the_branch_switched_at_the_two_site_branch_point_breaks_the_symmetry(ri
     a = switched["amplitudes"].values
     split = np.abs(a[:, 4] - a[:, 5])
     assert split[0] > 1e-5 and split[-1] > 10 * split[0]
+    low = branches["k=2 switched 1"]["v_d_computed"][0]
+    (end,) = branches["k=2 switched 1"]["bifurcations"]
+    assert end["type"] == "sliding" and 0 < low - end["v_d"] < 1e-4

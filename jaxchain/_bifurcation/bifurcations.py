@@ -234,18 +234,21 @@ def _sliding_end(problem: ContinuationProblem, algorithm: PseudoArclength, branc
     """The sliding bifurcation at the end of an exact branch whose corrector failed
     beyond its last orbit (a branch of stick-slip orbits ends where a stick phase
     vanishes, and no orbit of the same segments lies beyond), located by
-    `locate_sliding` from the last orbit and the two before it, if it lies between
-    that orbit and the failed prediction after it; else None. `after` is the last
+    `locate_sliding` from the last orbit and the two before it, if it lies beyond
+    that orbit towards the failed prediction after it, no farther than that
+    prediction or the last three orbits reach; else None. `after` is the last
     point's index: no point of the branch follows."""
     if branch.stop != Status.newton_failed or not exact_problem(problem):
         return None
     z, beyond = zs[-1], float(branch.p[-1])
     if not np.isfinite(_phases(problem, z)).any():
         return None
-    point = locate_sliding(problem, z, algorithm, delta=abs(beyond - float(z[-1])),
-                           seeds=zs[-3:-1])
-    if not point.converged or not min(float(z[-1]), beyond) <= float(point.p) <= max(
-            float(z[-1]), beyond):
+    step = beyond - float(z[-1])
+    point = locate_sliding(problem, z, algorithm, delta=abs(step), seeds=zs[-3:-1])
+    # beyond the last orbit, where the failed step went, as far as that step or the
+    # last three orbits reach (the steps shrink towards the square root's singularity)
+    reach = max(abs(step), abs(float(z[-1]) - float(zs[max(len(zs) - 3, 0)][-1])))
+    if not point.converged or not 0 <= (float(point.p) - float(z[-1])) * np.sign(step) <= reach:
         return None
     _, m = _critical(point.record)
     return BifurcationPoint(kind="sliding", p=point.p, z=point.z, multiplier=jnp.asarray(m),
