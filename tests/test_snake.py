@@ -78,7 +78,7 @@ def test_continuation_reproduces_itself_from_a_perturbed_start(one_site):
     assert len(ns) == 1 and abs(float(ns[0].p) - low) < 1e-6
 
 
-@pytest.mark.slow
+@pytest.mark.study
 def test_exact_one_site_branch_ends_where_the_exact_simulation_says(one_site, tmp_path,
                                                                      capsys):
     """The same branch on the exact stick/slip model (`jaxchain snake --engine
