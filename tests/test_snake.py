@@ -119,7 +119,7 @@ def exact_one_site_end(tmp_path_factory):
             xr.load_dataset(out / "snake" / "branch_k1.nc"))
 
 
-@pytest.mark.slow
+@pytest.mark.study
 def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(exact_one_site_end):
     """Upwards in v_d the exact one-site branch of the ring of 4 ends at a sliding
     bifurcation: the excited oscillator's stick phase shrinks like a square root,
@@ -161,7 +161,7 @@ def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(exact_one_sit
     assert stick(p_star + 1e-5) is None
 
 
-@pytest.mark.slow
+@pytest.mark.study
 def test_past_the_whole_ring_s_branch_point_the_check_sees_steady_sliding(
         exact_one_site_end):
     """The whole ring (all four on the HALC) loses stability at a branch point. Just
@@ -180,7 +180,7 @@ def test_past_the_whole_ring_s_branch_point_the_check_sees_steady_sliding(
     assert all(c["agrees"] for c in ring["simulation_check"])
 
 
-@pytest.mark.slow
+@pytest.mark.study
 def test_the_one_site_edge_tends_to_the_single_oscillator_s_limit_as_eta_c_vanishes(
         exact_one_site_end):
     """The one-site branch's sliding point (the edge of the excited oscillator's
