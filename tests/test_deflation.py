@@ -5,6 +5,7 @@ simulation finds from it, then further periodic orbits that are none of its
 symmetric copies, each a periodic orbit of an independent integrator (scipy)."""
 
 import numpy as np
+import jax
 import jax.numpy as jnp
 import pytest
 from scipy.integrate import solve_ivp
@@ -104,6 +105,38 @@ def test_deflating_the_state_of_a_start_leads_elsewhere(simulated):
     assert copies_distance(one, plain[0]) < 1e-6
     other = jc.distinct_orbits(problem, start, [one], count=2)[0]
     assert copies_distance(one, other) > 1e-2 and scipy_return(other) < 1e-6
+
+
+def test_the_distance_from_an_orbit_is_to_the_nearest_point_of_its_copies(simulated):
+    """`Deflation.distances` against the distance written out here: the closed
+    polyline through the orbit's samples, each of its six copies built explicitly
+    (y[:, perm]), every segment; the state near a copy of the orbit, near the orbit
+    and far from both; its gradient against central differences."""
+    one = packed(simulated[1].y0, simulated[1].period)
+    problem = jc.limit_cycle_problem(simulated[1], SHOOTING)
+    operator = jc.deflation(problem, [one], n_samples=64)
+    samples = np.reshape(np.asarray(operator.curves[0]), (64, 2, 3))
+
+    def written_out(u):
+        y = np.asarray(u[:-1])
+        best = np.inf
+        for perm in np.asarray(jc.chain_symmetries(RING)):
+            a = np.reshape(samples[:, :, perm], (64, 6))
+            edge = np.roll(a, -1, axis=0) - a
+            t = np.clip(np.sum((y - a) * edge, -1) / np.sum(edge**2, -1), 0.0, 1.0)
+            best = min(best, np.min(np.sum((y - a - t[:, None] * edge) ** 2, -1)))
+        return np.sqrt(best + (float(u[-1]) - float(one[-1])) ** 2)
+
+    rng = np.random.default_rng(3)
+    copy = jnp.concatenate([jnp.ravel(jnp.asarray(samples[17])[:, ::-1]), one[-1:] + 0.01])
+    for u in (copy + 1e-4 * rng.standard_normal(7), one + 0.05 * rng.standard_normal(7),
+              one + 2.0 * rng.standard_normal(7)):
+        d = float(operator.distances(u)[0])
+        assert abs(d - written_out(u)) < 1e-12 * max(d, 1.0)
+        v, h = rng.standard_normal(7), 1e-6
+        central = (written_out(u + h * v) - written_out(u - h * v)) / (2 * h)
+        slope = float(jax.jvp(lambda w: operator.distances(w)[0], (u,), (jnp.asarray(v),))[1])
+        assert abs(slope - central) < 1e-6 * max(abs(central), 1.0)
 
 
 def test_symmetries_of_the_ring_and_bad_arguments(simulated):

@@ -62,15 +62,36 @@ def orbit_samples(problem: ContinuationProblem, u: Float[Array, " 2n+1"], n_samp
     return jnp.reshape(ys, (n_samples, -1))
 
 
-def _segment_distance2(point, vertices):
-    """Squared distance from `point` (2n,) to the closed polyline through `vertices`
-    (s, 2n): the smallest over its s segments."""
-    a, b = vertices, jnp.roll(vertices, -1, axis=0)
-    edge = b - a
-    offset = point[None] - a
-    t = jnp.clip(jnp.sum(offset * edge, -1) / jnp.maximum(jnp.sum(edge**2, -1), 1e-300),
-                 0.0, 1.0)
-    return jnp.min(jnp.sum((offset - t[:, None] * edge) ** 2, -1))
+def _curve_distance2(point, curve, perms):
+    """Squared distance from `point` (2n,) to the closed polyline through `curve`
+    (s, 2n) and to its symmetric copies (the states y[:, perm] for each row of
+    `perms`, shape (g, n)): the smallest over the copies and the s segments.
+
+    A permutation is an isometry and the rows of `perms` form a group, so the copies
+    of the point, y[:, perm], are measured against the one curve. The nearest copy
+    and segment are chosen without derivatives and the distance to that segment is
+    differentiated: the derivative of a minimum is that of its minimiser (almost
+    everywhere), and the forward-mode Jacobian then costs one segment, not g s. The
+    nearest is found by matrix products (|y - a|^2 expanded, exact to rounding
+    relative to |y|^2, enough to choose it)."""
+    n = perms.shape[1]
+
+    def copies(y):
+        return jnp.reshape(jnp.moveaxis(jnp.reshape(y, (2, n))[:, perms], 1, 0), (-1, 2 * n))
+
+    edges = jnp.roll(curve, -1, axis=0) - curve
+    lengths2 = jnp.maximum(jnp.sum(edges**2, -1), 1e-300)
+    # the nearest copy and segment, by products with the whole curve at once
+    ys = copies(jax.lax.stop_gradient(point))
+    along = ys @ edges.T - jnp.sum(curve * edges, -1)[None]  # (y - a) . edge, shape (g, s)
+    t = jnp.clip(along / lengths2[None], 0.0, 1.0)
+    squared = (jnp.sum(ys**2, -1)[:, None] - 2 * ys @ curve.T + jnp.sum(curve**2, -1)[None]
+               - 2 * t * along + t**2 * lengths2[None])
+    g, k = jnp.divmod(jnp.argmin(squared), curve.shape[0])
+    # the distance to it, differentiable
+    offset = copies(point)[g] - curve[k]
+    t = jnp.clip(jnp.dot(offset, edges[k]) / lengths2[k], 0.0, 1.0)
+    return jnp.sum((offset - t * edges[k]) ** 2)
 
 
 class Deflation(eqx.Module):
@@ -83,14 +104,16 @@ class Deflation(eqx.Module):
     meets it wherever the phase oscillator turns, and every symmetric copy of it
     (`chain_symmetries`) solves the same problem. d_k is therefore the distance of
     y0 from the whole closed curve of orbit k (a polyline through dense samples,
-    exact to the chord error, about (T / s)^2 |y''| / 8) and its copies, with the
+    exact to the chord error, about (T / s)^2 |y''| / 8) and its copies (measured
+    as the copies of y0 against the one curve), with the
     period's difference: d_k^2 = min dist(y0, curve)^2 + (T - T_k)^2. Steady sliding
     solves shooting with any T, so it is deflated by the state alone, d^2 = |y0 -
     y_eq|^2.
 
     **Fields:**
 
-    - `curves`: samples of the known orbits and their copies, shape (k, g, s, 2 n_osc).
+    - `curves`: samples of the known orbits, shape (k, s, 2 n_osc).
+    - `perms`: the chain's symmetries (`chain_symmetries`), shape (g, n_osc).
     - `periods`: their periods, shape (k,).
     - `active`: which of the k slots hold an orbit (an unused slot deflates
         nothing: a fixed capacity keeps one compiled solve for every round),
@@ -99,7 +122,8 @@ class Deflation(eqx.Module):
     - `power`: p (> 0), `shift`: sigma (>= 0); Farrell et al. use p = 2, sigma = 1.
     """
 
-    curves: Float[Array, "k g s 2n"]
+    curves: Float[Array, "k s 2n"]
+    perms: Int[Array, "g n"]
     periods: Float[Array, " k"]
     active: Bool[Array, " k"]
     equilibria: Float[Array, "e 2n"]
@@ -110,8 +134,8 @@ class Deflation(eqx.Module):
         """d_k(u) for each known orbit (infinite for an unused slot), then each
         equilibrium, shape (k + e,)."""
         point, period = u[:-1], u[-1]
-        on_curves = jax.vmap(jax.vmap(lambda c: _segment_distance2(point, c)))(self.curves)
-        orbits = jnp.min(on_curves, axis=1) + (period[None] - self.periods) ** 2
+        on_curves = jax.vmap(lambda c: _curve_distance2(point, c, self.perms))(self.curves)
+        orbits = on_curves + (period[None] - self.periods) ** 2
         orbits = jnp.where(self.active, orbits, jnp.inf)
         rest = jnp.sum((point[None] - self.equilibria) ** 2, -1)
         return jnp.sqrt(jnp.concatenate([orbits, rest]))
@@ -152,16 +176,15 @@ def deflation(problem: ContinuationProblem, known=(), *, n_samples: int = 2048,
     curves, periods = [], []
     for u in known:
         u = jnp.asarray(u, dtype=float)
-        ys = jnp.reshape(orbit_samples(problem, u, n_samples, params), (n_samples, 2, n))
-        curves.append(jnp.stack([jnp.reshape(ys[:, :, p], (n_samples, 2 * n)) for p in perms]))
+        curves.append(orbit_samples(problem, u, n_samples, params))
         periods.append(u[-1])
     unused = capacity - len(known)
-    curves += [jnp.zeros((perms.shape[0], n_samples, 2 * n))] * unused
+    curves += [jnp.zeros((n_samples, 2 * n))] * unused
     periods += [jnp.zeros(())] * unused
     eps = problem.residual.eps if isinstance(problem.residual, ShootingResidual) else None
     equilibria = jnp.reshape(steady_sliding(params, eps), (1, -1))
-    return Deflation(curves=jnp.stack(curves) if curves else
-                     jnp.zeros((0, perms.shape[0], n_samples, 2 * n)),
+    return Deflation(curves=jnp.stack(curves) if curves else jnp.zeros((0, n_samples, 2 * n)),
+                     perms=perms,
                      periods=jnp.asarray(periods, dtype=float).reshape(-1),
                      active=jnp.arange(capacity) < len(known), equilibria=equilibria,
                      power=power, shift=shift)
