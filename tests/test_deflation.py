@@ -149,6 +149,8 @@ def test_symmetries_of_the_ring_and_bad_arguments(simulated):
     problem = jc.limit_cycle_problem(simulated[1], SHOOTING)
     with pytest.raises(ValueError, match="count"):
         jc.distinct_orbits(problem, problem.u0, count=0)
+    with pytest.raises(ValueError, match="capacity"):
+        jc.distinct_orbits(problem, problem.u0, count=2, capacity=0)
     with pytest.raises(ValueError, match="n_samples"):
         jc.deflation(problem, n_samples=4)
     with pytest.raises(ValueError, match="deflate"):

@@ -249,7 +249,8 @@ def deflated_orbit(problem: ContinuationProblem, start: Float[Array, " 2n+1"],
 
 def distinct_orbits(problem: ContinuationProblem, start: Float[Array, " 2n+1"], known=(), *,
                     count: int = 4, params: ChainParams | None = None,
-                    n_samples: int = 2048) -> list[Float[Array, " 2n+1"]]:
+                    n_samples: int = 2048, capacity: int | None = None
+                    ) -> list[Float[Array, " 2n+1"]]:
     """Further periodic orbits from one start by repeated deflation (Farrell et al.
     2015, Algorithm 1): solve from `start` with the known orbits (and steady
     sliding, and every symmetric copy) deflated, add the orbit found, and solve
@@ -265,16 +266,23 @@ def distinct_orbits(problem: ContinuationProblem, start: Float[Array, " 2n+1"], 
     - `count`: most new orbits to find (>= 1).
     - `params`: the parameters (the problem's by default).
     - `n_samples`: samples of each orbit's curve (`Deflation`).
+    - `capacity`: the operator's slots for orbits, at least len(known) + count - 1
+        (the default): calls with equal capacity share one compiled solve.
 
     **Returns:** the new orbits, each `pack(y0, T)`, in the order found.
 
-    **Raises:** `ValidationError` for count < 1.
+    **Raises:** `ValidationError` for count < 1 or a capacity below len(known) +
+    count - 1.
     """
     if count < 1:
         raise ValidationError(f"count must be >= 1, got {count!r}")
     params = problem.params if params is None else params
     known, found = [jnp.asarray(u, dtype=float) for u in known], []
-    capacity = len(known) + count - 1
+    least = len(known) + count - 1
+    capacity = least if capacity is None else capacity
+    if capacity < least:
+        raise ValidationError(f"capacity must be >= {least} (the known orbits and "
+                              f"count - 1), got {capacity!r}")
     for _ in range(count):
         operator = deflation(problem, known, n_samples=n_samples, params=params,
                              capacity=capacity)

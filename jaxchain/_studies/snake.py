@@ -725,6 +725,8 @@ def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int) -> di
     # the shooting problem of a start whose state is not periodic: another start's,
     # with the phase condition on its own oscillator (only the residual is used)
     template = next((o for o, _, _ in found.values() if o is not None), None)
+    # slots for every orbit that can be found: one compiled solve for all starts
+    capacity = len(known) + count * len(found)
     out = {}
     for k, (orbit, sim, _) in found.items():
         n = (sim or {}).get("phase_oscillator")
@@ -733,7 +735,7 @@ def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int) -> di
         problem = orbits.problem(template if orbit is None else orbit, n)
         y0 = jnp.asarray(OutOfPhaseExcitation.eq8(start_mask(params.graph, k))(params))
         start = pack(y0.at[1, n].set(0.0), 2 * np.pi)
-        new = distinct_orbits(problem, start, known, count=count)
+        new = distinct_orbits(problem, start, known, count=count, capacity=capacity)
         known += new
         out[k] = []
         for u in new:
