@@ -4,6 +4,8 @@ different stable states: repeated deflation from one start finds the state that
 simulation finds from it, then further periodic orbits that are none of its
 symmetric copies, each a periodic orbit of an independent integrator (scipy)."""
 
+import dataclasses
+
 import numpy as np
 import jax
 import jax.numpy as jnp
@@ -213,3 +215,38 @@ def test_a_start_that_is_not_periodic_is_deflated_from_its_eq8_state(tmp_path,
     u, n_halc = at.pop("k=1 deflated 1")
     assert scipy_return(u) < 1e-6 and n_halc == 1
     assert all(copies_distance(other, u) > 1e-2 for other, _ in at.values())
+
+
+def test_a_deflated_orbit_on_a_branch_already_followed_is_reported_not_followed(
+        tmp_path, monkeypatch, simulated):
+    """Deflation's orbits replaced by two known ones: the two-site state rotated by
+    one oscillator (a symmetric copy: on the start's own branch) and the one-site
+    state (another branch). The copy is reported on "k=2" and not followed; the
+    one-site state is followed as "k=2 deflated 1", one oscillator on the HALC at
+    the start's v_d. Read back, the report is the same."""
+    two = simulated[2]
+    rotated = jnp.roll(jnp.asarray(two.y0), 1, axis=1)
+    phase = int(np.argmax(np.roll(np.asarray(two.amplitudes), 1)))
+    copy = jc.periodic_orbit(RING, rotated, float(two.period),
+                             dataclasses.replace(SHOOTING, phase_oscillator=phase))
+    assert bool(copy.converged)
+    one = (simulated[1], int(np.argmax(np.asarray(simulated[1].amplitudes))))
+    replace_internal(monkeypatch, "snake deflated orbits",
+                     lambda orbits, params, found, count: {2: [(copy, phase), one]})
+    kwargs = dict(continuation_options=jc.ContinuationOptions(
+        ds=0.02, ds_max=0.05, p_min=1.45, p_max=1.55, max_points=3),
+        start_options=START, simulation_check=False, deflate=2, out=tmp_path)
+    found = jc.localized_branches(RING, (2,), **kwargs)
+    assert list(found["datasets"]) == ["k=2", "k=2 deflated 1"]
+    (repeat,) = found["summary"]["deflated_on_followed"]
+    assert repeat["start"] == "k=2" and repeat["on"] == "k=2" and repeat["n_halc"] == 2
+    ds = found["datasets"]["k=2 deflated 1"]
+    assert int(ds["n_halc"].values[int(np.argmin(np.abs(ds["v_d"].values - 1.5)))]) == 1
+
+    def computes(*args, **kwargs):
+        raise AssertionError("the stored branches are read back")
+
+    replace_internal(monkeypatch, "snake starts", computes)
+    again = jc.localized_branches(RING, (2,), **kwargs)
+    assert list(again["datasets"]) == ["k=2", "k=2 deflated 1"]
+    assert again["summary"]["deflated_on_followed"] == [repeat]

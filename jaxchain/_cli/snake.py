@@ -176,6 +176,9 @@ def _print_summary(s: dict) -> None:
                   f"{c['end']}): {'persists' if c['persists'] else 'lost'} ({verdict})")
     for f in s["not_periodic"]:
         print(f"k={f['excited']} excited: {f['reason']}")
+    for r in s.get("deflated_on_followed", []):
+        print(f"{r['start']} deflated: an orbit (energy {r['energy']:.4g}) on the branch "
+              f"{r['on']}, followed already")
 
 
 def _number(value, spec: str) -> str:

@@ -602,7 +602,9 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     - `deflate`: at `params.v_d`, up to this many further periodic orbits from the
         eq. (8) state of each start by deflation (`distinct_orbits`), every orbit
         found so far deflated; each is followed as a branch of its own, labelled
-        "k=<k> deflated <j>" (0: none).
+        "k=<k> deflated <j>", unless it lies on a branch already followed (a branch
+        with folds crosses v_d more than once): that one is reported in
+        `deflated_on_followed` (0: none).
     - `simulation_check`: check every stable range by direct simulation.
     - `out`: a folder: each branch is stored there as `branch_k<k>.nc` (or
         `branch_<name>.nc`) with the key
@@ -613,7 +615,10 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     **Returns:**
 
     A dict with `summary` (JSON-ready: `branches`, a list of objects with `label`,
-    `excited`, `sites`, `stable_ranges`, `bifurcations`, `connects_to`, ...) and
+    `excited`, `sites`, `stable_ranges`, `bifurcations`, `connects_to`, ...;
+    `not_periodic`, the starts without a periodic orbit and why; and
+    `deflated_on_followed`, the deflated orbits found on a branch already followed,
+    each with its `start`, `energy`, `n_halc` and the branch it lies `on`) and
     `datasets` (label -> the branch's `xarray.Dataset`).
 
     **Raises:**
@@ -641,24 +646,30 @@ def _check_branches(params: ChainParams | None, sites, engine, shooting, solver,
 def _run_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
                   start_options, switch, deflate, simulation_check, out, progress) -> tuple:
     """The branches (`_find_branches`), then the checks of their stable ranges
-    (`_stable_range_checks`): (datasets, starts, failed starts, checks)."""
-    datasets, starts, failed = _find_branches(orbits, params, sites, continuation_options,
-                                              start_options, switch, deflate, out, progress)
+    (`_stable_range_checks`): (datasets, starts, failed starts, deflated orbits on
+    branches already followed, checks)."""
+    datasets, starts, failed, repeated = _find_branches(
+        orbits, params, sites, continuation_options, start_options, switch, deflate, out,
+        progress)
     checks = _stable_range_checks(orbits, params, datasets, simulation_check,
                                   progress)
-    return datasets, starts, failed, checks
+    return datasets, starts, failed, repeated, checks
 
 
 def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
-                   start_options, switch, deflate, out, progress) -> tuple[dict, dict, dict]:
+                   start_options, switch, deflate, out, progress
+                   ) -> tuple[dict, dict, dict, list]:
     """The branch of each start, with `deflate` the branches of the further orbits
-    that deflation finds from its eq. (8) state (`_deflated_orbits`), and with
-    `switch` the branches switched onto at their branch points: read back from
+    that deflation finds from its eq. (8) state (`_deflated_orbits`; one on a branch
+    already followed is reported, `_on_followed_branch`, not followed again), and
+    with `switch` the branches switched onto at their branch points: read back from
     `out` where stored with the same settings, else started by simulation and
-    shooting (`start_orbits`), continued (`_follow_branch`) and stored. Returns
+    shooting (`start_orbits`), continued (`_follow_start`) and stored. Returns
     (label -> branch dataset, start -> the simulation's n_HALC and energy, start ->
-    why it has no periodic orbit)."""
-    datasets, starts, failed = {}, {}, {}
+    why it has no periodic orbit, the deflated orbits on branches already followed
+    from starts without a branch of their own; those of the others are their
+    branch's attribute `deflated_repeats`)."""
+    datasets, starts, failed, repeated = {}, {}, {}, []
     settings = {"chain": chain_record(params), **orbits.settings(),
                 "continuation": continuation_options, "start": start_options,
                 "switch": bool(switch), "deflate": int(deflate)}
@@ -672,45 +683,104 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
         if not stored:
             todo.append(k)
     if not todo:
-        return datasets, starts, failed
+        return datasets, starts, failed, repeated
     found = _start_orbits(orbits, params, todo, start_options, progress)
     deflated = _deflated_orbits(orbits, params, found, deflate) if deflate else {}
+    follow = dict(orbits=orbits, params=params, continuation_options=continuation_options,
+                  switch=switch, progress=progress)
     for k, (orbit, sim, reason) in found.items():
         starts[k] = sim
-        mask = start_mask(params.graph, k)
+        own, mask = _start_label(k), start_mask(params.graph, k)
         # a start whose simulated state is not periodic keeps its reason, and the
         # orbits that deflation finds from its eq. (8) state are followed still
-        runs = [] if orbit is None else [(_start_label(k), paths[k], orbit,
-                                          sim["phase_oscillator"])]
         if orbit is None:
             failed[k] = reason
-        runs += [(f"{_start_label(k)} deflated {j}", _numbered(paths[k], "deflated", j), o, m)
-                 for j, (o, m) in enumerate(deflated.get(k, []), 1)]
-        for label, path, start, phase in runs:
-            own = label == _start_label(k)  # the start's own branch, not a deflated one
-            try:
-                ds, switched = _follow_branch(orbits, start, phase, continuation_options,
-                                              k=int(mask.sum()), switch=switch,
-                                              progress=progress)
-            except (ValueError, RuntimeError) as err:  # flagged; the other branches go on
-                key = k if own else label
-                starts[key], failed[key] = sim, f"continuation failed: {err}"
+        mine = {} if orbit is None else _follow_start(own, orbit, sim["phase_oscillator"],
+                                                      mask, **follow)
+        if isinstance(mine, str):
+            starts[k], failed[k], mine = sim, mine, {}
+        followed, repeats, j = {}, [], 0
+        for o, m in deflated.get(k, []):
+            on = _on_followed_branch(orbits, params, o, datasets | mine | followed)
+            if on is not None:
+                repeats.append({"start": own, "energy": float(o.energy),
+                                "n_halc": int(o.n_halc), "on": on})
                 continue
-            first = ds.assign_attrs(start_vd=float(params.v_d), start_energy=float(start.energy),
-                                    start_n_halc=int(start.n_halc), switched=len(switched),
-                                    deflated=len(deflated.get(k, [])) if own else 0)
-            branches = [first] + [sw.assign_attrs(start_vd=sw.attrs["switched_from_vd"],
-                                                  start_energy=float(sw["energy"].values[0]),
-                                                  start_n_halc=int(sw["n_halc"].values[0]))
-                                  for sw in switched]
-            for j, b in enumerate(branches):
-                b = b.assign_attrs(start=label, start_sites=np.flatnonzero(mask).tolist())
-                if out is not None:
-                    Path(out).mkdir(parents=True, exist_ok=True)
-                    write_dataset(b, _numbered(path, "switched", j), "snake branch", k=k,
-                                  label=label, switched=j, **settings)
-                datasets[label if j == 0 else f"{label} switched {j}"] = b
-    return datasets, starts, failed
+            j += 1
+            label = f"{own} deflated {j}"
+            branches = _follow_start(label, o, m, mask, **follow)
+            if isinstance(branches, str):
+                starts[label], failed[label] = sim, branches
+                continue
+            _store_branches(out, _numbered(paths[k], "deflated", j), branches, settings, k)
+            followed |= branches
+        if own in mine:  # stored last: its attributes count the deflated branches
+            mine[own] = mine[own].assign_attrs(deflated=j, deflated_repeats=json.dumps(repeats))
+            _store_branches(out, paths[k], mine, settings, k)
+        else:
+            repeated += repeats
+        datasets |= mine | followed
+    return datasets, starts, failed, repeated
+
+
+def _follow_start(label: str, start, phase_oscillator: int, mask, *, orbits,
+                  params: ChainParams, continuation_options, switch, progress
+                  ) -> dict | str:
+    """The branch through the periodic orbit `start` at `params.v_d`
+    (`_follow_branch`) and the branches switched onto from it, labelled `label`
+    and "<label> switched <j>" (label -> dataset), or why its continuation failed."""
+    try:
+        ds, switched = _follow_branch(orbits, start, phase_oscillator, continuation_options,
+                                      k=int(mask.sum()), switch=switch, progress=progress)
+    except (ValueError, RuntimeError) as err:  # flagged; the other branches go on
+        return f"continuation failed: {err}"
+    first = ds.assign_attrs(start_vd=float(params.v_d), start_energy=float(start.energy),
+                            start_n_halc=int(start.n_halc), switched=len(switched), deflated=0,
+                            deflated_repeats="[]")
+    branches = [first] + [sw.assign_attrs(start_vd=sw.attrs["switched_from_vd"],
+                                          start_energy=float(sw["energy"].values[0]),
+                                          start_n_halc=int(sw["n_halc"].values[0]))
+                          for sw in switched]
+    return {label if j == 0 else f"{label} switched {j}":
+            b.assign_attrs(start=label, start_sites=np.flatnonzero(mask).tolist())
+            for j, b in enumerate(branches)}
+
+
+def _store_branches(out, path: Path | None, branches: dict, settings: dict, k) -> None:
+    """Write a start's branch and those switched onto from it (`_follow_start`) to
+    `path` and beside it, each with the key of its settings."""
+    if out is None:
+        return
+    Path(out).mkdir(parents=True, exist_ok=True)
+    label = next(iter(branches))
+    for j, b in enumerate(branches.values()):
+        write_dataset(b, _numbered(path, "switched", j), "snake branch", k=k, label=label,
+                      switched=j, **settings)
+
+
+def _on_followed_branch(orbits, params: ChainParams, orbit, branches: dict,
+                        tol: float = 1e-6) -> str | None:
+    """The label of a branch in `branches` that passes through the periodic orbit
+    `orbit` (at `params.v_d`), or None. Where a branch crosses v_d between two
+    points whose interpolated period and amplitudes sorted by size (a signature no
+    rotation or reflection changes) lie within 0.1 of the orbit's, the orbit of
+    that branch at v_d is shot from the interpolated point; the same orbit when its
+    signature agrees within `tol` (both are solved to Newton's tolerance)."""
+    v0 = float(params.v_d)
+    signature = np.append(np.sort(np.asarray(orbit.amplitudes)), float(orbit.period))
+    for label, ds in branches.items():
+        v, u = ds["v_d"].values, ds["u"].values
+        known = np.column_stack([np.sort(ds["amplitudes"].values, axis=1), ds["period"].values])
+        for i in np.flatnonzero((v[:-1] - v0) * (v[1:] - v0) <= 0):
+            w = 0.0 if v[i + 1] == v[i] else (v0 - v[i]) / (v[i + 1] - v[i])
+            if np.max(np.abs(known[i] + w * (known[i + 1] - known[i]) - signature)) > 0.1:
+                continue
+            y, period = unpack(jnp.asarray(u[i] + w * (u[i + 1] - u[i])))
+            shot = orbits.shoot(params, y, period, int(ds.attrs["phase_oscillator"]))
+            found = np.append(np.sort(np.asarray(shot.amplitudes)), float(shot.period))
+            if bool(shot.converged) and np.max(np.abs(found - signature)) < tol:
+                return label
+    return None
 
 
 def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int) -> dict:
@@ -801,9 +871,11 @@ def _stable_range_checks(orbits, params: ChainParams, datasets: dict,
     return out
 
 
-def _branches_summary(datasets: dict, starts: dict, failed: dict, checks: dict) -> dict:
+def _branches_summary(datasets: dict, starts: dict, failed: dict, repeated: list,
+                      checks: dict) -> dict:
     """The result of `localized_branches`: its JSON-ready summary, one entry per
-    branch with what `_stable_range_checks` found, and the datasets."""
+    branch with what `_stable_range_checks` found, the deflated orbits that lie on
+    branches already followed, and the datasets."""
     links = _connections(datasets)
     for label, ds in datasets.items():  # a switched branch meets its own at the branch point
         parent = ds.attrs["start"] if "switched" in label else None
@@ -833,8 +905,11 @@ def _branches_summary(datasets: dict, starts: dict, failed: dict, checks: dict) 
                      ds["trivial_multiplier_error"].max())}
         entry |= {k: v for k, v in checks[label].items() if k != "ranges"}
         branches.append(entry)
+    repeated = repeated + [r for ds in datasets.values()
+                           for r in json.loads(ds.attrs.get("deflated_repeats", "[]"))]
     summary = {"branches": branches,
                "not_periodic": [{"excited": k, "reason": r, "simulation": starts[k]}
-                                for k, r in failed.items()]}
+                                for k, r in failed.items()],
+               "deflated_on_followed": repeated}
     return {"summary": summary, "datasets": datasets}
 
