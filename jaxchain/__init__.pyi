@@ -152,6 +152,10 @@ from ._bifurcation.sliding import (
     stick_phases as stick_phases, sliding_curve as sliding_curve,
     SlidingCurve as SlidingCurve,
 )
+from ._bifurcation.past_sliding import (
+    past_sliding_start as past_sliding_start, held_problem as held_problem,
+    slip_margin as slip_margin,
+)
 from ._bifurcation.continuation import (
     continuation as continuation, ContinuationProblem as ContinuationProblem,
     PseudoArclength as PseudoArclength, ContinuationOptions as ContinuationOptions,

@@ -70,6 +70,12 @@ def test_sliding_location_needs_exact_orbits_with_a_stick_phase():
     problem = jc.ContinuationProblem(residual=lambda u, p: u, u0=jnp.zeros(3), params=ONE)
     with pytest.raises(ValueError, match="exact_cycle_problem"):
         jc.locate_sliding(problem, jnp.zeros(4))
+    for past in (lambda: jc.held_problem(problem, 0),
+                 lambda: jc.past_sliding_start(problem, jnp.zeros(4))):
+        with pytest.raises(ValueError, match="exact_cycle_problem"):
+            past()
+    with pytest.raises(ValueError, match="held"):
+        jc.NonsmoothOptions(held=(-1,))
     with pytest.raises(ValueError, match="period"):
         jc.stick_phases(ONE, jnp.zeros((2, 1)), 0.0, jc.ExactShooting().flow)
 
@@ -177,6 +183,41 @@ def test_the_branch_continued_past_the_existence_limit_meets_a_sliding_point_the
     # stick that the stick-slip cycle meets there: either way one sliding point
     (end,) = [b for b in jc.locate_bifurcations(problem, branch) if b.kind == "sliding"]
     assert end.width < 1e-8 and abs(float(end.p) - limit) < 1e-8
+
+
+@pytest.mark.numerics
+def test_past_the_sliding_point_the_branch_is_the_cycle_without_stick_down_to_hopf(
+        past_the_limit):
+    """Through the sliding point at the existence limit (`past_sliding_start`: the
+    oscillator held in slip, `held_problem`, on the side where it never reaches the
+    belt speed, `slip_margin` > 0), the branch goes on as the cycle without stick
+    that the subcritical Hopf point of steady sliding sends out: below the limit,
+    as the stick-slip cycle (the branch turns at the sliding point), every orbit
+    unstable and with no stick phase, its amplitude vanishing at the closed-form
+    Hopf point (`hopf_vd_analytic`) to 1e-5."""
+    problem, branch = past_the_limit
+    (end,) = [b for b in jc.locate_bifurcations(problem, branch) if b.kind == "sliding"]
+    new, tangent = jc.past_sliding_start(problem, end.z)
+    assert float(new.value()) < float(end.p) and float(tangent[-1]) < 0
+    z = jnp.append(new.u0, new.value())
+    assert jc.slip_margin(jc.held_problem(problem, 0), z, 0) > 0
+    past = jc.continuation(new, jc.PseudoArclength(), jc.ContinuationOptions(
+        ds=0.05, ds_max=0.1, p_min=1.0, max_points=24), tangent=tangent)
+    ok = np.asarray(past.converged)
+    assert ok.sum() > 20 and not np.asarray(past.stable)[ok].any()
+    for u, p in list(zip(np.asarray(past.u)[ok], np.asarray(past.p)[ok]))[::6]:
+        y0, period = jnp.reshape(u[:-1], (2, 1)), float(u[-1])
+        phases = jc.stick_phases(jc.with_parameter(ONE, "v_d", float(p)), y0, period,
+                                 jc.ExactShooting().flow)
+        assert np.isinf(phases).all()
+    # near the Hopf point the squared amplitude is linear in v_d (its leading
+    # order), so the zero of a parabola through the three smallest amplitudes
+    # before the branch turns is the Hopf point to third order
+    p, amplitude = np.asarray(past.p)[ok], np.asarray(past.records.amplitudes)[:, 0]
+    i = int(np.argmin(amplitude))
+    roots = np.roots(np.polyfit(p[i - 2:i + 1], amplitude[i - 2:i + 1] ** 2, 2))
+    hopf = roots[np.argmin(np.abs(roots - p[i]))]
+    assert amplitude[i] < 0.1 and abs(hopf - float(jc.hopf_vd_analytic(ONE))) < 1e-5
 
 
 @pytest.mark.numerics

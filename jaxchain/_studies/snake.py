@@ -17,6 +17,7 @@ from .._bifurcation.bifurcations import locate_bifurcations
 from .._bifurcation.branch_switching import switch_branch, switch_by_deflation
 from .._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
 from .._bifurcation.deflation import distinct_orbits
+from .._bifurcation.past_sliding import past_sliding_start
 from .._bifurcation.shooting import pack, unpack
 from .._sweeps.ensemble import ensemble
 from .._engine.options import SimulationOptions
@@ -247,9 +248,11 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
                    switch: bool = False, progress: bool = False
                    ) -> tuple[xr.Dataset, list[xr.Dataset]]:
     """Continue the branch of periodic orbits through `orbit` over v_d both ways
-    (pseudo-arclength, `continuation`), join the two halves in the order of the
-    branch, and locate its bifurcations (`locate_bifurcations`); with `switch`, at
-    each branch point follow the other branch through it (`_switched_branch`).
+    (pseudo-arclength, `continuation`), on through the sliding bifurcations where a
+    branch of exact orbits ends (`_through_sliding`), join the two halves in the
+    order of the branch, and locate its bifurcations (`locate_bifurcations`); with
+    `switch`, at each branch point follow the other branch through it
+    (`_switched_branch`).
 
     **Returns:**
 
@@ -268,12 +271,12 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
     halves, switched = [], []
     for direction in (-1, 1):
         opts = dataclasses.replace(continuation_options, direction=direction)
-        branch = continuation(problem, algorithm, opts, progress=progress)
-        bifs = locate_bifurcations(problem, branch, algorithm)
-        halves.append(_branch_dataset(k, problem, branch, bifs))
+        pieces = _through_sliding(problem, algorithm, opts, progress=progress)
+        halves.append(_pieces_dataset(k, pieces))
         if switch:
-            switched += [ds for b in bifs if b.kind == "branch point"
-                         for ds in _switched_branch(problem, branch, b, continuation_options,
+            switched += [ds for piece, branch, bifs in pieces for b in bifs
+                         if b.kind == "branch point"
+                         for ds in _switched_branch(piece, branch, b, continuation_options,
                                                     algorithm, k=k, progress=progress)]
     failures = [sw for sw in switched if isinstance(sw, dict)]
     down, up = halves
@@ -289,6 +292,47 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
         "stop": json.dumps({"low": down.attrs["stop"], "high": up.attrs["stop"]}),
         "failed_switches": json.dumps(failures)})
     return joined, [ds for ds in switched if not isinstance(ds, dict)]
+
+
+#: Sliding bifurcations that one continuation goes on through, at most.
+SLIDING_PASSES = 4
+
+
+def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationOptions, *,
+                     tangent=None, progress: bool = False) -> list[tuple]:
+    """Continue from `problem.u0` (`continuation`) and locate the bifurcations; where
+    the branch of exact orbits ends at a sliding bifurcation, go on past it onto the
+    orbits without that stick phase (`past_sliding_start`), each time with
+    `options`' budget, up to `SLIDING_PASSES` times. Returns the pieces in order,
+    each (its problem, `Branch`, bifurcations)."""
+    pieces = []
+    for _ in range(SLIDING_PASSES + 1):
+        branch = continuation(problem, algorithm, options, tangent=tangent, progress=progress)
+        bifs = locate_bifurcations(problem, branch, algorithm)
+        pieces.append((problem, branch, bifs))
+        ends = [b for b in bifs if b.kind == "sliding"
+                and b.after == int(np.sum(np.asarray(branch.converged))) - 1]
+        start = past_sliding_start(problem, ends[0].z, algorithm) if ends else None
+        if start is None:
+            break
+        problem, tangent = start
+    return pieces
+
+
+def _pieces_dataset(k: int, pieces: list) -> xr.Dataset:
+    """The branch dataset (`_branch_dataset`) of the pieces of `_through_sliding`,
+    joined in order: the bifurcations' `after` counted along the whole, the last
+    piece's stop."""
+    import xarray as xr
+
+    parts = [_branch_dataset(k, problem, branch, bifs) for problem, branch, bifs in pieces]
+    bifs, offset = [], 0
+    for part in parts:
+        bifs += [b | {"after": offset + b["after"]} for b in json.loads(part.attrs["bifurcations"])]
+        offset += part.sizes["point"]
+    joined = parts[0] if len(parts) == 1 else xr.concat(parts, dim="point", data_vars="all")
+    return joined.assign_attrs(parts[0].attrs | {"bifurcations": json.dumps(bifs),
+                                                 "stop": parts[-1].attrs["stop"]})
 
 
 def _switched_branch(problem, branch, point, continuation_options: ContinuationOptions,
@@ -311,9 +355,8 @@ def _switched_branch(problem, branch, point, continuation_options: ContinuationO
                      "other orbit"}]
     out = []
     for new, tangent in starts:
-        other = continuation(new, algorithm, continuation_options, tangent=tangent,
-                             progress=progress)
-        ds = _branch_dataset(k, new, other, locate_bifurcations(new, other, algorithm))
+        ds = _pieces_dataset(k, _through_sliding(new, algorithm, continuation_options,
+                                                 tangent=tangent, progress=progress))
         out.append(ds.assign_attrs(switched_from_vd=float(point.p),
                                    stop=json.dumps({"away": ds.attrs["stop"]})))
     return out
@@ -672,7 +715,8 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
     datasets, starts, failed, repeated = {}, {}, {}, []
     settings = {"chain": chain_record(params), **orbits.settings(),
                 "continuation": continuation_options, "start": start_options,
-                "switch": bool(switch), "deflate": int(deflate)}
+                "switch": bool(switch), "deflate": int(deflate),
+                "sliding_passes": SLIDING_PASSES}
     paths = {k: None if out is None else Path(out) / (
         f"branch_{k}.nc" if isinstance(k, str) else f"branch_k{k}.nc").replace(":", "")
         for k in sites}

@@ -50,12 +50,17 @@ class NonsmoothOptions(AbstractHorizon):
     - `max_steps`: step budget of one chunk.
     - `max_events`: budget of switch instants of one chunk; more means chattering.
     - `log_size`: the switch log gives the last `log_size` switches.
+    - `held`: oscillators (0-based indices) held in the mode they start in: their
+        guard is ignored, so a slipping one never sticks or reverses and slips on
+        past v_rel = 0 with its friction force's sign (the smooth continuation of
+        a slip phase, which `continue_past_sliding` follows through a sliding
+        bifurcation). Empty by default: the switch model itself.
 
     **Raises:**
 
     `ValidationError` naming the field for t_end <= 0, transient outside [0, t_end),
-    a tolerance, length or budget that is not a finite number > 0, or an unknown
-    solver or adjoint.
+    a tolerance, length or budget that is not a finite number > 0, an unknown
+    solver or adjoint, or `held` not a tuple of indices >= 0.
     """
 
     t_end: float = eqx.field(static=True, default=15000.0)
@@ -70,6 +75,7 @@ class NonsmoothOptions(AbstractHorizon):
     max_steps: int = eqx.field(static=True, default=100_000)
     max_events: int = eqx.field(static=True, default=100_000)
     log_size: int = eqx.field(static=True, default=1024)
+    held: tuple[int, ...] = eqx.field(static=True, default=())
 
     @classmethod
     def reference(cls, **fields) -> "NonsmoothOptions":
@@ -84,6 +90,10 @@ class NonsmoothOptions(AbstractHorizon):
             if not positive(value):
                 raise ValidationError(f"NonsmoothOptions.{name} must be a finite number > 0, "
                                       f"got {value!r}")
+        if not (isinstance(self.held, tuple) and all(isinstance(n, int) and n >= 0
+                                                      for n in self.held)):
+            raise ValidationError(f"NonsmoothOptions.held must be a tuple of oscillator "
+                                  f"indices >= 0, got {self.held!r}")
         if self.adjoint not in ("forward", "reverse"):
             raise ValidationError(f"NonsmoothOptions.adjoint must be 'forward' or 'reverse', "
                                   f"got {self.adjoint!r}")

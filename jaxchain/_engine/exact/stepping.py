@@ -227,7 +227,7 @@ def _turning_points(interp, c: Carry, y_end, t0, t_end):
     return jax.lax.cond(jnp.any(turns), locate, none)
 
 
-def _switch_point(interp, params, modes, t0, t1, tol):
+def _switch_point(interp, params, modes, t0, t1, tol, held):
     """The switch within a step: its time, the root of the smallest guard on the
     step's dense output (Chandrupatla's method, `_root`), and the state (y, work)
     there. Their derivatives are those of the implicit function theorem written
@@ -238,10 +238,10 @@ def _switch_point(interp, params, modes, t0, t1, tol):
     jumps); the state there moves with tau along the vector field. One vector
     field evaluation per switch."""
     fixed = jax.lax.stop_gradient(
-        _root(lambda t: guard(params, interp.evaluate(t)[0], modes), t0, t1, tol))
+        _root(lambda t: guard(params, interp.evaluate(t)[0], modes, held), t0, t1, tol))
     state = interp.evaluate(fixed)
     rate = mode_field(fixed, state, (params, modes))
-    g, g_rate = jax.jvp(lambda y: guard(params, y, modes), (state[0],), (rate[0],))
+    g, g_rate = jax.jvp(lambda y: guard(params, y, modes, held), (state[0],), (rate[0],))
     # the shift's value is 0; a tangential guard (rate 0, where no derivative
     # exists) or a branch that vmap computes in a lane without a switch (whose
     # values may not be finite) leaves the time and the state as they are
@@ -260,7 +260,7 @@ def _switch_point(interp, params, modes, t0, t1, tol):
 _INTERIOR = 10
 
 
-def _first_fall(interp, params, modes, t0, t1, y0, y_end):
+def _first_fall(interp, params, modes, t0, t1, y0, y_end, held):
     """(t, fallen): the first of the step's interior points (`_INTERIOR`, evenly
     spaced on its dense output) or its end where the smallest guard is <= 0, and
     whether there is one; the step's end and False if none. The switch lies
@@ -272,7 +272,7 @@ def _first_fall(interp, params, modes, t0, t1, y0, y_end):
     extremum inside), with its guard at both ends within h max|x''| of zero (no
     deeper dip fits in the step). Elsewhere, on most steps, the check costs two
     slopes of the dense output."""
-    at_end = guard(params, y_end, modes) <= 0
+    at_end = guard(params, y_end, modes, held) <= 0
     h = t1 - t0
 
     def slope(t):
@@ -285,7 +285,7 @@ def _first_fall(interp, params, modes, t0, t1, y0, y_end):
 
     def inside():
         ts = t0 + h * jnp.arange(1, _INTERIOR + 1) / (_INTERIOR + 1)
-        fallen = jax.vmap(lambda t: guard(params, interp.evaluate(t)[0], modes))(ts) <= 0
+        fallen = jax.vmap(lambda t: guard(params, interp.evaluate(t)[0], modes, held))(ts) <= 0
         return ts[jnp.argmax(fallen)], fallen.any()
 
     t, fallen = jax.lax.cond(jnp.any(dip), inside, lambda: (t1, jnp.array(False)))
@@ -317,7 +317,7 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
     # the step's end or at one of its interior points on the dense output (a slip
     # phase that touches v_rel = 0 and turns back within one step has both ends
     # positive), the step then ending at the first such point
-    t1, event = _first_fall(interp, params, c.modes, t0, t1, c.y, end[0])
+    t1, event = _first_fall(interp, params, c.modes, t0, t1, c.y, end[0], options.held)
     event = keep & event
     at_end = keep & (t1 >= t_stop)
     turning = observe & keep & jnp.any((c.modes != 0) & (c.y[1] * end[0][1] < 0))
@@ -326,7 +326,8 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
         """The switch (its time, the state there, the new modes), the turning
         points before it, and the samples observed."""
         tau, (y, work) = jax.lax.cond(
-            event, lambda: _switch_point(interp, params, c.modes, t0, t1, options.root_tol),
+            event, lambda: _switch_point(interp, params, c.modes, t0, t1, options.root_tol,
+                                         options.held),
             lambda: (t1, end))
         turn_ts, turn_ys = jax.lax.cond(
             observe, lambda: _turning_points(interp, c, y, t0, tau),
@@ -336,7 +337,7 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
         observed = observe_samples(c.observed, jnp.append(turn_ts, sample_t),
                                    jnp.concatenate([turn_ys, y[None]]), params, options)
         switched = jax.lax.cond(
-            event, lambda: switch(params, y, c.modes, options.switch_tol),
+            event, lambda: switch(params, y, c.modes, options.switch_tol, options.held),
             lambda: (y, c.modes, jnp.full(c.modes.shape, -1), jnp.array(True)))
         return (tau, y, work, observed) + switched
 

@@ -58,21 +58,23 @@ def _stick_force_rate(params, v):
     return stick_force(params, v) - 2 * params.xi * params.v_d
 
 
-def switch_guards(params, y, modes):
+def switch_guards(params, y, modes, held=()):
     """Each oscillator's guard (see the module docstring), > 0 while nothing
-    happens, shape (n_osc,)."""
+    happens, shape (n_osc,); +inf for the oscillators `held` (indices) in their
+    mode, which never switch."""
     x, v = y
     f = stick_force(params, x)
-    return _OFFSET + jnp.where(modes == 0, static_friction(params) - jnp.abs(f),
-                               modes * (v - params.v_d))
+    g = _OFFSET + jnp.where(modes == 0, static_friction(params) - jnp.abs(f),
+                            modes * (v - params.v_d))
+    return g if not held else g.at[jnp.asarray(held)].set(jnp.inf)
 
 
-def guard(params, y, modes):
+def guard(params, y, modes, held=()):
     """The smallest guard, a scalar: its fall through zero is the next switch."""
-    return jnp.min(switch_guards(params, y, modes))
+    return jnp.min(switch_guards(params, y, modes, held))
 
 
-def switch(params, y, modes, tol):
+def switch(params, y, modes, tol, held=()):
     """Apply the switching rule at a switch.
 
     An oscillator switches when its guard lies within `tol` of zero and is
@@ -99,7 +101,7 @@ def switch(params, y, modes, tol):
     a = mode_field(0.0, (y, None), (params, modes))[0][1]
     f = stick_force(params, x)
     stick = modes == 0
-    due = switch_guards(params, y, modes) <= tol
+    due = switch_guards(params, y, modes, held) <= tol
     leaves = stick & due & (jnp.sign(f) * _stick_force_rate(params, v) >= 0)
     ends = ~stick & due & (modes * a <= 0)
     sticks = ends & (jnp.abs(f) < static_friction(params))
