@@ -327,7 +327,6 @@ def _assemble(params, engine, reference_options, cases, tested, wall, results,
     )
     attrs = field_values(engine.options, f"{s}_") | field_values(reference_options,
                                                                  "reference_")
-    attrs = {k: (float(v) if not isinstance(v, (str, int)) else v) for k, v in attrs.items()}
     attrs |= {k: v for k, v in chain_record(params).items() if k != "v_d"}
     attrs |= {k: v for k, v in engine.attributes().items() if f"{s}_{k}" not in attrs}
     attrs |= {f"wall_time_s_{s}": wall,

@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
@@ -107,9 +108,16 @@ def observables_variables(obs: Observables, lead: tuple[str, ...]) -> dict:
 
 
 def field_values(obj, prefix: str = "") -> dict:
-    """The fields of a dataclass (options) by name, with `prefix`, leaving out those
-    that are None (netCDF attributes have no None)."""
-    return {prefix + f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)
+    """The fields of a dataclass (options) by name, with `prefix`, as netCDF
+    attributes keep them: strings and whole numbers as they are, tuples as JSON
+    lists, other numbers as floats; those that are None left out (netCDF
+    attributes have no None)."""
+    def plain(v):
+        if isinstance(v, (str, int)):
+            return v
+        return json.dumps(list(v)) if isinstance(v, tuple) else float(v)
+
+    return {prefix + f.name: plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)
             if getattr(obj, f.name) is not None}
 
 
@@ -123,8 +131,7 @@ def run_attributes(params: ChainParams, engine: AbstractEngine, ics: str,
     initial conditions, the jaxchain version and the paper, as plain numbers,
     lists and strings (netCDF and zarr keep them)."""
     attrs = {k: v for k, v in chain_record(params).items() if k != varying}
-    attrs |= {k: (v if isinstance(v, (str, int)) else float(v))
-              for k, v in field_values(engine.options).items()}
+    attrs |= field_values(engine.options)
     attrs |= engine.attributes()
     attrs |= {"ics": ics, "jaxchain_version": VERSION, "paper": PAPER,
               "units": "dimensionless, eqs. (4)-(6) of the paper"}
