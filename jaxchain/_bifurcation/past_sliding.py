@@ -69,19 +69,24 @@ def past_sliding_start(problem: ContinuationProblem, z: Float[Array, " n+1"],
     """A start on the orbits past a sliding bifurcation: those on which the
     oscillator whose stick phase vanished slips throughout.
 
-    From the orbit z at the sliding point (`SlidingPoint.z`, `BifurcationPoint.z`:
-    the stick phase all but gone), the model with that oscillator held in slip
+    From an orbit z of the branch next to the sliding point (its last orbit, or
+    `SlidingPoint.z`: the stick phase all but gone; the last orbit is safer, since
+    other branches may pass through the same sliding point and the point's own
+    orbit, solved near it, may lie on one of them), the model with that
+    oscillator held in slip
     (`held_problem`) is corrected at z's p and continued `steps` points of
     arclength `ds` each way. The way along which its relative velocity keeps its
     sign (`slip_margin` > 0) is the admissible one; its last point, an orbit of
     the switch model itself (the held oscillator never reaches the belt speed), is
     the start, and the direction from the sliding point to it the tangent to go on
-    along.
+    along. The start must have the stick phases of z but the vanished one (where
+    another oscillator's stick phase appears or vanishes at the same point, the
+    held family is not the continuation of this branch, and None is returned).
 
     **Arguments:**
 
     - `problem`: the branch's `ContinuationProblem` (`exact_cycle_problem`).
-    - `z`: the orbit (u, p) at the sliding point, shape (n + 1,).
+    - `z`: the branch's orbit (u, p) next to the sliding point, shape (n + 1,).
     - `algorithm`: the corrector (`PseudoArclength`).
     - `oscillator`: the oscillator whose stick phase vanishes (0-based); by default
         the one with the shortest stick phase at z.
@@ -100,11 +105,13 @@ def past_sliding_start(problem: ContinuationProblem, z: Float[Array, " n+1"],
         raise ValidationError("past_sliding_start needs a problem of exact orbits "
                               "(exact_cycle_problem)")
     z = jnp.asarray(z, dtype=float)
+    sticking = np.isfinite(_phases(problem, z))
     if oscillator is None:
-        phases = _phases(problem, z)
-        if not np.isfinite(phases).any():
+        if not sticking.any():
             return None
-        oscillator = int(np.argmin(phases))
+        oscillator = int(np.argmin(_phases(problem, z)))
+    # past the sliding point the same oscillators stick, but the held one
+    remaining = sticking & (np.arange(sticking.size) != oscillator)
     held = held_problem(problem, oscillator)
     at_p = jnp.zeros(z.size).at[-1].set(1.0)
     z, ok, _, _ = _correct(held, algorithm, z, at_p)
@@ -119,7 +126,8 @@ def past_sliding_start(problem: ContinuationProblem, z: Float[Array, " n+1"],
             return None
         points = [jnp.append(u, p) for u, p, c in zip(branch.u, branch.p, branch.converged)
                   if bool(c)][1:]
-        if points and all(slip_margin(held, w, oscillator) > 0 for w in points):
+        if (points and all(slip_margin(held, w, oscillator) > 0 for w in points)
+                and np.array_equal(np.isfinite(_phases(problem, points[-1])), remaining)):
             w = points[-1]
             out = eqx.tree_at(lambda pr: pr.u0, problem.with_params(problem.at(w[-1])), w[:-1])
             return out, (w - z) / jnp.linalg.norm(w - z)

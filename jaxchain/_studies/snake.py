@@ -310,9 +310,12 @@ def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationO
         branch = continuation(problem, algorithm, options, tangent=tangent, progress=progress)
         bifs = locate_bifurcations(problem, branch, algorithm)
         pieces.append((problem, branch, bifs))
-        ends = [b for b in bifs if b.kind == "sliding"
-                and b.after == int(np.sum(np.asarray(branch.converged))) - 1]
-        start = past_sliding_start(problem, ends[0].z, algorithm) if ends else None
+        ok = np.asarray(branch.converged)
+        ends = [b for b in bifs if b.kind == "sliding" and b.after == int(ok.sum()) - 1]
+        # from the branch's last orbit: the sliding point's own orbit, solved near
+        # it, may lie on another branch through the same point
+        last = jnp.append(branch.u[ok][-1], branch.p[ok][-1])
+        start = past_sliding_start(problem, last, algorithm) if ends else None
         if start is None:
             break
         problem, tangent = start
