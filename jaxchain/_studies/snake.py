@@ -253,6 +253,9 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
     order of the branch, and locate its bifurcations (`locate_bifurcations`); with
     `switch`, at each branch point follow the other branch through it
     (`_switched_branch`).
+    A branch that comes back through `orbit` is an isola: it is cut there
+    (`_closed_loop`), the other way is not continued, and both its stops are
+    "closed".
 
     **Returns:**
 
@@ -270,9 +273,13 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
     problem = orbits.problem(orbit, phase_oscillator)
     halves, switched = [], []
     for direction in (-1, 1):
+        if halves and halves[0].attrs["stop"] == "closed":  # an isola: all of it is known
+            halves.append(halves[0].isel(point=[0]).assign_attrs(
+                bifurcations="[]", stop="closed"))
+            continue
         opts = dataclasses.replace(continuation_options, direction=direction)
         pieces = _through_sliding(problem, algorithm, opts, progress=progress)
-        halves.append(_pieces_dataset(k, pieces))
+        halves.append(_closed_loop(orbits, orbit, _pieces_dataset(k, pieces)))
         if switch:
             switched += [ds for piece, branch, bifs in pieces for b in bifs
                          if b.kind == "branch point"
@@ -292,6 +299,25 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
         "stop": json.dumps({"low": down.attrs["stop"], "high": up.attrs["stop"]}),
         "failed_switches": json.dumps(failures)})
     return joined, [ds for ds in switched if not isinstance(ds, dict)]
+
+
+def _closed_loop(orbits, orbit, half: xr.Dataset) -> xr.Dataset:
+    """`half`, a branch continued from `orbit` one way, cut where it comes back
+    through `orbit` (`_passes_through`, after the first point where its signature
+    has left the start's by more than 0.1): the branch is an isola, closed on
+    itself, and its stop is "closed". Unchanged where it does not come back."""
+    signature = np.column_stack([np.sort(half["amplitudes"].values, axis=1),
+                                 half["period"].values, half["v_d"].values])
+    away = np.flatnonzero(np.max(np.abs(signature - signature[0]), axis=1) > 0.1)
+    if away.size == 0:
+        return half
+    i = _passes_through(orbits, orbit.params, orbit, half.isel(point=slice(away[0], None)))
+    if i is None:
+        return half
+    end = away[0] + i + 1
+    bifs = [b for b in json.loads(half.attrs["bifurcations"]) if b["after"] < end]
+    return half.isel(point=slice(0, end + 1)).assign_attrs(bifurcations=json.dumps(bifs),
+                                                           stop="closed")
 
 
 #: Sliding bifurcations that one continuation goes on through, at most.
@@ -805,28 +831,36 @@ def _store_branches(out, path: Path | None, branches: dict, settings: dict, k) -
                       switched=j, **settings)
 
 
-def _on_followed_branch(orbits, params: ChainParams, orbit, branches: dict,
-                        tol: float = 1e-6) -> str | None:
+def _on_followed_branch(orbits, params: ChainParams, orbit, branches: dict) -> str | None:
     """The label of a branch in `branches` that passes through the periodic orbit
-    `orbit` (at `params.v_d`), or None. Where a branch crosses v_d between two
-    points whose interpolated period and amplitudes sorted by size (a signature no
-    rotation or reflection changes) lie within 0.1 of the orbit's, the orbit of
-    that branch at v_d is shot from the interpolated point; the same orbit when its
-    signature agrees within `tol` (both are solved to Newton's tolerance)."""
+    `orbit` at `params.v_d` (`_passes_through`), or None."""
+    return next((label for label, ds in branches.items()
+                 if _passes_through(orbits, params, orbit, ds) is not None), None)
+
+
+def _passes_through(orbits, params: ChainParams, orbit, branch: xr.Dataset,
+                    tol: float = 1e-6) -> int | None:
+    """The first point i of `branch` such that the branch passes through the
+    periodic orbit `orbit` (at `params.v_d`) between points i and i + 1, or None.
+    Where the branch crosses v_d between two points whose interpolated period and
+    amplitudes sorted by size (a signature no rotation or reflection changes) lie
+    within 0.1 of the orbit's, the orbit of the branch at v_d is shot from the
+    interpolated point; the same orbit when its signature agrees within `tol` (both
+    are solved to Newton's tolerance)."""
     v0 = float(params.v_d)
     signature = np.append(np.sort(np.asarray(orbit.amplitudes)), float(orbit.period))
-    for label, ds in branches.items():
-        v, u = ds["v_d"].values, ds["u"].values
-        known = np.column_stack([np.sort(ds["amplitudes"].values, axis=1), ds["period"].values])
-        for i in np.flatnonzero((v[:-1] - v0) * (v[1:] - v0) <= 0):
-            w = 0.0 if v[i + 1] == v[i] else (v0 - v[i]) / (v[i + 1] - v[i])
-            if np.max(np.abs(known[i] + w * (known[i + 1] - known[i]) - signature)) > 0.1:
-                continue
-            y, period = unpack(jnp.asarray(u[i] + w * (u[i + 1] - u[i])))
-            shot = orbits.shoot(params, y, period, int(ds.attrs["phase_oscillator"]))
-            found = np.append(np.sort(np.asarray(shot.amplitudes)), float(shot.period))
-            if bool(shot.converged) and np.max(np.abs(found - signature)) < tol:
-                return label
+    v, u = branch["v_d"].values, branch["u"].values
+    known = np.column_stack([np.sort(branch["amplitudes"].values, axis=1),
+                             branch["period"].values])
+    for i in np.flatnonzero((v[:-1] - v0) * (v[1:] - v0) <= 0):
+        w = 0.0 if v[i + 1] == v[i] else (v0 - v[i]) / (v[i + 1] - v[i])
+        if np.max(np.abs(known[i] + w * (known[i + 1] - known[i]) - signature)) > 0.1:
+            continue
+        y, period = unpack(jnp.asarray(u[i] + w * (u[i + 1] - u[i])))
+        shot = orbits.shoot(params, y, period, int(branch.attrs["phase_oscillator"]))
+        found = np.append(np.sort(np.asarray(shot.amplitudes)), float(shot.period))
+        if bool(shot.converged) and np.max(np.abs(found - signature)) < tol:
+            return int(i)
     return None
 
 
@@ -929,6 +963,7 @@ def _branches_summary(datasets: dict, starts: dict, failed: dict, repeated: list
         if parent in datasets:
             links[label].append(parent)
             links[parent].append(label)
+    links = {label: list(dict.fromkeys(met)) for label, met in links.items()}
     branches = []
     for label, ds in datasets.items():
         ranges = checks[label]["ranges"]
