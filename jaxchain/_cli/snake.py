@@ -163,7 +163,7 @@ def _print_summary(s: dict) -> None:
         ranges = ", ".join(f"[{lo:.4f}, {hi:.4f}]" for lo, hi in b["stable_ranges"]) or "none"
         print(f"{b['label']} excited: {b['sites']} on the HALC where stable; stable on "
               f"{ranges}; connects to {', '.join(b['connects_to']) or 'nothing found'}")
-        if b["stop"].get("low") == "closed":
+        if b.get("stop", {}).get("low") == "closed":
             print("   closed on itself (an isola)")
         for r in b["stable_range_ends"]:
             print("   ends: " + "; ".join(f"{e['type']} at {_number(e['v_d'], '.5f')}"
