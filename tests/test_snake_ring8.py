@@ -2,8 +2,9 @@
 --engine exact --n-osc 8 --sites all --deflate 1` computes it (about 5 min on two
 cores): every start k = 1 ... 8 has a branch, every end of a stable range agrees
 with direct simulation, the two-site branch point lies where shooting at fixed v_d
-on either side puts the crossing of its multiplier, and the branch switched there
-breaks the two sites' symmetry.
+on either side puts the crossing of its multiplier, the branch switched there
+breaks the two sites' symmetry and turns at a sliding point onto orbits without
+the weaker site's stick phase, and a branch that deflation finds is an isola.
 
 Marked `study`: the default run leaves it out (pyproject.toml, addopts), so that the
 suite keeps within 10 minutes; CI runs it as a step of its own (.ci/run), and
@@ -78,9 +79,10 @@ def test_the_two_site_branch_point_is_where_shooting_at_fixed_v_d_crosses(ring8)
     straight line through the first two would be off by |f''/2f'| 0.003^2, 3e-5;
     the bisection's old stop at the edge of the corrector's failures, 5e-4)."""
     _, branches, folder = ring8
-    v_b = next(b["v_d"] for b in branches["k=2"]["bifurcations"] if b["type"] == "branch point")
+    (point,) = [b for b in branches["k=2"]["bifurcations"] if b["type"] == "branch point"]
+    v_b = point["v_d"]
     ds = xr.load_dataset(folder / "branch_k2.nc")
-    u = ds["u"].values[int(np.argmin(np.abs(ds["v_d"].values - v_b)))]
+    u = ds["u"].values[point["after"]]  # the orbit before it along the branch
     offsets = np.array([-0.003, 0.003, 0.006])
     f, split = np.transpose([_critical(v_b + d, u, int(ds.attrs["phase_oscillator"]))
                              for d in offsets])
@@ -92,16 +94,61 @@ def test_the_two_site_branch_point_is_where_shooting_at_fixed_v_d_crosses(ring8)
 def test_the_branch_switched_at_the_two_site_branch_point_breaks_the_symmetry(ring8):
     """The other branch through the two-site branch point: its two sites' amplitudes
     differ, by more the further it runs from the branch point (a pitchfork), while
-    on the followed branch they are equal. It ends where the weaker site's stick
-    phase vanishes, a sliding point located just beyond its last orbit."""
+    on the followed branch they are equal."""
     _, branches, folder = ring8
     followed = xr.load_dataset(folder / "branch_k2.nc")["amplitudes"].values
-    assert np.max(np.abs(followed[:, 4] - followed[:, 5])) < 1e-8
+    assert np.max(np.abs(followed[:, 4] - followed[:, 5])) < 1e-8  # symmetric throughout
     switched = xr.load_dataset(folder / "branch_k2_switched1.nc")
     assert switched.attrs["switched_from_vd"] == branches["k=2"]["stable_ranges"][0][1]
     a = switched["amplitudes"].values
     split = np.abs(a[:, 4] - a[:, 5])
-    assert split[0] > 1e-5 and split[-1] > 10 * split[0]
-    low = branches["k=2 switched 1"]["v_d_computed"][0]
-    (end,) = branches["k=2 switched 1"]["bifurcations"]
-    assert end["type"] == "sliding" and 0 < low - end["v_d"] < 1e-4
+    end = json.loads(switched.attrs["bifurcations"])[0]["after"]
+    assert split[0] > 1e-5 and split[end] > 10 * split[0]
+
+
+def _stick_count(u: np.ndarray, v_d: float) -> int:
+    params = jc.with_parameter(jc.ChainParams(n_osc=N), "v_d", v_d)
+    return int(np.isfinite(jc.stick_phases(params, u[:-1].reshape(2, -1), float(u[-1]),
+                                           jc.ExactShooting().flow)).sum())
+
+
+def test_the_switched_branch_turns_at_its_sliding_point_onto_orbits_without_that_stick(
+        ring8):
+    """The switched branch runs down to where the weaker site's stick phase
+    vanishes (a sliding point) and goes on through it: the points either side both
+    lie above it in v_d (the branch turns there, a non-smooth fold), the orbit
+    before it has two stick phases and the one after one. Shooting at the v_d of
+    the point after it, from the branch's orbit before the turn nearest that v_d
+    (no continuation), converges to an orbit with two stick phases: two orbits at
+    one v_d, one each side of the turn."""
+    _, _, folder = ring8
+    switched = xr.load_dataset(folder / "branch_k2_switched1.nc")
+    sliding = json.loads(switched.attrs["bifurcations"])[0]
+    assert sliding["type"] == "sliding"
+    i = sliding["after"]
+    v, u = switched["v_d"].values, switched["u"].values
+    assert v[i] > sliding["v_d"] and v[i + 1] > sliding["v_d"] and i + 1 < v.size - 1
+    assert _stick_count(u[i], v[i]) == 2 and _stick_count(u[i + 1], v[i + 1]) == 1
+    params = jc.with_parameter(jc.ChainParams(n_osc=N), "v_d", float(v[i + 1]))
+    j = int(np.argmin(np.abs(v[:i] - v[i + 1])))
+    other = jc.exact_periodic_orbit(params, u[j][:-1].reshape(2, -1), float(u[j][-1]),
+                                    jc.ExactShooting(phase_oscillator=int(
+                                        switched.attrs["phase_oscillator"])))
+    assert bool(other.converged)
+    assert _stick_count(np.append(np.ravel(other.y0), other.period), v[i + 1]) == 2
+
+
+def test_a_branch_found_by_deflation_is_an_isola(ring8):
+    """The branch that deflation finds from the one-site start comes back through
+    its start (both stops "closed") and meets no other branch: its two ends lie
+    within one of its steps of each other (in v_d, period and amplitudes sorted by
+    size), and it turns inside the range of its continuation."""
+    _, branches, folder = ring8
+    isola = branches["k=1 deflated 1"]
+    assert isola["stop"] == {"low": "closed", "high": "closed"} and not isola["connects_to"]
+    ds = xr.load_dataset(folder / "branch_k1_deflated1.nc")
+    curve = np.column_stack([np.sort(ds["amplitudes"].values, axis=1), ds["period"].values,
+                             ds["v_d"].values])
+    steps = np.linalg.norm(np.diff(curve, axis=0), axis=1)
+    assert np.linalg.norm(curve[0] - curve[-1]) <= steps.max()
+    assert 1.0 < ds["v_d"].values.min() and ds["v_d"].values.max() < 2.0

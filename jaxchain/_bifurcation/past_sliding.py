@@ -30,66 +30,69 @@ from .sliding import _phases, exact_problem
 from .._errors import ValidationError
 
 
-def held_problem(problem: ContinuationProblem, oscillator: int) -> ContinuationProblem:
-    """The exact shooting problem `problem` with `oscillator` (0-based) held in its
-    slip mode (`NonsmoothOptions.held`): it never sticks or reverses.
+def held_problem(problem: ContinuationProblem, oscillators) -> ContinuationProblem:
+    """The exact shooting problem `problem` with `oscillators` (0-based indices, or
+    one index) held in their slip mode (`NonsmoothOptions.held`): they never stick
+    or reverse.
 
     **Raises:** `ValidationError` for a problem that is not one of exact orbits
     (`exact_cycle_problem`) or an oscillator outside the chain."""
     if not exact_problem(problem):
         raise ValidationError("held_problem needs a problem of exact orbits "
                               "(exact_cycle_problem)")
-    if not 0 <= oscillator < problem.params.n_osc:
-        raise ValidationError(f"oscillator must be in 0..{problem.params.n_osc - 1}, got "
-                              f"{oscillator!r}")
+    held = tuple(int(n) for n in np.atleast_1d(oscillators))
+    if not all(0 <= n < problem.params.n_osc for n in held):
+        raise ValidationError(f"oscillators must be in 0..{problem.params.n_osc - 1}, got "
+                              f"{oscillators!r}")
     options = problem.residual.options
-    flow = dataclasses.replace(options.flow, held=(int(oscillator),))
+    flow = dataclasses.replace(options.flow, held=held)
     residual = dataclasses.replace(problem.residual,
                                    options=dataclasses.replace(options, flow=flow))
     return dataclasses.replace(problem, residual=residual)
 
 
-def slip_margin(problem: ContinuationProblem, z: Float[Array, " n+1"], oscillator: int, *,
+def slip_margin(problem: ContinuationProblem, z: Float[Array, " n+1"], oscillators, *,
                 n_samples: int = 512) -> float:
-    """The least relative velocity s (x_n' - v_d) of `oscillator` over the orbit z =
-    (u, p), with s the sign it has at t = 0, from `n_samples` samples of one period
-    (`orbit_samples`, by the flow of `problem`): > 0 where it slips in one
-    direction throughout (no stick, no reversal), <= 0 where it reaches the belt
-    speed. Dimensionless (eq. (6))."""
+    """The least relative velocity s (x_n' - v_d) of `oscillators` (0-based indices,
+    or one index) over the orbit z = (u, p), each with s the sign it has at t = 0,
+    from `n_samples` samples of one period (`orbit_samples`, by the flow of
+    `problem`): > 0 where each slips in one direction throughout (no stick, no
+    reversal), <= 0 where one reaches the belt speed. Dimensionless (eq. (6))."""
     params = problem.at(z[-1])
     samples = np.asarray(orbit_samples(problem, z[:-1], n_samples, params))
-    v_rel = samples[:, params.n_osc + oscillator] - float(params.v_d)
+    v_rel = samples[:, params.n_osc + np.atleast_1d(oscillators)] - float(params.v_d)
     return float(np.min(np.sign(v_rel[0]) * v_rel))
 
 
 def past_sliding_start(problem: ContinuationProblem, z: Float[Array, " n+1"],
                        algorithm: PseudoArclength = PseudoArclength(), *,
-                       oscillator: int | None = None, ds: float = 2e-3, steps: int = 5
+                       oscillators=None, ds: float = 2e-3, steps: int = 5
                        ) -> tuple[ContinuationProblem, Float[Array, " n+1"]] | None:
     """A start on the orbits past a sliding bifurcation: those on which the
-    oscillator whose stick phase vanished slips throughout.
+    oscillators whose stick phases vanished slip throughout.
 
     From an orbit z of the branch next to the sliding point (its last orbit, or
     `SlidingPoint.z`: the stick phase all but gone; the last orbit is safer, since
     other branches may pass through the same sliding point and the point's own
-    orbit, solved near it, may lie on one of them), the model with that
-    oscillator held in slip
-    (`held_problem`) is corrected at z's p and continued `steps` points of
-    arclength `ds` each way. The way along which its relative velocity keeps its
-    sign (`slip_margin` > 0) is the admissible one; its last point, an orbit of
-    the switch model itself (the held oscillator never reaches the belt speed), is
-    the start, and the direction from the sliding point to it the tangent to go on
-    along. The start must have the stick phases of z but the vanished one (where
-    another oscillator's stick phase appears or vanishes at the same point, the
-    held family is not the continuation of this branch, and None is returned).
+    orbit, solved near it, may lie on one of them), the model with those
+    oscillators held in slip (`held_problem`) is corrected at z's p and continued
+    `steps` points of arclength `ds` each way. The way along which their relative
+    velocities keep their signs (`slip_margin` > 0) is the admissible one; its
+    last point, an orbit of the switch model itself (the held oscillators never
+    reach the belt speed), is the start, and the direction from the sliding point
+    to it the tangent to go on along. The start must have the stick phases of z
+    but the vanished ones (where another oscillator's stick phase appears or
+    vanishes at the same point, the held family is not the continuation of this
+    branch, and None is returned).
 
     **Arguments:**
 
     - `problem`: the branch's `ContinuationProblem` (`exact_cycle_problem`).
     - `z`: the branch's orbit (u, p) next to the sliding point, shape (n + 1,).
     - `algorithm`: the corrector (`PseudoArclength`).
-    - `oscillator`: the oscillator whose stick phase vanishes (0-based); by default
-        the one with the shortest stick phase at z.
+    - `oscillators`: those whose stick phases vanish there (0-based indices); by
+        default those whose stick phase at z is the shortest, within 10 %
+        (symmetric sites of a ring lose theirs together).
     - `ds`, `steps`: the arclength step and the number of points of the held
         continuation each way.
 
@@ -105,14 +108,16 @@ def past_sliding_start(problem: ContinuationProblem, z: Float[Array, " n+1"],
         raise ValidationError("past_sliding_start needs a problem of exact orbits "
                               "(exact_cycle_problem)")
     z = jnp.asarray(z, dtype=float)
-    sticking = np.isfinite(_phases(problem, z))
-    if oscillator is None:
+    phases = _phases(problem, z)
+    sticking = np.isfinite(phases)
+    if oscillators is None:
         if not sticking.any():
             return None
-        oscillator = int(np.argmin(_phases(problem, z)))
-    # past the sliding point the same oscillators stick, but the held one
-    remaining = sticking & (np.arange(sticking.size) != oscillator)
-    held = held_problem(problem, oscillator)
+        oscillators = np.flatnonzero(phases <= 1.1 * np.min(phases))
+    oscillators = np.atleast_1d(oscillators)
+    # past the sliding point the same oscillators stick, but the held ones
+    remaining = sticking & ~np.isin(np.arange(sticking.size), oscillators)
+    held = held_problem(problem, oscillators)
     at_p = jnp.zeros(z.size).at[-1].set(1.0)
     z, ok, _, _ = _correct(held, algorithm, z, at_p)
     if not bool(ok):
@@ -126,7 +131,7 @@ def past_sliding_start(problem: ContinuationProblem, z: Float[Array, " n+1"],
             return None
         points = [jnp.append(u, p) for u, p, c in zip(branch.u, branch.p, branch.converged)
                   if bool(c)][1:]
-        if (points and all(slip_margin(held, w, oscillator) > 0 for w in points)
+        if (points and all(slip_margin(held, w, oscillators) > 0 for w in points)
                 and np.array_equal(np.isfinite(_phases(problem, points[-1])), remaining)):
             w = points[-1]
             out = eqx.tree_at(lambda pr: pr.u0, problem.with_params(problem.at(w[-1])), w[:-1])
