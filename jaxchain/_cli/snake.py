@@ -164,7 +164,8 @@ def _print_summary(s: dict) -> None:
         print(f"{b['label']} excited: {b['sites']} on the HALC where stable; stable on "
               f"{ranges}; connects to {', '.join(b['connects_to']) or 'nothing found'}")
         if b.get("stop", {}).get("low") == "closed":
-            print("   closed on itself (an isola)")
+            print("   closed on itself" + ("" if b["connects_to"] else
+                                          " (an isola: it meets no other branch)"))
         for r in b["stable_range_ends"]:
             print("   ends: " + "; ".join(f"{e['type']} at {_number(e['v_d'], '.5f')}"
                                           for e in r))
