@@ -158,10 +158,14 @@ def test_ctrl_c_stops_the_work_in_the_warm_process(warm_env, tmp_path):
     long_run = ["localized", "--n-osc", "20", "--t-end", "1e7", "--transient", "10",
                 "--json", "--out", "long"]
     # SIGINT as at a terminal: default in the command (a pytest worker's own
-    # disposition, which its children inherit, may be to ignore it)
-    proc = subprocess.Popen([SCRIPT, *long_run], env=env, cwd=tmp_path, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    # disposition, which its children inherit, may be to ignore it); set before the
+    # command's exec, which keeps a default disposition (no preexec_fn: a fork of a
+    # process with JAX's threads may deadlock)
+    at_terminal = ("import os, signal, sys; signal.signal(signal.SIGINT, signal.SIG_DFL); "
+                   "os.execv(sys.argv[1], sys.argv[1:])")
+    proc = subprocess.Popen([sys.executable, "-c", at_terminal, str(SCRIPT), *long_run],
+                            env=env, cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     end = time.monotonic() + 60
     while not any(s["state"] == "busy" for s in _states(env)) and time.monotonic() < end:
         time.sleep(0.1)
