@@ -479,9 +479,10 @@ def _check_by_simulation(orbits, params: ChainParams, branch: xr.Dataset, segmen
 
     - inside: at v_d = end -+ `delta` (at most half the segment's length, so as
       to stay on it), from the segment's orbit nearest there;
-    - outside a fold, or a bifurcation at the end of the branch with no orbit
-      beyond it (a sliding point where the corrector failed; the state ceases to
-      exist): at end +- `delta`, from the orbit nearest it;
+    - outside a fold, a sliding point (past it the branch goes on without that
+      stick phase, or ends), or a bifurcation at the end of the branch with no
+      orbit beyond it (the state ceases to exist): at end +- `delta`, from the
+      orbit nearest it;
     - outside a change of stability: on the unstable sheet beyond it, from its
       orbit where the perturbation grows to 100 within the horizon
       (`_unstable_point`; a weak instability needs |mu| to grow).
@@ -515,9 +516,10 @@ def _check_by_simulation(orbits, params: ChainParams, branch: xr.Dataset, segmen
         reach = min(delta, 0.5 * abs(segment["v_d"][1] - segment["v_d"][0]))
         inside = _segment_point(v, stable, last, end["v_d"] - outward * reach)
         sides = [("inside", end["v_d"] - outward * reach, inside, None)]
-        if end["type"] == "fold" or beyond is None:
-            # beyond a fold, or a bifurcation that ends the branch (a sliding point
-            # past which the corrector failed), the state does not exist
+        if end["type"] in ("fold", "sliding") or beyond is None:
+            # beyond a fold, a sliding point (the branch turns there onto orbits
+            # without that stick phase, or ends) or a bifurcation that ends the
+            # branch, the state does not exist
             sides.append(("outside", end["v_d"] + outward * delta, last, None))
         else:
             sides.append(("outside",) + _unstable_point(v, stable, growth, beyond, last, end,
