@@ -194,7 +194,7 @@ def test_past_the_sliding_point_the_branch_is_the_cycle_without_stick_down_to_ho
     that the subcritical Hopf point of steady sliding sends out: below the limit,
     as the stick-slip cycle (the branch turns at the sliding point), every orbit
     unstable and with no stick phase, its amplitude vanishing at the closed-form
-    Hopf point (`hopf_vd_analytic`) to 1e-5."""
+    Hopf point (`hopf_vd_analytic`), which `locate_bifurcations` finds there to 1e-6."""
     problem, branch = past_the_limit
     (end,) = [b for b in jc.locate_bifurcations(problem, branch) if b.kind == "sliding"]
     new, tangent = jc.past_sliding_start(problem, end.z)
@@ -210,14 +210,13 @@ def test_past_the_sliding_point_the_branch_is_the_cycle_without_stick_down_to_ho
         phases = jc.stick_phases(jc.with_parameter(ONE, "v_d", float(p)), y0, period,
                                  jc.ExactShooting().flow)
         assert np.isinf(phases).all()
-    # near the Hopf point the squared amplitude is linear in v_d (its leading
-    # order), so the zero of a parabola through the three smallest amplitudes
-    # before the branch turns is the Hopf point to third order
-    p, amplitude = np.asarray(past.p)[ok], np.asarray(past.records.amplitudes)[:, 0]
-    i = int(np.argmin(amplitude))
-    roots = np.roots(np.polyfit(p[i - 2:i + 1], amplitude[i - 2:i + 1] ** 2, 2))
-    hopf = roots[np.argmin(np.abs(roots - p[i]))]
-    assert amplitude[i] < 0.1 and abs(hopf - float(jc.hopf_vd_analytic(ONE))) < 1e-5
+    # the branch passes through steady sliding there (its amplitude changes sign, and
+    # v_d turns): `locate_bifurcations` names that turn a Hopf point, not a fold, and
+    # puts it where the energy, linear in v_d to leading order, vanishes
+    (hopf,) = jc.locate_bifurcations(new, past)
+    amplitude = np.asarray(past.records.amplitudes)[:, 0]
+    assert hopf.kind == "Hopf" and amplitude[hopf.after] < 0.1
+    assert abs(float(hopf.p) - float(jc.hopf_vd_analytic(ONE))) < 1e-6
 
 
 @pytest.mark.numerics

@@ -17,9 +17,16 @@ from .sliding import SlidingPoint, _phases, exact_problem, locate_sliding, vanis
 #: Applied Bifurcation Theory*, 3rd ed. (2004), Sect. 5.4), by their critical
 #: multiplier: +1 with a turning point in p (fold of limit cycles), +1 without one
 #: (branch point: a symmetry-breaking pitchfork or transcritical point, where another
-#: branch crosses), -1 (period doubling), a complex pair (Neimark-Sacker, torus).
+#: branch crosses), -1 (period doubling), a complex pair (Neimark-Sacker, torus); and
+#: "Hopf", where the cycle's amplitude vanishes on steady sliding (Sect. 3.5).
 BIFURCATION_KINDS = ("fold", "branch point", "period doubling", "Neimark-Sacker", "sliding",
-                     "grazing", "multiplier jump")
+                     "grazing", "multiplier jump", "Hopf")
+
+#: A turning point in p whose located orbit has less than this fraction of the energy
+#: of the converged orbits either side (an amplitude below 1 % of theirs) is a Hopf
+#: point: the branch passes through steady sliding, where its amplitude changes sign
+#: and p, even in the amplitude, turns.
+HOPF_ENERGY = 1e-4
 
 #: A change of stability whose critical multiplier still jumps by more than this
 #: across the bisection's last interval is discontinuity-induced, not a crossing.
@@ -143,7 +150,10 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
     that interval, and p is the zero of the test function's linear interpolation
     between the converged points either side (regula falsi; `width` is then their
     distance in arclength). The kind follows from the multiplier at the located
-    point (`BIFURCATION_KINDS`), unless the multiplier jumps by more than `JUMP`
+    point (`BIFURCATION_KINDS`); a turning point at zero amplitude, where the branch
+    passes through steady sliding (`HOPF_ENERGY`), is a "Hopf" point, its p the zero
+    of the energy extrapolated along the branch (`_hopf_p`). A change of stability is
+    classified by its multiplier, unless the multiplier jumps by more than `JUMP`
     across the last interval: a discontinuity-induced bifurcation of the exact
     model, "sliding" where a stick phase appears or vanishes (the count of zero
     multipliers changes) and "grazing" otherwise (`_discontinuity`). A sliding
@@ -208,7 +218,9 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
         if stopped:  # regula falsi between the converged points either side
             (f_a, z_a), (f_b, z_b) = sides
             p = z_a[-1] + (z_b[-1] - z_a[-1]) * f_a / (f_a - f_b)
-        if i in folds:
+        if i in folds and _through_steady_sliding(branch, record, i):
+            kind, p = "Hopf", _hopf_p(branch, i, p)
+        elif i in folds:
             kind = "fold"
         elif sides[1] is not None and abs(sides[1][0] - sides[0][0]) > JUMP:
             kind, zeros = _discontinuity(problem, sides)
@@ -227,6 +239,32 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
                                       record=record, after=int(i), width=float(width)))
     end = _sliding_end(problem, algorithm, branch, zs)
     return tuple(found) + ((end,) if end is not None else ())
+
+
+def _through_steady_sliding(branch: Branch, record, i: int) -> bool:
+    """Whether the turning point after converged point i, with the `record` of its
+    located orbit, lies on steady sliding (`HOPF_ENERGY`)."""
+    if not hasattr(record, "energy"):
+        return False
+    either_side = np.asarray(branch.records.energy)[i:i + 2]
+    return float(record.energy) < HOPF_ENERGY * float(either_side.min())
+
+
+def _hopf_p(branch: Branch, i: int, fallback) -> Float[Array, ""]:
+    """The Hopf point where a branch passes through steady sliding after converged
+    point i: the squared amplitude, and so the energy (eq. (9)), of the cycle is
+    linear in p to leading order there (Kuznetsov 2004, Sect. 3.5), so p is the zero,
+    nearest point i, of the parabola through the energies of the three converged
+    points up to i (two: the line). The located turning point itself is not: at
+    zero amplitude the corrector may converge to steady sliding, which solves
+    shooting at any p. `fallback` where fewer than two points precede it."""
+    p = np.asarray(branch.p)[np.asarray(branch.converged)][max(i - 2, 0):i + 1]
+    energy = np.asarray(branch.records.energy)[max(i - 2, 0):i + 1]
+    if p.size < 2:
+        return fallback
+    roots = np.roots(np.polyfit(p, energy, p.size - 1))
+    roots = roots[np.isreal(roots)].real
+    return jnp.asarray(roots[np.argmin(np.abs(roots - p[-1]))]) if roots.size else fallback
 
 
 def _sliding_end(problem: ContinuationProblem, algorithm: PseudoArclength, branch: Branch,

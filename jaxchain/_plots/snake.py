@@ -9,7 +9,8 @@ from .canvas import single_axes
 from .bifurcation import _segments
 
 _MARKERS = {"fold": "o", "branch point": "s", "period doubling": "D", "Neimark-Sacker": "^",
-            "sliding": "v", "grazing": "P", "multiplier jump": "*"}
+            "sliding": "v", "grazing": "P", "multiplier jump": "*",
+            "Hopf": "h"}
 
 
 def plot_snake(datasets: dict, sweep=None, title: str = "", ax=None):

@@ -336,6 +336,8 @@ def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationO
         branch = continuation(problem, algorithm, options, tangent=tangent, progress=progress)
         bifs = locate_bifurcations(problem, branch, algorithm)
         pieces.append((problem, branch, bifs))
+        if any(b.kind == "Hopf" for b in bifs):  # beyond it: the same cycles again
+            break
         ok = np.asarray(branch.converged)
         ends = [b for b in bifs if b.kind == "sliding" and b.after == int(ok.sum()) - 1]
         # from the branch's last orbit: the sliding point's own orbit, solved near
@@ -351,7 +353,9 @@ def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationO
 def _pieces_dataset(k: int, pieces: list) -> xr.Dataset:
     """The branch dataset (`_branch_dataset`) of the pieces of `_through_sliding`,
     joined in order: the bifurcations' `after` counted along the whole, the last
-    piece's stop."""
+    piece's stop. A branch that passes through steady sliding (a "Hopf"
+    bifurcation) is cut there, its stop "hopf": beyond, its shooting unknowns are
+    those of the same cycles half a period on, which it came through already."""
     import xarray as xr
 
     parts = [_branch_dataset(k, problem, branch, bifs) for problem, branch, bifs in pieces]
@@ -360,8 +364,14 @@ def _pieces_dataset(k: int, pieces: list) -> xr.Dataset:
         bifs += [b | {"after": offset + b["after"]} for b in json.loads(part.attrs["bifurcations"])]
         offset += part.sizes["point"]
     joined = parts[0] if len(parts) == 1 else xr.concat(parts, dim="point", data_vars="all")
+    stop = parts[-1].attrs["stop"]
+    hopf = [b for b in bifs if b["type"] == "Hopf"]
+    if hopf:
+        end = hopf[0]["after"]
+        joined = joined.isel(point=slice(0, end + 1))
+        bifs, stop = [b for b in bifs if b["after"] < end] + [hopf[0]], "hopf"
     return joined.assign_attrs(parts[0].attrs | {"bifurcations": json.dumps(bifs),
-                                                 "stop": parts[-1].attrs["stop"]})
+                                                 "stop": stop})
 
 
 def _switched_branch(problem, branch, point, continuation_options: ContinuationOptions,
@@ -434,11 +444,12 @@ def _connections(branches: dict, tol: float = 1e-3) -> dict:
     of the other at the same belt speed (within `tol`), with the same period (within
     `tol`, relative) and the same amplitudes sorted by size (within 10 `tol`): a
     signature that no rotation or reflection of the chain changes. A branch whose
-    energy falls below 1e-4 ends on steady sliding (a Hopf point)."""
+    energy falls below 1e-4, or that ends at a Hopf point, ends on steady sliding."""
     out = {k: [] for k in branches}
     keys = list(branches)
     for a in keys:
-        if float(branches[a]["energy"].min()) < 1e-4:
+        hopf = any(b["type"] == "Hopf" for b in json.loads(branches[a].attrs["bifurcations"]))
+        if hopf or float(branches[a]["energy"].min()) < 1e-4:
             out[a].append("steady sliding")
         for b in keys:
             if b == a:
@@ -516,10 +527,10 @@ def _check_by_simulation(orbits, params: ChainParams, branch: xr.Dataset, segmen
         reach = min(delta, 0.5 * abs(segment["v_d"][1] - segment["v_d"][0]))
         inside = _segment_point(v, stable, last, end["v_d"] - outward * reach)
         sides = [("inside", end["v_d"] - outward * reach, inside, None)]
-        if end["type"] in ("fold", "sliding") or beyond is None:
+        if end["type"] in ("fold", "sliding", "Hopf") or beyond is None:
             # beyond a fold, a sliding point (the branch turns there onto orbits
-            # without that stick phase, or ends) or a bifurcation that ends the
-            # branch, the state does not exist
+            # without that stick phase, or ends), a Hopf point or a bifurcation that
+            # ends the branch, the state does not exist
             sides.append(("outside", end["v_d"] + outward * delta, last, None))
         else:
             sides.append(("outside",) + _unstable_point(v, stable, growth, beyond, last, end,
