@@ -294,6 +294,8 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "snake starts": ("jaxchain._studies.snake", "_start_orbits"),
              "snake deflated orbits": ("jaxchain._studies.snake", "_deflated_orbits"),
              "snake branch": ("jaxchain._studies.snake", "_follow_branch"),
+             "snake through sliding": ("jaxchain._studies.snake", "_through_sliding"),
+             "snake pieces": ("jaxchain._studies.snake", "_pieces_dataset"),
              "snake switched branch": ("jaxchain._studies.snake", "_switched_branch"),
              "orbit description": ("jaxchain._bifurcation.shooting", "describe_orbit"),
              "mistuning design problems": ("jaxchain._studies.mistuning.pattern_design",

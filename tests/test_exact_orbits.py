@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-from helpers import scipy_slip_arc, scipy_stick_slip_cycle
+from helpers import internal, scipy_slip_arc, scipy_stick_slip_cycle
 
 ONE = jc.ChainParams(n_osc=1, v_d=1.5, xi=0.05)
 
@@ -217,6 +217,33 @@ def test_past_the_sliding_point_the_branch_is_the_cycle_without_stick_down_to_ho
     amplitude = np.asarray(past.records.amplitudes)[:, 0]
     assert hopf.kind == "Hopf" and amplitude[hopf.after] < 0.1
     assert abs(float(hopf.p) - float(jc.hopf_vd_analytic(ONE))) < 1e-6
+
+
+@pytest.mark.numerics
+def test_the_snake_s_branch_goes_through_the_sliding_point_and_ends_at_the_hopf_point(guess):
+    """The snake's continuation (`_through_sliding`, its pieces joined by
+    `_pieces_dataset`) of the single oscillator's exact stick-slip branch towards
+    larger v_d: through its sliding point at the closed-form existence limit
+    (`stick_slip_existence_limit`) and on, with no stick phase, down to the Hopf
+    point of steady sliding (`hopf_vd_analytic`), each to 1e-6; there the branch
+    is cut (stop "hopf"): beyond it lie the same cycles half a period on, so every
+    kept point past the sliding point lies below it and above the Hopf point, and
+    v_d falls monotonically along them."""
+    x_max, (_, period) = guess
+    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
+    limit = float(jc.stick_slip_existence_limit(ONE))
+    options = jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0, p_max=limit + 0.05,
+                                     max_points=30)
+    pieces = internal("snake through sliding")(jc.exact_cycle_problem(orbit),
+                                               jc.PseudoArclength(), options)
+    ds = internal("snake pieces")(1, pieces)
+    bifs = {b["type"]: b for b in json.loads(ds.attrs["bifurcations"])}
+    hopf = float(jc.hopf_vd_analytic(ONE))
+    assert len(pieces) == 2 and ds.attrs["stop"] == "hopf"
+    assert abs(bifs["sliding"]["v_d"] - limit) < 1e-6 and abs(bifs["Hopf"]["v_d"] - hopf) < 1e-6
+    past = ds["v_d"].values[bifs["sliding"]["after"] + 1:]
+    assert bifs["Hopf"]["after"] == ds.sizes["point"] - 1
+    assert np.all(np.diff(past) < 0) and past.max() < limit and past.min() > hopf
 
 
 @pytest.mark.numerics

@@ -6,8 +6,8 @@ import dataclasses
 import time
 from pathlib import Path
 
-from .._studies.snake import (SNAKE_CONTINUATION, SNAKE_START, check_starts, default_sites,
-                              default_starts, localized_branches)
+from .._studies.snake import (SLIDING_PASSES, SNAKE_CONTINUATION, SNAKE_START, check_starts,
+                              default_sites, default_starts, localized_branches)
 from .._plots.snake import plot_snake
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
@@ -91,7 +91,9 @@ def add_parser(sub):
                    help="largest belt speed of the branches (default 2.2)")
     g.add_argument("--max-points", type=positive_int, default=SNAKE_CONTINUATION.max_points,
                    help="continuation points each way (default "
-                        f"{SNAKE_CONTINUATION.max_points})")
+                        f"{SNAKE_CONTINUATION.max_points}), and as many again past each "
+                        f"sliding point an exact branch goes through (at most "
+                        f"{SLIDING_PASSES})")
     g.add_argument("--no-simulation", action="store_true",
                    help="skip the check by direct simulation at the ends of stable ranges")
     g.add_argument("--deflate", type=int, default=0, metavar="M",

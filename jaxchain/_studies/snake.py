@@ -339,11 +339,19 @@ def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationO
         if any(b.kind == "Hopf" for b in bifs):  # beyond it: the same cycles again
             break
         ok = np.asarray(branch.converged)
-        ends = [b for b in bifs if b.kind == "sliding" and b.after == int(ok.sum()) - 1]
-        # from the branch's last orbit: the sliding point's own orbit, solved near
-        # it, may lie on another branch through the same point
-        last = jnp.append(branch.u[ok][-1], branch.p[ok][-1])
-        start = past_sliding_start(problem, last, algorithm) if ends else None
+        # a branch that ends (its corrector failed beyond) at a sliding point, beyond
+        # its last orbit or between its last two: the last may lie on the other
+        # family through the point (no stick phase, unstable)
+        ends = [b for b in bifs if b.kind == "sliding" and b.after >= int(ok.sum()) - 2
+                and branch.stop == Status.newton_failed]
+        # from the branch's last orbits: the sliding point's own orbit, solved near
+        # it, may lie on another branch through the same point; and the last orbit,
+        # at the point, may have lost its stick phase already (the two families meet
+        # there), so the two before it are tried too
+        last = [jnp.append(u, p) for u, p in zip(branch.u[ok][-3:], branch.p[ok][-3:])]
+        start = next((s for z in last[::-1] if ends
+                      for s in [past_sliding_start(problem, z, algorithm)] if s is not None),
+                     None)
         if start is None:
             break
         problem, tangent = start
