@@ -113,10 +113,11 @@ def test_the_snake_switches_branches_at_its_branch_points(branch_point, tmp_path
                           found["datasets"]["k=1 switched 1"]["u"].values)
 
 
-def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch):
+def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch, tmp_path):
     """The first start's continuation raises (as it did where the start's phase
     condition was not the problem's): that start is reported with the reason, the
-    other start's branch is computed."""
+    other start's branch is computed. Both are stored: a second run reads them back,
+    the failed start's reason and simulation with them, and computes nothing."""
     follow = internal("snake branch")
     calls = []
 
@@ -129,13 +130,21 @@ def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch):
     replace_internal(monkeypatch, "snake branch", first_fails)
     # k = 2 first: the branch that is computed is then k = 1's, on the shooting
     # options (its phase oscillator) whose programs the tests above compiled.
-    found = jc.localized_branches(
-        RING, (2, 1), continuation_options=jc.ContinuationOptions(ds=0.02, max_points=2),
-        start_options=jc.SimulationOptions(t_end=2000.0, transient=1500.0),
-        simulation_check=False, switch=False)
+    kwargs = dict(continuation_options=jc.ContinuationOptions(ds=0.02, max_points=2),
+                  start_options=jc.SimulationOptions(t_end=2000.0, transient=1500.0),
+                  simulation_check=False, switch=False, out=tmp_path)
+    found = jc.localized_branches(RING, (2, 1), **kwargs)
     assert [b["label"] for b in found["summary"]["branches"]] == ["k=1"]
     (flagged,) = found["summary"]["not_periodic"]
     assert flagged["excited"] == 2 and "continuation failed" in flagged["reason"]
+
+    def computes(*args, **kwargs):
+        raise AssertionError("the stored starts are read back")
+
+    replace_internal(monkeypatch, "snake starts", computes)
+    again = jc.localized_branches(RING, (2, 1), **kwargs)
+    assert again["summary"]["not_periodic"] == found["summary"]["not_periodic"]
+    assert list(again["datasets"]) == ["k=1"]
 
 
 def test_a_switch_that_fails_is_reported_with_its_branch_point(branch_point, monkeypatch):

@@ -323,6 +323,12 @@ def _closed_loop(orbits, orbit, half: xr.Dataset) -> xr.Dataset:
 #: Sliding bifurcations that one continuation goes on through, at most.
 SLIDING_PASSES = 4
 
+#: Part of the key of stored branches: raise it whenever how a branch is followed
+#: changes, so that a resumed run recomputes the branches of an older method
+#: (2: through sliding points from the branch's last three orbits, cut at a Hopf
+#: point).
+BRANCH_METHOD = 2
+
 
 def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationOptions, *,
                      tangent=None, progress: bool = False) -> list[tuple]:
@@ -761,21 +767,33 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
     (label -> branch dataset, start -> the simulation's n_HALC and energy, start ->
     why it has no periodic orbit, the deflated orbits on branches already followed
     from starts without a branch of their own; those of the others are their
-    branch's attribute `deflated_repeats`)."""
+    branch's attribute `deflated_repeats`). A start without a branch of its own is
+    stored as a record of why (`_read_branches`), so that a resumed run does not
+    compute it again."""
+    import xarray as xr
+
     datasets, starts, failed, repeated = {}, {}, {}, []
     settings = {"chain": chain_record(params), **orbits.settings(),
                 "continuation": continuation_options, "start": start_options,
                 "switch": bool(switch), "deflate": int(deflate),
-                "sliding_passes": SLIDING_PASSES}
+                "sliding_passes": SLIDING_PASSES, "branch_method": BRANCH_METHOD}
     paths = {k: None if out is None else Path(out) / (
         f"branch_{k}.nc" if isinstance(k, str) else f"branch_k{k}.nc").replace(":", "")
         for k in sites}
     todo = []
     for k in sites:
-        stored = {} if out is None else _read_branches(paths[k], k, _start_label(k), settings)
-        datasets |= stored
-        if not stored:
+        stored = None if out is None else _read_branches(paths[k], k, _start_label(k),
+                                                         settings)
+        if stored is None:
             todo.append(k)
+            continue
+        record = stored[_start_label(k)]
+        if "no_branch" in record.attrs:  # a start without a branch of its own
+            del stored[_start_label(k)]
+            failed[k] = record.attrs["no_branch"]
+            starts[k] = json.loads(record.attrs["simulation"])
+            repeated += json.loads(record.attrs["deflated_repeats"])
+        datasets |= stored
     if not todo:
         return datasets, starts, failed, repeated
     found = _start_orbits(orbits, params, todo, start_options, progress)
@@ -813,6 +831,9 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
             _store_branches(out, paths[k], mine, settings, k)
         else:
             repeated += repeats
+            _store_branches(out, paths[k], {own: xr.Dataset(attrs={
+                "no_branch": failed[k], "simulation": json.dumps(sim), "switched": 0,
+                "deflated": j, "deflated_repeats": json.dumps(repeats)})}, settings, k)
         datasets |= mine | followed
     return datasets, starts, failed, repeated
 
@@ -928,25 +949,28 @@ def _numbered(path: Path | None, what: str, j: int) -> Path | None:
     return path if path is None or j == 0 else path.with_name(f"{path.stem}_{what}{j}.nc")
 
 
-def _read_branches(path: Path, k, label: str, settings: dict) -> dict:
+def _read_branches(path: Path, k, label: str, settings: dict) -> dict | None:
     """The stored branch `label` of start k, the branches switched onto from it and
-    the deflated branches of the start with theirs (label -> dataset), or {} if any
-    of them is missing or was made with other settings."""
+    the deflated branches of the start with theirs (label -> dataset), or None if
+    any of them is missing or was made with other settings. A start without a
+    branch of its own has a record instead of its branch: a dataset without
+    variables, its attributes `no_branch` (why), `simulation` (JSON: the start's
+    n_HALC and energy) and `deflated_repeats`."""
     first = read_dataset(path, "snake branch", k=k, label=label, switched=0, **settings)
     if first is None:
-        return {}
+        return None
     out = {label: first}
     for j in range(1, int(first.attrs.get("switched", 0)) + 1):
         out[f"{label} switched {j}"] = read_dataset(_numbered(path, "switched", j),
                                                     "snake branch", k=k, label=label,
                                                     switched=j, **settings)
     if any(ds is None for ds in out.values()):
-        return {}
+        return None
     for j in range(1, int(first.attrs.get("deflated", 0)) + 1):
         deflated = _read_branches(_numbered(path, "deflated", j), k, f"{label} deflated {j}",
                                   settings)
-        if not deflated:
-            return {}
+        if deflated is None:
+            return None
         out |= deflated
     return out
 
