@@ -150,3 +150,37 @@ def test_a_branch_found_by_deflation_is_an_isola(ring8):
     steps = np.linalg.norm(np.diff(curve, axis=0), axis=1)
     assert np.linalg.norm(curve[0] - curve[-1]) <= steps.max()
     assert 1.0 < ds["v_d"].values.min() and ds["v_d"].values.max() < 2.0
+
+
+def test_the_whole_ring_s_branch_goes_through_its_sliding_point_down_to_the_hopf_point(
+        ring8):
+    """The whole ring's branch (k = 8: neighbours in antiphase) goes on through its
+    sliding point, where every site loses its stick phase at once (all held
+    together), as the cycle without stick, down to the Hopf point of steady sliding.
+    There mu'(v_d) = -2 xi whatever the mode's stiffness, so the closed form of
+    `hopf_vd_analytic` holds for every mode of the ring; the branch meets it to 1e-6,
+    is cut there (stop "hopf") and connects to steady sliding."""
+    _, branches, _ = ring8
+    ring = branches["k=8"]
+    kinds = [b["type"] for b in ring["bifurcations"]]
+    assert kinds.index("sliding") < kinds.index("Hopf") == len(kinds) - 1
+    (hopf,) = [b["v_d"] for b in ring["bifurcations"] if b["type"] == "Hopf"]
+    expected = float(jc.hopf_vd_analytic(jc.ChainParams(n_osc=N)))
+    assert abs(hopf - expected) < 1e-6
+    assert ring["stop"]["high"] == "hopf" and "steady sliding" in ring["connects_to"]
+
+
+def test_the_one_site_branch_is_cut_where_it_retraces_itself(ring8):
+    """Past its sliding point the one-site branch turns at a fold where the pattern
+    is symmetric under a reflection of the ring, and beyond it runs back through the
+    mirror images of its own orbits (before this was detected it listed the folds
+    1.28327, 1.29218, 1.18389, 1.29218, 1.28327). It is cut at that fold (stop
+    "retraced"): the fold is its last bifurcation, and no two of its folds lie
+    within 1e-4 of each other in v_d."""
+    _, branches, folder = ring8
+    one = branches["k=1"]
+    assert one["stop"]["high"] == "retraced" and one["bifurcations"][-1]["type"] == "fold"
+    folds = sorted(b["v_d"] for b in one["bifurcations"] if b["type"] == "fold")
+    assert len(folds) >= 2 and np.all(np.diff(folds) > 1e-4)
+    ds = xr.load_dataset(folder / "branch_k1.nc")
+    assert ds["v_d"].values[-1] == pytest.approx(one["bifurcations"][-1]["v_d"], abs=0.01)

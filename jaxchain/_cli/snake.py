@@ -168,6 +168,12 @@ def _print_summary(s: dict) -> None:
         if b.get("stop", {}).get("low") == "closed":
             print("   closed on itself" + ("" if b["connects_to"] else
                                           " (an isola: it meets no other branch)"))
+        for way, stop in b.get("stop", {}).items():
+            if stop == "retraced":
+                print(f"   {way} end: beyond its last fold it retraces itself (its mirror "
+                      "image)")
+            if stop == "hopf":
+                print(f"   {way} end: its amplitude vanishes at a Hopf point of steady sliding")
         for r in b["stable_range_ends"]:
             print("   ends: " + "; ".join(f"{e['type']} at {_number(e['v_d'], '.5f')}"
                                           for e in r))

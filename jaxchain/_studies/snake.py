@@ -3,7 +3,7 @@ with their Floquet stability and bifurcations, started from direct simulation.""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import dataclasses
 import json
@@ -255,7 +255,9 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
     (`_switched_branch`).
     A branch that comes back through `orbit` is an isola: it is cut there
     (`_closed_loop`), the other way is not continued, and both its stops are
-    "closed".
+    "closed". A way that turns at a fold onto its own mirror image is cut at the
+    fold (`_retraced`, stop "retraced"), one that passes through steady sliding at
+    its Hopf point (`_pieces_dataset`, stop "hopf").
 
     **Returns:**
 
@@ -279,7 +281,9 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
             continue
         opts = dataclasses.replace(continuation_options, direction=direction)
         pieces = _through_sliding(problem, algorithm, opts, progress=progress)
-        halves.append(_closed_loop(orbits, orbit, _pieces_dataset(k, pieces)))
+        half = _closed_loop(orbits, orbit, _pieces_dataset(k, pieces))
+        halves.append(half if half.attrs["stop"] == "closed" else
+                      _retraced(orbits, orbit.params, half))
         if switch:
             switched += [ds for piece, branch, bifs in pieces for b in bifs
                          if b.kind == "branch point"
@@ -320,13 +324,40 @@ def _closed_loop(orbits, orbit, half: xr.Dataset) -> xr.Dataset:
                                                            stop="closed")
 
 
+class _Point(NamedTuple):
+    """A point of a branch dataset as `_passes_through` compares it."""
+
+    amplitudes: np.ndarray
+    period: float
+
+
+def _retraced(orbits, params: ChainParams, half: xr.Dataset) -> xr.Dataset:
+    """`half`, a branch continued one way, cut at its first fold beyond which it
+    retraces itself: where the point three steps past the fold is an orbit of the
+    branch before it (`_passes_through`, by shooting), the branch has turned at an
+    orbit fixed by a symmetry of the ring (a reflection, with the pattern's two
+    halves exchanged) and goes on as the image of what it came through. Its stop is
+    then "retraced", the fold its last bifurcation. Unchanged where no fold is."""
+    bifs = json.loads(half.attrs["bifurcations"])
+    for fold in (b for b in bifs if b["type"] == "fold"):
+        i, j = fold["after"], fold["after"] + 3
+        if j >= half.sizes["point"]:
+            break
+        probe = _Point(half["amplitudes"].values[j], float(half["period"].values[j]))
+        at = with_parameter(params, "v_d", float(half["v_d"].values[j]))
+        if _passes_through(orbits, at, probe, half.isel(point=slice(0, i + 1))) is not None:
+            return half.isel(point=slice(0, i + 1)).assign_attrs(
+                bifurcations=json.dumps([b for b in bifs if b["after"] <= i]), stop="retraced")
+    return half
+
+
 #: Sliding bifurcations that one continuation goes on through, at most.
 SLIDING_PASSES = 4
 
 #: Part of the key of stored branches: raise it whenever how a branch is followed
 #: changes, so that a resumed run recomputes the branches of an older method
 #: (2: through sliding points from the branch's last three orbits, cut at a Hopf
-#: point).
+#: point and where it retraces itself).
 BRANCH_METHOD = 2
 
 
@@ -888,7 +919,8 @@ def _passes_through(orbits, params: ChainParams, orbit, branch: xr.Dataset,
     amplitudes sorted by size (a signature no rotation or reflection changes) lie
     within 0.1 of the orbit's, the orbit of the branch at v_d is shot from the
     interpolated point; the same orbit when its signature agrees within `tol` (both
-    are solved to Newton's tolerance)."""
+    are solved to Newton's tolerance). `orbit`: anything with `amplitudes`, shape
+    (n_osc,), and `period`."""
     v0 = float(params.v_d)
     signature = np.append(np.sort(np.asarray(orbit.amplitudes)), float(orbit.period))
     v, u = branch["v_d"].values, branch["u"].values
