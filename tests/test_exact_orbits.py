@@ -152,16 +152,25 @@ def test_exact_cycles_continued_in_v_d_are_the_scipy_cycles_up_to_the_existence_
 
 
 @pytest.fixture(scope="module")
-def past_the_limit(guess):
-    """The exact cycle's problem, and its branch continued in v_d from 1.5 towards
-    0.05 beyond the existence limit."""
+def through_the_limit(guess):
+    """The snake's continuation (`_through_sliding`) of the exact cycle in v_d from
+    1.5 towards 0.05 beyond the existence limit, and on through the sliding point
+    there: its pieces, each (problem, branch, bifurcations)."""
     x_max, (_, period) = guess
     orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
-    problem = jc.exact_cycle_problem(orbit)
     limit = jc.stick_slip_existence_limit(ONE)
-    return problem, jc.continuation(problem, jc.PseudoArclength(),
-                                    jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0,
-                                                           p_max=limit + 0.05, max_points=30))
+    options = jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0, p_max=limit + 0.05,
+                                     max_points=30)
+    return internal("snake through sliding")(jc.exact_cycle_problem(orbit),
+                                             jc.PseudoArclength(), options)
+
+
+@pytest.fixture(scope="module")
+def past_the_limit(through_the_limit):
+    """The exact cycle's problem, and its branch continued in v_d from 1.5 towards
+    0.05 beyond the existence limit (`continuation`: the first piece)."""
+    problem, branch, _ = through_the_limit[0]
+    return problem, branch
 
 
 @pytest.mark.numerics
@@ -187,22 +196,26 @@ def test_the_branch_continued_past_the_existence_limit_meets_a_sliding_point_the
 
 @pytest.mark.numerics
 def test_past_the_sliding_point_the_branch_is_the_cycle_without_stick_down_to_hopf(
-        past_the_limit):
-    """Through the sliding point at the existence limit (`past_sliding_start`: the
-    oscillator held in slip, `held_problem`, on the side where it never reaches the
-    belt speed, `slip_margin` > 0), the branch goes on as the cycle without stick
-    that the subcritical Hopf point of steady sliding sends out: below the limit,
-    as the stick-slip cycle (the branch turns at the sliding point), every orbit
-    unstable and with no stick phase, its amplitude vanishing at the closed-form
-    Hopf point (`hopf_vd_analytic`), which `locate_bifurcations` finds there to 1e-6."""
-    problem, branch = past_the_limit
-    (end,) = [b for b in jc.locate_bifurcations(problem, branch) if b.kind == "sliding"]
-    new, tangent = jc.past_sliding_start(problem, end.z)
-    assert float(new.value()) < float(end.p) and float(tangent[-1]) < 0
+        through_the_limit):
+    """Through the sliding point at the existence limit the snake's continuation
+    (`_through_sliding`: `past_sliding_start`, the oscillator held in slip,
+    `held_problem`, on the side where it never reaches the belt speed, `slip_margin`
+    > 0) goes on as the cycle without stick that the subcritical Hopf point of
+    steady sliding sends out: below the limit, as the stick-slip cycle (the branch
+    turns at the sliding point), every orbit unstable and with no stick phase, down
+    to the closed-form Hopf point (`hopf_vd_analytic`). There the branch passes
+    through steady sliding (its amplitude changes sign, and v_d turns):
+    `locate_bifurcations` names that turn a Hopf point, not a fold, at the zero of
+    the energy (linear in v_d to leading order), to 1e-6. The snake's dataset of the
+    pieces (`_pieces_dataset`) has the sliding point at the closed-form limit
+    (`stick_slip_existence_limit`) to 1e-6 and is cut at the Hopf point (stop
+    "hopf"): beyond it lie the same cycles half a period on, so every kept point
+    past the sliding point lies between the two, v_d falling along them."""
+    (problem, _, bifs), (new, past, past_bifs) = through_the_limit
+    (end,) = [b for b in bifs if b.kind == "sliding"]
+    assert float(new.value()) < float(end.p) and float(past.tangent[0, -1]) < 0
     z = jnp.append(new.u0, new.value())
     assert jc.slip_margin(jc.held_problem(problem, 0), z, 0) > 0
-    past = jc.continuation(new, jc.PseudoArclength(), jc.ContinuationOptions(
-        ds=0.05, ds_max=0.1, p_min=1.0, max_points=24), tangent=tangent)
     ok = np.asarray(past.converged)
     assert ok.sum() > 20 and not np.asarray(past.stable)[ok].any()
     for u, p in list(zip(np.asarray(past.u)[ok], np.asarray(past.p)[ok]))[::6]:
@@ -210,40 +223,18 @@ def test_past_the_sliding_point_the_branch_is_the_cycle_without_stick_down_to_ho
         phases = jc.stick_phases(jc.with_parameter(ONE, "v_d", float(p)), y0, period,
                                  jc.ExactShooting().flow)
         assert np.isinf(phases).all()
-    # the branch passes through steady sliding there (its amplitude changes sign, and
-    # v_d turns): `locate_bifurcations` names that turn a Hopf point, not a fold, and
-    # puts it where the energy, linear in v_d to leading order, vanishes
-    (hopf,) = jc.locate_bifurcations(new, past)
+    (hopf,) = past_bifs
     amplitude = np.asarray(past.records.amplitudes)[:, 0]
+    closed_form = float(jc.hopf_vd_analytic(ONE))
     assert hopf.kind == "Hopf" and amplitude[hopf.after] < 0.1
-    assert abs(float(hopf.p) - float(jc.hopf_vd_analytic(ONE))) < 1e-6
-
-
-@pytest.mark.numerics
-def test_the_snake_s_branch_goes_through_the_sliding_point_and_ends_at_the_hopf_point(guess):
-    """The snake's continuation (`_through_sliding`, its pieces joined by
-    `_pieces_dataset`) of the single oscillator's exact stick-slip branch towards
-    larger v_d: through its sliding point at the closed-form existence limit
-    (`stick_slip_existence_limit`) and on, with no stick phase, down to the Hopf
-    point of steady sliding (`hopf_vd_analytic`), each to 1e-6; there the branch
-    is cut (stop "hopf"): beyond it lie the same cycles half a period on, so every
-    kept point past the sliding point lies below it and above the Hopf point, and
-    v_d falls monotonically along them."""
-    x_max, (_, period) = guess
-    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
+    assert abs(float(hopf.p) - closed_form) < 1e-6
+    ds = internal("snake pieces")(1, through_the_limit)
+    kinds = {b["type"]: b for b in json.loads(ds.attrs["bifurcations"])}
     limit = float(jc.stick_slip_existence_limit(ONE))
-    options = jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0, p_max=limit + 0.05,
-                                     max_points=30)
-    pieces = internal("snake through sliding")(jc.exact_cycle_problem(orbit),
-                                               jc.PseudoArclength(), options)
-    ds = internal("snake pieces")(1, pieces)
-    bifs = {b["type"]: b for b in json.loads(ds.attrs["bifurcations"])}
-    hopf = float(jc.hopf_vd_analytic(ONE))
-    assert len(pieces) == 2 and ds.attrs["stop"] == "hopf"
-    assert abs(bifs["sliding"]["v_d"] - limit) < 1e-6 and abs(bifs["Hopf"]["v_d"] - hopf) < 1e-6
-    past = ds["v_d"].values[bifs["sliding"]["after"] + 1:]
-    assert bifs["Hopf"]["after"] == ds.sizes["point"] - 1
-    assert np.all(np.diff(past) < 0) and past.max() < limit and past.min() > hopf
+    assert ds.attrs["stop"] == "hopf" and abs(kinds["sliding"]["v_d"] - limit) < 1e-6
+    assert kinds["Hopf"]["after"] == ds.sizes["point"] - 1
+    beyond = ds["v_d"].values[kinds["sliding"]["after"] + 1:]
+    assert np.all(np.diff(beyond) < 0) and beyond.max() < limit and beyond.min() > closed_form
 
 
 @pytest.mark.numerics
