@@ -147,8 +147,9 @@ def run(args) -> None:
     outputs.figure(plot_snake(found["datasets"], sweep,
                               title=f"N = {params.n_osc}, {model}: stable solid, "
                                     "unstable dashed"), "snake")
-    s = found["summary"] | {"wall_time_s": time.perf_counter() - start,
-                            "n_osc": params.n_osc} | engine_record(args)
+    s = (found["summary"] | {"wall_time_s": time.perf_counter() - start,
+                            "n_osc": params.n_osc, "v_d": float(params.v_d)}
+         | engine_record(args))
     report(s, outputs, "snake.json", args.json, _print_summary, s["wall_time_s"])
     disagree = [c for b in s["branches"] for c in b.get("simulation_check", [])
                 if c["agrees"] is False]
@@ -165,6 +166,11 @@ def _print_summary(s: dict) -> None:
         ranges = ", ".join(f"[{lo:.4f}, {hi:.4f}]" for lo, hi in b["stable_ranges"]) or "none"
         print(f"{b['label']} excited: {b['sites']} on the HALC where stable; stable on "
               f"{ranges}; connects to {', '.join(b['connects_to']) or 'nothing found'}")
+        start = b.get("start", {}).get("v_d")
+        if None not in (start, s.get("v_d")) and start != s["v_d"] and "switched" not in \
+                b["label"]:
+            print(f"   started at v_d = {start:g}: its simulated state at {s['v_d']:g} is "
+                  "not periodic")
         if b.get("stop", {}).get("low") == "closed":
             print("   closed on itself" + ("" if b["connects_to"] else
                                           " (an isola: it meets no other branch)"))

@@ -113,6 +113,12 @@ def check_starts(graph: Graph, starts) -> tuple:
 #: eq. (8) at v_d = 1.5 are not yet periodic to the shooting tolerance.
 SNAKE_START = SimulationOptions(t_end=12_000.0, transient=11_500.0)
 
+#: Where the simulated state of a start is not periodic at the snake's v_d (a torus
+#: born at a Neimark-Sacker point of the branch, or an irregular state), eq. (8) is
+#: simulated again at these offsets from it, in turn: on the ring of 20 the nine-site
+#: state is periodic at 1.6 and the ten-site state at 1.4, neither at 1.5.
+RETRY_VD = (-0.1, 0.1)
+
 #: Continuation of each branch: far enough each way (150 points) to pass its folds.
 SNAKE_CONTINUATION = ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.0, p_max=2.2,
                                          max_points=150)
@@ -143,12 +149,15 @@ def _turning_point(orbits, params: ChainParams, y: np.ndarray, oscillator: int
 
 def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions = SNAKE_START,
                  engine: str = "smoothed", shooting=None, solver=DEFAULT_SOLVER, eps=None,
-                 progress: bool = False):
+                 retry: tuple = RETRY_VD, progress: bool = False):
     """Periodic localized states of the chain at `params.v_d`, refined by shooting
     from direct simulation: eq. (8) with k oscillators excited (`excited_block`),
     integrated over `options`, then a turning point of the oscillator of largest
     amplitude (the phase condition's oscillator) and the time to the next one as the
-    guesses of `periodic_orbit`.
+    guesses of `periodic_orbit`. Where that state is not periodic (or steady
+    sliding, or the simulation fails), eq. (8) is simulated again at `params.v_d` +
+    each offset of `retry` in turn, and the first periodic orbit is kept at its own
+    v_d.
 
     **Arguments:**
 
@@ -168,13 +177,16 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
         number > 0, shape (), dimensionless (a fraction of x_0 omega_n), of the
         simulations and of shooting; `DEFAULT_EPS` when None. None for the exact
         engine.
+    - `retry`: offsets of v_d, dimensionless, tried in turn for the starts that
+        give no periodic orbit at `params.v_d` (`RETRY_VD`; () for none).
     - `progress`: progress bars.
 
     **Returns:**
 
-    A dict k -> (`PeriodicOrbit` or `ExactOrbit`, or None; the simulation's n_HALC
-    and energy; why it failed or None). A start fails when the simulated state is
-    not periodic (irregular: shooting does not converge) or never turns.
+    A dict k -> (`PeriodicOrbit` or `ExactOrbit`, or None; the simulation's n_HALC,
+    energy and `v_d`; why it failed or None). The orbit lies at `orbit.params.v_d`.
+    A start fails when at every belt speed tried the simulated state is not
+    periodic (irregular: shooting does not converge) or never turns.
 
     **Raises:**
 
@@ -182,37 +194,65 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
     engine or shooting options of the other engine.
     """
     orbits = snake_orbits(engine, shooting, eps, solver, params)
-    return _start_orbits(orbits, params, sites, options, progress)
+    return _start_orbits(orbits, params, sites, options, progress, tuple(retry))
 
 
 def _start_orbits(orbits, params: ChainParams, sites, options: SimulationOptions,
-                  progress: bool) -> dict:
-    """`start_orbits` on the engine of `orbits` (`snake_orbits`)."""
+                  progress: bool, retry: tuple = RETRY_VD) -> dict:
+    """`start_orbits` on the engine of `orbits` (`snake_orbits`): at `params.v_d`,
+    then for each start that gives no periodic orbit there, at the belt speeds
+    `params.v_d` + `retry` in turn (`_shoot_starts`); the orbit found first is
+    kept, at its own v_d (`orbit.params`), its simulation record with `v_d`. A start
+    that fails at every one keeps the reason of `params.v_d`."""
     sites = check_starts(params.graph, sites)
+    v0 = float(params.v_d)
+    out = _shoot_starts(orbits, params, sites, [v0], options, progress)[v0]
+    for k, (_, sim, _) in out.items():
+        sim["v_d"] = v0
+    again_k = [k for k in sites if out[k][0] is None]
+    if again_k and retry:
+        vds = [v0 + d for d in retry]
+        again = _shoot_starts(orbits, params, again_k, vds, options, progress)
+        for k in again_k:
+            tried = [again[v][k] + (v,) for v in vds]
+            found = next(((o, sim | {"v_d": v}, None) for o, sim, _, v in tried
+                          if o is not None), None)
+            out[k] = found or out[k][:2] + (out[k][2] + "; at v_d " + ", ".join(
+                f"{v:g}: {why}" for _, _, why, v in tried),)
+    return out
+
+
+def _shoot_starts(orbits, params: ChainParams, sites: tuple, vds: list,
+                  options: SimulationOptions, progress: bool) -> dict:
+    """The starts `sites` simulated at each belt speed of `vds` (one ensemble) and
+    refined by shooting: v_d -> k -> (the orbit or None, the simulation's n_HALC,
+    energy and phase oscillator, why it failed or None)."""
     masks = np.stack([start_mask(params.graph, k) for k in sites])
     ics = OutOfPhaseExcitation(excited=jnp.asarray(masks),
                                velocity=jnp.zeros(len(sites)), base_sign=-1.0)
-    ds = ensemble(params, [float(params.v_d)], ics, engine=orbits.simulation(options, params),
+    ds = ensemble(params, vds, ics, engine=orbits.simulation(options, params),
                   progress=progress)
     out = {}
-    for i, k in enumerate(sites):
-        amplitudes = ds["amplitudes"].values[0, i]
-        sim = {"n_halc": int(ds["n_halc"].values[0, i]),
-               "energy": float(ds["energy"].values[0, i])}
-        if int(ds["status"].values[0, i]) != Status.ok:
-            out[k] = (None, sim, "the simulation failed")
-            continue
-        n = int(np.argmax(amplitudes))
-        sim["phase_oscillator"] = n  # of the orbit's phase condition
-        guess = _turning_point(orbits, params, ds["y_final"].values[0, i], n)
-        if guess is None:
-            out[k] = (None, sim, "no turning point: steady sliding")
-            continue
-        orbit = orbits.shoot(params, guess[0], guess[1], n)
-        reason = None if bool(orbit.converged) else (
-            f"shooting did not converge (residual {float(orbit.residual):.2g}): the "
-            f"simulated state is not periodic")
-        out[k] = (orbit if reason is None else None, sim, reason)
+    for j, v in enumerate(vds):
+        at, out[v] = with_parameter(params, "v_d", v), {}
+        for i, k in enumerate(sites):
+            amplitudes = ds["amplitudes"].values[j, i]
+            sim = {"n_halc": int(ds["n_halc"].values[j, i]),
+                   "energy": float(ds["energy"].values[j, i])}
+            if int(ds["status"].values[j, i]) != Status.ok:
+                out[v][k] = (None, sim, "the simulation failed")
+                continue
+            n = int(np.argmax(amplitudes))
+            sim["phase_oscillator"] = n  # of the orbit's phase condition
+            guess = _turning_point(orbits, at, ds["y_final"].values[j, i], n)
+            if guess is None:
+                out[v][k] = (None, sim, "no turning point: steady sliding")
+                continue
+            orbit = orbits.shoot(at, guess[0], guess[1], n)
+            reason = None if bool(orbit.converged) else (
+                f"shooting did not converge (residual {float(orbit.residual):.2g}): the "
+                f"simulated state is not periodic")
+            out[v][k] = (orbit if reason is None else None, sim, reason)
     return out
 
 
@@ -357,8 +397,9 @@ SLIDING_PASSES = 4
 #: Part of the key of stored branches: raise it whenever how a branch is followed
 #: changes, so that a resumed run recomputes the branches of an older method
 #: (2: through sliding points from the branch's last three orbits, cut at a Hopf
-#: point and where it retraces itself).
-BRANCH_METHOD = 2
+#: point and where it retraces itself; 3: starts not periodic at v_d tried again at
+#: `RETRY_VD`).
+BRANCH_METHOD = 3
 
 
 def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationOptions, *,
@@ -807,7 +848,8 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
     settings = {"chain": chain_record(params), **orbits.settings(),
                 "continuation": continuation_options, "start": start_options,
                 "switch": bool(switch), "deflate": int(deflate),
-                "sliding_passes": SLIDING_PASSES, "branch_method": BRANCH_METHOD}
+                "sliding_passes": SLIDING_PASSES, "branch_method": BRANCH_METHOD,
+                "retry_vd": list(RETRY_VD)}
     paths = {k: None if out is None else Path(out) / (
         f"branch_{k}.nc" if isinstance(k, str) else f"branch_k{k}.nc").replace(":", "")
         for k in sites}
@@ -827,7 +869,9 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
         datasets |= stored
     if not todo:
         return datasets, starts, failed, repeated
-    found = _start_orbits(orbits, params, todo, start_options, progress)
+    lo, hi = continuation_options.p_min, continuation_options.p_max
+    retry = tuple(d for d in RETRY_VD if lo < float(params.v_d) + d < hi)
+    found = _start_orbits(orbits, params, todo, start_options, progress, retry)
     deflated = _deflated_orbits(orbits, params, found, deflate) if deflate else {}
     follow = dict(orbits=orbits, params=params, continuation_options=continuation_options,
                   switch=switch, progress=progress)
@@ -880,7 +924,7 @@ def _follow_start(label: str, start, phase_oscillator: int, mask, *, orbits,
                                       k=int(mask.sum()), switch=switch, progress=progress)
     except (ValueError, RuntimeError) as err:  # flagged; the other branches go on
         return f"continuation failed: {err}"
-    first = ds.assign_attrs(start_vd=float(params.v_d), start_energy=float(start.energy),
+    first = ds.assign_attrs(start_vd=float(start.params.v_d), start_energy=float(start.energy),
                             start_n_halc=int(start.n_halc), switched=len(switched), deflated=0,
                             deflated_repeats="[]")
     branches = [first] + [sw.assign_attrs(start_vd=sw.attrs["switched_from_vd"],
@@ -946,14 +990,18 @@ def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int) -> di
     steady sliding), up to `count` each; each refined by
     shooting with the phase condition on its oscillator of largest amplitude.
     Returns k -> [(orbit, its phase oscillator), ...]."""
-    known = [pack(o.y0, o.period) for o, _, _ in found.values() if o is not None]
+    # the starts' orbits at params.v_d; one found at a neighbouring v_d
+    # (`RETRY_VD`) is not a solution here, and its start is treated as not periodic
+    here = {k: (o if o is not None and float(o.params.v_d) == float(params.v_d) else None,
+                sim, why) for k, (o, sim, why) in found.items()}
+    known = [pack(o.y0, o.period) for o, _, _ in here.values() if o is not None]
     # the shooting problem of a start whose state is not periodic: another start's,
     # with the phase condition on its own oscillator (only the residual is used)
-    template = next((o for o, _, _ in found.values() if o is not None), None)
+    template = next((o for o, _, _ in here.values() if o is not None), None)
     # slots for every orbit that can be found: one compiled solve for all starts
-    capacity = len(known) + count * len(found)
+    capacity = len(known) + count * len(here)
     out = {}
-    for k, (orbit, sim, _) in found.items():
+    for k, (orbit, sim, _) in here.items():
         n = (sim or {}).get("phase_oscillator")
         if template is None or n is None:
             continue
