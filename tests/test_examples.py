@@ -63,8 +63,19 @@ SLOW = {"03_dynamics_of_localized_states.ipynb", "04_basin_stability.ipynb",
         "09_identification.ipynb"}
 
 
+#: The two slowest (about 35 and 20 s on 2 cores, compiling programs no other test
+#: of the default run compiles) run with the studies (`study`: CI's step of its own,
+#: .ci/run), to keep the default run within 10 minutes.
+STUDY = {"08_brake_pad.ipynb", "09_identification.ipynb"}
+
+
+def _marks(name: str) -> tuple:
+    return ((pytest.mark.slow,) if name in SLOW else ()) + (
+        (pytest.mark.study,) if name in STUDY else ())
+
+
 @pytest.mark.parametrize("name", [
-    pytest.param(name, marks=pytest.mark.slow) if name in SLOW else name
+    pytest.param(name, marks=_marks(name))
     for name in sorted(p.name for p in EXAMPLES.glob("*.ipynb"))])
 def test_notebook_runs_small_and_shows_its_figures(name, tmp_path, monkeypatch):
     nb = nbformat.read(EXAMPLES / name, as_version=4)
