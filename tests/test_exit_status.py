@@ -305,7 +305,8 @@ def test_work_precision_failed_runs_exit_1(tmp_path, monkeypatch, capsys):
 def test_the_snake_summary_prints_a_check_without_a_growth_and_an_end_without_a_speed(capsys):
     """A simulation check that agrees carries no expected growth (None in the
     summary), and a stable range may end where no speed was found: the table is
-    printed (the command failed with a TypeError once)."""
+    printed (the command failed with a TypeError once). A branch started at another
+    belt speed than the run's says so."""
     from jaxchain._cli.snake import _print_summary
 
     check = {"v_d": 1.3, "side": "inside", "end": "fold", "persists": True, "agrees": True,
@@ -316,3 +317,9 @@ def test_the_snake_summary_prints_a_check_without_a_growth_and_an_end_without_a_
     _print_summary({"branches": [branch], "not_periodic": []})
     out = capsys.readouterr().out
     assert "fold at -" in out and "(agrees)" in out and "undecided: growth 0.25" in out
+    assert "started at" not in out  # a summary without the run's v_d (an older one)
+    elsewhere = branch | {"label": "k=9", "start": {"v_d": 1.6}}
+    _print_summary({"branches": [branch | {"start": {"v_d": 1.5}}, elsewhere],
+                    "not_periodic": [], "v_d": 1.5})
+    out = capsys.readouterr().out
+    assert out.count("started at") == 1 and "started at v_d = 1.6" in out
