@@ -347,15 +347,18 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
 
 def _closed_loop(orbits, orbit, half: xr.Dataset) -> xr.Dataset:
     """`half`, a branch continued from `orbit` one way, cut where it comes back
-    through `orbit` (`_passes_through`, after the first point where its signature
-    has left the start's by more than 0.1): the branch is an isola, closed on
-    itself, and its stop is "closed". Unchanged where it does not come back."""
+    through `orbit` itself (`_passes_through` with `images` False, after the first
+    point where its signature has left the start's by more than 0.1): the branch is
+    an isola, closed on itself, and its stop is "closed". Unchanged where it does
+    not come back, or comes back through an image of `orbit` under a reflection of
+    the ring (it retraces itself beyond a fold: `_retraced`)."""
     signature = np.column_stack([np.sort(half["amplitudes"].values, axis=1),
                                  half["period"].values, half["v_d"].values])
     away = np.flatnonzero(np.max(np.abs(signature - signature[0]), axis=1) > 0.1)
     if away.size == 0:
         return half
-    i = _passes_through(orbits, orbit.params, orbit, half.isel(point=slice(away[0], None)))
+    i = _passes_through(orbits, orbit.params, orbit, half.isel(point=slice(away[0], None)),
+                        images=False)
     if i is None:
         return half
     end = away[0] + i + 1
@@ -956,7 +959,7 @@ def _on_followed_branch(orbits, params: ChainParams, orbit, branches: dict) -> s
 
 
 def _passes_through(orbits, params: ChainParams, orbit, branch: xr.Dataset,
-                    tol: float = 1e-6) -> int | None:
+                    tol: float = 1e-6, *, images: bool = True) -> int | None:
     """The first point i of `branch` such that the branch passes through the
     periodic orbit `orbit` (at `params.v_d`) between points i and i + 1, or None.
     Where the branch crosses v_d between two points whose interpolated period and
@@ -964,7 +967,10 @@ def _passes_through(orbits, params: ChainParams, orbit, branch: xr.Dataset,
     within 0.1 of the orbit's, the orbit of the branch at v_d is shot from the
     interpolated point; the same orbit when its signature agrees within `tol` (both
     are solved to Newton's tolerance). `orbit`: anything with `amplitudes`, shape
-    (n_osc,), and `period`."""
+    (n_osc,), and `period`. With `images` False, only `orbit` itself counts, not
+    its images under the ring's rotations and reflections: the shot's state and
+    period must then agree with `orbit.y0` and `orbit.period` within `tol` (both
+    with the branch's phase condition)."""
     v0 = float(params.v_d)
     signature = np.append(np.sort(np.asarray(orbit.amplitudes)), float(orbit.period))
     v, u = branch["v_d"].values, branch["u"].values
@@ -977,7 +983,9 @@ def _passes_through(orbits, params: ChainParams, orbit, branch: xr.Dataset,
         y, period = unpack(jnp.asarray(u[i] + w * (u[i + 1] - u[i])))
         shot = orbits.shoot(params, y, period, int(branch.attrs["phase_oscillator"]))
         found = np.append(np.sort(np.asarray(shot.amplitudes)), float(shot.period))
-        if bool(shot.converged) and np.max(np.abs(found - signature)) < tol:
+        same = images or np.max(np.abs(np.asarray(pack(shot.y0, shot.period))
+                                       - np.asarray(pack(orbit.y0, orbit.period)))) < tol
+        if bool(shot.converged) and np.max(np.abs(found - signature)) < tol and same:
             return int(i)
     return None
 
