@@ -184,3 +184,26 @@ def test_the_one_site_branch_is_cut_where_it_retraces_itself(ring8):
     assert len(folds) >= 2 and np.all(np.diff(folds) > 1e-4)
     ds = xr.load_dataset(folder / "branch_k1.nc")
     assert ds["v_d"].values[-1] == pytest.approx(one["bifurcations"][-1]["v_d"], abs=0.01)
+
+
+def test_a_start_not_periodic_at_the_snake_s_v_d_is_followed_from_a_neighbouring_one(ring8):
+    """The three-site state of eq. (8) is not periodic at v_d 1.5 (shooting from the
+    simulated state does not converge) but is at 1.4 (`RETRY_VD`): its branch
+    starts there, and its start orbit is periodic on the exact engine's own flow
+    (`nonsmooth_flow` over one period returns to the state within 1e-8, with no
+    Newton iteration). Beyond the fold below it the branch runs back through the
+    mirror images of its own orbits: it is cut there (stop "retraced") and its
+    other way is followed, up past the snake's v_d. (Before the isola test took
+    only the start itself, that mirror image closed the branch as an isola at 12
+    points, and its upper part was never computed.)"""
+    doc, branches, folder = ring8
+    three = branches["k=3"]
+    assert three["start"]["v_d"] == pytest.approx(1.4, abs=1e-12)
+    assert three["stop"]["low"] == "retraced" and three["stop"]["high"] != "closed"
+    assert three["v_d_computed"][1] > 1.5
+    ds = xr.load_dataset(folder / "branch_k3.nc")
+    u = ds["u"].values[np.argmin(np.abs(ds["v_d"].values - 1.4))]
+    params = jc.with_parameter(jc.ChainParams(n_osc=N), "v_d", 1.4)
+    y0 = u[:-1].reshape(2, -1)
+    after, status = jc.nonsmooth_flow(params, y0, np.array([u[-1]]), jc.ExactShooting().flow)
+    assert int(status) == jc.Status.ok and np.max(np.abs(np.asarray(after)[0] - y0)) < 1e-8

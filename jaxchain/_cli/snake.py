@@ -76,7 +76,8 @@ def add_parser(sub):
     g = p.add_argument_group("continuation")
     g.add_argument("--vd", type=one_belt_speed, default=1.5, metavar="V",
                    help="the belt speed where the states are found by simulation, one "
-                        "value (default 1.5)")
+                        "value (default 1.5); a start whose simulated state is not periodic "
+                        "there is simulated again at V - 0.1, then V + 0.1")
     g.add_argument("--sites", type=comma_list(_start), default=None, metavar="K,K,...",
                    help="the start of each branch: a number k of oscillators excited by "
                         "eq. (8) (a patch on a lattice), site:N for oscillator N alone "
