@@ -160,7 +160,9 @@ def test_a_switch_that_fails_is_reported_with_its_branch_point(branch_point, mon
 
     monkeypatch.setattr("jaxchain._studies.snake.switch_branch", fails)
     switched = internal("snake switched branch")
-    args = (problem, branch, point, jc.ContinuationOptions(max_points=2), jc.PseudoArclength())
+    orbits = internal("snake orbits")("smoothed", SHOOTING, params=RING)
+    args = (orbits, problem, branch, point, jc.ContinuationOptions(max_points=2),
+            jc.PseudoArclength())
     # deflation beside the branch point finds the other branch instead
     rescued = switched(*args, k=2, progress=False)
     assert rescued and all(ds.attrs["switched_from_vd"] == float(point.p) for ds in rescued)
@@ -230,3 +232,47 @@ def test_deflation_beside_the_branch_point_finds_keller_s_switched_orbit(branch_
     np.testing.assert_allclose(np.sort(np.asarray(deflated.amplitudes)),
                                np.sort(np.asarray(keller.amplitudes)), atol=2e-6)
     assert abs(float(keller.amplitudes[0] - keller.amplitudes[1])) > 1e-4
+
+
+@pytest.mark.study
+def test_a_branch_point_on_an_unstable_branch_is_where_shooting_at_fixed_v_d_crosses():
+    """The exact one-site branch of the ring of three, continued down from v_d 1.38
+    through its fold at 1.3749 onto the unstable sheet above it, meets a branch
+    point there: on an orbit unstable already, so no stability changes, and only
+    the sign of the bordered determinant det [[G_u, G_p], [t^T]]
+    (`Branch.branch_points`) sees it. Against shooting at fixed v_d, no
+    continuation: at v_b - delta and v_b + delta, from the branch's orbits either
+    side, the sign of prod (mu_i - 1) over the non-trivial Floquet multipliers (of
+    det(M - I) on them) differs, for delta = 2e-3 and 2e-4; and the multiplier
+    nearest +1 approaches it as delta shrinks (here a complex pair meets the real
+    axis at +1 and leaves it as a real pair, one multiplier either side of +1)."""
+    ring = jc.ChainParams(n_osc=3, v_d=1.38)
+    found = internal("snake start orbits")(
+        ring, (1,), engine="exact", options=jc.SimulationOptions(t_end=2000.0,
+                                                                 transient=1500.0))
+    orbit, sim, reason = found[1]
+    assert reason is None
+    shooting = jc.ExactShooting(phase_oscillator=sim["phase_oscillator"])
+    problem = jc.exact_cycle_problem(orbit, shooting)
+    branch = jc.continuation(problem, options=jc.ContinuationOptions(
+        ds=0.02, ds_max=0.1, p_min=1.3, p_max=1.45, max_points=12, direction=-1))
+    (point,) = [b for b in jc.locate_bifurcations(problem, branch) if b.kind == "branch point"]
+    assert point.after not in branch.stability_changes
+    assert not bool(np.asarray(branch.stable)[point.after + 1])  # unstable already
+    assert abs(complex(point.multiplier) - 1) < 1e-4
+    ok = np.flatnonzero(np.asarray(branch.converged))
+    v_b = float(point.p)
+
+    def at(side: int, delta: float) -> tuple[float, float]:
+        """(sign of prod (mu_i - 1), min |mu_i - 1|) of the orbit at v_b + delta."""
+        u = np.asarray(branch.u)[ok[side]]
+        shot = jc.exact_periodic_orbit(jc.with_parameter(ring, "v_d", v_b + delta),
+                                       u[:-1].reshape(2, -1), float(u[-1]), shooting)
+        assert bool(shot.converged)
+        m = np.delete(np.asarray(shot.multipliers), int(shot.trivial))
+        return float(np.sign(np.prod(m - 1).real)), float(np.min(np.abs(m - 1)))
+
+    far = [at(point.after, -2e-3), at(point.after + 1, 2e-3)]
+    near = [at(point.after, -2e-4), at(point.after + 1, 2e-4)]
+    assert far[0][0] == -far[1][0] and near[0][0] == -near[1][0]
+    assert all(n[1] < f[1] and n[1] < 1e-2 for n, f in zip(near, far))

@@ -159,7 +159,10 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
     multipliers changes) and "grazing" otherwise (`_discontinuity`). A sliding
     bifurcation is then located on its own defining condition, the stick phase's
     vanishing duration (`locate_sliding`); where that does not converge, the
-    bisection's point stays. An exact branch whose corrector failed beyond its last
+    bisection's point stays. A branch point where no stability changes (on a
+    branch unstable already) is found by the sign of the bordered determinant
+    (`Branch.branch_points`) and located by bisection on it (`_branch_points`).
+    An exact branch whose corrector failed beyond its last
     orbit ends with the sliding bifurcation located from that orbit, if there is one
     between it and the failed prediction (`after` is then the last point).
 
@@ -198,7 +201,7 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
         if i in folds:
             def test(s, t0=t0):
                 z = corrected(s)
-                return None if z is None else (float(_tangent(problem, z, t0)[-1]), z)
+                return None if z is None else (float(_tangent(problem, z, t0)[0][-1]), z)
         else:
             def test(s):
                 z = corrected(s)
@@ -237,8 +240,57 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
             kind = "branch point"
         found.append(BifurcationPoint(kind=kind, p=p, z=z, multiplier=jnp.asarray(m),
                                       record=record, after=int(i), width=float(width)))
+    found += _branch_points(problem, algorithm, branch, zs, tangents, steps)
+    found.sort(key=lambda b: b.after)
     end = _sliding_end(problem, algorithm, branch, zs)
     return tuple(found) + ((end,) if end is not None else ())
+
+
+#: A branch point located by the sign of the bordered determinant has a non-trivial
+#: real Floquet multiplier within this distance of +1 (the multiplier whose
+#: crossing it is); a sign change without one is the exact model's Jacobian
+#: jumping at a switch, not a branch point.
+BRANCH_MULTIPLIER = 1e-2
+
+
+def _branch_points(problem: ContinuationProblem, algorithm: PseudoArclength, branch: Branch,
+                   zs, tangents, steps: int) -> list[BifurcationPoint]:
+    """The branch points where the sign of det [[G_u, G_p], [t^T]] changes
+    (`Branch.branch_points`) and the stability does not (there the change of
+    stability locates and classifies them): on a branch that is unstable already a
+    second multiplier crossing +1 changes no stability. Each is located by
+    bisection on that sign (`_bisect`) and kept where the orbit there has a real
+    non-trivial multiplier within `BRANCH_MULTIPLIER` of +1 and, on the exact
+    model, the same number of stick phases on both sides (else the sign jumped
+    with the Jacobian at a sliding point)."""
+    found = []
+    for i in sorted(set(branch.branch_points) - set(branch.stability_changes)):
+        z0, t0 = zs[i], tangents[i]
+
+        def test(s, z0=z0, t0=t0):
+            new, good, _, _ = _correct(problem, algorithm, z0 + s * t0, t0)
+            return (float(_tangent(problem, new, t0)[1]), new) if bool(good) else None
+
+        f_hi = float(_tangent(problem, zs[i + 1], tangents[i + 1])[1])
+        s, width, z, sides, _ = _bisect(test, float(t0 @ (zs[i + 1] - z0)), steps, f_hi)
+        if z is None:
+            continue
+        record = _record(problem, z)
+        values = np.delete(np.asarray(record.multipliers), int(record.trivial))
+        real = values[np.abs(values.imag) <= 1e-6 * np.maximum(1.0, np.abs(values))].real
+        if not real.size or np.min(np.abs(real - 1.0)) > BRANCH_MULTIPLIER:
+            continue
+        if hasattr(record, "zero_multipliers"):
+            ends = [_record(problem, side[1]) if side is not None else None
+                    for side in sides]
+            ends[1] = ends[1] or _record(problem, zs[i + 1])
+            if int(ends[0].zero_multipliers) != int(ends[1].zero_multipliers):
+                continue
+        m = real[np.argmin(np.abs(real - 1.0))]
+        found.append(BifurcationPoint(kind="branch point", p=z[-1], z=z,
+                                      multiplier=jnp.asarray(complex(m)), record=record,
+                                      after=int(i), width=float(width)))
+    return found
 
 
 def _through_steady_sliding(branch: Branch, record, i: int) -> bool:

@@ -141,6 +141,11 @@ class Branch(eqx.Module):
     - `folds`: indices into the converged points after which dp/ds changes sign.
     - `stability_changes`: indices into the converged points after which `stable`
         changes.
+    - `branch_points`: indices into the converged points after which the sign of
+        det [[G_u, G_p], [t^T]] changes (t the tangent, oriented along the branch):
+        it changes at a simple branch point, where another branch crosses, and
+        not at a fold (Allgower and Georg, *Numerical Continuation Methods* (1990),
+        Sect. 8.1), whether or not the orbits' stability changes there.
     - `stop`: why the run ended, a `Status`: `max_points_reached`,
         `left_parameter_range` or `newton_failed`.
     """
@@ -154,6 +159,7 @@ class Branch(eqx.Module):
     folds: tuple[int, ...] = eqx.field(static=True)
     stability_changes: tuple[int, ...] = eqx.field(static=True)
     stop: Status = eqx.field(static=True)
+    branch_points: tuple[int, ...] = eqx.field(static=True, default=())
 
     @property
     def tangent_p(self) -> Float[Array, " n_points"]:
@@ -169,8 +175,9 @@ def _stacked(arrays) -> np.ndarray:
 @checks_as_nan
 @eqx.filter_jit
 def _tangent(problem: ContinuationProblem, z, previous):
-    """Unit tangent of the branch at z: the null vector of [G_u, G_p], oriented
-    along `previous`, from the bordered system [[G_u, G_p], [previous^T]] t = e."""
+    """(Unit tangent of the branch at z: the null vector of [G_u, G_p], oriented
+    along `previous`, from the bordered system [[G_u, G_p], [previous^T]] t = e;
+    the sign of det [[G_u, G_p], [t^T]], which changes at a branch point)."""
     jac = jax.jacfwd(problem)(z)
     bordered = jnp.concatenate([jac, previous[None]], axis=0)
     rhs = jnp.zeros(z.size).at[-1].set(1.0)
@@ -178,7 +185,8 @@ def _tangent(problem: ContinuationProblem, z, previous):
     # (built at lowering) would be a host callback wherever this is compiled
     # outside checks_as_nan (inside a user's own jax.jit)
     t = lx.linear_solve(lx.MatrixLinearOperator(bordered), rhs, lx.LU(), throw=False).value
-    return t / jnp.linalg.norm(t)
+    t = t / jnp.linalg.norm(t)
+    return t, jnp.linalg.slogdet(jnp.concatenate([jac, t[None]], axis=0))[0]
 
 
 @checks_as_nan
@@ -256,8 +264,9 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
                          f"{residual:.3g}); solve for it first")
     start = (jnp.zeros(z.size).at[-1].set(float(options.direction)) if tangent is None
              else jnp.asarray(tangent, dtype=float))
-    tangent = _tangent(problem, z, start)
+    tangent, sign = _tangent(problem, z, start)
     zs, tangents, converged, records = [z], [tangent], [True], [_record(problem, z)]
+    signs = [sign]
     ds, stop = options.ds, Status.max_points_reached
     bar = tqdm(total=options.max_points, desc="continuation", unit="point",
                disable=not progress, leave=False)
@@ -274,7 +283,8 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
                 stop = Status.newton_failed
                 break
             continue
-        z, tangent = new, _tangent(problem, new, tangent)
+        (z, (tangent, sign)) = new, _tangent(problem, new, tangent)
+        signs.append(sign)
         zs.append(z)
         tangents.append(tangent)
         converged.append(True)
@@ -292,6 +302,7 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
     records = jax.tree.map(lambda *xs: jnp.asarray(_stacked(xs)), *records)
     stable = np.asarray(records.stable)
     tp = tangents[ok, -1]
+    signs = np.asarray(_stacked(signs))
     return Branch(
         p=jnp.asarray(zs[:, -1]), u=jnp.asarray(zs[:, :-1]), tangent=jnp.asarray(tangents),
         converged=jnp.asarray(ok),
@@ -299,4 +310,5 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
         stable=jnp.asarray(stable),
         folds=tuple(int(i) for i in np.nonzero(np.sign(tp[1:]) != np.sign(tp[:-1]))[0]),
         stability_changes=tuple(int(i) for i in np.nonzero(stable[1:] != stable[:-1])[0]),
-        stop=stop)
+        stop=stop,
+        branch_points=tuple(int(i) for i in np.nonzero(signs[1:] * signs[:-1] < 0)[0]))

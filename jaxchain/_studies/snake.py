@@ -321,14 +321,15 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
             continue
         opts = dataclasses.replace(continuation_options, direction=direction)
         pieces = _through_sliding(problem, algorithm, opts, progress=progress)
-        half = _closed_loop(orbits, orbit, _pieces_dataset(k, pieces))
+        half = _closed_loop(orbits, orbit.params, orbit, _pieces_dataset(k, pieces))
         halves.append(half if half.attrs["stop"] == "closed" else
                       _retraced(orbits, orbit.params, half))
         if switch:
             switched += [ds for piece, branch, bifs in pieces for b in bifs
                          if b.kind == "branch point"
-                         for ds in _switched_branch(piece, branch, b, continuation_options,
-                                                    algorithm, k=k, progress=progress)]
+                         for ds in _switched_branch(orbits, piece, branch, b,
+                                                    continuation_options, algorithm, k=k,
+                                                    progress=progress)]
     failures = [sw for sw in switched if isinstance(sw, dict)]
     down, up = halves
     joined = xr.concat([down.isel(point=slice(None, None, -1)), up.isel(point=slice(1, None))],
@@ -345,26 +346,49 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
     return joined, [ds for ds in switched if not isinstance(ds, dict)]
 
 
-def _closed_loop(orbits, orbit, half: xr.Dataset) -> xr.Dataset:
-    """`half`, a branch continued from `orbit` one way, cut where it comes back
-    through `orbit` itself (`_passes_through` with `images` False, after the first
-    point where its signature has left the start's by more than 0.1): the branch is
-    an isola, closed on itself, and its stop is "closed". Unchanged where it does
-    not come back, or comes back through an image of `orbit` under a reflection of
-    the ring (it retraces itself beyond a fold: `_retraced`)."""
+def _closed_loop(orbits, params: ChainParams, orbit, half: xr.Dataset, *, first: int = 0,
+                 images: bool = False) -> xr.Dataset:
+    """`half`, a branch continued one way, cut where it comes back through `orbit`,
+    its point `first` at `params`, itself (`_passes_through` with `images` False,
+    after the first point where its signature has left that point's by more than
+    0.1): the branch is an isola, closed on itself, and its stop is "closed".
+    Unchanged where it does not come back, or comes back through an image of
+    `orbit` under a reflection of the ring (it retraces itself beyond a fold:
+    `_retraced`). With `images`, a return through an image of `orbit` closes it
+    too: from there on the branch is the image of what it has traced (closed up to
+    the ring's symmetry)."""
     signature = np.column_stack([np.sort(half["amplitudes"].values, axis=1),
                                  half["period"].values, half["v_d"].values])
-    away = np.flatnonzero(np.max(np.abs(signature - signature[0]), axis=1) > 0.1)
+    away = np.flatnonzero(np.max(np.abs(signature[first:] - signature[first]), axis=1) > 0.1)
     if away.size == 0:
         return half
-    i = _passes_through(orbits, orbit.params, orbit, half.isel(point=slice(away[0], None)),
-                        images=False)
+    start = first + away[0]
+    i = _passes_through(orbits, params, orbit, half.isel(point=slice(start, None)),
+                        images=images)
     if i is None:
         return half
-    end = away[0] + i + 1
+    end = start + i + 1
     bifs = [b for b in json.loads(half.attrs["bifurcations"]) if b["after"] < end]
     return half.isel(point=slice(0, end + 1)).assign_attrs(bifurcations=json.dumps(bifs),
                                                            stop="closed")
+
+
+def _repeats_itself(orbits, params: ChainParams, branch: xr.Dataset) -> xr.Dataset:
+    """A switched branch cut where it comes back through one of its own orbits or
+    an image of it (`_closed_loop` with `images`, stop "closed"): beyond, it repeats
+    what it has traced, up to the ring's symmetry. The orbit compared is its first
+    point more than 0.1 from its start in signature, not the start itself, which
+    lies beside a branch point, often at a fold, where shooting from the branch's
+    interpolated points can land on either sheet."""
+    signature = np.column_stack([np.sort(branch["amplitudes"].values, axis=1),
+                                 branch["period"].values, branch["v_d"].values])
+    away = np.flatnonzero(np.max(np.abs(signature - signature[0]), axis=1) > 0.1)
+    if away.size == 0:
+        return branch
+    j = int(away[0])
+    probe = _Point(branch["amplitudes"].values[j], float(branch["period"].values[j]))
+    at = with_parameter(params, "v_d", float(branch["v_d"].values[j]))
+    return _closed_loop(orbits, at, probe, branch, first=j, images=True)
 
 
 class _Point(NamedTuple):
@@ -463,11 +487,13 @@ def _pieces_dataset(k: int, pieces: list) -> xr.Dataset:
                                                  "stop": stop})
 
 
-def _switched_branch(problem, branch, point, continuation_options: ContinuationOptions,
-                     algorithm: PseudoArclength, *, k: int, progress: bool) -> list:
+def _switched_branch(orbits, problem, branch, point,
+                     continuation_options: ContinuationOptions, algorithm: PseudoArclength,
+                     *, k: int, progress: bool) -> list:
     """The other branches through the branch point `point` of `branch`, each
     continued away from it for `continuation_options.max_points` points, with its
-    bifurcations; attributes `switched_from_vd` and those of `_branch_dataset`.
+    bifurcations, and cut where it repeats itself (`_repeats_itself`); attributes
+    `switched_from_vd` and those of `_branch_dataset`.
     The step onto the other branch is Keller's (`switch_branch`, the kernel
     direction the followed branch does not take); where it does not converge (a
     symmetric ring, where the kernel has more directions), the orbits that
@@ -485,6 +511,7 @@ def _switched_branch(problem, branch, point, continuation_options: ContinuationO
     for new, tangent in starts:
         ds = _pieces_dataset(k, _through_sliding(new, algorithm, continuation_options,
                                                  tangent=tangent, progress=progress))
+        ds = _repeats_itself(orbits, new.params, ds)
         out.append(ds.assign_attrs(switched_from_vd=float(point.p),
                                    stop=json.dumps({"away": ds.attrs["stop"]})))
     return out
