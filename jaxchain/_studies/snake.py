@@ -425,8 +425,9 @@ SLIDING_PASSES = 4
 #: changes, so that a resumed run recomputes the branches of an older method
 #: (2: through sliding points from the branch's last three orbits, cut at a Hopf
 #: point and where it retraces itself; 3: starts not periodic at v_d tried again at
-#: `RETRY_VD`).
-BRANCH_METHOD = 3
+#: `RETRY_VD`; 4: branch points on unstable branches, switched there, switched
+#: branches cut where they repeat themselves).
+BRANCH_METHOD = 4
 
 
 def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationOptions, *,
