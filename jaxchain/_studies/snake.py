@@ -292,7 +292,9 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
     branch of exact orbits ends (`_through_sliding`), join the two halves in the
     order of the branch, and locate its bifurcations (`locate_bifurcations`); with
     `switch`, at each branch point follow the other branch through it
-    (`_switched_branch`).
+    (`_switched_branch`): at those the branch keeps (not past a cut) whose orbit
+    has a site on the HALC (the others join cycles without stick, not localized
+    states).
     A branch that comes back through `orbit` is an isola: it is cut there
     (`_closed_loop`), the other way is not continued, and both its stops are
     "closed". A way that turns at a fold onto its own mirror image is cut at the
@@ -324,9 +326,13 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
         half = _closed_loop(orbits, orbit.params, orbit, _pieces_dataset(k, pieces))
         halves.append(half if half.attrs["stop"] == "closed" else
                       _retraced(orbits, orbit.params, half))
+        # at the branch points the half keeps (not past a cut) whose orbit has a site
+        # on the HALC: the others join cycles without stick, not localized states
+        kept = {b["v_d"] for b in json.loads(halves[-1].attrs["bifurcations"])}
         if switch:
             switched += [ds for piece, branch, bifs in pieces for b in bifs
-                         if b.kind == "branch point"
+                         if b.kind == "branch point" and float(b.p) in kept
+                         and int(b.record.n_halc) > 0
                          for ds in _switched_branch(orbits, piece, branch, b,
                                                     continuation_options, algorithm, k=k,
                                                     progress=progress)]
