@@ -240,7 +240,11 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
             kind = "branch point"
         found.append(BifurcationPoint(kind=kind, p=p, z=z, multiplier=jnp.asarray(m),
                                       record=record, after=int(i), width=float(width)))
-    found += _branch_points(problem, algorithm, branch, zs, tangents, steps)
+    # a sign change beside a discontinuity-induced point is the exact model's
+    # Jacobian jumping at that switch, not a branch point
+    switches = {b.after for b in found if b.kind in ("sliding", "grazing", "multiplier jump")}
+    found += [b for b in _branch_points(problem, algorithm, branch, zs, tangents, steps)
+              if b.after not in switches]
     found.sort(key=lambda b: b.after)
     end = _sliding_end(problem, algorithm, branch, zs)
     return tuple(found) + ((end,) if end is not None else ())
@@ -262,7 +266,8 @@ def _branch_points(problem: ContinuationProblem, algorithm: PseudoArclength, bra
     bisection on that sign (`_bisect`) and kept where the orbit there has a real
     non-trivial multiplier within `BRANCH_MULTIPLIER` of +1 and, on the exact
     model, the same number of stick phases on both sides (else the sign jumped
-    with the Jacobian at a sliding point)."""
+    with the Jacobian at a sliding point; `locate_bifurcations` also drops those
+    between the points of a sliding or grazing point)."""
     found = []
     for i in sorted(set(branch.branch_points) - set(branch.stability_changes)):
         z0, t0 = zs[i], tangents[i]
