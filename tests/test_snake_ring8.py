@@ -91,6 +91,16 @@ def test_the_two_site_branch_point_is_where_shooting_at_fixed_v_d_crosses(ring8)
     assert np.min(np.abs(roots)) < 5e-6
 
 
+def _switched_at_the_stable_end(branches: dict, folder) -> xr.Dataset:
+    """The branch switched onto from the two-site branch at the branch point that
+    ends its stable range (its other branch points, on unstable parts of it, have
+    branches of their own)."""
+    v_b = branches["k=2"]["stable_ranges"][0][1]
+    (label,) = [b["label"] for b in branches.values()
+                if b["label"].startswith("k=2 switched") and b["switched_from_vd"] == v_b]
+    return xr.load_dataset(folder / f"branch_k2_switched{label.rsplit(' ', 1)[1]}.nc")
+
+
 def test_the_branch_switched_at_the_two_site_branch_point_breaks_the_symmetry(ring8):
     """The other branch through the two-site branch point: its two sites' amplitudes
     differ, by more the further it runs from the branch point (a pitchfork), while
@@ -98,8 +108,7 @@ def test_the_branch_switched_at_the_two_site_branch_point_breaks_the_symmetry(ri
     _, branches, folder = ring8
     followed = xr.load_dataset(folder / "branch_k2.nc")["amplitudes"].values
     assert np.max(np.abs(followed[:, 4] - followed[:, 5])) < 1e-8  # symmetric throughout
-    switched = xr.load_dataset(folder / "branch_k2_switched1.nc")
-    assert switched.attrs["switched_from_vd"] == branches["k=2"]["stable_ranges"][0][1]
+    switched = _switched_at_the_stable_end(branches, folder)
     a = switched["amplitudes"].values
     split = np.abs(a[:, 4] - a[:, 5])
     end = json.loads(switched.attrs["bifurcations"])[0]["after"]
@@ -124,8 +133,8 @@ def test_the_switched_branch_turns_at_its_sliding_point_onto_orbits_without_that
     from the orbit before, at that v_d, reaches the orbit without the stick phase:
     near the turn the two lie closer to each other than the stick-slip orbits
     along their square-root branch.)"""
-    _, _, folder = ring8
-    switched = xr.load_dataset(folder / "branch_k2_switched1.nc")
+    _, branches, folder = ring8
+    switched = _switched_at_the_stable_end(branches, folder)
     sliding = json.loads(switched.attrs["bifurcations"])[0]
     assert sliding["type"] == "sliding"
     i = sliding["after"]
