@@ -240,9 +240,11 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
             kind = "branch point"
         found.append(BifurcationPoint(kind=kind, p=p, z=z, multiplier=jnp.asarray(m),
                                       record=record, after=int(i), width=float(width)))
-    # a sign change beside a discontinuity-induced point is the exact model's
-    # Jacobian jumping at that switch, not a branch point
-    switches = {b.after for b in found if b.kind in ("sliding", "grazing", "multiplier jump")}
+    # a sign change beside a discontinuity-induced point (in its interval or the
+    # next either side) is the exact model's Jacobian jumping at that switch, where
+    # the branch may turn without a smooth fold, not a branch point
+    switches = {b.after + d for b in found if b.kind in ("sliding", "grazing", "multiplier jump")
+                for d in (-1, 0, 1)}
     found += [b for b in _branch_points(problem, algorithm, branch, zs, tangents, steps)
               if b.after not in switches]
     found.sort(key=lambda b: b.after)
@@ -267,7 +269,7 @@ def _branch_points(problem: ContinuationProblem, algorithm: PseudoArclength, bra
     non-trivial multiplier within `BRANCH_MULTIPLIER` of +1 and, on the exact
     model, the same number of stick phases on both sides (else the sign jumped
     with the Jacobian at a sliding point; `locate_bifurcations` also drops those
-    between the points of a sliding or grazing point)."""
+    within one interval of a sliding or grazing point)."""
     found = []
     for i in sorted(set(branch.branch_points) - set(branch.stability_changes)):
         z0, t0 = zs[i], tangents[i]
