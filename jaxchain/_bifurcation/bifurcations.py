@@ -243,13 +243,14 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
     # a sign change beside a discontinuity-induced point (in its interval or the
     # next either side) is the exact model's Jacobian jumping at that switch, where
     # the branch may turn without a smooth fold, not a branch point
-    switches = {b.after + d for b in found if b.kind in ("sliding", "grazing", "multiplier jump")
-                for d in (-1, 0, 1)}
+    end = _sliding_end(problem, algorithm, branch, zs)
+    ends = [end] if end is not None else []
+    switches = {b.after + d for b in found + ends
+                if b.kind in ("sliding", "grazing", "multiplier jump") for d in (-1, 0, 1)}
     found += [b for b in _branch_points(problem, algorithm, branch, zs, tangents, steps)
               if b.after not in switches]
     found.sort(key=lambda b: b.after)
-    end = _sliding_end(problem, algorithm, branch, zs)
-    return tuple(found) + ((end,) if end is not None else ())
+    return tuple(found + ends)
 
 
 #: A branch point located by the sign of the bordered determinant has a non-trivial
