@@ -240,17 +240,15 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
             kind = "branch point"
         found.append(BifurcationPoint(kind=kind, p=p, z=z, multiplier=jnp.asarray(m),
                                       record=record, after=int(i), width=float(width)))
-    # a sign change beside a discontinuity-induced point (in its interval or the
-    # next either side) is the exact model's Jacobian jumping at that switch, where
-    # the branch may turn without a smooth fold, not a branch point
-    end = _sliding_end(problem, algorithm, branch, zs)
-    ends = [end] if end is not None else []
-    switches = {b.after + d for b in found + ends
-                if b.kind in ("sliding", "grazing", "multiplier jump") for d in (-1, 0, 1)}
-    found += [b for b in _branch_points(problem, algorithm, branch, zs, tangents, steps)
-              if b.after not in switches]
+    # beside a sliding point the exact Jacobian jumps, and a sign change there need
+    # not pass through zero; but where a symmetric pair of sites loses its stick
+    # phases at once, other branches do leave there (the ring of 20's eighteen-site
+    # branch meets a sixteen-site one at its sliding point 1.73099), so those are
+    # kept and switched at like any other
+    found += _branch_points(problem, algorithm, branch, zs, tangents, steps)
     found.sort(key=lambda b: b.after)
-    return tuple(found + ends)
+    end = _sliding_end(problem, algorithm, branch, zs)
+    return tuple(found) + ((end,) if end is not None else ())
 
 
 #: A branch point located by the sign of the bordered determinant has a non-trivial
@@ -269,8 +267,7 @@ def _branch_points(problem: ContinuationProblem, algorithm: PseudoArclength, bra
     bisection on that sign (`_bisect`) and kept where the orbit there has a real
     non-trivial multiplier within `BRANCH_MULTIPLIER` of +1 and, on the exact
     model, the same number of stick phases on both sides (else the sign jumped
-    with the Jacobian at a sliding point; `locate_bifurcations` also drops those
-    within one interval of a sliding or grazing point)."""
+    with the Jacobian at a sliding point)."""
     found = []
     for i in sorted(set(branch.branch_points) - set(branch.stability_changes)):
         z0, t0 = zs[i], tangents[i]
