@@ -352,6 +352,16 @@ def _follow_branch(orbits, orbit, phase_oscillator: int,
     return joined, [ds for ds in switched if not isinstance(ds, dict)]
 
 
+def _first_away(branch: xr.Dataset, first: int = 0) -> int | None:
+    """The first point after point `first` of `branch` whose signature (amplitudes
+    sorted by size, period, v_d) differs from that point's by more than 0.1, or
+    None."""
+    signature = np.column_stack([np.sort(branch["amplitudes"].values, axis=1),
+                                 branch["period"].values, branch["v_d"].values])
+    away = np.flatnonzero(np.max(np.abs(signature[first:] - signature[first]), axis=1) > 0.1)
+    return None if away.size == 0 else first + int(away[0])
+
+
 def _closed_loop(orbits, params: ChainParams, orbit, half: xr.Dataset, *, first: int = 0,
                  images: bool = False) -> xr.Dataset:
     """`half`, a branch continued one way, cut where it comes back through `orbit`,
@@ -363,12 +373,9 @@ def _closed_loop(orbits, params: ChainParams, orbit, half: xr.Dataset, *, first:
     `_retraced`). With `images`, a return through an image of `orbit` closes it
     too: from there on the branch is the image of what it has traced (closed up to
     the ring's symmetry)."""
-    signature = np.column_stack([np.sort(half["amplitudes"].values, axis=1),
-                                 half["period"].values, half["v_d"].values])
-    away = np.flatnonzero(np.max(np.abs(signature[first:] - signature[first]), axis=1) > 0.1)
-    if away.size == 0:
+    start = _first_away(half, first)
+    if start is None:
         return half
-    start = first + away[0]
     i = _passes_through(orbits, params, orbit, half.isel(point=slice(start, None)),
                         images=images)
     if i is None:
@@ -386,12 +393,9 @@ def _repeats_itself(orbits, params: ChainParams, branch: xr.Dataset) -> xr.Datas
     point more than 0.1 from its start in signature, not the start itself, which
     lies beside a branch point, often at a fold, where shooting from the branch's
     interpolated points can land on either sheet."""
-    signature = np.column_stack([np.sort(branch["amplitudes"].values, axis=1),
-                                 branch["period"].values, branch["v_d"].values])
-    away = np.flatnonzero(np.max(np.abs(signature - signature[0]), axis=1) > 0.1)
-    if away.size == 0:
+    j = _first_away(branch)
+    if j is None:
         return branch
-    j = int(away[0])
     probe = _Point(branch["amplitudes"].values[j], float(branch["period"].values[j]))
     at = with_parameter(params, "v_d", float(branch["v_d"].values[j]))
     return _closed_loop(orbits, at, probe, branch, first=j, images=True)
