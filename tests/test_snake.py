@@ -11,7 +11,8 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 
-from helpers import assert_usage_error, internal, reference_rhs
+from helpers import (assert_usage_error, internal, internal_module, reference_rhs,
+                     replace_internal)
 
 RING = jc.ChainParams(n_osc=4, v_d=1.5)
 OPTIONS = jc.ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.2, p_max=1.75, max_points=14)
@@ -223,6 +224,58 @@ def test_stored_branches_are_read_back_only_for_equal_settings(one_site):
     fresh = jc.localized_branches(RING, (1,), continuation_options=other, out=out,
                                simulation_check=False)
     assert fresh["datasets"]["k=1"].sizes["point"] <= 7 < a.sizes["point"]  # recomputed
+
+
+@pytest.mark.numerics
+def test_recurrences_of_a_periodic_orbit_return_after_one_period():
+    """On the single oscillator's exact stick-slip cycle every turning point x' = 0
+    (from + to -) comes back after one period: the guesses of `_recurrences` are
+    each a period apart to the sampling step (1e-3), the first one first, and each
+    state returns to itself to the flow's accuracy after its time to the next."""
+    one = jc.ChainParams(n_osc=1, v_d=1.5)
+    orbits = internal("snake orbits")("exact")
+    cycle = jc.exact_periodic_orbit(one, np.array([[2.2], [0.0]]), 6.3)
+    start = orbits.samples(one, cycle.y0, np.array([0.0, 1.0]))[-1]
+    guesses = internal_module("snake starts")._recurrences(orbits, one, start, 0)
+    # the first turning point after `start` is the orbit's y0, T - 1 later
+    assert len(guesses) == 5
+    np.testing.assert_allclose(guesses[0][0], cycle.y0, atol=5e-3)
+    for y, period in guesses:
+        assert period == pytest.approx(float(cycle.period), abs=1e-3)
+        back = orbits.samples(one, y, np.array([0.0, float(cycle.period)]))[-1]
+        np.testing.assert_allclose(back, y, atol=1e-8)
+
+
+def test_a_start_that_loses_its_pattern_is_tried_at_the_neighbouring_speeds(monkeypatch):
+    """A start whose orbit at v_d has another number of sites on the HALC than it
+    excites is simulated again at v_d -+ 0.1, like one with no periodic orbit: the
+    first orbit that keeps its number of sites is kept, else the orbit it had (or,
+    with none, the first orbit found); a start that keeps its pattern is not tried
+    again. `_shoot_starts` is replaced by a table of outcomes (n_HALC, None for no
+    periodic orbit) for each belt speed."""
+    table = {1.5: {1: None, 2: 3, 3: 4, 4: None, 5: 5},
+             1.4: {1: 2, 2: 3, 3: 4, 4: 5},
+             1.6: {1: 1, 2: 3, 3: 3, 4: None}}
+    tried = []
+
+    class Orbit:
+        def __init__(self, n_halc, v_d):
+            self.n_halc, self.v_d = n_halc, v_d
+
+    def outcomes(orbits, params, sites, vds, options, progress):
+        tried.append((tuple(sites), tuple(round(v, 9) for v in vds)))
+        return {v: {k: (None, {}, "not periodic") if table[round(v, 9)][k] is None
+                    else (Orbit(table[round(v, 9)][k], round(v, 9)), {}, None)
+                    for k in sites} for v in vds}
+
+    replace_internal(monkeypatch, "snake starts at speeds", outcomes)
+    ring = jc.ChainParams(n_osc=8, v_d=1.5)
+    out = internal("snake starts")(None, ring, (1, 2, 3, 4, 5), jc.SimulationOptions(),
+                                   False)
+    assert tried == [((1, 2, 3, 4, 5), (1.5,)), ((1, 2, 3, 4), (1.4, 1.6))]
+    chosen = {k: (o.v_d, o.n_halc) for k, (o, _, _) in out.items()}
+    assert chosen == {1: (1.6, 1), 2: (1.5, 3), 3: (1.6, 3), 4: (1.4, 5), 5: (1.5, 5)}
+    assert [out[k][1]["v_d"] for k in (1, 2, 3, 4, 5)] == [1.6, 1.5, 1.6, 1.4, 1.5]
 
 
 @pytest.mark.numerics

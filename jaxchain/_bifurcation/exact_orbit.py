@@ -34,6 +34,12 @@ class ExactShooting(eqx.Module):
     - `newton_tol`: Newton's tolerance (optimistix, rtol = atol) on the state and
         period.
     - `newton_steps`: Newton's iteration budget.
+    - `damped_steps`: the iteration budget of the damped Newton method (Newton
+        steps shortened by Armijo backtracking on the squared residual; Dennis and
+        Schnabel 1996, Sect. 6.3) tried from the same guess where Newton's method
+        fails: near an orbit with multipliers close to +1 (weakly coupled
+        oscillators' phases), a full Newton step from a guess 0.05 away leaves
+        the orbit's neighbourhood. 0 for none.
     - `n_samples`: samples of one period from which amplitudes and stick are
         read (an extremum between samples is missed by about
         A (pi / n_samples)^2 / 2).
@@ -50,6 +56,7 @@ class ExactShooting(eqx.Module):
     flow: NonsmoothOptions = NonsmoothOptions.reference(t_end=1.0, transient=0.0)
     newton_tol: float = eqx.field(static=True, default=1e-9)
     newton_steps: int = eqx.field(static=True, default=40)
+    damped_steps: int = eqx.field(static=True, default=120)
     n_samples: int = eqx.field(static=True, default=4096)
     phase_oscillator: int = eqx.field(static=True, default=0)
 
@@ -64,6 +71,9 @@ class ExactShooting(eqx.Module):
             if not getattr(self, name) > 0:
                 raise ValidationError(f"ExactShooting.{name} must be > 0, got "
                                       f"{getattr(self, name)!r}")
+        if not self.damped_steps >= 0:
+            raise ValidationError(f"ExactShooting.damped_steps must be >= 0, got "
+                                  f"{self.damped_steps!r}")
 
 
 def exact_flow(params: ChainParams, y0: State, period, options: ExactShooting) -> State:
@@ -202,8 +212,27 @@ def _root(params, u0, options):
     return sol.value, sol.result == optx.RESULTS.successful
 
 
+@checks_as_nan
+@eqx.filter_jit
+def _damped_root(params, u0, options):
+    """Newton steps (optimistix's Gauss-Newton with the Newton descent: the same
+    linear solve on a square system) shortened by backtracking until the squared
+    residual decreases enough (Armijo)."""
+    tol = options.newton_tol
+    solver = eqx.tree_at(lambda s: s.search,
+                         optx.GaussNewton(rtol=tol, atol=tol, norm=optx.max_norm),
+                         optx.BacktrackingArmijo())
+    sol = optx.least_squares(lambda u, p: exact_shooting_residual(u, p, options), solver,
+                             u0, params, max_steps=options.damped_steps, throw=False)
+    return sol.value, sol.result == optx.RESULTS.successful
+
+
 def _solve(params, u0, options):
     u, ok = _root(params, u0, options)
+    if not bool(ok) and options.damped_steps:
+        # it may stop at a minimum of the residual that is not a root, or short of
+        # its tolerance: Newton's method from where it stopped decides
+        u, ok = _root(params, _damped_root(params, u0, options)[0], options)
     # the record by continuation's own program (`describe_point`), compiled once
     orbit = describe_point(DescribeExactOrbit(options), u, params, params.v_d, "v_d")
     return eqx.tree_at(lambda o: o.converged, orbit, orbit.converged & ok)
@@ -216,7 +245,9 @@ def exact_periodic_orbit(params: ChainParams, y0: State, period: float,
     the friction law of eqs. (1)-(2), stick exact) by single shooting on the exact
     engine: optimistix's Newton method on `exact_shooting_residual` (state and
     period, phase condition x_n'(0) = 0), its Jacobian by forward-mode
-    differentiation through every switch. Its Floquet multipliers are the
+    differentiation through every switch; where it fails, the damped Newton
+    method (`ExactShooting.damped_steps`) from the same guess, finished by
+    Newton's method. Its Floquet multipliers are the
     eigenvalues of the exact monodromy matrix (`exact_monodromy`), with no eps:
     the limit that the smoothed model's multipliers approach as eps -> 0.
 

@@ -22,7 +22,11 @@ which the paper's Fig. 3(b) only suggests by simulation ("snaking"):
   - start: eq. (8) with k oscillators excited (--sites), simulated at --vd; a
     turning point of the oscillator of largest amplitude and the time to the next
     are the guesses of shooting (diffrax, Levenberg-Marquardt of optimistix, phase
-    condition x_n'(0) = 0); an irregular state does not converge and is reported;
+    condition x_n'(0) = 0), and where it fails, the turning points where the
+    state comes back closest after one turn (close recurrences); an irregular
+    state does not converge and is reported; a start whose state is not periodic,
+    or has another number of sites on the HALC than it excites, is simulated
+    again at --vd -+ 0.1 and followed from there;
   - Floquet multipliers from the monodromy matrix (forward mode through the
     solver), the trivial one deflated (the flow direction); its distance from 1
     and the multipliers' change at 100x tighter tolerances are reported;
@@ -53,7 +57,8 @@ starts and the checks); shooting keeps its own tight tolerances.
 
 With --engine exact, the exact stick/slip switch model throughout: simulations on
 the exact engine, shooting by Newton's method with the exact engine's derivative
-through every switch (its saltation matrices), and the exact Floquet multipliers
+through every switch (its saltation matrices), then the damped Newton method
+(Armijo backtracking) where Newton's method fails, and the exact Floquet multipliers
 (stick phases give multipliers at zero); their accuracy is checked at 100x looser
 tolerances, the exact engine's being near rounding already (1e-12)."""
 
@@ -77,7 +82,8 @@ def add_parser(sub):
     g.add_argument("--vd", type=one_belt_speed, default=1.5, metavar="V",
                    help="the belt speed where the states are found by simulation, one "
                         "value (default 1.5); a start whose simulated state is not periodic "
-                        "there is simulated again at V - 0.1, then V + 0.1")
+                        "there, or has another number of sites on the HALC than it excites, "
+                        "is simulated again at V - 0.1 and V + 0.1")
     g.add_argument("--sites", type=comma_list(_start), default=None, metavar="K,K,...",
                    help="the start of each branch: a number k of oscillators excited by "
                         "eq. (8) (a patch on a lattice), site:N for oscillator N alone "
@@ -170,8 +176,8 @@ def _print_summary(s: dict) -> None:
         start = b.get("start", {}).get("v_d")
         if None not in (start, s.get("v_d")) and start != s["v_d"] and "switched" not in \
                 b["label"]:
-            print(f"   started at v_d = {start:g}: its simulated state at {s['v_d']:g} is "
-                  "not periodic")
+            print(f"   started at v_d = {start:g}: at {s['v_d']:g} its simulated state is "
+                  "not periodic, or not with the sites it excites")
         if b.get("stop", {}).get("low") == "closed":
             print("   closed on itself" + ("" if b["connects_to"] else
                                           " (an isola: it meets no other branch)"))

@@ -119,6 +119,12 @@ SNAKE_START = SimulationOptions(t_end=12_000.0, transient=11_500.0)
 #: state is periodic at 1.6 and the ten-site state at 1.4, neither at 1.5.
 RETRY_VD = (-0.1, 0.1)
 
+#: Where shooting from the first turning point of a start's simulated state fails,
+#: it is tried from this many more, those where the state comes back closest after
+#: one turn first (`_recurrences`): the ring of 20's nineteen-site state of eq. (8)
+#: at v_d = 1.6 lingers near an unstable orbit (multiplier 1.02) without settling.
+RECURRENCES = 4
+
 #: Continuation of each branch: far enough each way (150 points) to pass its folds.
 SNAKE_CONTINUATION = ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.0, p_max=2.2,
                                          max_points=150)
@@ -140,11 +146,23 @@ def _turning_point(orbits, params: ChainParams, y: np.ndarray, oscillator: int
                    ) -> tuple[np.ndarray, float] | None:
     """A state where x_n' passes from + to - (n = `oscillator`), and the time to the
     next such crossing (`_downward_crossings` on the engine of `orbits`)."""
-    ts, ys, down = _downward_crossings(orbits, params, y)
+    guesses = _recurrences(orbits, params, y, oscillator)
+    return guesses[0] if guesses else None
+
+
+def _recurrences(orbits, params: ChainParams, y: np.ndarray, oscillator: int,
+                 horizon: float = 40.0) -> list[tuple[np.ndarray, float]]:
+    """The states where x_n' passes from + to - (n = `oscillator`) over `horizon`
+    from `y`, each with the time to the next such crossing: the first, then the
+    others by how closely the state returns there (max-norm), closest first. A
+    close recurrence lies near a periodic orbit, unstable ones included, that
+    the flow passes (Auerbach et al. 1987, Phys. Rev. Lett. 58, 2387)."""
+    ts, ys, down = _downward_crossings(orbits, params, y, horizon)
     down = down[oscillator]
-    if down.size < 2:
-        return None
-    return ys[down[0]], float(ts[down[1]] - ts[down[0]])
+    gaps = [float(np.max(np.abs(ys[b] - ys[a]))) for a, b in zip(down[1:-1], down[2:])]
+    order = [0] + [1 + i for i in np.argsort(gaps, kind="stable")]
+    return [(ys[down[i]], float(ts[down[i + 1]] - ts[down[i]])) for i in order
+            if i + 1 < down.size]
 
 
 def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions = SNAKE_START,
@@ -154,10 +172,13 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
     from direct simulation: eq. (8) with k oscillators excited (`excited_block`),
     integrated over `options`, then a turning point of the oscillator of largest
     amplitude (the phase condition's oscillator) and the time to the next one as the
-    guesses of `periodic_orbit`. Where that state is not periodic (or steady
-    sliding, or the simulation fails), eq. (8) is simulated again at `params.v_d` +
-    each offset of `retry` in turn, and the first periodic orbit is kept at its own
-    v_d.
+    guesses of `periodic_orbit` (where it fails, from the `RECURRENCES` states of
+    closest return, `_recurrences`). Where that state is not periodic (or steady
+    sliding, or the simulation fails), or where its orbit has not as many sites on
+    the HALC as the start excites, eq. (8) is simulated again at `params.v_d` + each
+    offset of `retry` in turn, and the first periodic orbit that keeps the start's
+    number of sites (else the first periodic one, else the orbit at `params.v_d`)
+    is kept at its own v_d.
 
     **Arguments:**
 
@@ -178,7 +199,8 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
         simulations and of shooting; `DEFAULT_EPS` when None. None for the exact
         engine.
     - `retry`: offsets of v_d, dimensionless, tried in turn for the starts that
-        give no periodic orbit at `params.v_d` (`RETRY_VD`; () for none).
+        give no periodic orbit at `params.v_d`, or one with another number of
+        sites on the HALC than they excite (`RETRY_VD`; () for none).
     - `progress`: progress bars.
 
     **Returns:**
@@ -200,25 +222,35 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
 def _start_orbits(orbits, params: ChainParams, sites, options: SimulationOptions,
                   progress: bool, retry: tuple = RETRY_VD) -> dict:
     """`start_orbits` on the engine of `orbits` (`snake_orbits`): at `params.v_d`,
-    then for each start that gives no periodic orbit there, at the belt speeds
-    `params.v_d` + `retry` in turn (`_shoot_starts`); the orbit found first is
-    kept, at its own v_d (`orbit.params`), its simulation record with `v_d`. A start
-    that fails at every one keeps the reason of `params.v_d`."""
+    then for each start that gives no periodic orbit there, or one that has lost
+    the pattern it excites (another number of sites on the HALC: the ring of 20's
+    nineteen-site start ends on the whole ring at 1.5), at the belt speeds
+    `params.v_d` + `retry` in turn (`_shoot_starts`). The first orbit found with
+    as many sites on the HALC as the start excites is kept, else the first orbit
+    found; at its own v_d (`orbit.params`), its simulation record with `v_d`. A
+    start that fails at every one keeps the reason of `params.v_d`."""
     sites = check_starts(params.graph, sites)
     v0 = float(params.v_d)
     out = _shoot_starts(orbits, params, sites, [v0], options, progress)[v0]
     for k, (_, sim, _) in out.items():
         sim["v_d"] = v0
-    again_k = [k for k in sites if out[k][0] is None]
+
+    def keeps(k, orbit) -> bool:
+        return int(orbit.n_halc) == int(start_mask(params.graph, k).sum())
+
+    again_k = [k for k in sites if out[k][0] is None or not keeps(k, out[k][0])]
     if again_k and retry:
         vds = [v0 + d for d in retry]
         again = _shoot_starts(orbits, params, again_k, vds, options, progress)
         for k in again_k:
             tried = [again[v][k] + (v,) for v in vds]
-            found = next(((o, sim | {"v_d": v}, None) for o, sim, _, v in tried
-                          if o is not None), None)
-            out[k] = found or out[k][:2] + (out[k][2] + "; at v_d " + ", ".join(
-                f"{v:g}: {why}" for _, _, why, v in tried),)
+            found = [(o, sim | {"v_d": v}, None) for o, sim, _, v in tried if o is not None]
+            kept = [f for f in found if keeps(k, f[0])]
+            if out[k][0] is not None:
+                out[k] = kept[0] if kept else out[k]
+                continue
+            out[k] = (kept + found or [out[k][:2] + (out[k][2] + "; at v_d " + ", ".join(
+                f"{v:g}: {why}" for _, _, why, v in tried),)])[0]
     return out
 
 
@@ -244,11 +276,14 @@ def _shoot_starts(orbits, params: ChainParams, sites: tuple, vds: list,
                 continue
             n = int(np.argmax(amplitudes))
             sim["phase_oscillator"] = n  # of the orbit's phase condition
-            guess = _turning_point(orbits, at, ds["y_final"].values[j, i], n)
-            if guess is None:
+            guesses = _recurrences(orbits, at, ds["y_final"].values[j, i], n)
+            if not guesses:
                 out[v][k] = (None, sim, "no turning point: steady sliding")
                 continue
-            orbit = orbits.shoot(at, guess[0], guess[1], n)
+            for guess in guesses[:1 + RECURRENCES]:
+                orbit = orbits.shoot(at, guess[0], guess[1], n)
+                if bool(orbit.converged):
+                    break
             reason = None if bool(orbit.converged) else (
                 f"shooting did not converge (residual {float(orbit.residual):.2g}): the "
                 f"simulated state is not periodic")
@@ -436,8 +471,9 @@ SLIDING_PASSES = 4
 #: (2: through sliding points from the branch's last three orbits, cut at a Hopf
 #: point and where it retraces itself; 3: starts not periodic at v_d tried again at
 #: `RETRY_VD`; 4: branch points on unstable branches, switched there, switched
-#: branches cut where they repeat themselves).
-BRANCH_METHOD = 4
+#: branches cut where they repeat themselves; 5: starts that lose their pattern
+#: tried again, shooting from close recurrences and by the damped Newton method).
+BRANCH_METHOD = 5
 
 
 def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationOptions, *,
@@ -890,7 +926,7 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
                 "continuation": continuation_options, "start": start_options,
                 "switch": bool(switch), "deflate": int(deflate),
                 "sliding_passes": SLIDING_PASSES, "branch_method": BRANCH_METHOD,
-                "retry_vd": list(RETRY_VD)}
+                "retry_vd": list(RETRY_VD), "recurrences": RECURRENCES}
     paths = {k: None if out is None else Path(out) / (
         f"branch_{k}.nc" if isinstance(k, str) else f"branch_k{k}.nc").replace(":", "")
         for k in sites}
