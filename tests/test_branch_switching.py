@@ -91,28 +91,30 @@ def test_the_snake_switches_branches_at_its_branch_points(branch_point, tmp_path
     """`localized_branches` (switch=True, the default) follows the other branch at
     the two-site state's branch point: a branch labelled as switched, starting at the
     branch point that `locate_bifurcations` finds here, with unequal amplitudes,
-    connected to its parent both ways; stored and read back whole."""
+    connected to its parent both ways; stored and read back whole. The start is
+    eq. (8) with both sites excited (with one, the two-site state it reaches has
+    not its pattern, and the snake looks for one site at other belt speeds)."""
     _, _, point = branch_point
     kwargs = dict(continuation_options=jc.ContinuationOptions(
         ds=0.02, ds_max=0.1, p_min=1.0, p_max=1.85, max_points=12),
         start_options=jc.SimulationOptions(t_end=2000.0, transient=1500.0),
         simulation_check=False, out=tmp_path)
-    found = jc.localized_branches(RING, (1,), **kwargs)
+    found = jc.localized_branches(RING, (2,), **kwargs)
     labels = [b["label"] for b in found["summary"]["branches"]]
-    assert labels == ["k=1", "k=1 switched 1"]
+    assert labels == ["k=2", "k=2 switched 1"]
     parent, switched = found["summary"]["branches"]
     assert abs(switched["switched_from_vd"] - float(point.p)) < 1e-6
-    assert switched["connects_to"] == ["k=1"] and "k=1 switched 1" in parent["connects_to"]
-    amplitudes = found["datasets"]["k=1 switched 1"]["amplitudes"].values
+    assert switched["connects_to"] == ["k=2"] and "k=2 switched 1" in parent["connects_to"]
+    amplitudes = found["datasets"]["k=2 switched 1"]["amplitudes"].values
     assert np.all(np.abs(amplitudes[:, 0] - amplitudes[:, 1]) > 1e-5)
     def refuse(*args, **kwargs):
         raise AssertionError("a stored branch was computed again")
 
     replace_internal(monkeypatch, "snake starts", refuse)
-    again = jc.localized_branches(RING, (1,), **kwargs)  # read back, not recomputed
+    again = jc.localized_branches(RING, (2,), **kwargs)  # read back, not recomputed
     assert list(again["datasets"]) == labels
-    assert np.array_equal(again["datasets"]["k=1 switched 1"]["u"].values,
-                          found["datasets"]["k=1 switched 1"]["u"].values)
+    assert np.array_equal(again["datasets"]["k=2 switched 1"]["u"].values,
+                          found["datasets"]["k=2 switched 1"]["u"].values)
 
 
 def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch, tmp_path):

@@ -98,10 +98,11 @@ def test_the_damped_newton_method_reaches_a_weakly_unstable_orbit_from_farther()
     found by the snake from its simulation) is unstable by a real multiplier 1.034
     and has a complex pair 1.007 beside the trivial 1. Its state rounded to three
     digits is the start of Newton's method alone (`damped_steps=0`), which
-    converges there. From that orbit's state moved by 0.05 (normal, eight seeds),
-    Newton's method alone fails for some seeds (2 of the 8 when this test was
-    written); with the damped Newton method after it (the default) every one
-    converges to the same orbit: period to 1e-9, state to 1e-7."""
+    converges there. From that orbit's state moved by 0.05 (normal, seeds 4 to 7),
+    Newton's method alone fails for some seeds (6 and 7 when this test was
+    written; 2 of seeds 0 to 7); with the damped Newton method after it (the
+    default) every one converges to the same orbit: period to 1e-9, state to
+    1e-7."""
     ring = jc.ChainParams(n_osc=8, v_d=1.4)
     options = jc.ExactShooting(phase_oscillator=2)
     near = jnp.array([[0.566, 0.726, 2.118, 1.409, -0.377, -0.824, -0.245, 0.67],
@@ -109,7 +110,7 @@ def test_the_damped_newton_method_reaches_a_weakly_unstable_orbit_from_farther()
     orbit = jc.exact_periodic_orbit(ring, near, 6.292,
                                     dataclasses.replace(options, damped_steps=0))
     assert int(orbit.n_halc) == 5 and not bool(orbit.stable)
-    for seed in range(8):
+    for seed in range(4, 8):
         moved = orbit.y0 + 0.05 * np.random.default_rng(seed).normal(size=(2, 8))
         again = jc.exact_periodic_orbit(ring, moved, orbit.period, options)
         assert abs(float(again.period - orbit.period)) < 1e-9, seed
