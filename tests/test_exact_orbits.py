@@ -3,7 +3,6 @@
 scipy cycle, its exact Floquet multipliers, and Newton's convergence from
 perturbed starts."""
 
-import dataclasses
 import json
 
 import jax.numpy as jnp
@@ -97,18 +96,16 @@ def test_the_damped_newton_method_reaches_a_weakly_unstable_orbit_from_farther()
     """The ring of eight's five-site orbit at v_d 1.4 (eq. (8) with five sites,
     found by the snake from its simulation) is unstable by a real multiplier 1.034
     and has a complex pair 1.007 beside the trivial 1. Its state rounded to three
-    digits is the start of Newton's method alone (`damped_steps=0`), which
-    converges there. From that orbit's state moved by 0.05 (normal, seeds 4 to 7),
-    Newton's method alone fails for some seeds (6 and 7 when this test was
-    written; 2 of seeds 0 to 7); with the damped Newton method after it (the
-    default) every one converges to the same orbit: period to 1e-9, state to
-    1e-7."""
+    digits is the start of shooting. From that orbit's state moved by 0.05
+    (normal, seeds 4 to 7), Newton's method alone fails for some seeds (6 and 7
+    when this test was written; 2 of seeds 0 to 7); with the damped Newton method
+    after it (the default) every one converges to the same orbit: period to 1e-9,
+    state to 1e-7."""
     ring = jc.ChainParams(n_osc=8, v_d=1.4)
     options = jc.ExactShooting(phase_oscillator=2)
     near = jnp.array([[0.566, 0.726, 2.118, 1.409, -0.377, -0.824, -0.245, 0.67],
                       [0.063, 0.317, 0.0, -1.289, -1.088, -0.014, -1.226, -0.31]])
-    orbit = jc.exact_periodic_orbit(ring, near, 6.292,
-                                    dataclasses.replace(options, damped_steps=0))
+    orbit = jc.exact_periodic_orbit(ring, near, 6.292, options)
     assert int(orbit.n_halc) == 5 and not bool(orbit.stable)
     for seed in range(4, 8):
         moved = orbit.y0 + 0.05 * np.random.default_rng(seed).normal(size=(2, 8))
