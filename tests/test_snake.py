@@ -250,12 +250,13 @@ def test_a_start_that_loses_its_pattern_is_tried_at_the_neighbouring_speeds(monk
     """A start whose orbit at v_d has another number of sites on the HALC than it
     excites is simulated again at v_d -+ 0.1, like one with no periodic orbit: the
     first orbit that keeps its number of sites is kept, else the orbit it had (or,
-    with none, the first orbit found); a start that keeps its pattern is not tried
-    again. `_shoot_starts` is replaced by a table of outcomes (n_HALC, None for no
-    periodic orbit) for each belt speed."""
-    table = {1.5: {1: None, 2: 3, 3: 4, 4: None, 5: 5},
-             1.4: {1: 2, 2: 3, 3: 4, 4: 5},
-             1.6: {1: 1, 2: 3, 3: 3, 4: None}}
+    with none, the first orbit found, or with none anywhere, the reasons of every
+    speed); a start that keeps its pattern is not tried again. `_shoot_starts` is
+    replaced by a table of outcomes (n_HALC, None for no periodic orbit) for each
+    belt speed."""
+    table = {1.5: {1: None, 2: 3, 3: 4, 4: None, 5: 5, 6: None},
+             1.4: {1: 2, 2: 3, 3: 4, 4: 5, 6: None},
+             1.6: {1: 1, 2: 3, 3: 3, 4: None, 6: None}}
     tried = []
 
     class Orbit:
@@ -270,9 +271,12 @@ def test_a_start_that_loses_its_pattern_is_tried_at_the_neighbouring_speeds(monk
 
     replace_internal(monkeypatch, "snake starts at speeds", outcomes)
     ring = jc.ChainParams(n_osc=8, v_d=1.5)
-    out = internal("snake starts")(None, ring, (1, 2, 3, 4, 5), jc.SimulationOptions(),
+    out = internal("snake starts")(None, ring, (1, 2, 3, 4, 5, 6), jc.SimulationOptions(),
                                    False)
-    assert tried == [((1, 2, 3, 4, 5), (1.5,)), ((1, 2, 3, 4), (1.4, 1.6))]
+    assert tried == [((1, 2, 3, 4, 5, 6), (1.5,)), ((1, 2, 3, 4, 6), (1.4, 1.6))]
+    failed = out.pop(6)
+    assert failed[0] is None and failed[2] == ("not periodic; at v_d 1.4: not periodic, "
+                                               "1.6: not periodic")
     chosen = {k: (o.v_d, o.n_halc) for k, (o, _, _) in out.items()}
     assert chosen == {1: (1.6, 1), 2: (1.5, 3), 3: (1.6, 3), 4: (1.4, 5), 5: (1.5, 5)}
     assert [out[k][1]["v_d"] for k in (1, 2, 3, 4, 5)] == [1.6, 1.5, 1.6, 1.4, 1.5]

@@ -245,12 +245,14 @@ def _start_orbits(orbits, params: ChainParams, sites, options: SimulationOptions
         for k in again_k:
             tried = [again[v][k] + (v,) for v in vds]
             found = [(o, sim | {"v_d": v}, None) for o, sim, _, v in tried if o is not None]
-            kept = [f for f in found if keeps(k, f[0])]
-            if out[k][0] is not None:
-                out[k] = kept[0] if kept else out[k]
-                continue
-            out[k] = (kept + found or [out[k][:2] + (out[k][2] + "; at v_d " + ", ".join(
-                f"{v:g}: {why}" for _, _, why, v in tried),)])[0]
+            # an orbit that keeps the pattern; else, for a start with none, any orbit
+            choice = [f for f in found if keeps(k, f[0])] or (
+                found if out[k][0] is None else [])
+            if choice:
+                out[k] = choice[0]
+            elif out[k][0] is None:
+                out[k] = out[k][:2] + (out[k][2] + "; at v_d " + ", ".join(
+                    f"{v:g}: {why}" for _, _, why, v in tried),)
     return out
 
 
