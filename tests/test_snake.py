@@ -4,6 +4,7 @@ the stored branches read back, and the command line."""
 
 import json
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 import xarray as xr
@@ -244,6 +245,76 @@ def test_recurrences_of_a_periodic_orbit_return_after_one_period():
         assert period == pytest.approx(float(cycle.period), abs=1e-3)
         back = orbits.samples(one, y, np.array([0.0, float(cycle.period)]))[-1]
         np.testing.assert_allclose(back, y, atol=1e-8)
+
+
+def test_eq8_on_the_ring_is_fixed_by_the_reflection_about_an_odd_block_s_centre():
+    """The isotropy subgroup of eq. (8)'s state on the ring of eight (signs (-1)^n):
+    for an odd block, the identity and the reflection about the block's centre (an
+    involution mapping the block onto itself); for an even block, the identity
+    alone (the reflection swaps the signs); for the whole ring, the rotations by
+    an even number of sites and the reflections through a site, eight in all; on
+    a chain that is not a homogeneous ring, the identity."""
+    starts = internal_module("snake starts")
+    ring = jc.ChainParams(n_osc=8, v_d=1.5)
+    ident = np.arange(8)
+    for k in range(1, 9):
+        mask = starts.start_mask(ring.graph, k)
+        perms = starts.isotropy(ring, jc.OutOfPhaseExcitation.eq8(mask)(ring).reshape(2, 8))
+        assert np.array_equal(perms[0], ident)
+        if k == 8:
+            assert len(perms) == 8
+        elif k % 2:
+            assert len(perms) == 2
+            r = perms[1]
+            assert np.array_equal(r[r], ident) and np.array_equal(mask[r], mask)
+            assert np.sum(r == ident) == 2  # a reflection through two sites of an even ring
+        else:
+            assert len(perms) == 1
+    mistuned = jc.ChainParams(n_osc=8, v_d=1.5, xi=np.linspace(0.05, 0.06, 8))
+    y = jc.OutOfPhaseExcitation.eq8(starts.start_mask(mistuned.graph, 3))(mistuned)
+    assert len(starts.isotropy(mistuned, y.reshape(2, 8))) == 1
+
+
+@pytest.mark.numerics
+def test_inside_its_fixed_subspace_the_symmetric_start_reaches_an_orbit_unstable_across_it():
+    """Eq. (8) with five of the ring of eight's oscillators excited, simulated
+    inside the fixed subspace of its reflection (`symmetric_state`) and shot from
+    there, gives a five-site orbit fixed by the reflection that is unstable (a
+    Floquet multiplier beyond 1) only across that subspace: the monodromy matrix
+    restricted to it, by central finite differences of the exact engine's flow
+    (`nonsmooth_flow`) along an orthonormal basis of the subspace, has no
+    multiplier beyond 1 + 1e-3, and the one at 1 (the flow's direction) is
+    among them."""
+    starts = internal_module("snake starts")
+    orbits = internal("snake orbits")("exact")
+    at = jc.ChainParams(n_osc=8, v_d=1.5)
+    start = np.asarray(jc.OutOfPhaseExcitation.eq8(starts.start_mask(at.graph, 5))(at))
+    perms = starts.isotropy(at, start.reshape(2, 8))
+    orbit, why, _ = internal("snake symmetric orbit")(orbits, at, start.reshape(2, 8), perms,
+                                                      12_000.0)
+    assert why is None and int(orbit.n_halc) == 5
+    y0, period, r = np.asarray(orbit.y0), float(orbit.period), perms[1]
+    np.testing.assert_allclose(y0[:, r], y0, atol=1e-8)
+    assert np.max(np.abs(np.asarray(orbit.multipliers))) > 1.0 + 1e-3
+    # an orthonormal basis of the fixed subspace: e_n + e_r(n), normalised
+    pairs = sorted({tuple(sorted((n, int(r[n])))) for n in range(8)})
+    basis = []
+    for row in range(2):
+        for pair in pairs:
+            e = np.zeros((2, 8))
+            e[row, list(pair)] = 1.0
+            basis.append(e / np.linalg.norm(e))
+    h, flow = 1e-6, jc.ExactShooting().flow
+    columns = []
+    for e in basis:
+        ends = [np.asarray(jc.nonsmooth_flow(at, jnp.asarray(y0 + s * h * e),
+                                             jnp.array([period]), flow)[0][-1])
+                for s in (1, -1)]
+        columns.append((ends[0] - ends[1]).reshape(-1) / (2 * h))
+    restricted = np.stack([e.reshape(-1) for e in basis]) @ np.stack(columns, axis=1)
+    moduli = np.abs(np.linalg.eigvals(restricted))
+    assert np.max(moduli) < 1.0 + 1e-3
+    assert np.min(np.abs(moduli - 1.0)) < 1e-3
 
 
 def test_a_start_that_loses_its_pattern_is_tried_at_the_neighbouring_speeds(monkeypatch):

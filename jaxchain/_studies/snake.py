@@ -16,7 +16,7 @@ from .._engine.progress import tqdm
 from .._bifurcation.bifurcations import locate_bifurcations
 from .._bifurcation.branch_switching import switch_branch, switch_by_deflation
 from .._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
-from .._bifurcation.deflation import distinct_orbits
+from .._bifurcation.deflation import chain_symmetries, distinct_orbits
 from .._bifurcation.past_sliding import past_sliding_start
 from .._bifurcation.shooting import pack, unpack
 from .._sweeps.ensemble import ensemble
@@ -125,6 +125,14 @@ RETRY_VD = (-0.1, 0.1)
 #: at v_d = 1.6 lingers near an unstable orbit (multiplier 1.02) without settling.
 RECURRENCES = 4
 
+#: A start whose simulated state gives no orbit with as many sites on the HALC as it
+#: excites, and whose eq. (8) state a symmetry of the chain fixes (`isotropy`), is
+#: simulated again inside that symmetry's fixed subspace (`symmetric_state`),
+#: projected back onto it every this many time units: the ring of 20's
+#: nineteen-site orbit at v_d = 1.6 is unstable only across it (multiplier 1.0206;
+#: e-folding in 300 time units, so rounding grows no further than 1e-15 within one).
+SYMMETRIC_CHUNK = 100.0
+
 #: Continuation of each branch: far enough each way (150 points) to pass its folds.
 SNAKE_CONTINUATION = ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.0, p_max=2.2,
                                          max_points=150)
@@ -158,7 +166,12 @@ def _recurrences(orbits, params: ChainParams, y: np.ndarray, oscillator: int,
     close recurrence lies near a periodic orbit, unstable ones included, that
     the flow passes (Auerbach et al. 1987, Phys. Rev. Lett. 58, 2387)."""
     ts, ys, down = _downward_crossings(orbits, params, y, horizon)
-    down = down[oscillator]
+    return _closest_returns(ts, ys, down[oscillator])
+
+
+def _closest_returns(ts, ys, down) -> list[tuple[np.ndarray, float]]:
+    """`_recurrences` from the samples (ts, ys) and the indices `down` of one
+    oscillator's turning points (`_downward_crossings`)."""
     gaps = [float(np.max(np.abs(ys[b] - ys[a]))) for a, b in zip(down[1:-1], down[2:])]
     order = [0] + [1 + i for i in np.argsort(gaps, kind="stable")]
     return [(ys[down[i]], float(ts[down[i + 1]] - ts[down[i]])) for i in order
@@ -173,12 +186,16 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
     integrated over `options`, then a turning point of the oscillator of largest
     amplitude (the phase condition's oscillator) and the time to the next one as the
     guesses of `periodic_orbit` (where it fails, from the `RECURRENCES` states of
-    closest return, `_recurrences`). Where that state is not periodic (or steady
-    sliding, or the simulation fails), or where its orbit has not as many sites on
-    the HALC as the start excites, eq. (8) is simulated again at `params.v_d` + each
-    offset of `retry` in turn, and the first periodic orbit that keeps the start's
-    number of sites (else the first periodic one, else the orbit at `params.v_d`)
-    is kept at its own v_d.
+    closest return, `_recurrences`). Where that gives no orbit with as many sites on
+    the HALC as the start excites, and a symmetry of the chain fixes the start's
+    eq. (8) state (`isotropy`), eq. (8) is simulated again inside the fixed subspace
+    of those symmetries (`symmetric_state`) and shot from there; its orbit is kept
+    if it has the start's number of sites, or if there was none. Where that state
+    is not periodic (or steady sliding, or the simulation fails), or where its orbit
+    has not as many sites on the HALC as the start excites, eq. (8) is simulated
+    again at `params.v_d` + each offset of `retry` in turn, and the first periodic
+    orbit that keeps the start's number of sites (else the first periodic one, else
+    the orbit at `params.v_d`) is kept at its own v_d.
 
     **Arguments:**
 
@@ -278,19 +295,86 @@ def _shoot_starts(orbits, params: ChainParams, sites: tuple, vds: list,
                 continue
             n = int(np.argmax(amplitudes))
             sim["phase_oscillator"] = n  # of the orbit's phase condition
-            guesses = _recurrences(orbits, at, ds["y_final"].values[j, i], n)
-            if not guesses:
-                out[v][k] = (None, sim, "no turning point: steady sliding")
-                continue
-            for guess in guesses[:1 + RECURRENCES]:
-                orbit = orbits.shoot(at, guess[0], guess[1], n)
-                if bool(orbit.converged):
-                    break
-            reason = None if bool(orbit.converged) else (
-                f"shooting did not converge (residual {float(orbit.residual):.2g}): the "
-                f"simulated state is not periodic")
-            out[v][k] = (orbit if reason is None else None, sim, reason)
+            orbit, reason = _shoot_guesses(
+                orbits, at, _recurrences(orbits, at, ds["y_final"].values[j, i], n), n)
+            n_sites = int(masks[i].sum())
+            if orbit is None or int(orbit.n_halc) != n_sites:
+                start = np.asarray(OutOfPhaseExcitation.eq8(masks[i])(at)).reshape(2, -1)
+                perms = isotropy(at, start)
+                if len(perms) > 1:  # simulated again inside the start's fixed subspace
+                    again, why, m = _symmetric_orbit(orbits, at, start, perms, options.t_end)
+                    if again is not None and (orbit is None or int(again.n_halc) == n_sites):
+                        orbit, reason = again, None
+                        sim |= {"phase_oscillator": m, "symmetric": True}
+                    elif orbit is None:
+                        reason += f"; inside its symmetry's fixed subspace, {why}"
+            out[v][k] = (orbit, sim, reason)
     return out
+
+
+def _symmetric_orbit(orbits, params: ChainParams, start, perms, t_end: float):
+    """The start simulated inside the fixed subspace of `perms` (`symmetric_state`)
+    and refined by shooting from its recurrences, projected onto it, with the
+    oscillator of largest amplitude as the phase oscillator: (orbit or None, why
+    none or None, that oscillator)."""
+    y = symmetric_state(orbits, params, start, perms, t_end)
+    if not np.all(np.isfinite(y)):
+        return None, "the simulation failed", 0
+    ts, ys, down = _downward_crossings(orbits, params, y)
+    m = int(np.argmax(np.ptp(ys[:, 0], axis=0)))
+    return (*_shoot_guesses(orbits, params, _closest_returns(ts, ys, down[m]), m, perms), m)
+
+
+def _shoot_guesses(orbits, params: ChainParams, guesses: list, n: int, perms=None):
+    """Shooting (`orbits.shoot`, phase oscillator n) from the first 1 + `RECURRENCES`
+    of `guesses` (`_recurrences`) in turn, each first projected onto the fixed
+    subspace of `perms` where given (`symmetric_state`): (the first converged orbit,
+    None), or (None, why none)."""
+    if not guesses:
+        return None, "no turning point: steady sliding"
+    for y, period in guesses[:1 + RECURRENCES]:
+        orbit = orbits.shoot(params, y if perms is None else _projected(y, perms), period, n)
+        if bool(orbit.converged):
+            return orbit, None
+    return None, (f"shooting did not converge (residual {float(orbit.residual):.2g}): the "
+                  f"simulated state is not periodic")
+
+
+def isotropy(params: ChainParams, y) -> np.ndarray:
+    """The symmetries of the chain (`chain_symmetries`: on a homogeneous ring its
+    rotations and reflections) that map the state y, shape (2, n_osc), onto itself:
+    its isotropy subgroup, shape (s, n_osc), the identity first. For eq. (8) on the
+    ring, an odd block of excited oscillators is fixed by the reflection about its
+    centre; an even block by no symmetry (its signs alternate)."""
+    y = np.asarray(y)
+    perms = np.asarray(chain_symmetries(params))
+    fixed = perms[[np.allclose(y[:, p], y, rtol=0.0, atol=1e-12) for p in perms]]
+    return fixed[np.argsort([not np.array_equal(p, np.arange(y.shape[1])) for p in fixed],
+                            kind="stable")]
+
+
+def _projected(y, perms) -> np.ndarray:
+    """The orthogonal projection of y, shape (2, n_osc), onto the states fixed by
+    every permutation of `perms` (a group): the mean of its copies y[:, p]."""
+    y = np.asarray(y)
+    return np.mean([y[:, p] for p in perms], axis=0)
+
+
+def symmetric_state(orbits, params: ChainParams, y, perms, t_end: float,
+                    chunk: float = SYMMETRIC_CHUNK) -> np.ndarray:
+    """The flow of the engine of `orbits` (`snake_orbits`) from y, shape (2, n_osc),
+    over `t_end` (dimensionless time, eqs. (4)-(6)), projected back onto the fixed
+    subspace of the group `perms` (`isotropy`) every `chunk`: the chain's
+    equations commute with its symmetries, so that subspace is invariant, and the
+    projection only removes the rounding errors that an instability across it
+    would grow. A periodic orbit unstable only across the subspace is an attractor
+    inside it (Golubitsky, Stewart and Schaeffer 1988, *Singularities and Groups in
+    Bifurcation Theory* II, Ch. XIII, the fixed-point subspaces). Shape (2, n_osc);
+    nan where the flow fails."""
+    y = _projected(y, perms)
+    for _ in range(int(np.ceil(t_end / chunk))):
+        y = _projected(orbits.samples(params, y, np.array([0.0, chunk]))[-1], perms)
+    return y
 
 
 def _branch_dataset(k: int, problem, branch, bifurcations) -> xr.Dataset:
@@ -474,8 +558,9 @@ SLIDING_PASSES = 4
 #: point and where it retraces itself; 3: starts not periodic at v_d tried again at
 #: `RETRY_VD`; 4: branch points on unstable branches, switched there, switched
 #: branches cut where they repeat themselves; 5: starts that lose their pattern
-#: tried again, shooting from close recurrences and by the damped Newton method).
-BRANCH_METHOD = 5
+#: tried again, shooting from close recurrences and by the damped Newton method;
+#: 6: starts simulated again inside the fixed subspace of their symmetry).
+BRANCH_METHOD = 6
 
 
 def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationOptions, *,
@@ -928,7 +1013,8 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
                 "continuation": continuation_options, "start": start_options,
                 "switch": bool(switch), "deflate": int(deflate),
                 "sliding_passes": SLIDING_PASSES, "branch_method": BRANCH_METHOD,
-                "retry_vd": list(RETRY_VD), "recurrences": RECURRENCES}
+                "retry_vd": list(RETRY_VD), "recurrences": RECURRENCES,
+                "symmetric_chunk": SYMMETRIC_CHUNK}
     paths = {k: None if out is None else Path(out) / (
         f"branch_{k}.nc" if isinstance(k, str) else f"branch_k{k}.nc").replace(":", "")
         for k in sites}
