@@ -353,6 +353,53 @@ def test_a_start_that_loses_its_pattern_is_tried_at_the_neighbouring_speeds(monk
     assert [out[k][1]["v_d"] for k in (1, 2, 3, 4, 5)] == [1.6, 1.5, 1.6, 1.4, 1.5]
 
 
+def test_a_start_without_its_own_orbit_is_simulated_inside_its_fixed_subspace(monkeypatch):
+    """After the neighbouring speeds, a start with no orbit of its own number of
+    sites whose eq. (8) state a reflection fixes (an odd k on the ring) is tried
+    inside that fixed subspace at v_d, then at v_d -+ 0.1: the first orbit with its
+    own number of sites is kept, marked `symmetric`, at its own v_d with its own
+    phase oscillator; an even start (no symmetry) and a start with its own orbit
+    are not tried; a start that fails there too keeps the orbit it had, or with
+    none its reasons, extended. `_shoot_starts` and `_symmetric_orbit` are
+    replaced by tables of outcomes (n_HALC, None for no periodic orbit)."""
+    plain = {1.5: {1: None, 3: 4, 4: None, 5: None, 7: 7},
+             1.4: {1: None, 3: 4, 4: None, 5: None},
+             1.6: {1: None, 3: 4, 4: None, 5: None}}
+    inside = {1.5: {1: 1, 3: 2, 5: None}, 1.4: {3: 3, 5: None}, 1.6: {5: 6}}
+    tried = []
+
+    class Orbit:
+        def __init__(self, n_halc, v_d):
+            self.n_halc, self.v_d, self.energy = n_halc, v_d, 1.0
+
+    def outcomes(orbits, params, sites, vds, options, progress):
+        return {v: {k: (None, {}, "not periodic") if plain[round(v, 9)][k] is None
+                    else (Orbit(plain[round(v, 9)][k], round(v, 9)), {}, None)
+                    for k in sites} for v in vds}
+
+    def symmetric(orbits, at, start, perms, t_end):
+        v, k = round(float(at.v_d), 9), int(np.sum(np.abs(start[0] - start[0, 0]) > 1e-12))
+        tried.append((k, v, len(perms)))
+        n = inside[v][k]
+        return (None, "not periodic", 0) if n is None else (Orbit(n, v), None, 9)
+
+    replace_internal(monkeypatch, "snake starts at speeds", outcomes)
+    replace_internal(monkeypatch, "snake symmetric orbit", symmetric)
+    ring = jc.ChainParams(n_osc=8, v_d=1.5)
+    out = internal("snake starts")(None, ring, (1, 3, 4, 5, 7), jc.SimulationOptions(), False)
+    assert tried == [(1, 1.5, 2), (3, 1.5, 2), (3, 1.4, 2), (5, 1.5, 2), (5, 1.4, 2),
+                     (5, 1.6, 2)]
+    assert {k: (o.v_d, o.n_halc) for k, (o, _, _) in out.items() if o is not None} == {
+        1: (1.5, 1), 3: (1.4, 3), 7: (1.5, 7)}
+    assert out[1][1] == {"n_halc": 1, "energy": 1.0, "phase_oscillator": 9, "v_d": 1.5,
+                         "symmetric": True}
+    assert out[3][1]["v_d"] == 1.4 and out[3][2] is None and "symmetric" not in out[7][1]
+    assert out[4][0] is None and "fixed subspace" not in out[4][2]
+    assert out[5][0] is None and out[5][2].endswith(
+        "; inside the fixed subspace of its symmetry, at v_d 1.5: not periodic, 1.4: not "
+        "periodic, 1.6: 6 sites on the HALC")
+
+
 @pytest.mark.numerics
 def test_snake_command_json_and_bad_options(tmp_path, capsys):
     """The command's branch, read back from its file, against scipy: each stored

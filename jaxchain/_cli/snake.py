@@ -23,14 +23,14 @@ which the paper's Fig. 3(b) only suggests by simulation ("snaking"):
     turning point of the oscillator of largest amplitude and the time to the next
     are the guesses of shooting (diffrax, Levenberg-Marquardt of optimistix, phase
     condition x_n'(0) = 0), and where it fails, the turning points where the
-    state comes back closest after one turn (close recurrences); a start that
-    gives no orbit with as many sites on the HALC as it excites, and whose eq. (8)
-    state a symmetry of the ring fixes (an odd block: the reflection about its
-    centre), is simulated again inside that symmetry's fixed subspace, where an
-    orbit unstable only across it attracts; an irregular state does not converge
-    and is reported; a start whose state is not periodic, or has another number
-    of sites on the HALC than it excites, is simulated again at --vd -+ 0.1 and
-    followed from there;
+    state comes back closest after one turn (close recurrences); an irregular
+    state does not converge and is reported; a start whose state is not periodic,
+    or has another number of sites on the HALC than it excites, is simulated
+    again at --vd -+ 0.1 and followed from there; one that still has no orbit
+    with its own number of sites, and whose eq. (8) state a symmetry of the ring
+    fixes (an odd block: the reflection about its centre), is simulated at --vd,
+    then --vd -+ 0.1, inside that symmetry's fixed subspace, where an orbit
+    unstable only across it attracts;
   - Floquet multipliers from the monodromy matrix (forward mode through the
     solver), the trivial one deflated (the flow direction); its distance from 1
     and the multipliers' change at 100x tighter tolerances are reported;

@@ -125,12 +125,12 @@ RETRY_VD = (-0.1, 0.1)
 #: at v_d = 1.6 lingers near an unstable orbit (multiplier 1.02) without settling.
 RECURRENCES = 4
 
-#: A start whose simulated state gives no orbit with as many sites on the HALC as it
-#: excites, and whose eq. (8) state a symmetry of the chain fixes (`isotropy`), is
-#: simulated again inside that symmetry's fixed subspace (`symmetric_state`),
-#: projected back onto it every this many time units: the ring of 20's
-#: nineteen-site orbit at v_d = 1.6 is unstable only across it (multiplier 1.0206;
-#: e-folding in 300 time units, so rounding grows no further than 1e-15 within one).
+#: A start that gives no orbit with as many sites on the HALC as it excites, at v_d
+#: or at the offsets `RETRY_VD`, and whose eq. (8) state a symmetry of the chain
+#: fixes (`isotropy`), is simulated again inside that symmetry's fixed subspace
+#: (`symmetric_state`), projected back onto it every this many time units: the ring
+#: of 20's nineteen-site orbit at v_d = 1.6 is unstable only across it (multiplier
+#: 1.0206 a period of 6.23: rounding grows by less than a factor 1.5 within one).
 SYMMETRIC_CHUNK = 100.0
 
 #: Continuation of each branch: far enough each way (150 points) to pass its folds.
@@ -186,16 +186,16 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
     integrated over `options`, then a turning point of the oscillator of largest
     amplitude (the phase condition's oscillator) and the time to the next one as the
     guesses of `periodic_orbit` (where it fails, from the `RECURRENCES` states of
-    closest return, `_recurrences`). Where that gives no orbit with as many sites on
-    the HALC as the start excites, and a symmetry of the chain fixes the start's
-    eq. (8) state (`isotropy`), eq. (8) is simulated again inside the fixed subspace
-    of those symmetries (`symmetric_state`) and shot from there; its orbit is kept
-    if it has the start's number of sites, or if there was none. Where that state
-    is not periodic (or steady sliding, or the simulation fails), or where its orbit
-    has not as many sites on the HALC as the start excites, eq. (8) is simulated
-    again at `params.v_d` + each offset of `retry` in turn, and the first periodic
-    orbit that keeps the start's number of sites (else the first periodic one, else
-    the orbit at `params.v_d`) is kept at its own v_d.
+    closest return, `_recurrences`). Where that state is not periodic (or steady
+    sliding, or the simulation fails), or where its orbit has not as many sites on
+    the HALC as the start excites, eq. (8) is simulated again at `params.v_d` + each
+    offset of `retry` in turn, and the first periodic orbit that keeps the start's
+    number of sites (else the first periodic one, else the orbit at `params.v_d`)
+    is kept at its own v_d. A start that still has no orbit with its own number of
+    sites, and whose eq. (8) state a symmetry of the chain fixes (`isotropy`), is
+    simulated inside the fixed subspace of those symmetries (`symmetric_state`) at
+    `params.v_d`, then at each offset, and shot from there: the first orbit with
+    its own number of sites replaces the one it had.
 
     **Arguments:**
 
@@ -245,19 +245,21 @@ def _start_orbits(orbits, params: ChainParams, sites, options: SimulationOptions
     `params.v_d` + `retry` in turn (`_shoot_starts`). The first orbit found with
     as many sites on the HALC as the start excites is kept, else the first orbit
     found; at its own v_d (`orbit.params`), its simulation record with `v_d`. A
-    start that fails at every one keeps the reason of `params.v_d`."""
+    start that fails at every one keeps the reason of `params.v_d`. A start with no
+    orbit of its own number of sites by then is tried inside the fixed subspace of
+    its symmetries at the same speeds (`_symmetric_start`)."""
     sites = check_starts(params.graph, sites)
     v0 = float(params.v_d)
+    vds = [v0 + d for d in retry]
     out = _shoot_starts(orbits, params, sites, [v0], options, progress)[v0]
     for k, (_, sim, _) in out.items():
         sim["v_d"] = v0
 
     def keeps(k, orbit) -> bool:
-        return int(orbit.n_halc) == int(start_mask(params.graph, k).sum())
+        return orbit is not None and int(orbit.n_halc) == int(start_mask(params.graph, k).sum())
 
-    again_k = [k for k in sites if out[k][0] is None or not keeps(k, out[k][0])]
+    again_k = [k for k in sites if not keeps(k, out[k][0])]
     if again_k and retry:
-        vds = [v0 + d for d in retry]
         again = _shoot_starts(orbits, params, again_k, vds, options, progress)
         for k in again_k:
             tried = [again[v][k] + (v,) for v in vds]
@@ -270,7 +272,34 @@ def _start_orbits(orbits, params: ChainParams, sites, options: SimulationOptions
             elif out[k][0] is None:
                 out[k] = out[k][:2] + (out[k][2] + "; at v_d " + ", ".join(
                     f"{v:g}: {why}" for _, _, why, v in tried),)
+    for k in [k for k in sites if not keeps(k, out[k][0])]:
+        out[k] = _symmetric_start(orbits, params, k, [v0, *vds], options.t_end, out[k])
     return out
+
+
+def _symmetric_start(orbits, params: ChainParams, k, vds: list, t_end: float, had: tuple
+                     ) -> tuple:
+    """The start k, which gave no orbit with its own number of sites, simulated
+    inside the fixed subspace of its eq. (8) state's symmetries (`isotropy`,
+    `_symmetric_orbit`) at each belt speed of `vds` in turn: the first orbit with
+    the start's number of sites, with its record (`symmetric` True); else `had`
+    (the reason of a start with no orbit extended)."""
+    mask, whys = start_mask(params.graph, k), []
+    for v in vds:
+        at = with_parameter(params, "v_d", v)
+        start = np.asarray(OutOfPhaseExcitation.eq8(mask)(at)).reshape(2, -1)
+        perms = isotropy(at, start)
+        if len(perms) == 1:  # no symmetry: nothing to try
+            return had
+        orbit, why, m = _symmetric_orbit(orbits, at, start, perms, t_end)
+        if orbit is not None and int(orbit.n_halc) == int(mask.sum()):
+            return orbit, {"n_halc": int(orbit.n_halc), "energy": float(orbit.energy),
+                           "phase_oscillator": m, "v_d": v, "symmetric": True}, None
+        whys.append(f"{v:g}: " + (why or f"{int(orbit.n_halc)} sites on the HALC"))
+    if had[0] is not None:
+        return had
+    return had[:2] + (had[2] + "; inside the fixed subspace of its symmetry, at v_d "
+                      + ", ".join(whys),)
 
 
 def _shoot_starts(orbits, params: ChainParams, sites: tuple, vds: list,
@@ -297,17 +326,6 @@ def _shoot_starts(orbits, params: ChainParams, sites: tuple, vds: list,
             sim["phase_oscillator"] = n  # of the orbit's phase condition
             orbit, reason = _shoot_guesses(
                 orbits, at, _recurrences(orbits, at, ds["y_final"].values[j, i], n), n)
-            n_sites = int(masks[i].sum())
-            if orbit is None or int(orbit.n_halc) != n_sites:
-                start = np.asarray(OutOfPhaseExcitation.eq8(masks[i])(at)).reshape(2, -1)
-                perms = isotropy(at, start)
-                if len(perms) > 1:  # simulated again inside the start's fixed subspace
-                    again, why, m = _symmetric_orbit(orbits, at, start, perms, options.t_end)
-                    if again is not None and (orbit is None or int(again.n_halc) == n_sites):
-                        orbit, reason = again, None
-                        sim |= {"phase_oscillator": m, "symmetric": True}
-                    elif orbit is None:
-                        reason += f"; inside its symmetry's fixed subspace, {why}"
             out[v][k] = (orbit, sim, reason)
     return out
 
@@ -1067,7 +1085,8 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
             _store_branches(out, _numbered(paths[k], "deflated", j), branches, settings, k)
             followed |= branches
         if own in mine:  # stored last: its attributes count the deflated branches
-            mine[own] = mine[own].assign_attrs(deflated=j, deflated_repeats=json.dumps(repeats))
+            mine[own] = mine[own].assign_attrs(deflated=j, deflated_repeats=json.dumps(repeats),
+                                               start_symmetric=int(bool(sim.get("symmetric"))))
             _store_branches(out, paths[k], mine, settings, k)
         else:
             repeated += repeats
@@ -1275,7 +1294,8 @@ def _branches_summary(datasets: dict, starts: dict, failed: dict, repeated: list
                  "points": int(ds.sizes["point"]),
                  "stop": json.loads(ds.attrs["stop"]),
                  "start": {"v_d": ds.attrs["start_vd"], "energy": ds.attrs["start_energy"],
-                           "n_halc": ds.attrs["start_n_halc"]},
+                           "n_halc": ds.attrs["start_n_halc"],
+                           "symmetric": bool(ds.attrs.get("start_symmetric", 0))},
                  "switched_from_vd": ds.attrs.get("switched_from_vd"),
                  "failed_switches": json.loads(ds.attrs.get("failed_switches", "[]")),
                  "largest_trivial_multiplier_error": float(
