@@ -400,6 +400,41 @@ def test_a_start_without_its_own_orbit_is_simulated_inside_its_fixed_subspace(mo
         "periodic, 1.6: 6 sites on the HALC")
 
 
+def test_neighbouring_numbers_of_sites_connect_where_one_joined_set_of_branches_has_both(
+        capsys):
+    """`_sites_connections` on four branches drawn by hand: A (one site, then none
+    past a sliding point), B (two sites) meeting C (two, then three sites), and D
+    (four sites) alone. 0 and 1 connect along A; 1 and 2 do not (A meets neither
+    B nor C); 2 and 3 connect through B and C, stable ones too (B stable with two
+    sites, C with three); 3 and 4 do not; nothing carries 5. The command prints
+    one line per pair."""
+    def branch(n_halc, stable):
+        return xr.Dataset({"n_halc": ("point", np.array(n_halc)),
+                           "stable": ("point", np.array(stable, dtype=bool))})
+
+    datasets = {"A": branch([1, 1, 1, 0, 0], [1, 1, 0, 0, 0]),
+                "B": branch([2, 2, 2], [1, 1, 0]), "C": branch([2, 3, 3], [0, 0, 1]),
+                "D": branch([4, 4], [1, 1])}
+    links = {"A": [], "B": ["C"], "C": ["B", "steady sliding"], "D": []}
+    out = internal_module("snake starts")._sites_connections(datasets, links, 5)
+    assert [c["sites"] for c in out] == [[n, n + 1] for n in range(5)]
+    assert [c["connected"] for c in out] == [True, False, True, False, False]
+    assert [c["stable_connected"] for c in out] == [False, False, True, False, False]
+    assert out[0]["through"] == [["A"]] and out[2]["through"] == [["B", "C"]]
+    assert out[1]["with_n"] == ["A"] and out[1]["with_n_plus_1"] == ["B", "C"]
+    assert out[4]["with_n"] == ["D"] and out[4]["with_n_plus_1"] == []
+    from jaxchain._cli.snake import _print_summary
+
+    _print_summary({"branches": [], "not_periodic": [], "sites_connections": out})
+    lines = capsys.readouterr().out.splitlines()
+    assert lines == [
+        "0 and 1 sites: connected through A, not the stable ones",
+        "1 and 2 sites: not connected (no branch, nor branches that meet, carry both)",
+        "2 and 3 sites: connected through B (and 1 more joined to it), stable ones too",
+        "3 and 4 sites: not connected (no branch, nor branches that meet, carry both)",
+        "4 and 5 sites: no orbit with 5 sites found"]
+
+
 @pytest.mark.numerics
 def test_snake_command_json_and_bad_options(tmp_path, capsys):
     """The command's branch, read back from its file, against scipy: each stored

@@ -49,8 +49,11 @@ which the paper's Fig. 3(b) only suggests by simulation ("snaking"):
     up to M further periodic orbits at --vd, none of those found before, each
     followed as a branch of its own, so that branches that meet no followed one
     are found too;
-  - which branches meet (the same orbit up to the chain's symmetries), and
-    direct simulation just inside and outside each end of each stable range
+  - which branches meet (the same orbit up to the chain's symmetries), and for
+    each n whether the orbits with n and n + 1 sites on the HALC connect (one
+    set of branches, joined where they meet, carries both), the stable ones
+    too;
+  - direct simulation just inside and outside each end of each stable range
     (--no-simulation skips it).
 
 Writes <out>/snake.png, <out>/snake.json and each branch to
@@ -210,6 +213,20 @@ def _print_summary(s: dict) -> None:
     for r in s.get("deflated_on_followed", []):
         print(f"{r['start']} deflated: an orbit (energy {r['energy']:.4g}) on the branch "
               f"{r['on']}, followed already")
+    for c in s.get("sites_connections", []):
+        n, m = c["sites"]
+        if not (c["with_n"] and c["with_n_plus_1"]):
+            missing = f"{n} or {m}" if not (c["with_n"] or c["with_n_plus_1"]) else (
+                n if not c["with_n"] else m)
+            print(f"{n} and {m} sites: no orbit with {missing} sites found")
+            continue
+        through = "; ".join(ls[0] + (f" (and {len(ls) - 1} more joined to it)" if len(ls) > 1
+                                     else "") for ls in c["through"])
+        print(f"{n} and {m} sites: " + (
+            f"connected through {through}" + (", stable ones too" if c["stable_connected"]
+                                              else ", not the stable ones")
+            if c["connected"] else "not connected (no branch, nor branches that meet, "
+                                   "carry both)"))
 
 
 def _number(value, spec: str) -> str:

@@ -734,6 +734,49 @@ def _connections(branches: dict, tol: float = 1e-3) -> dict:
     return out
 
 
+def _sites_connections(datasets: dict, links: dict, n_osc: int) -> list[dict]:
+    """Whether the orbits with n and with n + 1 sites on the HALC connect, for n = 0
+    ... n_osc - 1: the branches (labels of `datasets`, each with `n_halc` and
+    `stable` at each point) are joined where they meet (`links`: label -> the
+    labels it meets, `_connections` and the switched branches' parents) into
+    connected sets, and n connects to n + 1 where one such set carries orbits with
+    both numbers of sites (along one branch, through a sliding point, or across a
+    point where two meet); `stable_connected` where one set carries stable orbits
+    with both. One entry per n: sites [n, n + 1], the labels of the branches that
+    carry each (`with_n`, `with_n_plus_1`), `connected`, `through` (each connected
+    set that carries both, as sorted labels) and `stable_connected`."""
+    parent = {label: label for label in datasets}
+
+    def root(label):
+        while parent[label] != label:
+            label = parent[label]
+        return label
+
+    for a, met in links.items():
+        for b in met:
+            if a in parent and b in parent:
+                parent[root(a)] = root(b)
+    sets: dict = {}
+    for label in datasets:
+        sets.setdefault(root(label), []).append(label)
+    on = {label: set(ds["n_halc"].values.astype(int).tolist())
+          for label, ds in datasets.items()}
+    stable = {label: set(ds["n_halc"].values[ds["stable"].values.astype(bool)].astype(int)
+                         .tolist()) for label, ds in datasets.items()}
+    out = []
+    for n in range(n_osc):
+        both = [sorted(ls) for ls in sets.values()
+                if any(n in on[x] for x in ls) and any(n + 1 in on[x] for x in ls)]
+        out.append({"sites": [n, n + 1],
+                    "with_n": [x for x in datasets if n in on[x]],
+                    "with_n_plus_1": [x for x in datasets if n + 1 in on[x]],
+                    "connected": bool(both), "through": both,
+                    "stable_connected": any(
+                        any(n in stable[x] for x in ls) and any(n + 1 in stable[x] for x in ls)
+                        for ls in sets.values())})
+    return out
+
+
 def _phase_lags(orbits, params: ChainParams, y, sites) -> np.ndarray | None:
     """The phase of each oscillator of `sites` relative to the first, in periods
     (0 to 1): from the first turning point (x_n' from + to -) of each
@@ -969,9 +1012,11 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
 
     A dict with `summary` (JSON-ready: `branches`, a list of objects with `label`,
     `excited`, `sites`, `stable_ranges`, `bifurcations`, `connects_to`, ...;
-    `not_periodic`, the starts without a periodic orbit and why; and
+    `not_periodic`, the starts without a periodic orbit and why;
     `deflated_on_followed`, the deflated orbits found on a branch already followed,
-    each with its `start`, `energy`, `n_halc` and the branch it lies `on`) and
+    each with its `start`, `energy`, `n_halc` and the branch it lies `on`; and
+    `sites_connections`, for n = 0 ... N - 1 whether the orbits with n and n + 1
+    sites on the HALC connect, stable ones included, `_sites_connections`) and
     `datasets` (label -> the branch's `xarray.Dataset`).
 
     **Raises:**
@@ -984,7 +1029,7 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
         raise ValidationError(f"deflate must be a whole number >= 0, got {deflate!r}")
     run = _run_branches(orbits, params, sites, continuation_options, start_options, switch,
                         deflate, simulation_check, out, progress)
-    return _branches_summary(*run)
+    return _branches_summary(*run, params.n_osc)
 
 
 def _check_branches(params: ChainParams | None, sites, engine, shooting, solver, eps
@@ -1267,7 +1312,7 @@ def _stable_range_checks(orbits, params: ChainParams, datasets: dict,
 
 
 def _branches_summary(datasets: dict, starts: dict, failed: dict, repeated: list,
-                      checks: dict) -> dict:
+                      checks: dict, n_osc: int) -> dict:
     """The result of `localized_branches`: its JSON-ready summary, one entry per
     branch with what `_stable_range_checks` found, the deflated orbits that lie on
     branches already followed, and the datasets."""
@@ -1307,6 +1352,7 @@ def _branches_summary(datasets: dict, starts: dict, failed: dict, repeated: list
     summary = {"branches": branches,
                "not_periodic": [{"excited": k, "reason": r, "simulation": starts[k]}
                                 for k, r in failed.items()],
-               "deflated_on_followed": repeated}
+               "deflated_on_followed": repeated,
+               "sites_connections": _sites_connections(datasets, links, n_osc)}
     return {"summary": summary, "datasets": datasets}
 
