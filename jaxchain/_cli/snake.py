@@ -215,10 +215,11 @@ def _print_summary(s: dict) -> None:
               f"{r['on']}, followed already")
     for c in s.get("sites_connections", []):
         n, m = c["sites"]
+        if not (c["with_n"] or c["with_n_plus_1"]):
+            continue  # neither number of sites is on a branch of this run
         if not (c["with_n"] and c["with_n_plus_1"]):
-            missing = f"{n} or {m}" if not (c["with_n"] or c["with_n_plus_1"]) else (
-                n if not c["with_n"] else m)
-            print(f"{n} and {m} sites: no orbit with {missing} sites found")
+            print(f"{n} and {m} sites: no orbit with {n if not c['with_n'] else m} sites "
+                  "found")
             continue
         through = "; ".join(ls[0] + (f" (and {len(ls) - 1} more joined to it)" if len(ls) > 1
                                      else "") for ls in c["through"])
