@@ -294,6 +294,7 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "snake starts": ("jaxchain._studies.snake", "_start_orbits"),
              "snake starts at speeds": ("jaxchain._studies.snake", "_shoot_starts"),
              "snake symmetric orbit": ("jaxchain._studies.snake", "_symmetric_orbit"),
+             "snake summary lines": ("jaxchain._cli.snake", "_print_summary"),
              "snake deflated orbits": ("jaxchain._studies.snake", "_deflated_orbits"),
              "snake branch": ("jaxchain._studies.snake", "_follow_branch"),
              "snake through sliding": ("jaxchain._studies.snake", "_through_sliding"),

@@ -423,9 +423,8 @@ def test_neighbouring_numbers_of_sites_connect_where_one_joined_set_of_branches_
     assert out[0]["through"] == [["A"]] and out[2]["through"] == [["B", "C"]]
     assert out[1]["with_n"] == ["A"] and out[1]["with_n_plus_1"] == ["B", "C"]
     assert out[4]["with_n"] == ["D"] and out[4]["with_n_plus_1"] == []
-    from jaxchain._cli.snake import _print_summary
-
-    _print_summary({"branches": [], "not_periodic": [], "sites_connections": out})
+    internal("snake summary lines")({"branches": [], "not_periodic": [],
+                                     "sites_connections": out})
     lines = capsys.readouterr().out.splitlines()
     assert lines == [
         "0 and 1 sites: connected through A, not the stable ones",
