@@ -291,7 +291,7 @@ def test_inside_its_fixed_subspace_the_symmetric_start_reaches_an_orbit_unstable
     start = np.asarray(jc.OutOfPhaseExcitation.eq8(starts.start_mask(at.graph, 5))(at))
     perms = starts.isotropy(at, start.reshape(2, 8))
     orbit, why, _ = internal("snake symmetric orbit")(orbits, at, start.reshape(2, 8), perms,
-                                                      12_000.0)
+                                                      3000.0)
     assert why is None and int(orbit.n_halc) == 5
     y0, period, r = np.asarray(orbit.y0), float(orbit.period), perms[1]
     np.testing.assert_allclose(y0[:, r], y0, atol=1e-8)
