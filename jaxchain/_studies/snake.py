@@ -285,12 +285,16 @@ def _symmetric_start(orbits, params: ChainParams, k, vds: list, t_end: float, ha
     the start's number of sites, with its record (`symmetric` True); else `had`
     (the reason of a start with no orbit extended)."""
     mask, whys = start_mask(params.graph, k), []
-    for v in vds:
+
+    def eq8(v):
         at = with_parameter(params, "v_d", v)
-        start = np.asarray(OutOfPhaseExcitation.eq8(mask)(at)).reshape(2, -1)
-        perms = isotropy(at, start)
-        if len(perms) == 1:  # no symmetry: nothing to try
-            return had
+        return at, np.asarray(OutOfPhaseExcitation.eq8(mask)(at)).reshape(2, -1)
+
+    perms = isotropy(*eq8(vds[0]))  # the same at every belt speed
+    if len(perms) == 1:  # no symmetry: nothing to try
+        return had
+    for v in vds:
+        at, start = eq8(v)
         orbit, why, m = _symmetric_orbit(orbits, at, start, perms, t_end)
         if orbit is not None and int(orbit.n_halc) == int(mask.sum()):
             return orbit, {"n_halc": int(orbit.n_halc), "energy": float(orbit.energy),
