@@ -142,6 +142,7 @@ from ._bifurcation.deflation import (
 from ._bifurcation.branch_switching import (
     switch_branch as switch_branch, branch_direction as branch_direction,
     switch_by_deflation as switch_by_deflation, critical_directions as critical_directions,
+    symmetric_directions as symmetric_directions,
 )
 from ._bifurcation.grazing import (
     stick_slip_grazing as stick_slip_grazing, grazing_curve as grazing_curve,

@@ -300,6 +300,7 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "snake through sliding": ("jaxchain._studies.snake", "_through_sliding"),
              "snake pieces": ("jaxchain._studies.snake", "_pieces_dataset"),
              "snake switched branch": ("jaxchain._studies.snake", "_switched_branch"),
+             "snake switch along axes": ("jaxchain._studies.snake", "_switch_along_axes"),
              "snake orbits": ("jaxchain._studies.snake_orbits", "snake_orbits"),
              "orbit description": ("jaxchain._bifurcation.shooting", "describe_orbit"),
              "mistuning design problems": ("jaxchain._studies.mistuning.pattern_design",

@@ -173,7 +173,8 @@ def test_a_switch_that_fails_is_reported_with_its_branch_point(branch_point, mon
     monkeypatch.setattr("jaxchain._studies.snake.switch_by_deflation", lambda *a, **k: [])
     assert switched(*args, k=2, progress=False) == [{
         "v_d": float(point.p),
-        "reason": "switching did not converge; deflation beside it found no other orbit"}]
+        "reason": "switching did not converge; deflation beside it found no other orbit, "
+                  "nor a step along an axis of its symmetry"}]
 
 
 def _pitchfork(symmetric: bool):
@@ -280,3 +281,85 @@ def test_a_branch_point_on_an_unstable_branch_is_where_shooting_at_fixed_v_d_cro
     near = [at(point.after, -2e-4), at(point.after + 1, 2e-4)]
     assert far[0][0] == -far[1][0] and near[0][0] == -near[1][0]
     assert all(n[1] < f[1] and n[1] < 1e-2 for n, f in zip(near, far))
+
+
+def _s3_problem():
+    """u in R^3, G_i = (v_d - 1) u_i + sum_j u_j + u_i^2 - u_i^3: equivariant under
+    every permutation of (u_1, u_2, u_3) (S_3, the dihedral group of the triangle).
+    The trivial branch u = 0 meets a branch point at v_d = 1 whose critical
+    directions are the plane sum u = 0 (S_3's two-dimensional irreducible
+    representation; the symmetric direction's eigenvalue there is 3)."""
+    def residual(u, p):
+        return (p.v_d - 1) * u + jnp.sum(u) + u**2 - u**3
+    return jc.ContinuationProblem(residual=residual, u0=jnp.zeros(3),
+                                  params=jc.ChainParams(n_osc=1, v_d=1.0))
+
+
+def test_the_axes_of_a_symmetric_branch_point_are_the_lines_its_reflections_fix():
+    """At the S_3-symmetric branch point the critical plane sum u = 0 holds three
+    lines fixed by a transposition, (1, 1, -2) and its permutations, which the
+    rotations map onto each other: `symmetric_directions` keeps one, whichever
+    symmetry comes first, fixed by its transposition and normalised; Keller's step
+    along it, to either side, lands on a branch that keeps that symmetry (two
+    equal components), the same solution as the reduced two-unknown system
+    solved by scipy at that v_d; the rotations alone fix no line."""
+    from scipy.optimize import fsolve
+
+    problem, z, tangent = _s3_problem(), jnp.array([0.0, 0.0, 0.0, 1.0]), jnp.eye(4)[3]
+    perms = [[0, 1, 2], [1, 2, 0], [2, 0, 1], [1, 0, 2], [0, 2, 1], [2, 1, 0]]
+    actions = [p + [3] for p in perms]
+    axes = jc.symmetric_directions(problem, z, tangent, actions)
+    assert axes.shape == (1, 4)
+    np.testing.assert_allclose(axes[0], np.array([-1.0, -1.0, 2.0, 0.0]) / np.sqrt(6),
+                               atol=1e-12)
+    assert jc.symmetric_directions(problem, z, tangent, actions[:3]).shape == (0, 4)
+    with pytest.raises(ValueError, match="permutations"):
+        jc.symmetric_directions(problem, z, tangent, [[0, 1, 1, 3]])
+    branch = type("Branch", (), {"converged": np.ones(1, bool), "tangent": tangent[None]})
+    point = type("Point", (), {"kind": "branch point", "z": z, "after": 0, "p": 1.0})
+    for side in (1, -1):
+        new, direction = jc.switch_branch(problem, branch, point, step=0.05, side=side,
+                                          direction=axes[0])
+        u, p = np.asarray(new.u0), float(new.value())
+        assert abs(u[0] - u[1]) < 1e-10 and abs(u[0] - u[2]) > 1e-3
+        np.testing.assert_allclose(direction, side * axes[0], atol=1e-15)
+
+        def reduced(ac, p=p):
+            a, c = ac
+            s = 2 * a + c
+            return [(p - 1) * a + s + a**2 - a**3, (p - 1) * c + s + c**2 - c**3]
+        np.testing.assert_allclose(fsolve(reduced, u[[0, 2]], xtol=1e-13), u[[0, 2]],
+                                   atol=1e-9)
+        assert np.max(np.abs(problem.residual(jnp.asarray(u), new.params))) < 1e-9
+
+
+def test_the_snake_switches_along_the_axes_of_the_orbit_s_symmetry():
+    """The S_3 branch point above written as a ring of three's shooting unknowns
+    (x, x', T) with v_d the parameter: x as u above, x' = 0, T = 1. The snake's
+    step along the axes (`_switch_along_axes`: the isotropy of the state at the
+    point, `chain_symmetries` of the ring of three, every permutation) lands,
+    to both sides, on states that one transposition fixes and no rotation does,
+    each a zero of G; a point whose state has no symmetry gives none."""
+    def residual(u, p):
+        x, v, t = u[:3], u[3:6], u[6]
+        return jnp.concatenate([(p.v_d - 1) * x + jnp.sum(x) + x**2 - x**3, v,
+                                jnp.atleast_1d(t - 1)])
+    ring = jc.ChainParams(n_osc=3, v_d=1.0)
+    problem = jc.ContinuationProblem(residual=residual, u0=jnp.zeros(7).at[6].set(1.0),
+                                     params=ring)
+    tangent = jnp.eye(8)[7]
+    branch = type("Branch", (), {"converged": np.ones(1, bool), "tangent": tangent[None]})
+    point = type("Point", (), {"kind": "branch point", "after": 0, "p": 1.0,
+                               "z": jnp.zeros(8).at[6].set(1.0).at[7].set(1.0)})
+    starts = internal("snake switch along axes")(problem, branch, point, jc.PseudoArclength())
+    assert len(starts) == 2
+    perms = np.asarray(jc.chain_symmetries(ring))
+    for new, direction in starts:
+        x = np.asarray(new.u0[:3])
+        assert np.max(np.abs(residual(new.u0, new.params))) < 1e-9
+        fixed = [p for p in perms if np.allclose(x[p], x, atol=1e-10)]
+        assert len(fixed) == 2 and np.ptp(x) > 1e-3  # the identity and a transposition
+        assert abs(float(direction[-1])) < 1e-12  # the axis is orthogonal to the branch
+    asymmetric = type("Point", (), {**vars(point), "z": point.z.at[:3].set([0.1, 0.2, 0.3])})
+    assert internal("snake switch along axes")(problem, branch, asymmetric,
+                                               jc.PseudoArclength()) == []

@@ -3,7 +3,9 @@ kernel direction of the continuation Jacobian that the followed branch does not
 take (Keller, *Numerical solution of bifurcation and nonlinear eigenvalue
 problems* (1977); Seydel, *Practical Bifurcation and Stability Analysis*, 3rd ed.
 (2010), Sect. 5.6), or, where the kernel has more dimensions than that (a
-symmetric ring), by deflation from the followed branch's orbits beside it."""
+symmetric ring), by deflation from the followed branch's orbits beside it, or along
+the lines of the kernel that the ring's symmetries fix (the equivariant branching
+lemma)."""
 
 import itertools
 
@@ -33,12 +35,13 @@ def branch_direction(problem: ContinuationProblem, z: Float[Array, " n+1"],
 
 def switch_branch(problem: ContinuationProblem, branch: Branch, point: BifurcationPoint, *,
                   step: float = 0.02, side: int = 1,
-                  algorithm: PseudoArclength = PseudoArclength()
+                  algorithm: PseudoArclength = PseudoArclength(), direction=None
                   ) -> tuple[ContinuationProblem, Float[Array, " n+1"]]:
     """A first point of the other branch through a branch point, and the direction
     to follow it: from the branch point z_b step `side * step` along
-    `branch_direction`, t, then Newton's method on G = 0 with <t, z - z_b> = side
-    * step (Keller's corrector), which keeps it off the followed branch.
+    `branch_direction` (or `direction`), t, then Newton's method on G = 0 with
+    <t, z - z_b> = side * step (Keller's corrector), which keeps it off the
+    followed branch.
 
     **Arguments:**
 
@@ -49,6 +52,9 @@ def switch_branch(problem: ContinuationProblem, branch: Branch, point: Bifurcati
     - `side`: +1 or -1, which half of the other branch (at a symmetry-breaking
         pitchfork the two halves are symmetric copies of each other).
     - `algorithm`: `PseudoArclength` (Newton's tolerance and budget).
+    - `direction`: the unit direction in (u, p) to step along, shape (n + 1,),
+        instead of `branch_direction`: one of `symmetric_directions` where the
+        kernel has more than one critical direction.
 
     **Returns:**
 
@@ -66,8 +72,10 @@ def switch_branch(problem: ContinuationProblem, branch: Branch, point: Bifurcati
         raise ValidationError(f"switch_branch needs step > 0 and side +1 or -1, got "
                               f"{step!r} and {side!r}")
     ok = np.asarray(branch.converged)
-    tangent = branch.tangent[np.nonzero(ok)[0][point.after]]
-    direction = side * branch_direction(problem, point.z, tangent)
+    if direction is None:
+        tangent = branch.tangent[np.nonzero(ok)[0][point.after]]
+        direction = branch_direction(problem, point.z, tangent)
+    direction = side * jnp.asarray(direction, dtype=float)
     z, converged, _, _ = _correct(problem, algorithm, point.z + step * direction, direction)
     if not bool(converged):
         raise RuntimeError(f"switching at the branch point p = {float(point.p):.6g} did "
@@ -97,8 +105,10 @@ def critical_directions(problem: ContinuationProblem, z: Float[Array, " n+1"],
     singular vector is otherwise arbitrary). Shape (k, n + 1)."""
     jac = np.asarray(jax.jacfwd(problem)(jnp.asarray(z, dtype=float)))
     _, s, vt = np.linalg.svd(jac)
-    small = s[::-1][:_CRITICAL + 1]  # the smallest first
-    k = count or 1 + int(np.argmax(small[1:] / np.maximum(small[:-1], np.finfo(float).tiny)))
+    # the smallest first, each at least the rounding of the largest: below it two
+    # singular values are alike (an exact zero and 1e-17 make no gap)
+    small = np.maximum(s[::-1][:_CRITICAL + 1], s[0] * max(jac.shape) * np.finfo(float).eps)
+    k = count or 1 + int(np.argmax(small[1:] / small[:-1]))
     kernel = vt[-(k + 1):]  # k critical directions and the always-present one
     t = np.asarray(tangent, dtype=float) / np.linalg.norm(tangent)
     rest = kernel - np.outer(kernel @ t, t)
@@ -106,6 +116,65 @@ def critical_directions(problem: ContinuationProblem, z: Float[Array, " n+1"],
     directions = basis[:, :k].T
     largest = directions[np.arange(k), np.argmax(np.abs(directions), axis=1)]
     return directions * np.sign(largest)[:, None]
+
+
+def symmetric_directions(problem: ContinuationProblem, z: Float[Array, " n+1"],
+                         tangent: Float[Array, " n+1"], actions, *, tol: float = 1e-2
+                         ) -> Float[np.ndarray, "m n+1"]:
+    """The lines of the critical plane at the branch point z that a symmetry fixes,
+    one of each kind: where the kernel of [G_u, G_p] has several critical
+    directions (`critical_directions`: a Floquet multiplier +1 of a two-dimensional
+    irreducible representation of the ring's dihedral group), branches leave along
+    the lines of it fixed by a subgroup of the symmetries of the orbit at z, the
+    axes of the equivariant branching lemma (Golubitsky, Stewart and Schaeffer,
+    *Singularities and Groups in Bifurcation Theory* II (1988), ch. XIII, Thm. 3.3;
+    on the dihedral groups ch. XVIII); off them a step of `switch_branch` lands
+    nowhere near a branch. For each symmetry of `actions`, the critical directions
+    c it fixes (c[a] = c) are the null space of the matrix of c[a] - c over the
+    plane; a one-dimensional null space is an axis. Axes mapped onto each other
+    by a symmetry lead to copies of one branch: the first of each is kept.
+
+    **Arguments:**
+
+    - `problem`, `z`, `tangent`: as for `critical_directions` (z a branch point).
+    - `actions`: the symmetries of the orbit at z as permutations of the
+        components of z, shape (s, n + 1) (on the shooting unknowns (x, x', T, p)
+        of a chain: each permutation of the oscillators applied to x and to x',
+        T and p fixed), the identity included or not.
+    - `tol`: a singular value of c[a] - c below `tol` (its largest is 2) counts
+        as zero. The critical plane is known as well as the branch point is
+        located: at the whole ring of 20's (exact model, v_d 1.7404) the lines
+        that reflections fix give 2e-3 to 5e-3, the other symmetries 0.3 and
+        more.
+
+    **Returns:**
+
+    The axes, unit vectors with their largest component positive, shape (m,
+    n + 1); at a generic branch point (one critical direction), that direction
+    (m = 1). Empty (m = 0) where no symmetry fixes a line of the plane.
+
+    **Raises:**
+
+    `ValidationError` for actions that are not permutations of z's components.
+    """
+    actions = np.atleast_2d(np.asarray(actions, dtype=int))
+    n = np.asarray(z).size
+    if actions.shape[1] != n or np.any(np.sort(actions, axis=1) != np.arange(n)):
+        raise ValidationError(f"symmetric_directions needs permutations of the {n} "
+                              f"components of z, got shape {actions.shape}")
+    plane = critical_directions(problem, z, tangent)
+    if len(plane) == 1:
+        return plane
+    axes = []
+    for a in actions:
+        _, s, vt = np.linalg.svd((plane[:, a] - plane).T)
+        if not (s[-1] < tol and (len(s) < 2 or s[-2] >= tol)):
+            continue  # the symmetry fixes no line of the plane, or all of it
+        axis = vt[-1] @ plane
+        axis = axis / np.linalg.norm(axis) * np.sign(axis[np.argmax(np.abs(axis))])
+        if not any(np.max(np.abs(axis[actions] @ known)) > 1.0 - tol for known in axes):
+            axes.append(axis)
+    return np.asarray(axes).reshape(-1, n)
 
 
 def switch_by_deflation(problem: ContinuationProblem, branch: Branch, point: BifurcationPoint,

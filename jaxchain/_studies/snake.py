@@ -14,7 +14,8 @@ import numpy as np
 
 from .._engine.progress import tqdm
 from .._bifurcation.bifurcations import locate_bifurcations
-from .._bifurcation.branch_switching import switch_branch, switch_by_deflation
+from .._bifurcation.branch_switching import (switch_branch, switch_by_deflation,
+                                              symmetric_directions)
 from .._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
 from .._bifurcation.deflation import chain_symmetries, distinct_orbits
 from .._bifurcation.past_sliding import past_sliding_start
@@ -362,15 +363,17 @@ def _shoot_guesses(orbits, params: ChainParams, guesses: list, n: int, perms=Non
                   f"simulated state is not periodic")
 
 
-def isotropy(params: ChainParams, y) -> np.ndarray:
+def isotropy(params: ChainParams, y, atol: float = 1e-12) -> np.ndarray:
     """The symmetries of the chain (`chain_symmetries`: on a homogeneous ring its
-    rotations and reflections) that map the state y, shape (2, n_osc), onto itself:
-    its isotropy subgroup, shape (s, n_osc), the identity first. For eq. (8) on the
-    ring, an odd block of excited oscillators is fixed by the reflection about its
-    centre; an even block by no symmetry (its signs alternate)."""
+    rotations and reflections) that map the state y, shape (2, n_osc), onto itself
+    within `atol`: its isotropy subgroup, shape (s, n_osc), the identity first. For
+    eq. (8) on the ring, an odd block of excited oscillators is fixed by the
+    reflection about its centre; an even block by no symmetry (its signs
+    alternate). A state solved by shooting keeps its symmetry only to Newton's
+    tolerance: pass an `atol` above it."""
     y = np.asarray(y)
     perms = np.asarray(chain_symmetries(params))
-    fixed = perms[[np.allclose(y[:, p], y, rtol=0.0, atol=1e-12) for p in perms]]
+    fixed = perms[[np.allclose(y[:, p], y, rtol=0.0, atol=atol) for p in perms]]
     return fixed[np.argsort([not np.array_equal(p, np.arange(y.shape[1])) for p in fixed],
                             kind="stable")]
 
@@ -581,8 +584,9 @@ SLIDING_PASSES = 4
 #: `RETRY_VD`; 4: branch points on unstable branches, switched there, switched
 #: branches cut where they repeat themselves; 5: starts that lose their pattern
 #: tried again, shooting from close recurrences and by the damped Newton method;
-#: 6: starts simulated again inside the fixed subspace of their symmetry).
-BRANCH_METHOD = 6
+#: 6: starts simulated again inside the fixed subspace of their symmetry; 7: branch
+#: points switched along the axes of their orbit's symmetry where the others fail).
+BRANCH_METHOD = 7
 
 
 def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationOptions, *,
@@ -653,16 +657,19 @@ def _switched_branch(orbits, problem, branch, point,
     The step onto the other branch is Keller's (`switch_branch`, the kernel
     direction the followed branch does not take); where it does not converge (a
     symmetric ring, where the kernel has more directions), the orbits that
-    deflation finds beside the branch point (`switch_by_deflation`). Where neither
-    finds one, the failure instead: a dict of the branch point's v_d and the
-    reason, which the followed branch keeps (`failed_switches`)."""
+    deflation finds beside the branch point (`switch_by_deflation`), and where that
+    finds none, Keller's step along each axis of the orbit's symmetry in the
+    kernel (`_switch_along_axes`). Where none finds one, the failure instead: a
+    dict of the branch point's v_d and the reason, which the followed branch keeps
+    (`failed_switches`)."""
     try:
         starts = [switch_branch(problem, branch, point, algorithm=algorithm)]
     except RuntimeError as err:
-        starts = switch_by_deflation(problem, branch, point, algorithm=algorithm)
+        starts = (switch_by_deflation(problem, branch, point, algorithm=algorithm)
+                  or _switch_along_axes(problem, branch, point, algorithm))
         if not starts:
             return [{"v_d": float(point.p), "reason": f"{err}; deflation beside it found no "
-                     "other orbit"}]
+                     "other orbit, nor a step along an axis of its symmetry"}]
     out = []
     for new, tangent in starts:
         ds = _pieces_dataset(k, _through_sliding(new, algorithm, continuation_options,
@@ -670,6 +677,35 @@ def _switched_branch(orbits, problem, branch, point,
         ds = _repeats_itself(orbits, new.params, ds)
         out.append(ds.assign_attrs(switched_from_vd=float(point.p),
                                    stop=json.dumps({"away": ds.attrs["stop"]})))
+    return out
+
+
+def _switch_along_axes(problem, branch, point, algorithm: PseudoArclength) -> list:
+    """Keller's step (`switch_branch`) from the branch point `point` along each axis
+    of the critical plane that a symmetry of its orbit fixes
+    (`symmetric_directions`, with the orbit's isotropy subgroup, `isotropy`), to
+    both sides: the (problem, tangent) of each that converges. Tried where the
+    kernel direction and deflation beside the point fail: the whole ring of 20's
+    branch point with a double multiplier +1. Empty for an orbit with no
+    symmetry."""
+    z = np.asarray(point.z)
+    y = z[:-2].reshape(2, -1)  # z = (x, x', T, v_d)
+    # its symmetry holds to Newton's tolerance (1e-9): 1e-6 keeps it, and separates
+    # patterns that differ by their sites' amplitudes
+    perms = isotropy(problem.params, y, atol=1e-6)
+    if len(perms) < 2:
+        return []
+    n = y.shape[1]
+    actions = [np.concatenate([p, n + p, [2 * n, 2 * n + 1]]) for p in perms]
+    tangent = branch.tangent[np.nonzero(np.asarray(branch.converged))[0][point.after]]
+    out = []
+    for axis in symmetric_directions(problem, point.z, tangent, actions):
+        for side in (1, -1):
+            try:
+                out.append(switch_branch(problem, branch, point, side=side,
+                                         algorithm=algorithm, direction=axis))
+            except RuntimeError:
+                continue
     return out
 
 
