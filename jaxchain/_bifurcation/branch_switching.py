@@ -144,7 +144,7 @@ def symmetric_directions(problem: ContinuationProblem, z: Float[Array, " n+1"],
     - `tol`: a singular value of c[a] - c below `tol` (its largest is 2) counts
         as zero. The critical plane is known as well as the branch point is
         located: at the whole ring of 20's (exact model, v_d 1.7404) the lines
-        that reflections fix give 2e-3 to 5e-3, the other symmetries 0.3 and
+        that reflections fix give 3e-6 to 5e-3, the other symmetries 0.36 and
         more.
 
     **Returns:**
