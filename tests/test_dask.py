@@ -56,6 +56,7 @@ def _scheduler_address(file, deadline_s=60) -> str:
     raise AssertionError("the scheduler wrote no address in time")
 
 
+@pytest.mark.study
 def test_a_sweep_on_a_local_cluster_equals_the_in_process_sweep(tmp_path, client, in_process):
     """Each batch is a task on one of two spawned worker processes, which writes
     its region of the store: the result equals the in-process sweep bit for bit
@@ -83,6 +84,7 @@ class _Attempts(SchedulerPlugin):
             self.log.append((str(key), finish))
 
 
+@pytest.mark.study
 def test_a_worker_killed_mid_sweep_is_replaced_and_its_batch_is_run_again(
         tmp_path, client, in_process):
     """The workers hold before each batch write (the writers' test hook, on in
@@ -120,6 +122,7 @@ def test_a_worker_killed_mid_sweep_is_replaced_and_its_batch_is_run_again(
     xr.testing.assert_equal(ds[RESULTS], in_process[RESULTS])
 
 
+@pytest.mark.study
 def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_process(
         tmp_path, in_process):
     """`jaxchain sweep --scheduler ADDRESS` on a scheduler and one worker started
@@ -167,6 +170,7 @@ def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_pro
                             in_process[RESULTS])
 
 
+@pytest.mark.study
 def test_basin_on_a_local_cluster_equals_basin_in_process(tmp_path, client):
     """`jaxchain basin --scheduler ADDRESS`, on the module's cluster of two spawned
     workers, writes the basin.nc of the in-process command, to the last bit. The ring
@@ -182,6 +186,7 @@ def test_basin_on_a_local_cluster_equals_basin_in_process(tmp_path, client):
     xr.testing.assert_identical(here.drop_attrs(), there.drop_attrs())
 
 
+@pytest.mark.study
 def test_a_crosscheck_on_a_local_cluster_equals_the_in_process_one(tmp_path, client):
     """Each non-smooth reference run is a task that stores its run in the
     checkpoint folder: the cross-check equals the in-process one, wall times aside,

@@ -159,6 +159,7 @@ def test_symmetries_of_the_ring_and_bad_arguments(simulated):
         jc.localized_branches(RING, (1,), deflate=-1)
 
 
+@pytest.mark.study
 def test_the_snake_follows_the_orbits_that_deflation_finds(tmp_path):
     """`localized_branches(deflate=2)` from eq. (8) with two excited: besides the
     branch of the simulated state, the branches of two further orbits at the start's

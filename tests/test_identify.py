@@ -161,6 +161,7 @@ def test_noise_free_records_give_the_parameters_and_offsets(clean_records):
 
 @pytest.mark.numerics
 @pytest.mark.slow
+@pytest.mark.study
 def test_standard_errors_cover_the_truth_as_often_as_they_should(clean_records):
     """Ten noise draws (0.5 % of the amplitude) of the same records, four
     parameters and two offsets each: 60 intervals of +-2 standard errors, which
@@ -183,6 +184,7 @@ def test_standard_errors_cover_the_truth_as_often_as_they_should(clean_records):
 
 @pytest.mark.numerics
 @pytest.mark.slow
+@pytest.mark.study
 def test_stribeck_records_are_attributed_to_the_stribeck_law():
     """Records made with a Stribeck law of Gaussian decay (delta = 2), which the
     exponential law cannot take: on held-out records the Stribeck fit's residual

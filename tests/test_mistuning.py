@@ -39,6 +39,7 @@ def _summary(out):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_every_draw_keeps_the_hopf_point_and_its_own_stiffness(study):
     """With uniform damping and load every mode of steady sliding loses stability
     where 2 xi + mu'(v_d) = 0 whatever the stiffness: the Hopf point of every draw
@@ -80,6 +81,7 @@ def _transfer_matrix_exponents(eta_c, sigma, omega2, cells, batches=16, warmup=2
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_json_gives_the_localization_factor_table(study):
     """The localization factor table against a second estimate, by NumPy
     (`_transfer_matrix_exponents`: its own random numbers, 40,000 cells), within
@@ -109,6 +111,7 @@ def test_the_json_gives_the_localization_factor_table(study):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_single_site_state_s_frequency_damping_and_linear_decay(study):
     """The numbers the study attaches to the single-site state: its period T, and
     omega^2 = (2 pi / T)^2 that of the single oscillator's non-smooth stick-slip
@@ -152,6 +155,7 @@ def test_the_single_site_state_s_frequency_damping_and_linear_decay(study):
     assert abs(gamma - expected[0]) < 5 * np.hypot(error, expected_error[0])
 
 
+@pytest.mark.study
 def test_resume_after_a_lost_chain_gives_the_same_study(study, tmp_path, capsys):
     """A run killed before its last chain (its store missing) and the study's
     files lost: --resume recomputes them, the lost chain on a Dask cluster, and the

@@ -29,6 +29,7 @@ def followed():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_followed_fold_is_the_mistuned_ring_s_own_fold(followed):
     """The fold of the state at oscillator 1 (0-based), followed from the
     homogeneous ring through the pattern and the ring's symmetry, is the fold that
@@ -47,6 +48,7 @@ def test_followed_fold_is_the_mistuned_ring_s_own_fold(followed):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_fold_gradients_match_finite_differences(followed):
     """d fold_j / d theta by implicit differentiation (forward mode through
     optimistix's ImplicitAdjoint) against central differences of the fold solved

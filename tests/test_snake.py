@@ -276,6 +276,7 @@ def test_eq8_on_the_ring_is_fixed_by_the_reflection_about_an_odd_block_s_centre(
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_inside_its_fixed_subspace_the_symmetric_start_reaches_an_orbit_unstable_across_it():
     """Eq. (8) with five of the ring of eight's oscillators excited, simulated
     inside the fixed subspace of its reflection (`symmetric_state`) and shot from

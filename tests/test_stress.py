@@ -15,6 +15,7 @@ QUICK = jc.stress_cases(quick=True)
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_quick_matrix_verifies_every_case_on_the_default_solver(tmp_path, capsys,
                                                                 monkeypatch):
     """`jaxchain stress --quick` on the default path: every case of the reduced
