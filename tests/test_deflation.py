@@ -14,7 +14,7 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 
-from helpers import internal, reference_rhs, replace_internal
+from helpers import internal, internal_module, reference_rhs, replace_internal
 
 RING = jc.ChainParams(n_osc=3, v_d=1.5)
 #: The starts settle within 1500 time units on three oscillators.
@@ -233,7 +233,7 @@ def test_a_deflated_orbit_on_a_branch_already_followed_is_reported_not_followed(
     assert bool(copy.converged)
     one = (simulated[1], int(np.argmax(np.asarray(simulated[1].amplitudes))))
     replace_internal(monkeypatch, "snake deflated orbits",
-                     lambda orbits, params, found, count: {2: [(copy, phase), one]})
+                     lambda orbits, params, found, count, stored: {2: [(copy, phase), one]})
     kwargs = dict(continuation_options=jc.ContinuationOptions(
         ds=0.02, ds_max=0.05, p_min=1.45, p_max=1.55, max_points=3),
         start_options=START, simulation_check=False, deflate=2, out=tmp_path)
@@ -251,3 +251,43 @@ def test_a_deflated_orbit_on_a_branch_already_followed_is_reported_not_followed(
     again = jc.localized_branches(RING, (2,), **kwargs)
     assert list(again["datasets"]) == ["k=2", "k=2 deflated 1"]
     assert again["summary"]["deflated_on_followed"] == [repeat]
+
+
+@pytest.mark.numerics
+def test_a_resumed_run_deflates_the_orbits_of_the_starts_it_read_back(tmp_path,
+                                                                       monkeypatch):
+    """`localized_branches(deflate=1)` from the two- and the one-site start, then again
+    with the one-site start's files removed, as after a run stopped once its first
+    start was stored: deflation from the one-site start has every orbit deflated
+    that it had in the whole run (the two-site start's own and the orbit deflation
+    found from it, read back from their branches' first points), and the resumed
+    run ends with the whole run's branches."""
+    module = internal_module("snake starts")
+    real, seen = module.distinct_orbits, []
+
+    def spy(problem, start, known, **kwargs):
+        seen.append([np.asarray(u) for u in known])
+        return real(problem, start, known, **kwargs)
+
+    monkeypatch.setattr(module, "distinct_orbits", spy)
+    kwargs = dict(continuation_options=jc.ContinuationOptions(
+        ds=0.02, ds_max=0.05, p_min=1.45, p_max=1.55, max_points=3),
+        start_options=START, simulation_check=False, deflate=1, out=tmp_path)
+    whole = jc.localized_branches(RING, (2, 1), **kwargs)
+    whole_known = seen[-1]
+    seen.clear()
+    for path in tmp_path.glob("branch_k1*.nc"):
+        path.unlink()
+    resumed = jc.localized_branches(RING, (2, 1), **kwargs)
+    (known,) = seen  # deflation from the one-site start alone
+    assert len(known) == len(whole_known) == 3
+    # the same orbits: a stored one is its branch's first point, shot again (Newton's
+    # tolerance 1e-9), the whole run's the solution of deflation itself
+    assert all(min(copies_distance(u, v) for v in known) < 1e-6 for u in whole_known)
+    assert list(resumed["datasets"]) == list(whole["datasets"])
+    # orbits of one residual, each to Newton's tolerance (1e-9, shooting and the
+    # continuation's corrector alike) from its root
+    tol = 10 * jc.ShootingOptions().newton_tol
+    for label, ds in whole["datasets"].items():
+        np.testing.assert_allclose(resumed["datasets"][label]["u"].values, ds["u"].values,
+                                   rtol=0, atol=tol, err_msg=label)

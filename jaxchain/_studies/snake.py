@@ -1140,7 +1140,10 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
     lo, hi = continuation_options.p_min, continuation_options.p_max
     retry = tuple(d for d in RETRY_VD if lo < float(params.v_d) + d < hi)
     found = _start_orbits(orbits, params, todo, start_options, progress, retry)
-    deflated = _deflated_orbits(orbits, params, found, deflate) if deflate else {}
+    # a resumed run deflates the stored starts' orbits too, as the run it resumes did
+    deflated = _deflated_orbits(orbits, params, found, deflate,
+                                stored=_stored_orbits(datasets, float(params.v_d))
+                                ) if deflate else {}
     follow = dict(orbits=orbits, params=params, continuation_options=continuation_options,
                   switch=switch, progress=progress)
     for k, (orbit, sim, reason) in found.items():
@@ -1256,19 +1259,38 @@ def _passes_through(orbits, params: ChainParams, orbit, branch: xr.Dataset,
     return None
 
 
-def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int) -> dict:
+def _stored_orbits(datasets: dict, v_d: float) -> list:
+    """The orbits at `v_d` that a resumed run read back: the start of each stored
+    start's own branch and deflated branch that begins there (not a switched
+    branch, nor one started at a neighbouring v_d), as shooting unknowns
+    (x, x', T), the point of the branch at its start."""
+    out = []
+    for label, ds in datasets.items():
+        if " switched " in label or float(ds.attrs["start_vd"]) != v_d:
+            continue
+        i = int(np.argmin(np.abs(ds["v_d"].values - v_d)))
+        if float(ds["v_d"].values[i]) == v_d:
+            out.append(jnp.asarray(ds["u"].values[i]))
+    return out
+
+
+def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int,
+                     stored: list = ()) -> dict:
     """Further periodic orbits at `params.v_d` by deflation (`distinct_orbits`, Farrell,
     Birkisson and Funke 2015): from the eq. (8) state of each start k (T = 2 pi),
     those whose simulated state is not periodic included, with every orbit found so
     far deflated (the starts' own, those of earlier k, their symmetric copies,
     steady sliding), up to `count` each; each refined by
     shooting with the phase condition on its oscillator of largest amplitude.
-    Returns k -> [(orbit, its phase oscillator), ...]."""
+    `stored`: the orbits of the starts that a resumed run read back
+    (`_stored_orbits`), deflated too, so that resuming finds what the whole run
+    would. Returns k -> [(orbit, its phase oscillator), ...]."""
     # the starts' orbits at params.v_d; one found at a neighbouring v_d
     # (`RETRY_VD`) is not a solution here, and its start is treated as not periodic
     here = {k: (o if o is not None and float(o.params.v_d) == float(params.v_d) else None,
                 sim, why) for k, (o, sim, why) in found.items()}
     known = [pack(o.y0, o.period) for o, _, _ in here.values() if o is not None]
+    known += list(stored)
     # the shooting problem of a start whose state is not periodic: another start's,
     # with the phase condition on its own oscillator (only the residual is used)
     template = next((o for o, _, _ in here.values() if o is not None), None)
