@@ -1045,7 +1045,9 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     - `out`: a folder: each branch is stored there as `branch_k<k>.nc` (or
         `branch_<name>.nc`) with the key
         of its settings (`write_dataset`) as it finishes, and read back on a later
-        call with equal settings (resume).
+        call with equal settings (resume); the starts not stored are computed, and
+        with `deflate` their deflation deflates the stored starts' orbits too, as
+        the whole run would.
     - `progress`: progress bars.
 
     **Returns:**
