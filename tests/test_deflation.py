@@ -10,6 +10,7 @@ import numpy as np
 import jax
 import jax.numpy as jnp
 import pytest
+import xarray as xr
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
@@ -291,3 +292,24 @@ def test_a_resumed_run_deflates_the_orbits_of_the_starts_it_read_back(tmp_path,
     for label, ds in whole["datasets"].items():
         np.testing.assert_allclose(resumed["datasets"][label]["u"].values, ds["u"].values,
                                    rtol=0, atol=tol, err_msg=label)
+
+
+def test_branches_followed_by_two_workers_are_those_of_one(tmp_path):
+    """`localized_branches(workers=2)`: the starts' branches, and those of the
+    orbits deflation finds, followed in two processes side by side, are the
+    branches of the sequential run to the last bit (each is the same compiled
+    program), labelled and stored alike, and read back by a sequential call."""
+    kwargs = dict(continuation_options=jc.ContinuationOptions(
+        ds=0.02, ds_max=0.05, p_min=1.45, p_max=1.55, max_points=3),
+        start_options=START, simulation_check=False, deflate=1)
+    one = jc.localized_branches(RING, (2, 1), **kwargs, out=tmp_path / "one")
+    two = jc.localized_branches(RING, (2, 1), **kwargs, out=tmp_path / "two", workers=2)
+    assert list(two["datasets"]) == list(one["datasets"]) == [
+        "k=2", "k=2 deflated 1", "k=1", "k=1 deflated 1"]
+    for label, ds in one["datasets"].items():
+        xr.testing.assert_identical(two["datasets"][label], ds)
+    assert two["summary"]["deflated_on_followed"] == one["summary"]["deflated_on_followed"]
+    back = jc.localized_branches(RING, (2, 1), **kwargs, out=tmp_path / "two")
+    assert list(back["datasets"]) == list(one["datasets"])
+    with pytest.raises(ValueError, match="workers"):
+        jc.localized_branches(RING, (2,), **kwargs, workers=0)

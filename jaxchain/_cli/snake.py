@@ -115,6 +115,10 @@ def add_parser(sub):
                         "of each start by deflation (every orbit found so far, its copies "
                         "under the ring's symmetries and steady sliding deflated), each "
                         "followed as a branch of its own (default 0: none)")
+    g.add_argument("--workers", type=positive_int, default=1, metavar="W",
+                   help="processes that follow the starts' branches side by side, one "
+                        "core each (default 1: one after another); the branches are the "
+                        "same either way")
     g.add_argument("--no-switch", action="store_true",
                    help="do not follow the other branch at each branch point (branch "
                         "switching along the kernel direction the branch does not take)")
@@ -156,7 +160,8 @@ def run(args) -> None:
                                eps=args.eps if smoothed else None,
                                switch=not args.no_switch, deflate=args.deflate,
                                simulation_check=not args.no_simulation,
-                               out=outputs.path("snake"), progress=show_progress(args))
+                               out=outputs.path("snake"), progress=show_progress(args),
+                               workers=args.workers)
     model = f"eps = {args.eps:g}" if smoothed else "the exact stick/slip model"
     outputs.figure(plot_snake(found["datasets"], sweep,
                               title=f"N = {params.n_osc}, {model}: stable solid, "

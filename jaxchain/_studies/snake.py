@@ -30,6 +30,7 @@ from .._physics.record import chain_record
 from .._engine.simulate import simulate
 from .._engine.solver.registry import DEFAULT_SOLVER
 from .snake_orbits import snake_orbits
+from .snake_pool import Followers
 from .._sweeps.result_store import read_dataset, write_dataset
 from .._errors import ValidationError
 from .._engine.status import Status
@@ -1000,7 +1001,8 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
                        solver=DEFAULT_SOLVER, eps=None, switch: bool = True,
                        deflate: int = 0,
                        simulation_check: bool = True,
-                       out: Path | None = None, progress: bool = False) -> dict:
+                       out: Path | None = None, progress: bool = False,
+                       workers: int = 1) -> dict:
     """The snake: each localized periodic state that simulation finds at
     `params.v_d` (eq. (8) with k excited, for k in `sites`), refined by shooting,
     continued over v_d both ways by pseudo-arclength through its folds, with its
@@ -1049,6 +1051,11 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
         with `deflate` their deflation deflates the stored starts' orbits too, as
         the whole run would.
     - `progress`: progress bars.
+    - `workers`: the number of processes that follow the starts' branches side by
+        side (1: one after another, in this process). The branches are the same
+        either way (each is the same computation), and so is what is stored;
+        with more, a deflated orbit's branch may be followed and then dropped,
+        where it lies on a branch followed before it.
 
     **Returns:**
 
@@ -1069,8 +1076,10 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     params, sites, orbits = _check_branches(params, sites, engine, shooting, solver, eps)
     if not (isinstance(deflate, int) and deflate >= 0):
         raise ValidationError(f"deflate must be a whole number >= 0, got {deflate!r}")
+    if not (isinstance(workers, int) and workers >= 1):
+        raise ValidationError(f"workers must be a whole number >= 1, got {workers!r}")
     run = _run_branches(orbits, params, sites, continuation_options, start_options, switch,
-                        deflate, simulation_check, out, progress)
+                        deflate, simulation_check, out, progress, workers)
     return _branches_summary(*run, params.n_osc)
 
 
@@ -1084,20 +1093,21 @@ def _check_branches(params: ChainParams | None, sites, engine, shooting, solver,
 
 
 def _run_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
-                  start_options, switch, deflate, simulation_check, out, progress) -> tuple:
+                  start_options, switch, deflate, simulation_check, out, progress,
+                  workers: int = 1) -> tuple:
     """The branches (`_find_branches`), then the checks of their stable ranges
     (`_stable_range_checks`): (datasets, starts, failed starts, deflated orbits on
     branches already followed, checks)."""
     datasets, starts, failed, repeated = _find_branches(
         orbits, params, sites, continuation_options, start_options, switch, deflate, out,
-        progress)
+        progress, workers)
     checks = _stable_range_checks(orbits, params, datasets, simulation_check,
                                   progress)
     return datasets, starts, failed, repeated, checks
 
 
 def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
-                   start_options, switch, deflate, out, progress
+                   start_options, switch, deflate, out, progress, workers: int = 1
                    ) -> tuple[dict, dict, dict, list]:
     """The branch of each start, with `deflate` the branches of the further orbits
     that deflation finds from its eq. (8) state (`_deflated_orbits`; one on a branch
@@ -1111,7 +1121,6 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
     branch's attribute `deflated_repeats`). A start without a branch of its own is
     stored as a record of why (`_read_branches`), so that a resumed run does not
     compute it again."""
-    import xarray as xr
 
     datasets, starts, failed, repeated = {}, {}, {}, []
     settings = {"chain": chain_record(params), **orbits.settings(),
@@ -1146,8 +1155,34 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
     deflated = _deflated_orbits(orbits, params, found, deflate,
                                 stored=_stored_orbits(datasets, float(params.v_d))
                                 ) if deflate else {}
-    follow = dict(orbits=orbits, params=params, continuation_options=continuation_options,
-                  switch=switch, progress=progress)
+    with Followers(workers) as pool:
+        # every branch asked for at once, each from its start (a deflated orbit's may
+        # go unused, where it lies on a branch followed before it); with one worker
+        # each is computed when the loop below asks for it, as the sequential run did
+        follow = dict(orbits=orbits, continuation_options=continuation_options,
+                      switch=switch, progress=progress and workers <= 1)
+        jobs = {}
+        for k, (orbit, sim, _) in found.items():
+            mask = start_mask(params.graph, k)
+            if orbit is not None:
+                jobs[k] = pool.submit(_follow_start, orbit, sim["phase_oscillator"],
+                                      mask, **follow)
+            for i, (o, m) in enumerate(deflated.get(k, [])):
+                jobs[k, i] = pool.submit(_follow_start, o, m, mask, **follow)
+        _take_branches(orbits, params, found, deflated, jobs, out, paths, settings,
+                       (datasets, starts, failed, repeated))
+    return datasets, starts, failed, repeated
+
+
+def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, jobs: dict,
+                   out, paths: dict, settings: dict, into: tuple) -> None:
+    """The branches of `jobs` (`_find_branches`), in the order of the starts: each
+    start's own, then those of its deflated orbits not on a branch followed before
+    (`_on_followed_branch`), labelled and stored, into (datasets, starts, failed,
+    repeated)."""
+    import xarray as xr
+
+    datasets, starts, failed, repeated = into
     for k, (orbit, sim, reason) in found.items():
         starts[k] = sim
         own, mask = _start_label(k), start_mask(params.graph, k)
@@ -1155,12 +1190,11 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
         # orbits that deflation finds from its eq. (8) state are followed still
         if orbit is None:
             failed[k] = reason
-        mine = {} if orbit is None else _follow_start(own, orbit, sim["phase_oscillator"],
-                                                      mask, **follow)
+        mine = {} if orbit is None else _labelled(own, orbit, mask, jobs[k].result())
         if isinstance(mine, str):
             starts[k], failed[k], mine = sim, mine, {}
         followed, repeats, j = {}, [], 0
-        for o, m in deflated.get(k, []):
+        for i, (o, m) in enumerate(deflated.get(k, [])):
             on = _on_followed_branch(orbits, params, o, datasets | mine | followed)
             if on is not None:
                 repeats.append({"start": own, "energy": float(o.energy),
@@ -1168,7 +1202,7 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
                 continue
             j += 1
             label = f"{own} deflated {j}"
-            branches = _follow_start(label, o, m, mask, **follow)
+            branches = _labelled(label, o, mask, jobs[k, i].result())
             if isinstance(branches, str):
                 starts[label], failed[label] = sim, branches
                 continue
@@ -1184,20 +1218,26 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
                 "no_branch": failed[k], "simulation": json.dumps(sim), "switched": 0,
                 "deflated": j, "deflated_repeats": json.dumps(repeats)})}, settings, k)
         datasets |= mine | followed
-    return datasets, starts, failed, repeated
 
 
-def _follow_start(label: str, start, phase_oscillator: int, mask, *, orbits,
-                  params: ChainParams, continuation_options, switch, progress
-                  ) -> dict | str:
-    """The branch through the periodic orbit `start` at `params.v_d`
-    (`_follow_branch`) and the branches switched onto from it, labelled `label`
-    and "<label> switched <j>" (label -> dataset), or why its continuation failed."""
+def _follow_start(start, phase_oscillator: int, mask, *, orbits, continuation_options,
+                  switch, progress) -> tuple | str:
+    """The branch through the periodic orbit `start` (`_follow_branch`) and the
+    branches switched onto from it, (branch, [switched, ...]), or why its
+    continuation failed. Run in a worker process where `workers` > 1."""
     try:
-        ds, switched = _follow_branch(orbits, start, phase_oscillator, continuation_options,
-                                      k=int(mask.sum()), switch=switch, progress=progress)
+        return _follow_branch(orbits, start, phase_oscillator, continuation_options,
+                              k=int(mask.sum()), switch=switch, progress=progress)
     except (ValueError, RuntimeError) as err:  # flagged; the other branches go on
         return f"continuation failed: {err}"
+
+
+def _labelled(label: str, start, mask, followed: tuple | str) -> dict | str:
+    """The branches of `_follow_start` from `start`, labelled `label` and "<label>
+    switched <j>" (label -> dataset), or why its continuation failed."""
+    if isinstance(followed, str):
+        return followed
+    ds, switched = followed
     first = ds.assign_attrs(start_vd=float(start.params.v_d), start_energy=float(start.energy),
                             start_n_halc=int(start.n_halc), switched=len(switched), deflated=0,
                             deflated_repeats="[]")
