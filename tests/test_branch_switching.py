@@ -86,6 +86,7 @@ def test_switching_needs_a_branch_point(branch_point):
         jc.switch_branch(problem, branch, fold)
 
 
+@pytest.mark.study
 def test_the_snake_switches_branches_at_its_branch_points(branch_point, tmp_path,
                                                           monkeypatch):
     """`localized_branches` (switch=True, the default) follows the other branch at
@@ -151,6 +152,7 @@ def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch, tmp
     assert list(again["datasets"]) == ["k=1"]
 
 
+@pytest.mark.study
 def test_a_switch_that_fails_is_reported_with_its_branch_point(branch_point, monkeypatch):
     """Where the step onto the other branch does not converge (`switch_branch` raises
     RuntimeError), the snake follows the orbits that deflation finds beside the

@@ -185,6 +185,7 @@ def test_the_snake_follows_the_orbits_that_deflation_finds(tmp_path):
     assert list(again["datasets"]) == labels
 
 
+@pytest.mark.study
 def test_a_start_that_is_not_periodic_is_deflated_from_its_eq8_state(tmp_path,
                                                                       monkeypatch):
     """A start whose simulated state is not periodic (here the one-site start, its
@@ -294,6 +295,7 @@ def test_a_resumed_run_deflates_the_orbits_of_the_starts_it_read_back(tmp_path,
                                    rtol=0, atol=tol, err_msg=label)
 
 
+@pytest.mark.study
 def test_branches_followed_by_two_workers_are_those_of_one(tmp_path):
     """`localized_branches(workers=2)`: the starts' branches, and those of the
     orbits deflation finds, followed in two processes side by side, are the

@@ -92,6 +92,7 @@ def test_exact_shooting_refuses_bad_input_in_one_line():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_damped_newton_method_reaches_a_weakly_unstable_orbit_from_farther():
     """The ring of eight's five-site orbit at v_d 1.4 (eq. (8) with five sites,
     found by the snake from its simulation) is unstable by a real multiplier 1.034

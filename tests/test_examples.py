@@ -63,13 +63,14 @@ SLOW = {"03_dynamics_of_localized_states.ipynb", "04_basin_stability.ipynb",
         "09_identification.ipynb"}
 
 
-#: The notebooks that run a whole study (03 to 09: 13 to 35 s each on 2 cores) run
+#: The notebooks that run a whole study (02 to 09: 8 to 35 s each on 2 cores) run
 #: with the studies (`study`: CI's step of its own, .ci/run), to keep the default
 #: run within 10 minutes: on the machine of session 79 the default run took 724.6 s
-#: with 03 to 07 in it. 01 and 02 (a simulation, a small sweep) stay.
-STUDY = {"03_dynamics_of_localized_states.ipynb", "04_basin_stability.ipynb",
-         "05_any_chain.ipynb", "06_anderson_meets_friction.ipynb", "07_snaking.ipynb",
-         "08_brake_pad.ipynb", "09_identification.ipynb"}
+#: with 02 to 07 in it. 01 (one simulation) stays.
+STUDY = {"02_bifurcation_sweep.ipynb", "03_dynamics_of_localized_states.ipynb",
+         "04_basin_stability.ipynb", "05_any_chain.ipynb",
+         "06_anderson_meets_friction.ipynb", "07_snaking.ipynb", "08_brake_pad.ipynb",
+         "09_identification.ipynb"}
 
 
 def _marks(name: str) -> tuple:

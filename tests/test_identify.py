@@ -120,6 +120,7 @@ def test_the_jacobian_of_the_misfit_is_that_of_finite_differences(clean_records,
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_exact_engine_fits_exact_records_without_the_smoothing_bias(clean_records,
                                                                        tmp_path, capsys):
     """Records of the exact model refitted by the exact model, by `jaxchain identify
