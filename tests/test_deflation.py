@@ -226,7 +226,10 @@ def test_a_deflated_orbit_on_a_branch_already_followed_is_reported_not_followed(
     one oscillator (a symmetric copy: on the start's own branch) and the one-site
     state (another branch). The copy is reported on "k=2" and not followed; the
     one-site state is followed as "k=2 deflated 1", one oscillator on the HALC at
-    the start's v_d. Read back, the report is the same."""
+    the start's v_d. A third solution of deflation, from which shooting did not
+    converge, is neither. Read back, the report is the same, and a run resumed
+    with a further start deflates from it every orbit the first run's deflation
+    knew: the start's own orbit and the three solutions, to the last bit."""
     two = simulated[2]
     rotated = jnp.roll(jnp.asarray(two.y0), 1, axis=1)
     phase = int(np.argmax(np.roll(np.asarray(two.amplitudes), 1)))
@@ -234,8 +237,12 @@ def test_a_deflated_orbit_on_a_branch_already_followed_is_reported_not_followed(
                              dataclasses.replace(SHOOTING, phase_oscillator=phase))
     assert bool(copy.converged)
     one = (simulated[1], int(np.argmax(np.asarray(simulated[1].amplitudes))))
+    # deflation's solutions stand apart from the shot orbits (phase conditions differ)
+    given = [(o, m, jnp.append(jnp.ravel(o.y0), o.period) + 1e-3)
+             for o, m in [(copy, phase), one]]
+    given.append((None, 0, given[0][2] + 0.5))
     replace_internal(monkeypatch, "snake deflated orbits",
-                     lambda orbits, params, found, count, stored: {2: [(copy, phase), one]})
+                     lambda orbits, params, found, count, stored: {2: given})
     kwargs = dict(continuation_options=jc.ContinuationOptions(
         ds=0.02, ds_max=0.05, p_min=1.45, p_max=1.55, max_points=3),
         start_options=START, simulation_check=False, deflate=2, out=tmp_path)
@@ -253,6 +260,20 @@ def test_a_deflated_orbit_on_a_branch_already_followed_is_reported_not_followed(
     again = jc.localized_branches(RING, (2,), **kwargs)
     assert list(again["datasets"]) == ["k=2", "k=2 deflated 1"]
     assert again["summary"]["deflated_on_followed"] == [repeat]
+    # resumed with the one-site start: its deflation (replaced by a spy) is given the
+    # orbits the first run's deflation knew, read back from the stored records
+    seen = []
+    replace_internal(monkeypatch, "snake starts",
+                     lambda *args: {1: (None, {}, "not periodic (replaced)")})
+    replace_internal(monkeypatch, "snake deflated orbits",
+                     lambda orbits, params, found, count, stored: seen.append(stored) or {})
+    jc.localized_branches(RING, (2, 1), **kwargs)
+    ((own, *deflated),) = seen
+    assert all(np.array_equal(a, u) for a, (_, _, u) in zip(deflated, given, strict=True))
+    start = found["datasets"]["k=2"]  # its first point: its start orbit, corrected again
+    i = int(np.argmin(np.abs(start["v_d"].values - 1.5)))
+    np.testing.assert_allclose(own, start["u"].values[i], rtol=0,
+                               atol=10 * jc.ShootingOptions().newton_tol)
 
 
 @pytest.mark.numerics
@@ -262,8 +283,8 @@ def test_a_resumed_run_deflates_the_orbits_of_the_starts_it_read_back(tmp_path,
     with the one-site start's files removed, as after a run stopped once its first
     start was stored: deflation from the one-site start has every orbit deflated
     that it had in the whole run (the two-site start's own and the orbit deflation
-    found from it, read back from their branches' first points), and the resumed
-    run ends with the whole run's branches."""
+    found from it, read back from the two-site start's record, to the last bit),
+    and the resumed run ends with the whole run's branches."""
     module = internal_module("snake starts")
     real, seen = module.distinct_orbits, []
 
@@ -283,9 +304,12 @@ def test_a_resumed_run_deflates_the_orbits_of_the_starts_it_read_back(tmp_path,
     resumed = jc.localized_branches(RING, (2, 1), **kwargs)
     (known,) = seen  # deflation from the one-site start alone
     assert len(known) == len(whole_known) == 3
-    # the same orbits: a stored one is its branch's first point, shot again (Newton's
-    # tolerance 1e-9), the whole run's the solution of deflation itself
+    # the same orbits: the one-site start's own is shot again in the resumed run
+    # (Newton's tolerance 1e-9)
     assert all(min(copies_distance(u, v) for v in known) < 1e-6 for u in whole_known)
+    # the two read back (the two-site start's own orbit and deflation's solution from
+    # it) are the whole run's to the last bit
+    assert sum(any(np.array_equal(u, v) for v in known) for u in whole_known) >= 2
     assert list(resumed["datasets"]) == list(whole["datasets"])
     # orbits of one residual, each to Newton's tolerance (1e-9, shooting and the
     # continuation's corrector alike) from its root

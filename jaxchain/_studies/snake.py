@@ -1122,7 +1122,7 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
     stored as a record of why (`_read_branches`), so that a resumed run does not
     compute it again."""
 
-    datasets, starts, failed, repeated = {}, {}, {}, []
+    datasets, starts, failed, repeated, known = {}, {}, {}, [], []
     settings = {"chain": chain_record(params), **orbits.settings(),
                 "continuation": continuation_options, "start": start_options,
                 "switch": bool(switch), "deflate": int(deflate),
@@ -1139,6 +1139,7 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
         if stored is None:
             todo.append(k)
             continue
+        known += _stored_orbits(stored, float(params.v_d))
         record = stored[_start_label(k)]
         if "no_branch" in record.attrs:  # a start without a branch of its own
             del stored[_start_label(k)]
@@ -1152,8 +1153,7 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
     retry = tuple(d for d in RETRY_VD if lo < float(params.v_d) + d < hi)
     found = _start_orbits(orbits, params, todo, start_options, progress, retry)
     # a resumed run deflates the stored starts' orbits too, as the run it resumes did
-    deflated = _deflated_orbits(orbits, params, found, deflate,
-                                stored=_stored_orbits(datasets, float(params.v_d))
+    deflated = _deflated_orbits(orbits, params, found, deflate, stored=known
                                 ) if deflate else {}
     with Followers(workers) as pool:
         # every branch asked for at once, each from its start (a deflated orbit's may
@@ -1167,8 +1167,9 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
             if orbit is not None:
                 jobs[k] = pool.submit(_follow_start, orbit, sim["phase_oscillator"],
                                       mask, **follow)
-            for i, (o, m) in enumerate(deflated.get(k, [])):
-                jobs[k, i] = pool.submit(_follow_start, o, m, mask, **follow)
+            for i, (o, m, _) in enumerate(deflated.get(k, [])):
+                if o is not None:
+                    jobs[k, i] = pool.submit(_follow_start, o, m, mask, **follow)
         _take_branches(orbits, params, found, deflated, jobs, out, paths, settings,
                        (datasets, starts, failed, repeated))
     return datasets, starts, failed, repeated
@@ -1194,11 +1195,13 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
         if isinstance(mine, str):
             starts[k], failed[k], mine = sim, mine, {}
         followed, repeats, j = {}, [], 0
-        for i, (o, m) in enumerate(deflated.get(k, [])):
-            on = _on_followed_branch(orbits, params, o, datasets | mine | followed)
+        for i, (o, m, _) in enumerate(deflated.get(k, [])):
+            on = None if o is None else _on_followed_branch(orbits, params, o,
+                                                           datasets | mine | followed)
             if on is not None:
                 repeats.append({"start": own, "energy": float(o.energy),
                                 "n_halc": int(o.n_halc), "on": on})
+            if o is None or on is not None:
                 continue
             j += 1
             label = f"{own} deflated {j}"
@@ -1208,15 +1211,21 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
                 continue
             _store_branches(out, _numbered(paths[k], "deflated", j), branches, settings, k)
             followed |= branches
+        # every orbit this start gave deflation (`_deflated_orbits`), for a resumed run
+        known = {"deflation_known": json.dumps([np.asarray(u, dtype=float).tolist() for u in (
+            [] if orbit is None or float(orbit.params.v_d) != float(params.v_d)
+            else [pack(orbit.y0, orbit.period)]) + [u for _, _, u in deflated.get(k, [])]])}
         if own in mine:  # stored last: its attributes count the deflated branches
             mine[own] = mine[own].assign_attrs(deflated=j, deflated_repeats=json.dumps(repeats),
-                                               start_symmetric=int(bool(sim.get("symmetric"))))
+                                               start_symmetric=int(bool(sim.get("symmetric"))),
+                                               **known)
             _store_branches(out, paths[k], mine, settings, k)
         else:
             repeated += repeats
             _store_branches(out, paths[k], {own: xr.Dataset(attrs={
                 "no_branch": failed[k], "simulation": json.dumps(sim), "switched": 0,
-                "deflated": j, "deflated_repeats": json.dumps(repeats)})}, settings, k)
+                "deflated": j, "deflated_repeats": json.dumps(repeats), **known})},
+                settings, k)
         datasets |= mine | followed
 
 
@@ -1301,14 +1310,20 @@ def _passes_through(orbits, params: ChainParams, orbit, branch: xr.Dataset,
     return None
 
 
-def _stored_orbits(datasets: dict, v_d: float) -> list:
-    """The orbits at `v_d` that a resumed run read back: the start of each stored
-    start's own branch and deflated branch that begins there (not a switched
-    branch, nor one started at a neighbouring v_d), as shooting unknowns
-    (x, x', T), the point of the branch at its start."""
+def _stored_orbits(stored: dict, v_d: float) -> list:
+    """The orbits at `v_d` that one start gave deflation in the run that stored its
+    branches, `stored` (`_read_branches`), as shooting unknowns (x, x', T): its
+    own orbit and every solution deflation found from it, as deflation had them
+    (the record's `deflation_known`). Files written before that attribute give the
+    first point of the start's own and deflated branches instead (not a switched
+    branch, nor one started at a neighbouring v_d)."""
+    record = next(iter(stored.values()))
+    if "deflation_known" in record.attrs:
+        return [jnp.asarray(u) for u in json.loads(record.attrs["deflation_known"])]
     out = []
-    for label, ds in datasets.items():
-        if " switched " in label or float(ds.attrs["start_vd"]) != v_d:
+    for label, ds in stored.items():
+        if " switched " in label or "no_branch" in ds.attrs or float(
+                ds.attrs["start_vd"]) != v_d:
             continue
         i = int(np.argmin(np.abs(ds["v_d"].values - v_d)))
         if float(ds["v_d"].values[i]) == v_d:
@@ -1326,7 +1341,8 @@ def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int,
     shooting with the phase condition on its oscillator of largest amplitude.
     `stored`: the orbits of the starts that a resumed run read back
     (`_stored_orbits`), deflated too, so that resuming finds what the whole run
-    would. Returns k -> [(orbit, its phase oscillator), ...]."""
+    would. Returns k -> [(orbit, its phase oscillator, the deflation's solution u),
+    ...], the orbit None where shooting from u does not converge."""
     # the starts' orbits at params.v_d; one found at a neighbouring v_d
     # (`RETRY_VD`) is not a solution here, and its start is treated as not periodic
     here = {k: (o if o is not None and float(o.params.v_d) == float(params.v_d) else None,
@@ -1356,8 +1372,8 @@ def _deflated_orbits(orbits, params: ChainParams, found: dict, count: int,
             if m != n:  # the phase condition on the oscillator that vibrates most
                 guess = _turning_point(orbits, params, np.asarray(y), m)
                 shot = None if guess is None else orbits.shoot(params, guess[0], guess[1], m)
-            if shot is not None and bool(shot.converged):
-                out[k].append((shot, m))
+            out[k].append((shot if shot is not None and bool(shot.converged) else None,
+                           m, u))
     return out
 
 
