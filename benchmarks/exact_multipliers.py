@@ -19,7 +19,7 @@ import diffrax
 import numpy as np
 
 import jaxchain as jc
-from jaxchain._studies.snake import start_orbits  # the landed snake's starts
+from jaxchain._studies.snake.starts import start_orbits  # the landed snake's starts
 
 jc.configure()  # float64, one CPU device per core, the XLA flags
 

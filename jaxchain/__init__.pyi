@@ -209,9 +209,9 @@ from ._studies.mistuning.pattern_design import (
     pattern_deviations as pattern_deviations,
 )
 from ._studies.mistuning.design_study import design_study as design_study
-from ._studies.snake import (
-    localized_branches as localized_branches, start_site as start_site,
-    start_mask as start_mask, LATTICE_STARTS as LATTICE_STARTS,
+from ._studies.snake.run import localized_branches as localized_branches
+from ._studies.snake.starts import (
+    start_site as start_site, start_mask as start_mask, LATTICE_STARTS as LATTICE_STARTS,
 )
 from ._studies.bistable_range import (
     bistable_range as bistable_range, BISTABLE_XI_VALUES as BISTABLE_XI_VALUES,

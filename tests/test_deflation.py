@@ -15,7 +15,7 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 
-from helpers import internal, internal_module, reference_rhs, replace_internal
+from helpers import internal, reference_rhs, replace_internal
 
 RING = jc.ChainParams(n_osc=3, v_d=1.5)
 #: The starts settle within 1500 time units on three oscillators.
@@ -285,14 +285,13 @@ def test_a_resumed_run_deflates_the_orbits_of_the_starts_it_read_back(tmp_path,
     that it had in the whole run (the two-site start's own and the orbit deflation
     found from it, read back from the two-site start's record, to the last bit),
     and the resumed run ends with the whole run's branches."""
-    module = internal_module("snake starts")
-    real, seen = module.distinct_orbits, []
+    real, seen = internal("snake deflation"), []
 
     def spy(problem, start, known, **kwargs):
         seen.append([np.asarray(u) for u in known])
         return real(problem, start, known, **kwargs)
 
-    monkeypatch.setattr(module, "distinct_orbits", spy)
+    replace_internal(monkeypatch, "snake deflation", spy)
     kwargs = dict(continuation_options=jc.ContinuationOptions(
         ds=0.02, ds_max=0.05, p_min=1.45, p_max=1.55, max_points=3),
         start_options=START, simulation_check=False, deflate=1, out=tmp_path)

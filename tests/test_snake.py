@@ -237,7 +237,7 @@ def test_recurrences_of_a_periodic_orbit_return_after_one_period():
     orbits = internal("snake orbits")("exact")
     cycle = jc.exact_periodic_orbit(one, np.array([[2.2], [0.0]]), 6.3)
     start = orbits.samples(one, cycle.y0, np.array([0.0, 1.0]))[-1]
-    guesses = internal_module("snake starts")._recurrences(orbits, one, start, 0)
+    guesses = internal_module("snake symmetric orbit")._recurrences(orbits, one, start, 0)
     # the first turning point after `start` is the orbit's y0, T - 1 later
     assert len(guesses) == 5
     np.testing.assert_allclose(guesses[0][0], cycle.y0, atol=5e-3)
@@ -254,7 +254,7 @@ def test_eq8_on_the_ring_is_fixed_by_the_reflection_about_an_odd_block_s_centre(
     alone (the reflection swaps the signs); for the whole ring, the rotations by
     an even number of sites and the reflections through a site, eight in all; on
     a chain that is not a homogeneous ring, the identity."""
-    starts = internal_module("snake starts")
+    starts = internal_module("snake symmetric orbit")
     ring = jc.ChainParams(n_osc=8, v_d=1.5)
     ident = np.arange(8)
     for k in range(1, 9):
@@ -286,7 +286,7 @@ def test_inside_its_fixed_subspace_the_symmetric_start_reaches_an_orbit_unstable
     (`nonsmooth_flow`) along an orthonormal basis of the subspace, has no
     multiplier beyond 1 + 1e-3, and the one at 1 (the flow's direction) is
     among them."""
-    starts = internal_module("snake starts")
+    starts = internal_module("snake symmetric orbit")
     orbits = internal("snake orbits")("exact")
     at = jc.ChainParams(n_osc=8, v_d=1.5)
     start = np.asarray(jc.OutOfPhaseExcitation.eq8(starts.start_mask(at.graph, 5))(at))
@@ -417,7 +417,7 @@ def test_neighbouring_numbers_of_sites_connect_where_one_joined_set_of_branches_
                 "B": branch([2, 2, 2], [1, 1, 0]), "C": branch([2, 3, 3], [0, 0, 1]),
                 "D": branch([4, 4], [1, 1])}
     links = {"A": [], "B": ["C"], "C": ["B", "steady sliding"], "D": []}
-    out = internal_module("snake starts")._sites_connections(datasets, links, 5)
+    out = internal("snake sites connections")(datasets, links, 5)
     assert [c["sites"] for c in out] == [[n, n + 1] for n in range(5)]
     assert [c["connected"] for c in out] == [True, False, True, False, False]
     assert [c["stable_connected"] for c in out] == [False, False, True, False, False]

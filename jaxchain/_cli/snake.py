@@ -6,8 +6,9 @@ import dataclasses
 import time
 from pathlib import Path
 
-from .._studies.snake import (SLIDING_PASSES, SNAKE_CONTINUATION, SNAKE_START, check_starts,
-                              default_sites, default_starts, localized_branches)
+from .._studies.snake.branch import SLIDING_PASSES, SNAKE_CONTINUATION
+from .._studies.snake.run import localized_branches
+from .._studies.snake.starts import SNAKE_START, check_starts, default_sites, default_starts
 from .._plots.snake import plot_snake
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,

@@ -24,8 +24,8 @@ from ..._engine.options import SimulationOptions
 from ..._physics.forces import DEFAULT_EPS
 from ..._physics.initial import OutOfPhaseExcitation, initial_states
 from ..._physics.params import ChainParams, stack_chains, with_parameter
-from ..snake import _turning_point
-from ..snake_orbits import SNAKE_SHOOTING, SmoothedOrbits
+from ..snake.starts import _turning_point
+from ..snake.orbits import SNAKE_SHOOTING, SmoothedOrbits
 from ..._sweeps.result_store import read_dataset, write_dataset
 from ..._checks import check_count
 from ..._errors import ValidationError

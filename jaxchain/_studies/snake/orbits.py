@@ -11,18 +11,27 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._engine.compat import checks_as_nan
-from .._bifurcation.continuation import ContinuationProblem
-from .._bifurcation.exact_orbit import (ExactShooting, exact_cycle_problem,
-                                        exact_floquet_multipliers, exact_periodic_orbit)
-from .._bifurcation.limit_cycles import limit_cycle_problem
-from .._bifurcation.shooting import (ShootingOptions, floquet_multipliers, flow, periodic_orbit,
-                                     unpack)
-from .._engine.engines import AbstractEngine, as_engine
-from .._engine.exact.solve import nonsmooth_flow
-from .._engine.options import SimulationOptions
-from .._errors import ValidationError
-from .._physics.params import ChainParams
+from ..._bifurcation.continuation import ContinuationProblem
+from ..._bifurcation.exact_orbit import (
+    ExactShooting,
+    exact_cycle_problem,
+    exact_floquet_multipliers,
+    exact_periodic_orbit,
+)
+from ..._bifurcation.limit_cycles import limit_cycle_problem
+from ..._bifurcation.shooting import (
+    ShootingOptions,
+    floquet_multipliers,
+    flow,
+    periodic_orbit,
+    unpack,
+)
+from ..._engine.compat import checks_as_nan
+from ..._engine.engines import AbstractEngine, as_engine
+from ..._engine.exact.solve import nonsmooth_flow
+from ..._engine.options import SimulationOptions
+from ..._errors import ValidationError
+from ..._physics.params import ChainParams
 
 #: Shooting on a chain: Levenberg-Marquardt converges from a simulated state.
 SNAKE_SHOOTING = ShootingOptions(root_finder="levenberg-marquardt")

@@ -1,0 +1,344 @@
+"""`localized_branches`: every start's branch, the branches that deflation and
+branch switching find, stored as they are found and read back on resuming, and
+checked."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..._bifurcation.continuation import ContinuationOptions
+from ..._bifurcation.shooting import pack
+from ..._engine.options import SimulationOptions
+from ..._engine.solver.registry import DEFAULT_SOLVER
+from ..._errors import ValidationError
+from ..._physics.params import ChainParams, chain_or_default
+from ..._physics.record import chain_record
+from ..._sweeps.result_store import read_dataset, write_dataset
+from .branch import BRANCH_METHOD, SLIDING_PASSES, SNAKE_CONTINUATION, _follow_branch
+from .checks import _stable_range_checks
+from .deflated import _deflated_orbits, _on_followed_branch, _stored_orbits
+from .orbits import snake_orbits
+from .pool import Followers
+from .starts import (
+    RECURRENCES,
+    RETRY_VD,
+    SNAKE_START,
+    SYMMETRIC_CHUNK,
+    _start_label,
+    _start_orbits,
+    check_starts,
+    start_mask,
+)
+from .summary import _branches_summary
+
+
+def localized_branches(params: ChainParams | None = None, sites=None, *,
+                       engine: str = "smoothed", shooting=None,
+                       continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
+                       start_options: SimulationOptions = SNAKE_START,
+                       solver=DEFAULT_SOLVER, eps=None, switch: bool = True,
+                       deflate: int = 0,
+                       simulation_check: bool = True,
+                       out: Path | None = None, progress: bool = False,
+                       workers: int = 1) -> dict:
+    """The snake: each localized periodic state that simulation finds at
+    `params.v_d` (eq. (8) with k excited, for k in `sites`), refined by shooting,
+    continued over v_d both ways by pseudo-arclength through its folds, with its
+    Floquet multipliers, bifurcations (`locate_bifurcations`), stable ranges, the
+    branches it meets and, optionally, direct simulation just inside and outside each
+    end of each stable range.
+
+    **Arguments:**
+
+    - `params`: the chain (any chain of `ChainParams`); `params.v_d` is where the
+        states are found (1.5 by default, inside the paper's bistable range).
+    - `sites`: the starts: numbers of excited oscillators (eq. (8)'s block or a
+        graph's patch) or named one-site starts (`start_site`); `default_starts`
+        by default (the corner, edge and interior one-site states on a lattice).
+    - `engine`: "smoothed" (eq. (5) with tanh(v_rel/eps)) or "exact" (the stick/slip
+        switch model: exact shooting, exact Floquet multipliers, simulations on
+        the exact engine) for every orbit, branch and simulation.
+    - `shooting`: `ShootingOptions` (smoothed) or `ExactShooting` (exact) of every
+        orbit (`SNAKE_SHOOTING`, `EXACT_SNAKE_SHOOTING` by default).
+    - `continuation_options`: `ContinuationOptions` (direction is set both ways).
+    - `start_options`: `SimulationOptions` of the starting simulations.
+    - `solver`: the smoothed engine's solver of the simulations, the starts and the
+        checks (`SOLVERS`); shooting has its own (`shooting.solver`).
+    - `eps`: the smoothed engine's smoothing velocity of tanh(v_rel/eps) (None:
+        `DEFAULT_EPS`; None for the exact engine), a finite number > 0,
+        shape (), dimensionless (a fraction of x_0 omega_n): that of the smoothed
+        engine of every simulation (`Smoothed.eps`) and of every orbit, branch and
+        multiplier; `DEFAULT_EPS` by default. Stored branches are read back only
+        for an equal eps.
+    - `switch`: at each branch point of a branch, switch onto the other branch
+        through it and follow that too (`switch_branch`: the kernel direction that
+        the followed branch does not take; where that fails, as at the branch
+        points of a symmetric ring, every orbit that `switch_by_deflation` finds
+        beside it; labelled "k=<k> switched <j>").
+    - `deflate`: at `params.v_d`, up to this many further periodic orbits from the
+        eq. (8) state of each start by deflation (`distinct_orbits`), every orbit
+        found so far deflated; each is followed as a branch of its own, labelled
+        "k=<k> deflated <j>", unless it lies on a branch already followed (a branch
+        with folds crosses v_d more than once): that one is reported in
+        `deflated_on_followed` (0: none).
+    - `simulation_check`: check every stable range by direct simulation.
+    - `out`: a folder: each branch is stored there as `branch_k<k>.nc` (or
+        `branch_<name>.nc`) with the key
+        of its settings (`write_dataset`) as it finishes, and read back on a later
+        call with equal settings (resume); the starts not stored are computed, and
+        with `deflate` their deflation deflates the stored starts' orbits too, as
+        the whole run would.
+    - `progress`: progress bars.
+    - `workers`: the number of processes that follow the starts' branches side by
+        side (1: one after another, in this process). The branches are the same
+        either way (each is the same computation), and so is what is stored;
+        with more, a deflated orbit's branch may be followed and then dropped,
+        where it lies on a branch followed before it.
+
+    **Returns:**
+
+    A dict with `summary` (JSON-ready: `branches`, a list of objects with `label`,
+    `excited`, `sites`, `stable_ranges`, `bifurcations`, `connects_to`, ...;
+    `not_periodic`, the starts without a periodic orbit and why;
+    `deflated_on_followed`, the deflated orbits found on a branch already followed,
+    each with its `start`, `energy`, `n_halc` and the branch it lies `on`; and
+    `sites_connections`, for n = 0 ... N - 1 whether the orbits with n and n + 1
+    sites on the HALC connect, stable ones included, `_sites_connections`) and
+    `datasets` (label -> the branch's `xarray.Dataset`).
+
+    **Raises:**
+
+    `ValidationError` for bad sites, options or eps, an unknown engine, eps given
+    to the exact engine or shooting options of the other engine.
+    """
+    params, sites, orbits = _check_branches(params, sites, engine, shooting, solver, eps)
+    if not (isinstance(deflate, int) and deflate >= 0):
+        raise ValidationError(f"deflate must be a whole number >= 0, got {deflate!r}")
+    if not (isinstance(workers, int) and workers >= 1):
+        raise ValidationError(f"workers must be a whole number >= 1, got {workers!r}")
+    run = _run_branches(orbits, params, sites, continuation_options, start_options, switch,
+                        deflate, simulation_check, out, progress, workers)
+    return _branches_summary(*run, params.n_osc)
+
+
+def _check_branches(params: ChainParams | None, sites, engine, shooting, solver, eps
+                    ) -> tuple:
+    """The chain (the paper's ring where None), the starts (`check_starts`) and the
+    orbits of the engine (`snake_orbits`, which checks eps and the options)."""
+    params = chain_or_default(params)
+    orbits = snake_orbits(engine, shooting, eps, solver, params)
+    return params, check_starts(params.graph, sites), orbits
+
+
+def _run_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
+                  start_options, switch, deflate, simulation_check, out, progress,
+                  workers: int = 1) -> tuple:
+    """The branches (`_find_branches`), then the checks of their stable ranges
+    (`_stable_range_checks`): (datasets, starts, failed starts, deflated orbits on
+    branches already followed, checks)."""
+    datasets, starts, failed, repeated = _find_branches(
+        orbits, params, sites, continuation_options, start_options, switch, deflate, out,
+        progress, workers)
+    checks = _stable_range_checks(orbits, params, datasets, simulation_check,
+                                  progress)
+    return datasets, starts, failed, repeated, checks
+
+
+def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
+                   start_options, switch, deflate, out, progress, workers: int = 1
+                   ) -> tuple[dict, dict, dict, list]:
+    """The branch of each start, with `deflate` the branches of the further orbits
+    that deflation finds from its eq. (8) state (`_deflated_orbits`; one on a branch
+    already followed is reported, `_on_followed_branch`, not followed again), and
+    with `switch` the branches switched onto at their branch points: read back from
+    `out` where stored with the same settings, else started by simulation and
+    shooting (`start_orbits`), continued (`_follow_start`) and stored. Returns
+    (label -> branch dataset, start -> the simulation's n_HALC and energy, start ->
+    why it has no periodic orbit, the deflated orbits on branches already followed
+    from starts without a branch of their own; those of the others are their
+    branch's attribute `deflated_repeats`). A start without a branch of its own is
+    stored as a record of why (`_read_branches`), so that a resumed run does not
+    compute it again."""
+
+    datasets, starts, failed, repeated, known = {}, {}, {}, [], []
+    settings = {"chain": chain_record(params), **orbits.settings(),
+                "continuation": continuation_options, "start": start_options,
+                "switch": bool(switch), "deflate": int(deflate),
+                "sliding_passes": SLIDING_PASSES, "branch_method": BRANCH_METHOD,
+                "retry_vd": list(RETRY_VD), "recurrences": RECURRENCES,
+                "symmetric_chunk": SYMMETRIC_CHUNK}
+    paths = {k: None if out is None else Path(out) / (
+        f"branch_{k}.nc" if isinstance(k, str) else f"branch_k{k}.nc").replace(":", "")
+        for k in sites}
+    todo = []
+    for k in sites:
+        stored = None if out is None else _read_branches(paths[k], k, _start_label(k),
+                                                         settings)
+        if stored is None:
+            todo.append(k)
+            continue
+        known += _stored_orbits(stored, float(params.v_d))
+        record = stored[_start_label(k)]
+        if "no_branch" in record.attrs:  # a start without a branch of its own
+            del stored[_start_label(k)]
+            failed[k] = record.attrs["no_branch"]
+            starts[k] = json.loads(record.attrs["simulation"])
+            repeated += json.loads(record.attrs["deflated_repeats"])
+        datasets |= stored
+    if not todo:
+        return datasets, starts, failed, repeated
+    lo, hi = continuation_options.p_min, continuation_options.p_max
+    retry = tuple(d for d in RETRY_VD if lo < float(params.v_d) + d < hi)
+    found = _start_orbits(orbits, params, todo, start_options, progress, retry)
+    # a resumed run deflates the stored starts' orbits too, as the run it resumes did
+    deflated = _deflated_orbits(orbits, params, found, deflate, stored=known
+                                ) if deflate else {}
+    with Followers(workers) as pool:
+        # every branch asked for at once, each from its start (a deflated orbit's may
+        # go unused, where it lies on a branch followed before it); with one worker
+        # each is computed when the loop below asks for it, as the sequential run did
+        follow = dict(orbits=orbits, continuation_options=continuation_options,
+                      switch=switch, progress=progress and workers <= 1)
+        jobs = {}
+        for k, (orbit, sim, _) in found.items():
+            mask = start_mask(params.graph, k)
+            if orbit is not None:
+                jobs[k] = pool.submit(_follow_start, orbit, sim["phase_oscillator"],
+                                      mask, **follow)
+            for i, (o, m, _) in enumerate(deflated.get(k, [])):
+                if o is not None:
+                    jobs[k, i] = pool.submit(_follow_start, o, m, mask, **follow)
+        _take_branches(orbits, params, found, deflated, jobs, out, paths, settings,
+                       (datasets, starts, failed, repeated))
+    return datasets, starts, failed, repeated
+
+
+def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, jobs: dict,
+                   out, paths: dict, settings: dict, into: tuple) -> None:
+    """The branches of `jobs` (`_find_branches`), in the order of the starts: each
+    start's own, then those of its deflated orbits not on a branch followed before
+    (`_on_followed_branch`), labelled and stored, into (datasets, starts, failed,
+    repeated)."""
+    import xarray as xr
+
+    datasets, starts, failed, repeated = into
+    for k, (orbit, sim, reason) in found.items():
+        starts[k] = sim
+        own, mask = _start_label(k), start_mask(params.graph, k)
+        # a start whose simulated state is not periodic keeps its reason, and the
+        # orbits that deflation finds from its eq. (8) state are followed still
+        if orbit is None:
+            failed[k] = reason
+        mine = {} if orbit is None else _labelled(own, orbit, mask, jobs[k].result())
+        if isinstance(mine, str):
+            starts[k], failed[k], mine = sim, mine, {}
+        followed, repeats, j = {}, [], 0
+        for i, (o, m, _) in enumerate(deflated.get(k, [])):
+            on = None if o is None else _on_followed_branch(orbits, params, o,
+                                                           datasets | mine | followed)
+            if on is not None:
+                repeats.append({"start": own, "energy": float(o.energy),
+                                "n_halc": int(o.n_halc), "on": on})
+            if o is None or on is not None:
+                continue
+            j += 1
+            label = f"{own} deflated {j}"
+            branches = _labelled(label, o, mask, jobs[k, i].result())
+            if isinstance(branches, str):
+                starts[label], failed[label] = sim, branches
+                continue
+            _store_branches(out, _numbered(paths[k], "deflated", j), branches, settings, k)
+            followed |= branches
+        # every orbit this start gave deflation (`_deflated_orbits`), for a resumed run
+        known = {"deflation_known": json.dumps([np.asarray(u, dtype=float).tolist() for u in (
+            [] if orbit is None or float(orbit.params.v_d) != float(params.v_d)
+            else [pack(orbit.y0, orbit.period)]) + [u for _, _, u in deflated.get(k, [])]])}
+        if own in mine:  # stored last: its attributes count the deflated branches
+            mine[own] = mine[own].assign_attrs(deflated=j, deflated_repeats=json.dumps(repeats),
+                                               start_symmetric=int(bool(sim.get("symmetric"))),
+                                               **known)
+            _store_branches(out, paths[k], mine, settings, k)
+        else:
+            repeated += repeats
+            _store_branches(out, paths[k], {own: xr.Dataset(attrs={
+                "no_branch": failed[k], "simulation": json.dumps(sim), "switched": 0,
+                "deflated": j, "deflated_repeats": json.dumps(repeats), **known})},
+                settings, k)
+        datasets |= mine | followed
+
+
+def _follow_start(start, phase_oscillator: int, mask, *, orbits, continuation_options,
+                  switch, progress) -> tuple | str:
+    """The branch through the periodic orbit `start` (`_follow_branch`) and the
+    branches switched onto from it, (branch, [switched, ...]), or why its
+    continuation failed. Run in a worker process where `workers` > 1."""
+    try:
+        return _follow_branch(orbits, start, phase_oscillator, continuation_options,
+                              k=int(mask.sum()), switch=switch, progress=progress)
+    except (ValueError, RuntimeError) as err:  # flagged; the other branches go on
+        return f"continuation failed: {err}"
+
+
+def _labelled(label: str, start, mask, followed: tuple | str) -> dict | str:
+    """The branches of `_follow_start` from `start`, labelled `label` and "<label>
+    switched <j>" (label -> dataset), or why its continuation failed."""
+    if isinstance(followed, str):
+        return followed
+    ds, switched = followed
+    first = ds.assign_attrs(start_vd=float(start.params.v_d), start_energy=float(start.energy),
+                            start_n_halc=int(start.n_halc), switched=len(switched), deflated=0,
+                            deflated_repeats="[]")
+    branches = [first] + [sw.assign_attrs(start_vd=sw.attrs["switched_from_vd"],
+                                          start_energy=float(sw["energy"].values[0]),
+                                          start_n_halc=int(sw["n_halc"].values[0]))
+                          for sw in switched]
+    return {label if j == 0 else f"{label} switched {j}":
+            b.assign_attrs(start=label, start_sites=np.flatnonzero(mask).tolist())
+            for j, b in enumerate(branches)}
+
+
+def _store_branches(out, path: Path | None, branches: dict, settings: dict, k) -> None:
+    """Write a start's branch and those switched onto from it (`_follow_start`) to
+    `path` and beside it, each with the key of its settings."""
+    if out is None:
+        return
+    Path(out).mkdir(parents=True, exist_ok=True)
+    label = next(iter(branches))
+    for j, b in enumerate(branches.values()):
+        write_dataset(b, _numbered(path, "switched", j), "snake branch", k=k, label=label,
+                      switched=j, **settings)
+
+
+def _numbered(path: Path | None, what: str, j: int) -> Path | None:
+    """The file of the j-th branch of kind `what` (switched, deflated) beside the
+    branch stored at `path` (j = 0: that branch)."""
+    return path if path is None or j == 0 else path.with_name(f"{path.stem}_{what}{j}.nc")
+
+
+def _read_branches(path: Path, k, label: str, settings: dict) -> dict | None:
+    """The stored branch `label` of start k, the branches switched onto from it and
+    the deflated branches of the start with theirs (label -> dataset), or None if
+    any of them is missing or was made with other settings. A start without a
+    branch of its own has a record instead of its branch: a dataset without
+    variables, its attributes `no_branch` (why), `simulation` (JSON: the start's
+    n_HALC and energy) and `deflated_repeats`."""
+    first = read_dataset(path, "snake branch", k=k, label=label, switched=0, **settings)
+    if first is None:
+        return None
+    out = {label: first}
+    for j in range(1, int(first.attrs.get("switched", 0)) + 1):
+        out[f"{label} switched {j}"] = read_dataset(_numbered(path, "switched", j),
+                                                    "snake branch", k=k, label=label,
+                                                    switched=j, **settings)
+    if any(ds is None for ds in out.values()):
+        return None
+    for j in range(1, int(first.attrs.get("deflated", 0)) + 1):
+        deflated = _read_branches(_numbered(path, "deflated", j), k, f"{label} deflated {j}",
+                                  settings)
+        if deflated is None:
+            return None
+        out |= deflated
+    return out
