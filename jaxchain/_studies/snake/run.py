@@ -237,12 +237,12 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
             starts[k], failed[k], mine = sim, mine, {}
         followed, repeats, j = {}, [], 0
         for i, (o, m, _) in enumerate(deflated.get(k, [])):
-            on = None if o is None else _on_followed_branch(orbits, params, o,
-                                                           datasets | mine | followed)
+            if o is None:  # shooting from deflation's solution did not converge
+                continue
+            on = _on_followed_branch(orbits, params, o, datasets | mine | followed)
             if on is not None:
                 repeats.append({"start": own, "energy": float(o.energy),
                                 "n_halc": int(o.n_halc), "on": on})
-            if o is None or on is not None:
                 continue
             j += 1
             label = f"{own} deflated {j}"
@@ -253,9 +253,11 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
             _store_branches(out, _numbered(paths[k], "deflated", j), branches, settings, k)
             followed |= branches
         # every orbit this start gave deflation (`_deflated_orbits`), for a resumed run
-        known = {"deflation_known": json.dumps([np.asarray(u, dtype=float).tolist() for u in (
-            [] if orbit is None or float(orbit.params.v_d) != float(params.v_d)
-            else [pack(orbit.y0, orbit.period)]) + [u for _, _, u in deflated.get(k, [])]])}
+        gave = ([] if orbit is None or float(orbit.params.v_d) != float(params.v_d)
+                else [pack(orbit.y0, orbit.period)])
+        gave += [u for _, _, u in deflated.get(k, [])]
+        known = {"deflation_known": json.dumps([np.asarray(u, dtype=float).tolist()
+                                                for u in gave])}
         if own in mine:  # stored last: its attributes count the deflated branches
             mine[own] = mine[own].assign_attrs(deflated=j, deflated_repeats=json.dumps(repeats),
                                                start_symmetric=int(bool(sim.get("symmetric"))),
