@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -83,6 +84,15 @@ def test_fold_derivative_against_finite_differences(branch, where, value):
     assert bool(ok_plus) and bool(ok_minus)
     fd = (plus[n] - minus[n]) / (2 * h)
     assert abs(float(derivative[n]) - float(fd)) < 1e-4 * abs(float(fd))
+
+    # reverse mode: the implicit function theorem's tangent transposes (a
+    # forward-mode pass through diffrax's loop would not)
+    def fold_vd(v):
+        moved = problem.with_params(jc.with_parameter(problem.params, where, v))
+        return jc.solve_fold(moved, solution)[0][n]
+
+    reverse = float(jax.grad(fold_vd)(jnp.asarray(value)))
+    assert abs(reverse - float(derivative[n])) < 1e-10 * abs(reverse)
 
 
 @pytest.fixture(scope="module")

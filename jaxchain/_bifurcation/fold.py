@@ -10,6 +10,8 @@ from jaxtyping import Array, Bool, Float
 from .._engine.compat import checks_as_nan
 from .._physics.params import ChainParams
 from .continuation import Branch, ContinuationProblem, describe_point
+from .implicit import implicit_root
+from .._printing import values_repr
 
 
 class FoldPoint(eqx.Module):
@@ -30,6 +32,8 @@ class FoldPoint(eqx.Module):
     null_vector: Float[Array, " n"]
     record: eqx.Module
     converged: Bool[Array, ""]
+
+    __repr__ = values_repr
 
 
 def _extended(unknowns, problem: ContinuationProblem):
@@ -64,20 +68,31 @@ def _fold_start(problem: ContinuationProblem, z: Float[Array, " n+1"]) -> Float[
     return jnp.concatenate([z, _null_vector(problem, z)])
 
 
+class _Newton(eqx.Module):
+    """Newton's method (optimistix) on a fold's extended system, as
+    `implicit_root` takes it: (root, converged)."""
+
+    tol: float
+    max_steps: int
+
+    def __call__(self, fn, start, args):
+        sol = optx.root_find(fn, optx.Newton(rtol=self.tol, atol=self.tol), start, args,
+                             max_steps=self.max_steps, throw=False)
+        return sol.value, (sol.result == optx.RESULTS.successful) & jnp.all(
+            jnp.isfinite(sol.value))
+
+
 @checks_as_nan
 @eqx.filter_jit
 def solve_fold(problem: ContinuationProblem, start: Float[Array, " 2n+1"],
                tol: float = 1e-9, max_steps: int = 30):
     """Newton's method on the extended system from `start` = (u, p, w); returns
     the solution (u, p, w) and whether it converged. Traceable and differentiable
-    in `problem.params` by implicit differentiation (optimistix's
-    `ImplicitAdjoint`: the derivative solves one linear system with the extended
-    system's Jacobian, not a derivative through Newton's iterations)."""
-    sol = optx.root_find(_extended, optx.Newton(rtol=tol, atol=tol), start, problem,
-                         max_steps=max_steps, throw=False,
-                         adjoint=optx.ImplicitAdjoint())
-    ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(sol.value))
-    return sol.value, ok
+    in `problem.params` (and the problem's eps), in forward and reverse mode
+    (`jax.jvp`, `jax.grad`), by the implicit function theorem on the extended
+    system (`implicit_root`: one linear solve with its Jacobian, not a derivative
+    through Newton's iterations); NaN derivatives where Newton's method failed."""
+    return implicit_root(_extended, _Newton(tol, max_steps), start, problem)
 
 
 def fold_point(problem: ContinuationProblem, near: Branch | Float[Array, " n+1"], *,

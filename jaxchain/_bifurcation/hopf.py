@@ -17,6 +17,7 @@ from .._physics.params import is_homogeneous_ring
 from .._physics.model import as_value, jacobian
 from .._physics.params import ChainParams, with_parameter
 from .._errors import ValidationError
+from .._printing import values_repr
 
 
 def _require_ring(params: ChainParams, what: str) -> None:
@@ -226,9 +227,14 @@ class HopfPoint(eqx.Module):
         Steady sliding is stable above the largest.
     - `omega`: angular frequency of each mode at its Hopf point, shape (n_osc,).
     - `slope`: d Re(lambda) / d v_d of each mode at its Hopf point, by JAX, shape
-        (n_osc,); negative (the speed stabilises steady sliding).
+        (n_osc,); negative (the speed stabilises steady sliding). On a chain other
+        than the homogeneous ring a diagnostic that JAX holds constant: its
+        derivative would need the derivatives of non-symmetric eigenvectors.
     - `residual`: growth rate at the returned v_d, shape (n_osc,).
     - `newton_steps`: Newton iterations of each mode, shape (n_osc,).
+
+    `v_d`, `omega` and `residual` are differentiable in every parameter of the
+    chain (`hopf_point`).
     """
 
     v_d: Float[Array, " n_osc"]
@@ -236,6 +242,8 @@ class HopfPoint(eqx.Module):
     slope: Float[Array, " n_osc"]
     residual: Float[Array, " n_osc"]
     newton_steps: Array
+
+    __repr__ = values_repr
 
 
 def _mode_growth(v_d, args):
@@ -320,12 +328,21 @@ def _leading_growth(v_d, args):
 @eqx.filter_jit
 def _hopf_leading(params: ChainParams, eps, guess, rtol, atol):
     """The Hopf point of any chain: Newton's method (optimistix) on the leading
-    growth rate, with shapes (1,) as `_hopf_modes` gives them per mode."""
+    growth rate, with shapes (1,) as `_hopf_modes` gives them per mode.
+
+    Derivatives by the implicit function theorem on the Hopf condition
+    g(v_d, p) = Re lambda(v_d, p) = 0 (optimistix's `ImplicitAdjoint`): dv_d,H =
+    -(dg/dp dp) / (dg/dv_d), with the derivative of a simple eigenvalue from its
+    left and right eigenvectors, d lambda = w^T dJ v / (w^T v) (the rows of V^-1
+    are the left eigenvectors: JAX's derivative of `eigvals`; Magnus, Econometric
+    Theory 1 (1985) 179). Nothing differentiates an eigenvector: the slope
+    dg/dv_d, a derivative already, is held constant (`HopfPoint.slope`), since its
+    own derivative would need them."""
     sol = optx.root_find(_leading_growth, optx.Newton(rtol=rtol, atol=atol), guess,
                          (params, eps), max_steps=100, throw=False)
     at = with_parameter(params, "v_d", sol.value)
     values = steady_sliding_eigenvalues(at, eps)
-    slope = jax.grad(_leading_growth)(sol.value, (params, eps))
+    slope = jax.grad(_leading_growth)(*jax.lax.stop_gradient((sol.value, (params, eps))))
     fields = (sol.value, jnp.abs(values[0].imag), slope, values[0].real,
               sol.stats["num_steps"])
     return (*(jnp.atleast_1d(a) for a in fields), sol.result)
@@ -374,8 +391,14 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, eps=DEFAULT_EPS,
     form is `hopf_vd_analytic`; for any law with uniform damping and load the root
     is that of 2 xi + (P_n/P) mu'(v_d) = 0 for every mode.
 
-    Differentiable in the other parameters by implicit differentiation (optimistix's
-    `ImplicitAdjoint`): d v_d,H / d xi = -(d g/d xi) / (d g/d v_d).
+    Differentiable (`jax.grad`, `jax.jvp`) in every other parameter of every chain
+    (coupling, masses, damping, stiffnesses, loads, the friction law's parameters
+    and tables) and in `eps`, by the implicit function theorem on the Hopf condition
+    g(v_d, p) = Re lambda(v_d, p) = 0 (optimistix's `ImplicitAdjoint`): d v_d,H =
+    -(dg/dp dp) / (dg/dv_d), with d lambda = w^T dJ v / (w^T v) from the left and
+    right eigenvectors of the Jacobian (Govaerts, *Numerical Methods for
+    Bifurcations of Dynamical Equilibria*, SIAM 2000, Ch. 4); no eigenvector is
+    differentiated.
 
     **Arguments:**
 

@@ -19,6 +19,7 @@ from .fold import FoldSystem, solve_fold
 from .hopf import check_eps, hopf_vd
 from .limit_cycles import problem_eps
 from .._errors import ValidationError
+from .._printing import values_repr
 
 
 def hopf_vd_and_derivative(params: ChainParams, where: Callable | str, value, *,
@@ -154,6 +155,8 @@ class BoundaryCurves(eqx.Module):
     converged: Bool[Array, " n_values"]
     solutions: Float[Array, "n_values 2n+1"]
     branches: tuple[Branch, ...]
+
+    __repr__ = values_repr
 
 
 #: Steps of the fold curve in (u, p, w, second parameter).
