@@ -10,6 +10,7 @@ import jax
 import platformdirs
 
 from .._errors import ValidationError
+from .._engine.cache_folder import check_cache_folder
 from .._engine.programs import keep_programs
 from .._setup import VERSION, configure
 from .common import (Parser, RunsFailed, UsageError, finish_prefetch, one_line,
@@ -34,7 +35,8 @@ def build_parser(commands=COMMANDS) -> Parser:
         epilog="Compiled programs are kept between runs in JAX's persistent "
                "compilation cache, in the folder named by JAXCHAIN_CACHE_DIR (an "
                "empty value turns it off) or else in the user's cache folder "
-               "(platformdirs.user_cache_dir('jaxchain')/xla). "
+               "(platformdirs.user_cache_dir('jaxchain')/xla); only you (or root) may "
+               "write that folder: one that another user owns or can write is refused. "
                "After a first command, a warm process keeps JAX loaded and runs the "
                "next commands of the same environment ('jaxchain server status' shows "
                "it, 'jaxchain server stop' ends it, JAXCHAIN_SERVER=0 turns it off). "
@@ -83,18 +85,38 @@ def compilation_cache() -> str | None:
     in the folder `traced` (`keep_programs`), so that a warm start neither traces
     nor compiles them.
 
+    The process runs what the cache holds, so only this user (or root) may write
+    it (`check_cache_folder`, as ssh checks `~/.ssh`); a missing folder is created
+    with mode 0o700. A folder of root's that this user cannot write (a cache shared
+    on a cluster, filled by its administrator) is read, never written. A folder
+    that cannot be created turns the cache off.
+
     **Returns:**
 
     The folder, or None when the cache is off.
+
+    **Raises:**
+
+    `UsageError` naming the folder (or the folder above it, or the file in it)
+    that another user owns or can write, and the fix.
     """
     folder = os.environ.get("JAXCHAIN_CACHE_DIR")
     if folder is None:
         folder = os.path.join(platformdirs.user_cache_dir("jaxchain"), "xla")
     if not folder:
         return None
+    try:
+        writable = check_cache_folder(folder)
+        keep_programs(os.path.join(folder, "traced"))
+    except ValidationError as err:
+        raise UsageError(str(err)) from None
+    except OSError:
+        return None  # it cannot be created: no cache
     jax.config.update("jax_compilation_cache_dir", folder)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    keep_programs(os.path.join(folder, "traced"))
+    # JAX writes an executable only if it took at least this long to compile:
+    # every one, or none into a folder that is read only.
+    jax.config.update("jax_persistent_cache_min_compile_time_secs",
+                      0.0 if writable else float("inf"))
     return folder
 
 
@@ -127,9 +149,9 @@ def main(argv=None) -> int:
         os.environ["MPLBACKEND"] = "Agg"
         if "matplotlib" in sys.modules:
             sys.modules["matplotlib"].use("Agg")
-    compilation_cache()
     ran = False
     try:
+        compilation_cache()  # a cache folder that others can write: exit status 2
         args.run(args)
         ran = True
         return 0

@@ -1,18 +1,23 @@
 """Traced programs kept on disk beside JAX's compiled ones, so that a warm start does
-not trace diffrax's loop again (`jax.export`)."""
+not trace diffrax's loop again (`jax.export`). What is kept is data: the program
+serialised by `jax.export` and the tree structure of its output as JSON
+(`tree_json`); nothing read back runs code of the file's own. The folder is checked
+first: only this user (or root) may write it (`check_cache_folder`)."""
 
+import contextlib
 import functools
 import hashlib
 import importlib.metadata
 import json
 import os
-import pickle
 from collections.abc import Callable
 from pathlib import Path
 
 import equinox as eqx
 import jax
 
+from . import tree_json
+from .cache_folder import check_cache_folder
 from .hashes import canonical
 from .._setup import source_identity
 
@@ -29,6 +34,7 @@ def code_identity() -> dict:
 
 
 _folder: list[Path | None] = [None]
+_writable = [False]  # whether this user may write `_folder` (`check_cache_folder`)
 
 #: The kept programs loaded by this process, by folder and key: a second call (the
 #: next batch of a sweep) runs the program compiled for the first.
@@ -42,11 +48,28 @@ def keep_programs(folder: Path | str | None) -> None:
     as the key names a user's own friction law or observer by its class, not by its
     code. Another folder (or None) forgets the programs this process loaded: the
     next call of `kept_program` reads its program from the folder again; the same
-    folder keeps them (the command line's warm process runs many commands)."""
-    folder = None if folder is None else Path(folder)
+    folder keeps them (the command line's warm process runs many commands).
+
+    The folder is created (mode 0o700) where it is missing; where it cannot be
+    (a read-only cache without it), no program is kept. A folder of root's that
+    this user cannot write is read only: programs are read from it, and those
+    traced here are not written.
+
+    **Raises:**
+
+    `ValidationError` for a folder that another user owns or can write
+    (`check_cache_folder`).
+    """
+    writable = False
+    if folder is not None:
+        try:
+            writable = check_cache_folder(folder)
+            folder = Path(folder)
+        except OSError:
+            folder = None
     if folder != _folder[0]:
         _loaded.clear()
-    _folder[0] = folder
+    _folder[0], _writable[0] = folder, writable
 
 
 def program_folder() -> Path | None:
@@ -79,15 +102,17 @@ def kept_program(fn: Callable, *example) -> Callable | None:
     only its compilation remains, which the persistent cache holds too.
 
     The first call for a key traces `fn` and writes `<key>.jaxexport` (the
-    serialised program) and `<key>.tree` (a pickled template of its output) in
-    `program_folder()`; later processes read them back. A program is never reused
-    across other settings, code or package versions (`_program_key`).
+    serialised program) and `<key>.tree` (the tree structure of its output as
+    JSON, `tree_json`) in `program_folder()`; later processes read them back. A
+    program is never reused across other settings, code or package versions
+    (`_program_key`); files that do not fit the key's arrays are traced again.
 
     **Returns:**
 
     The function, or None when no folder is set (the cache is off), or when `example`
-    holds a value that cannot be keyed (`canonical` raises `TypeError`) or a
-    program that cannot be exported: then call `fn` itself.
+    holds a value that cannot be keyed (`canonical` raises `TypeError`), a
+    program that cannot be exported or an output whose tree has no JSON form
+    (`tree_json.to_json`): then call `fn` itself.
     """
     folder = program_folder()
     if folder is None:
@@ -109,18 +134,19 @@ def _load(fn, folder, key, static, treedef, leaves):
     program, tree = folder / f"{key}.jaxexport", folder / f"{key}.tree"
     try:
         exported = jax.export.deserialize(bytearray(program.read_bytes()))
-        out_tree = jax.tree_util.tree_structure(pickle.loads(tree.read_bytes()))
-    except Exception:  # missing, partial or unreadable: trace it again
-        exported, template = _export(fn, static, treedef, leaves)
+        out_tree = tree_json.from_json(json.loads(tree.read_bytes()))
+        if (out_tree.num_leaves != len(exported.out_avals)
+                or [(a.shape, a.dtype) for a in exported.in_avals]
+                != [(x.shape, x.dtype) for x in leaves]):
+            raise ValueError("the files do not fit the key's arrays")
+    except Exception:  # missing, partial, unreadable or not this key's: trace again
+        exported, out_tree = _export(fn, static, treedef, leaves)
         if exported is None:
             return None
-        out_tree = jax.tree_util.tree_structure(template)
-        try:
-            folder.mkdir(parents=True, exist_ok=True)
-            _write(tree, pickle.dumps(template))
-            _write(program, exported.serialize())
-        except OSError:
-            pass  # a read-only cache: the program still serves this process
+        if _writable[0]:  # else a read-only cache: the program serves this process
+            with contextlib.suppress(OSError):  # a full disk: the same
+                _write(tree, json.dumps(tree_json.to_json(out_tree)).encode())
+                _write(program, exported.serialize())
     call = jax.jit(exported.call)
 
     def run(*args):
@@ -163,22 +189,21 @@ def compiled(fn: Callable, *args):
 
 
 def _export(fn, static, treedef, leaves):
-    """The exported program of `fn` over the arrays `leaves`, and a template of its
-    output (the output with each array replaced by 0), from which a later process
-    rebuilds the output's tree: a tree structure itself does not survive pickling
-    (equinox's static fields). (None, None) when it cannot be exported or the
-    template cannot be pickled."""
-    templates = []
+    """The exported program of `fn` over the arrays `leaves`, and the tree structure
+    of its output. (None, None) when it cannot be exported or its output's tree
+    has no JSON form (`tree_json.to_json`)."""
+    trees = []
 
     def flat(*arrays):
         out = fn(*eqx.combine(jax.tree_util.tree_unflatten(treedef, arrays), static))
-        templates.append(jax.tree_util.tree_map(lambda _: 0, out))
-        return jax.tree_util.tree_leaves(out)
+        leaves_out, out_tree = jax.tree_util.tree_flatten(out)
+        trees.append(out_tree)
+        return leaves_out
 
     shapes = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
     try:
         exported = jax.export.export(jax.jit(flat))(*shapes)
-        pickle.dumps(templates[0])
+        tree_json.to_json(trees[0])
     except Exception:
         return None, None
-    return exported, templates[0]
+    return exported, trees[0]
