@@ -18,7 +18,8 @@ from .._errors import ValidationError
 from .._physics.custom_types import State
 from .._physics.params import ChainParams
 from .continuation import ContinuationProblem, describe_point
-from .shooting import critical_multiplier, deflated_multipliers, pack, shooting_guess, unpack
+from .shooting import (critical_multiplier, deflated_multipliers, multiplier_resolution,
+                       pack, shooting_guess, unpack)
 
 
 class ExactShooting(eqx.Module):
@@ -127,7 +128,13 @@ def exact_floquet_multipliers(params: ChainParams, y0: State, period,
     the flow direction, the vector field at y0) deflated from the rest
     (`deflated_multipliers`). Returns (multipliers, shape (2 n_osc,); the index of
     the trivial one, shape ())."""
-    m = exact_monodromy(params, y0, period, options)
+    return _deflated(params, y0, exact_monodromy(params, y0, period, options))
+
+
+def _deflated(params: ChainParams, y0: State, m: Float[Array, "2n 2n"]
+              ) -> tuple[Complex[Array, " 2n"], Array]:
+    """The multipliers of the exact monodromy `m` of the orbit through `y0`, the
+    trivial one (of the exact vector field at y0) deflated."""
     modes = initial_modes(params, y0)
     direction = jnp.reshape(mode_field(0.0, (y0, None), (params, modes))[0], (-1,))
     return deflated_multipliers(m, direction)
@@ -154,6 +161,13 @@ class ExactOrbit(eqx.Module):
         stick phases give multipliers at zero (`zero_multipliers` of them).
     - `trivial`: index of the trivial multiplier (of the flow direction), shape ().
     - `zero_multipliers`: multipliers of modulus below 1e-9, shape ().
+    - `resolved`: whether each multiplier lies above `multiplier_resolution` in
+        modulus, shape (2 n_osc,): as `PeriodicOrbit.resolved`, for the error of
+        the computed exact monodromy (`multiplier_resolution`, at the flow's
+        rtol). A stick phase's multipliers are zero exactly (the saltation
+        matrix of slip to stick has a zero row), so they come out at rounding,
+        unresolved.
+    - `multiplier_resolution`: the bound, shape ().
     - `stable`: all non-trivial multipliers inside the unit circle, shape ().
     - `residual`: max-norm of the shooting residual, shape ().
     - `converged`: whether Newton's method converged, shape ().
@@ -171,6 +185,8 @@ class ExactOrbit(eqx.Module):
     multipliers: Complex[Array, " 2n"]
     trivial: Int[Array, ""]
     zero_multipliers: Int[Array, ""]
+    resolved: Bool[Array, " 2n"]
+    multiplier_resolution: Float[Array, ""]
     stable: Bool[Array, ""]
     residual: Float[Array, ""]
     converged: Bool[Array, ""]
@@ -185,7 +201,9 @@ def describe_exact_orbit(params: ChainParams, u: Float[Array, " 2n+1"],
                          options: ExactShooting, converged=True) -> ExactOrbit:
     """The `ExactOrbit` of the shooting unknowns `u` (traceable)."""
     y0, period = unpack(u)
-    multipliers, trivial = exact_floquet_multipliers(params, y0, period, options)
+    m = exact_monodromy(params, y0, period, options)
+    multipliers, trivial = _deflated(params, y0, m)
+    resolution = multiplier_resolution(m, multipliers[trivial], options.flow.rtol)
     ts = period * jnp.linspace(0.0, 1.0, options.n_samples + 1)[1:]
     ys, status = nonsmooth_flow(params, y0, ts, options.flow)
     ys = jnp.where(status == Status.ok, ys, jnp.nan)
@@ -197,7 +215,9 @@ def describe_exact_orbit(params: ChainParams, u: Float[Array, " 2n+1"],
         params=params, y0=y0, period=period, amplitudes=amplitudes,
         energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc, n_halc=jnp.sum(on_halc),
         multipliers=multipliers, trivial=trivial,
-        zero_multipliers=jnp.sum(jnp.abs(multipliers) < 1e-9), stable=jnp.all(others < 1),
+        zero_multipliers=jnp.sum(jnp.abs(multipliers) < 1e-9),
+        resolved=jnp.abs(multipliers) > resolution, multiplier_resolution=resolution,
+        stable=jnp.all(others < 1),
         residual=residual,
         converged=jnp.asarray(converged) & (residual <= 1e3 * options.newton_tol))
 

@@ -171,7 +171,13 @@ def floquet_multipliers(params: ChainParams, y0: State, period, options: Shootin
     non-trivial ones and the trivial one; index of the trivial one, shape ()).
     Its distance from 1 measures the accuracy of the flow.
     """
-    m = monodromy(params, y0, period, options, eps)
+    return _deflated(params, y0, monodromy(params, y0, period, options, eps), eps)
+
+
+def _deflated(params: ChainParams, y0: State, m: Float[Array, "2n 2n"], eps
+              ) -> tuple[Complex[Array, " 2n"], Array]:
+    """The multipliers of the monodromy `m` of the orbit through `y0`, the trivial
+    one (of the vector field at y0) deflated."""
     return deflated_multipliers(m, jnp.reshape(vector_field(0.0, y0, params, eps), (-1,)))
 
 
@@ -190,14 +196,62 @@ def deflated_multipliers(m: Float[Array, "2n 2n"], direction: Float[Array, " 2n"
     return values[order], jnp.argmax(order == values.size - 1)
 
 
+def jacobian_trace(params: ChainParams, y: State, eps=DEFAULT_EPS) -> Float[Array, ""]:
+    """The trace of the Jacobian of eq. (5), smoothed at `eps`, at the state `y`
+    (shape (2, n_osc)): the sum over the oscillators of d x_n'' / d x_n'. The
+    positions' rows add nothing (x' = v), and each acceleration depends on its own
+    velocity only (damping and friction act on each oscillator, the coupling on
+    positions), so the velocity block is diagonal and its diagonal is one
+    Jacobian-vector product along all-ones velocities:
+    sum_n (-2 xi_n + dF_n/dv_n) / m_n."""
+    x, v = y[0], y[1]
+
+    def acceleration(v):
+        return vector_field(0.0, jnp.stack([x, v]), params, eps)[1]
+
+    _, diagonal = jax.jvp(acceleration, (v,), (jnp.ones_like(v),))
+    return jnp.sum(diagonal)
+
+
+def _liouville_field(t, z, model: Model):
+    """Eq. (5) and, beside it, the trace of its Jacobian (`jacobian_trace`), whose
+    integral over a period is the logarithm of the monodromy's determinant."""
+    y, _ = z
+    return model_field(t, y, model), jacobian_trace(model.params, y, model.eps)
+
+
 def _orbit_extrema(params: ChainParams, y0: State, period, options: ShootingOptions,
                    eps) -> tuple[Float[Array, " n_osc"], Float[Array, " n_osc"],
-                                 Float[Array, " n_osc"]]:
+                                 Float[Array, " n_osc"], Float[Array, ""]]:
     """(x_max, x_min, smallest slip speed |x' - v_d|) of each oscillator over one
-    period, from `options.n_samples` dense-output samples."""
+    period, from `options.n_samples` dense-output samples, and the integral of
+    the Jacobian's trace over the period (`jacobian_trace`), integrated alongside
+    as one more state at the same tolerances."""
     ts = period * jnp.linspace(0.0, 1.0, options.n_samples)
-    ys = flow(params, y0, period, options, diffrax.SaveAt(ts=ts), eps=eps).ys
-    return ys[:, 0].max(0), ys[:, 0].min(0), min_slip_speed(ys[:, 1], params.v_d)
+    with errors_as_nan():  # as `flow`
+        ys, log_det = diffrax.diffeqsolve(
+            diffrax.ODETerm(_liouville_field), options.solver, 0.0, period, None,
+            (y0, jnp.zeros(())), Model(params, eps), saveat=diffrax.SaveAt(ts=ts),
+            max_steps=options.max_steps, adjoint=diffrax.ForwardMode(),
+            stepsize_controller=diffrax.PIDController(rtol=options.rtol,
+                                                      atol=options.atol),
+            throw=False).ys
+    return (ys[:, 0].max(0), ys[:, 0].min(0), min_slip_speed(ys[:, 1], params.v_d),
+            log_det[-1])
+
+
+def multiplier_resolution(m: Float[Array, "2n 2n"], trivial_multiplier, rtol
+                          ) -> Float[Array, ""]:
+    """The smallest modulus a Floquet multiplier of the computed monodromy `m` can be
+    told from zero by: the error of `m` itself, estimated as the larger of
+    |m|_2 max(rtol, machine epsilon) (the flow's relative tolerance `rtol`, or
+    rounding) and the trivial multiplier's distance from 1 (the error the flow
+    shows in the one direction whose multiplier is known). An eigenvalue moves by
+    about the error of the matrix (Bauer-Fike, for a well-conditioned one), so a
+    multiplier below the bound is rounding or integration noise: its sign, its
+    phase and its size mean nothing."""
+    floor = jnp.maximum(rtol, jnp.finfo(m.dtype).eps)
+    return jnp.maximum(jnp.linalg.norm(m, 2) * floor, jnp.abs(trivial_multiplier - 1))
 
 
 class PeriodicOrbit(eqx.Module):
@@ -217,6 +271,17 @@ class PeriodicOrbit(eqx.Module):
         (`sticks`), shape ().
     - `multipliers`: Floquet multipliers by decreasing modulus, shape (2 n_osc,).
     - `trivial`: index of the trivial multiplier, shape ().
+    - `resolved`: whether each multiplier lies above `multiplier_resolution` in
+        modulus, shape (2 n_osc,). An unresolved one is zero as far as the
+        computed monodromy tells (a stick phase contracts the velocity by about
+        exp(-mu_st T_stick / eps), far below any tolerance): its value, sign
+        included, is noise, and its size is only bounded.
+    - `multiplier_resolution`: the bound (`multiplier_resolution`), shape ().
+    - `monodromy_determinant`: det M by Liouville's formula, exp of the integral of
+        the Jacobian's trace over the period (`jacobian_trace`), integrated
+        beside the orbit: the product of all the multipliers, resolved or not
+        (the non-trivial ones' product where the trivial one is 1), to the
+        integration tolerance relative, however small, shape ().
     - `stable`: all non-trivial multipliers inside the unit circle, shape ().
     - `residual`: max-norm of the shooting residual, shape ().
     - `converged`: whether Newton's method converged, shape ().
@@ -233,6 +298,9 @@ class PeriodicOrbit(eqx.Module):
     n_halc: Array
     multipliers: Complex[Array, " 2n"]
     trivial: Array
+    resolved: Bool[Array, " 2n"]
+    multiplier_resolution: Float[Array, ""]
+    monodromy_determinant: Float[Array, ""]
     stable: Bool[Array, ""]
     residual: Float[Array, ""]
     converged: Bool[Array, ""]
@@ -257,8 +325,10 @@ def describe_orbit(params: ChainParams, u: Float[Array, " 2n+1"], options: Shoot
     (> 0, shape (), dimensionless; `DEFAULT_EPS` by default) (traceable)."""
     eps = jnp.asarray(eps, dtype=float)
     y0, period = unpack(u)
-    multipliers, trivial = floquet_multipliers(params, y0, period, options, eps)
-    x_max, x_min, slip_speed = _orbit_extrema(params, y0, period, options, eps)
+    m = monodromy(params, y0, period, options, eps)
+    multipliers, trivial = _deflated(params, y0, m, eps)
+    resolution = multiplier_resolution(m, multipliers[trivial], options.rtol)
+    x_max, x_min, slip_speed, log_det = _orbit_extrema(params, y0, period, options, eps)
     amplitudes = 0.5 * (x_max - x_min)
     others = jnp.where(jnp.arange(multipliers.size) == trivial, 0.0, jnp.abs(multipliers))
     residual = jnp.max(jnp.abs(shooting_residual(u, params, options, eps)))
@@ -266,7 +336,9 @@ def describe_orbit(params: ChainParams, u: Float[Array, " 2n+1"], options: Shoot
     return PeriodicOrbit(
         params=params, eps=eps, y0=y0, period=period, amplitudes=amplitudes,
         energy=0.5 * jnp.sum(amplitudes**2), n_halc=n_halc,
-        multipliers=multipliers, trivial=trivial, stable=jnp.all(others < 1),
+        multipliers=multipliers, trivial=trivial,
+        resolved=jnp.abs(multipliers) > resolution, multiplier_resolution=resolution,
+        monodromy_determinant=jnp.exp(log_det), stable=jnp.all(others < 1),
         residual=residual, converged=jnp.asarray(converged))
 
 

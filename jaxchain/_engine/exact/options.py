@@ -38,7 +38,8 @@ class NonsmoothOptions(AbstractHorizon):
         "forward" (the default: `jax.jvp`, `jax.jacfwd`; plain loops) or "reverse"
         (`jax.grad`, `jax.vjp`; nested checkpointed loops whose memory is bounded
         however many steps and chunks a run takes). A run is computed the same
-        either way.
+        either way. Reverse mode of a "forward" run raises a `RuntimeError` of
+        one line that names this setting.
     - `root_tol`: absolute tolerance on event times of the bracketed root find
         (Chandrupatla's method) that locates them on the dense output.
     - `switch_tol`: at a switch, every oscillator whose guard (relative velocity or

@@ -118,6 +118,26 @@ OBSERVERS = (Extrema(),)
 #: gradients of tests/test_nonsmooth.py).
 _LOOPS = {"forward": ("lax", "lax"), "reverse": ("bounded", "bounded")}
 
+#: The one line that reverse-mode differentiation of a forward-mode run raises
+#: (`forward_only`), in place of JAX's own about `lax.while_loop`.
+REVERSE_MODE_ADVICE = ("reverse-mode differentiation (jax.grad, jax.vjp) of the exact engine "
+                       "needs NonsmoothOptions(adjoint='reverse'); the default, "
+                       "adjoint='forward', runs loops that only forward mode (jax.jvp, "
+                       "jax.jacfwd) differentiates")
+
+
+def forward_only(c: "Carry") -> "Carry":
+    """The carry after a forward-mode chunk, unchanged, its floating-point leaves
+    marked so that transposing them (`jax.grad`, `jax.vjp`) raises
+    `REVERSE_MODE_ADVICE` (equinox's `nondifferentiable_backward`). Reverse mode
+    transposes a program from its outputs back, so every cotangent that would
+    reach a chunk's `lax.while_loop` (which JAX cannot transpose) reaches its mark
+    first. An identity in evaluation, `jax.jvp` and `vmap`: forward-mode runs are
+    compiled as before."""
+    dynamic, static = eqx.partition(c, eqx.is_inexact_array)
+    return eqx.combine(eqxi.nondifferentiable_backward(dynamic, msg=REVERSE_MODE_ADVICE),
+                       static)
+
 
 def _solver(options) -> diffrax.AbstractAdaptiveSolver:
     """The Runge-Kutta pair, its stages in a loop that the run's mode of
@@ -418,6 +438,8 @@ def chunk(params: ChainParams, options, progress: bool, observe, c: Carry, t_sto
     c = eqxi.while_loop(cond, lambda d: _step(params, options, observe, t_stop, d), c,
                         max_steps=None if kind == "lax" else options.max_steps,
                         kind=kind, base=_base(options.max_steps))
+    if kind == "lax":
+        c = forward_only(c)
     status = jnp.where((c.status == Status.ok) & (c.t < t_stop),
                        jnp.where(c.chunk_steps >= options.max_steps, Status.max_steps_reached,
                                  Status.event_not_resolved), c.status)
