@@ -12,6 +12,7 @@ from .continuation import Branch, ContinuationProblem, PseudoArclength, _correct
 from .._errors import ValidationError
 from .._engine.status import Status
 from .sliding import SlidingPoint, _phases, exact_problem, locate_sliding, vanishing_stick
+from .._printing import values_repr
 
 #: The kinds of codimension-one bifurcation of limit cycles (Kuznetsov, *Elements of
 #: Applied Bifurcation Theory*, 3rd ed. (2004), Sect. 5.4), by their critical
@@ -60,6 +61,8 @@ class BifurcationPoint(eqx.Module):
     record: eqx.Module
     after: int = eqx.field(static=True)
     width: float = eqx.field(static=True)
+
+    __repr__ = values_repr
 
 
 def _critical(record) -> tuple[float, complex]:

@@ -16,6 +16,7 @@ from .._engine.progress import tqdm
 from .._physics.params import ChainParams, parameter_value, with_parameter
 from .._errors import ValidationError
 from .._engine.status import Status
+from .._printing import values_repr
 
 
 class ContinuationProblem(eqx.Module):
@@ -160,6 +161,8 @@ class Branch(eqx.Module):
     stability_changes: tuple[int, ...] = eqx.field(static=True)
     stop: Status = eqx.field(static=True)
     branch_points: tuple[int, ...] = eqx.field(static=True, default=())
+
+    __repr__ = values_repr
 
     @property
     def tangent_p(self) -> Float[Array, " n_points"]:

@@ -13,6 +13,7 @@ from .hopf import check_eps
 from .limit_cycles import problem_eps
 from .two_parameter import fold_curve, hopf_vd_and_derivative
 from .._checks import check_positive
+from .._printing import values_repr
 
 
 class DampingDesign(eqx.Module):
@@ -35,6 +36,8 @@ class DampingDesign(eqx.Module):
     d_window: float
     history: Float[Array, "n_iterations 2"]
     converged: bool
+
+    __repr__ = values_repr
 
 
 def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, " 2n+1"],

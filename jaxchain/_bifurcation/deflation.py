@@ -21,6 +21,7 @@ from .continuation import ContinuationProblem
 from .exact_orbit import ExactShootingResidual
 from .limit_cycles import ShootingResidual
 from .shooting import flow, unpack
+from .._printing import values_repr
 
 
 def chain_symmetries(params: ChainParams) -> Int[Array, "g n_osc"]:
@@ -207,6 +208,8 @@ class DeflatedOrbit(eqx.Module):
     residual: Float[Array, ""]
     distance: Float[Array, ""]
     found: Bool[Array, ""]
+
+    __repr__ = values_repr
 
 
 @checks_as_nan

@@ -20,6 +20,7 @@ from .._physics.params import ChainParams
 from .continuation import ContinuationProblem, describe_point
 from .shooting import (critical_multiplier, deflated_multipliers, multiplier_resolution,
                        pack, shooting_guess, unpack)
+from .._printing import values_repr
 
 
 class ExactShooting(eqx.Module):
@@ -190,6 +191,8 @@ class ExactOrbit(eqx.Module):
     stable: Bool[Array, ""]
     residual: Float[Array, ""]
     converged: Bool[Array, ""]
+
+    __repr__ = values_repr
 
     @property
     def critical_multiplier(self) -> Complex[Array, ""]:

@@ -18,6 +18,7 @@ from .._errors import ValidationError
 from .._physics.model import stick_force
 from .._physics.params import ChainParams, parameter_value, with_parameter
 from .existence import stick_exit_state
+from .._printing import values_repr
 
 
 class GrazingPoint(eqx.Module):
@@ -41,6 +42,8 @@ class GrazingPoint(eqx.Module):
     time: Float[Array, ""]
     residual: Float[Array, ""]
     converged: Bool[Array, ""]
+
+    __repr__ = values_repr
 
 
 def _arc_end(time, params: ChainParams, rtol: float):

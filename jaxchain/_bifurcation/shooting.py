@@ -18,6 +18,7 @@ from .._checks import check_positive
 from .continuation import describe_point
 from .hopf import check_eps
 from .._errors import ValidationError
+from .._printing import values_repr
 
 
 class ShootingOptions(eqx.Module):
@@ -304,6 +305,8 @@ class PeriodicOrbit(eqx.Module):
     stable: Bool[Array, ""]
     residual: Float[Array, ""]
     converged: Bool[Array, ""]
+
+    __repr__ = values_repr
 
     @property
     def critical_multiplier(self) -> Complex[Array, ""]:

@@ -14,6 +14,7 @@ from .._errors import ValidationError
 from .._physics.params import parameter_value, with_parameter
 from .continuation import ContinuationProblem, PseudoArclength, _correct, _record
 from .shooting import unpack
+from .._printing import values_repr
 
 _STICK = SWITCH_KINDS.index("slip to stick")
 _SLIP = SWITCH_KINDS.index("stick to slip")
@@ -98,6 +99,8 @@ class SlidingPoint(eqx.Module):
     step: Float[Array, ""]
     iterations: int = eqx.field(static=True)
     converged: bool = eqx.field(static=True)
+
+    __repr__ = values_repr
 
 
 def exact_problem(problem: ContinuationProblem) -> bool:
