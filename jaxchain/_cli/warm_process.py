@@ -256,7 +256,8 @@ class _Warm:
         self.replacing.acquire()
         with contextlib.suppress(OSError):
             os.unlink(f"{self.base}.starting")
-        if key(self.env, self.paths) == self.key:  # not for code that changed since
+        # not for code that changed since, nor for a process told to stop
+        if key(self.env, self.paths) == self.key and not self.stopped.is_set():
             with contextlib.suppress(OSError):
                 spawn(self.base, self.env, before=self.remove_files)
         self.remove_files()
