@@ -8,11 +8,22 @@ own side is `jaxchain._cli.warm_process`; `jaxchain server` shows and stops them
   `IDLE_S` seconds without a command (JAXCHAIN_SERVER_IDLE, in seconds), when its
   code or its installed packages change, and on `jaxchain server stop`.
 - A later command with the same Python, the same installed packages
-  (`_installed_state`), the same jaxchain source files (`source_identity`) and the
-  same environment variables that set JAX, XLA, jaxchain, matplotlib, threads and
-  paths (`key`) runs there, with its own standard input, output and error (their
-  file descriptors are passed over the socket), working directory, environment
-  and umask; its exit status comes back to the command.
+  (`_installed_state`), the same jaxchain source files (`source_identity`), the
+  same environment (every variable but those of the terminal and the login
+  session, `SESSION_NAMES`, and the switches) and the same resource limits,
+  nice value and CPU affinity (`process_settings`) runs there (`key`): a warm
+  process was started with exactly what a process of the command's own would
+  have, so that what libraries read once, at import (zarr's
+  ZARR_DEFAULT_ZARR_FORMAT, JAX's and XLA's settings), and what limits a
+  process is the command's own. It runs with its own standard input, output and
+  error (their file descriptors are passed over the socket), working directory,
+  environment, umask and `sys.argv` (the `history` of its results names it);
+  its exit status comes back to the command. A command whose settings differ
+  runs in its own process and starts a warm process of its own settings, at most
+  `MAX_PROCESSES` of them per user (the one idle longest gives way).
+- A command with a finite limit of CPU time or memory (`ulimit -t`, `-v`, `-d`:
+  `OWN_PROCESS_LIMITS`) always runs in its own process: a warm process's
+  earlier commands would count against it.
 - One command at a time: a command that finds the warm process running another
   one runs in its own process; one that finds it finishing the previous command,
   or starting, waits for it.
@@ -23,13 +34,16 @@ own side is `jaxchain._cli.warm_process`; `jaxchain server` shows and stops them
 This module imports only the standard library and `jaxchain._setup` (no JAX), so
 that a command handed over costs about 0.1 s of its own.
 
-Protocol, over a Unix socket in a folder of the user's own (mode 0700): frames of
+Protocol, over a Unix socket in this user's runtime folder (`folder`, mode 0700,
+wherever $TMPDIR points): frames of
 one byte of kind, four bytes of length and the payload. The warm process answers
 a connection at once (a thread of its own listens): "a" when it will run the
 command, "b" when it runs another one, "w" when it is replacing itself. After
-"a" the command sends "r" with its request (JSON: argv, cwd, env, umask) and its
-standard input, output and error; the warm process answers "s" with the exit
-status (JSON) once the command's output is written and closed.
+"a" the command sends "r" with its request (JSON: argv, argv0, cwd, env, umask)
+and its standard input, output and error; the warm process answers "s" with the
+exit status (JSON) once the command's output is written and closed, or "e" with
+a message (UTF-8) when the request is malformed (nothing ran: the command runs
+in its own process).
 """
 
 import array
@@ -37,11 +51,12 @@ import contextlib
 import hashlib
 import json
 import os
+import signal
 import socket
+import stat
 import struct
 import subprocess
 import sys
-import tempfile
 import time
 
 from .._setup import source_identity
@@ -53,14 +68,32 @@ IDLE_S = 600.0
 #: (JAXCHAIN_SERVER_MAX_MB): above it after a command, it replaces itself.
 MAX_MB = 1024
 
-#: The environment variables that are part of the key: a command whose values of
-#: these differ from the warm process's starts (or finds) a warm process of its own.
-KEY_PREFIXES = ("JAX", "XLA", "TF_", "CUDA", "NVIDIA", "MPL", "PYTHON", "OMP_", "MKL_",
-                "OPENBLAS_", "XDG_", "DASK_", "TQDM_", "LD_", "LC_", "LANG")
-KEY_NAMES = ("HOME", "TMPDIR")
+#: The environment variables that the key leaves out: those of the terminal, the
+#: shell and the login session, which differ between two terminals of one user
+#: and which nothing that a command runs reads once for all. A command still
+#: runs with its own values of these (argparse wraps its help at its COLUMNS).
+SESSION_NAMES = frozenset({
+    "COLUMNS", "LINES", "TERM", "COLORTERM", "TERM_PROGRAM", "TERM_PROGRAM_VERSION",
+    "TERM_SESSION_ID", "VTE_VERSION", "WINDOWID", "DISPLAY", "TMUX", "TMUX_PANE", "STY",
+    "WINDOW", "PWD", "OLDPWD", "SHLVL", "_", "GPG_TTY", "XDG_SESSION_ID", "XDG_VTNR",
+    "SSH_CLIENT", "SSH_CONNECTION", "SSH_TTY", "SSH_AUTH_SOCK", "SSH_AGENT_PID", "MAIL"})
+
+#: Resource limits that count what a process used over its life or holds: a
+#: command with a finite soft limit of one of these runs in its own process, where
+#: the limit is its own (a warm process's earlier commands would count too).
+OWN_PROCESS_LIMITS = ("RLIMIT_CPU", "RLIMIT_AS", "RLIMIT_DATA")
+
+#: The most warm processes a user has at a time (JAXCHAIN_SERVER_MAX_PROCESSES):
+#: to start another, the one idle longest stops; where every one runs a command,
+#: none starts.
+MAX_PROCESSES = 4
+
+#: The largest frame that a warm process reads (a request holds the arguments and
+#: the environment, which the system bounds to a few MiB).
+MAX_FRAME = 16 * 2**20
 
 #: Switches of the warm process itself (JAXCHAIN_SERVER, JAXCHAIN_SERVER_IDLE,
-#: JAXCHAIN_SERVER_MAX_MB), not part of the key.
+#: JAXCHAIN_SERVER_MAX_MB, JAXCHAIN_SERVER_MAX_PROCESSES), not part of the key.
 SWITCH_PREFIX = "JAXCHAIN_SERVER"
 
 #: Where a lingering process does harm: continuous integration and batch schedulers.
@@ -78,17 +111,48 @@ START_S = 30.0
 
 _HEADER = struct.Struct(">cI")
 
+#: The folder of the jaxchain package that this module belongs to.
+PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
 
 def enabled(env=os.environ) -> bool:
     """Whether commands use a warm process: JAXCHAIN_SERVER=1 turns it on, =0 off;
     unset, on unless one of `NO_SERVER_WHERE` is set. Only on systems with Unix
-    sockets and user ids."""
-    if not (hasattr(socket, "AF_UNIX") and hasattr(os, "getuid")):
+    sockets and user ids, and never for a process with a finite limit of
+    `OWN_PROCESS_LIMITS`."""
+    if not (hasattr(socket, "AF_UNIX") and hasattr(os, "getuid")) or limited():
         return False
     switch = env.get("JAXCHAIN_SERVER", "")
     if switch in ("0", "1"):
         return switch == "1"
     return not any(env.get(name) for name in NO_SERVER_WHERE)
+
+
+def limited() -> bool:
+    """Whether this process has a finite soft limit of `OWN_PROCESS_LIMITS`."""
+    try:
+        import resource
+    except ImportError:  # no resource limits on this system
+        return False
+    return any(resource.getrlimit(getattr(resource, name))[0] != resource.RLIM_INFINITY
+               for name in OWN_PROCESS_LIMITS if hasattr(resource, name))
+
+
+def process_settings() -> dict:
+    """What limits this process or where it runs, besides its environment: every
+    resource limit (soft and hard), the nice value and the CPU affinity, where
+    the system has them. A process started by this one inherits them."""
+    found: dict = {}
+    with contextlib.suppress(ImportError):
+        import resource
+
+        found["limits"] = {name: list(resource.getrlimit(getattr(resource, name)))
+                           for name in sorted(dir(resource)) if name.startswith("RLIMIT_")}
+    with contextlib.suppress(AttributeError, OSError):
+        found["nice"] = os.getpriority(os.PRIO_PROCESS, 0)
+    with contextlib.suppress(AttributeError, OSError):
+        found["affinity"] = sorted(os.sched_getaffinity(0))
+    return found
 
 
 def _installed_state(paths=None) -> list:
@@ -116,34 +180,58 @@ def _installed_state(paths=None) -> list:
 
 
 def key(env=os.environ, paths=None) -> str:
-    """The key of the warm process that may run a command from `env`: Python and
-    its environment (`sys.prefix`), the installed packages (`_installed_state` of
-    `paths`), the source files of jaxchain (`source_identity`) and the environment
-    variables of `KEY_PREFIXES` and `KEY_NAMES` (the switches aside)."""
+    """The key of the warm process that may run a command from `env` in this
+    process: Python and its environment (`sys.prefix`), the installed packages
+    (`_installed_state` of `paths`), the source files of jaxchain
+    (`source_identity`), the environment variables (all but `SESSION_NAMES` and
+    the switches) and the process's limits, nice value and CPU affinity
+    (`process_settings`)."""
     chosen = {k: v for k, v in env.items()
-              if (k.startswith(KEY_PREFIXES) or k in KEY_NAMES)
-              and not k.startswith(SWITCH_PREFIX)}
+              if k not in SESSION_NAMES and not k.startswith(SWITCH_PREFIX)}
     data = {"prefix": sys.prefix, "python": os.path.realpath(sys.executable),
             "version": sys.version, "source": source_identity(),
-            "installed": _installed_state(paths), "env": chosen}
+            "installed": _installed_state(paths), "env": chosen,
+            "process": process_settings()}
     return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:24]
 
 
+def installation() -> dict:
+    """This installation of jaxchain: its Python environment and package folder
+    (`jaxchain server stop` stops only the warm processes of this one)."""
+    return {"prefix": sys.prefix, "package": PACKAGE}
+
+
 def folder() -> str:
-    """The folder of the warm processes' sockets, the user's own: made with mode
-    0700 if missing.
+    """The folder of this user's warm processes, whatever $TMPDIR is: `jaxchain`
+    in the user's runtime folder, $XDG_RUNTIME_DIR or else /run/user/UID (each
+    where it is a folder of the user's own that no one else may enter, as the XDG
+    Base Directory specification requires), else /tmp/jaxchain-UID; made with
+    mode 0700 if missing. Not in the home folder, which a cluster's nodes may
+    share (a process id names a process of one machine only).
 
     **Raises:** `OSError` when it is a link, belongs to another user or others may
     enter it."""
-    import stat
-
-    path = os.path.join(tempfile.gettempdir(), f"jaxchain-{os.getuid()}")
+    uid = os.getuid()
+    for runtime in (os.environ.get("XDG_RUNTIME_DIR", ""), f"/run/user/{uid}"):
+        if os.path.isabs(runtime) and _private(runtime):
+            path = os.path.join(runtime, "jaxchain")
+            break
+    else:
+        path = f"/tmp/jaxchain-{uid}"
     os.makedirs(path, mode=0o700, exist_ok=True)
-    info = os.lstat(path)  # a link planted by another user is refused, not followed
-    if (not stat.S_ISDIR(info.st_mode) or info.st_uid != os.getuid()
-            or info.st_mode & 0o077):
+    if not _private(path):  # a link or folder planted by another user is refused
         raise OSError(f"{path} is not private to this user")
     return path
+
+
+def _private(path: str) -> bool:
+    """Whether `path` is a folder (not a link) of this user that no one else may
+    enter or change."""
+    try:
+        info = os.lstat(path)
+    except OSError:
+        return False
+    return stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid() and not info.st_mode & 0o077
 
 
 def send(conn: socket.socket, kind: bytes, payload: bytes = b"", fds=()) -> None:
@@ -159,11 +247,15 @@ def send(conn: socket.socket, kind: bytes, payload: bytes = b"", fds=()) -> None
 
 def receive(conn: socket.socket, fds: list | None = None) -> tuple[bytes, bytes] | None:
     """The next frame (kind, payload), or None at the end of the stream; file
-    descriptors that came with it are appended to `fds`."""
+    descriptors that came with it are appended to `fds`.
+
+    **Raises:** `ValueError` for a frame longer than `MAX_FRAME` (not read)."""
     header = _exactly(conn, _HEADER.size, fds)
     if header is None:
         return None
     kind, length = _HEADER.unpack(header)
+    if length > MAX_FRAME:
+        raise ValueError(f"a frame of {length} bytes (at most {MAX_FRAME})")
     payload = _exactly(conn, length, fds)
     return None if payload is None else (kind, payload)
 
@@ -190,9 +282,11 @@ def _exactly(conn: socket.socket, n: int, fds: list | None) -> bytes | None:
 
 def forward(argv: list[str], env: dict) -> int | None:
     """Run `jaxchain argv` in the warm process of the environment `env` (this
-    process's, as it started), with this process's standard streams: its exit
-    status; None when there is no warm process, or it runs another command (then
-    run it here)."""
+    process's, as it started) and of this process's limits, nice value and CPU
+    affinity (`key`), with this process's standard streams, working directory,
+    umask and `sys.argv[0]`: its exit status; None when there is no such warm
+    process, it runs another command or it refused the request (then run it
+    here)."""
     if not enabled(env):
         return None
     try:
@@ -204,7 +298,8 @@ def forward(argv: list[str], env: dict) -> int | None:
         return None
     umask = os.umask(0o022)
     os.umask(umask)
-    request = {"argv": argv, "cwd": os.getcwd(), "env": env, "umask": umask}
+    request = {"argv": argv, "argv0": sys.argv[0] if sys.argv else "jaxchain",
+               "cwd": os.getcwd(), "env": env, "umask": umask}
     try:
         sys.stdout.flush()
         sys.stderr.flush()
@@ -219,11 +314,13 @@ def forward(argv: list[str], env: dict) -> int | None:
         _interrupt(conn)
         print(f"jaxchain {_command_name(argv)}: error: interrupted", file=sys.stderr)
         return 130
-    except OSError:
+    except (OSError, ValueError):
         frame = None
     conn.close()
     if frame is not None and frame[0] == b"s":
         return int(json.loads(frame[1]))
+    if frame is not None and frame[0] == b"e":  # refused before it ran: run it here
+        return None
     print(f"jaxchain {_command_name(argv)}: error: the warm process ended during the "
           f"command (JAXCHAIN_SERVER=0 runs commands in their own process)", file=sys.stderr)
     return 1
@@ -252,7 +349,7 @@ def _accepted(base: str) -> socket.socket | None:
         try:
             conn.connect(f"{base}.sock")
             answer = receive(conn)
-        except OSError:  # no socket yet, refused (gone), or no answer (stopped)
+        except (OSError, ValueError):  # no socket yet, refused (gone), no answer (stopped)
             answer = None
         if answer is not None and answer[0] == b"a":
             return conn
@@ -282,27 +379,38 @@ def _starting(base: str) -> bool:
 def alive(pid: int, start: str | None = None) -> bool:
     """Whether process `pid` is alive and, given its `start` (`process_start`),
     still the same process: an id that the system has given to another process
-    since (ids are reused, 32768 of them by default on Linux) is not."""
+    since (ids are reused, 32768 of them by default on Linux) is not, and
+    neither is a process that ended and that its parent has not yet reaped (a
+    zombie: a container's first process may never reap it)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:  # another user's: not a warm process of this user
         return False
-    now = process_start(pid)
-    return start is None or now is None or now == start
+    fields = _stat(pid)
+    if fields is None:  # the system does not tell
+        return True
+    return fields[0] not in ("Z", "X") and (start is None or fields[19] == start)
 
 
 def process_start(pid: int | None = None) -> str | None:
     """When process `pid` (this one by default) started, in the system's clock
     ticks since boot (field 22 of /proc/PID/stat): with its id, it names one
     process. None where the system does not tell (no /proc)."""
+    fields = _stat(pid)
+    return None if fields is None else fields[19]
+
+
+def _stat(pid: int | None) -> list[str] | None:
+    """The fields of /proc/PID/stat after the name (its state first, then from
+    field 4 on), or None where the system does not tell."""
     try:
         with open(f"/proc/{pid or 'self'}/stat") as f:
             fields = f.read().rsplit(")", 1)[1].split()
-        return fields[19]  # the fields after the name start at field 3
-    except (OSError, IndexError):
+    except OSError:
         return None
+    return fields if len(fields) > 19 else None
 
 
 def _command_name(argv: list[str]) -> str:
@@ -310,21 +418,61 @@ def _command_name(argv: list[str]) -> str:
 
 
 def start(env: dict) -> None:
-    """Start the warm process of the environment `env` in the background, unless
-    one runs or is starting; say so in one line on standard error."""
+    """Start the warm process of the environment `env` (and of this process's
+    limits, nice value and CPU affinity) in the background, unless one runs or is
+    starting; say so in one line on standard error. Where the user has
+    `MAX_PROCESSES` already (JAXCHAIN_SERVER_MAX_PROCESSES), the one idle longest
+    is stopped first, and none starts when every one runs a command."""
+    import fcntl
+
     try:
-        base = os.path.join(folder(), key(env))
+        place = folder()
+        base = os.path.join(place, key(env))
         if _listening(f"{base}.sock") or _starting(base):
             return
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(f"{base}.starting")  # a failed start
-        spawn(base, env)
+        lock = os.open(os.path.join(place, "start.lock"), os.O_CREAT | os.O_RDWR, 0o600)
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # one start at a time: the count holds
+            if _starting(base) or not _room(place, _max_processes(env)):
+                return
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(f"{base}.starting")  # a failed start
+            spawn(base, env)
+        finally:
+            os.close(lock)
     except (OSError, ValueError):
         return
     idle = env.get("JAXCHAIN_SERVER_IDLE", f"{IDLE_S:g}")
     print(f"jaxchain: a warm process keeps JAX loaded for the next commands (it stops "
           f"after {idle} idle seconds; 'jaxchain server status' shows it, "
           f"JAXCHAIN_SERVER=0 turns it off)", file=sys.stderr)
+
+
+def _max_processes(env: dict) -> int:
+    """The most warm processes a user may have (JAXCHAIN_SERVER_MAX_PROCESSES, at
+    least 1; `MAX_PROCESSES` unset or unreadable)."""
+    try:
+        return max(1, int(env.get("JAXCHAIN_SERVER_MAX_PROCESSES", MAX_PROCESSES)))
+    except ValueError:
+        return MAX_PROCESSES
+
+
+def _room(place: str, most: int) -> bool:
+    """Whether one more warm process may start in `place`, where at most `most`
+    may live: those idle longest are stopped (SIGTERM) to make room; False when
+    the others run commands."""
+    found = states()
+    starting = [name for name in os.listdir(place)
+                if name.endswith(".starting") and _starting(os.path.join(place, name[:-9]))]
+    extra = len(found) + len(starting) + 1 - most
+    idle = sorted((s for s in found if s["state"] == "idle"), key=lambda s: -s["idle_s"])
+    if extra > len(idle):
+        return False
+    for state in idle[:max(extra, 0)]:
+        with contextlib.suppress(ProcessLookupError):
+            if alive(state["pid"], state.get("start")):
+                os.kill(state["pid"], signal.SIGTERM)
+    return True
 
 
 def _listening(path: str) -> bool:
@@ -367,9 +515,9 @@ def spawn(base: str, env: dict, before=None) -> None:
 
 def states() -> list[dict]:
     """Each warm process of this user (`<key>.json`, written by it): its process
-    id, version, environment, state, idle seconds and memory (read now where the
-    system tells, else as it was after its last command). The files of processes
-    that are gone are removed."""
+    id, version, installation, state, idle seconds, memory (read now where the
+    system tells, else as it was after its last command) and key. The files of
+    processes that are gone (a zombie included) are removed."""
     try:
         place = folder()
     except OSError:
@@ -381,9 +529,12 @@ def states() -> list[dict]:
         path = os.path.join(place, name)
         try:
             state = json.loads(open(path).read())
-        except (OSError, ValueError):
+            pid = state["pid"]
+        except (OSError, ValueError, TypeError, KeyError):
             continue
-        if not alive(state["pid"], state.get("start")):
+        if not isinstance(pid, int):
+            continue
+        if not alive(pid, state.get("start")):
             for suffix in (".json", ".sock", ".pid", ".log"):
                 with contextlib.suppress(OSError):
                     os.unlink(path[:-5] + suffix)

@@ -1,17 +1,20 @@
 """The warm process of the command line, its own side (`jaxchain._cli.warm` is the
 commands' side): it imports JAX, jaxchain and what writing results needs once,
 then runs the commands handed to it, one at a time, until it is idle for
-`IDLE_S` seconds, stopped (SIGTERM, `jaxchain server stop`) or stale.
+`IDLE_S` seconds, stopped (SIGTERM, `jaxchain server stop`: it takes no more
+commands and ends once the one it runs has finished) or stale.
 
 - **Answered at once.** A thread of its own accepts each connection and answers
   it: "a" (run here), "b" (another command runs: run in your own process) or "w"
   (replacing itself: wait for the new one). What the process does after a command
   (collecting its garbage, measuring its memory) never makes the next command
   run in its own process; the next one waits for it instead.
-- **As a process of its own.** A command runs with its own standard input,
-  output and error (their descriptors, passed over the socket), working
-  directory, environment and umask; its output is closed before its exit status
-  goes back.
+- **As a process of its own.** It was started with the environment, resource
+  limits, nice value and CPU affinity of the commands it serves (they are part
+  of its key, `jaxchain._cli.warm.key`). A command runs with its own standard
+  input, output and error (their descriptors, passed over the socket), working
+  directory, environment, umask and `sys.argv`; its output is closed before its
+  exit status goes back. A malformed request is answered "e" with a message.
 - **Bounded.** After a command that leaves it above `MAX_MB` MiB
   (JAXCHAIN_SERVER_MAX_MB), it replaces itself by a fresh process, as gunicorn's
   `max_requests` and Celery's `worker_max_memory_per_child` do.
@@ -41,7 +44,7 @@ import warnings
 
 from .._setup import VERSION
 from .._sweeps.atomic import write_text
-from .warm import IDLE_S, MAX_MB, key, process_start, receive, rss_mb, send, spawn
+from .warm import IDLE_S, MAX_MB, PACKAGE, key, process_start, receive, rss_mb, send, spawn
 
 #: Seconds between two checks, while idle, that the code and packages are unchanged.
 STALE_CHECK_S = 2.0
@@ -75,7 +78,7 @@ class _Warm:
     def state(self, state: str, **extra) -> None:
         """Write `<base>.json` (`jaxchain._cli.warm.states` reads it)."""
         record = {"pid": os.getpid(), "start": process_start(), "version": VERSION,
-                  "prefix": sys.prefix,
+                  "prefix": sys.prefix, "package": PACKAGE,
                   "python": sys.executable, "state": state, "since": time.time(),
                   "started": self.started, "served": self.served, "rss_mb": rss_mb(),
                   "max_mb": self.max_mb, "idle_limit_s": self.idle_s} | extra
@@ -94,8 +97,8 @@ class _Warm:
                 conn, _ = server.accept()
             except OSError:  # the socket was closed: replacing or stopping
                 return
-            with self.lock:
-                answer = self.closing or (b"b" if self.busy else b"a")
+            with self.lock:  # stopped: it takes no more commands
+                answer = self.closing or (b"b" if self.busy or self.stopped.is_set() else b"a")
                 self.busy = self.busy or answer == b"a"
             try:
                 send(conn, answer)
@@ -149,20 +152,29 @@ class _Warm:
         interrupted command may have left JAX's caches half written; a process
         above its memory bound keeps it."""
         fds: list[int] = []
+        request = error = None
         try:
             conn.settimeout(5.0)  # the request follows at once, or the command went away
             frame = receive(conn, fds)
             conn.settimeout(None)
+            if frame is not None:
+                request = _request(frame, fds)
         except OSError:
-            frame = None
-        if frame is None or frame[0] != b"r" or len(fds) != 3:
+            pass
+        except ValueError as err:  # a malformed request: answered, nothing run
+            error = str(err)
+        if request is None:
             for fd in fds:
-                os.close(fd)
+                with contextlib.suppress(OSError):
+                    os.close(fd)
             with self.lock:
                 self.busy = False
+            if error is not None:
+                self.log(f"refused pid={os.getpid()}: a malformed request: {error}")
+                with contextlib.suppress(OSError):
+                    send(conn, b"e", f"a malformed request: {error}".encode())
             conn.close()
             return None
-        request = json.loads(frame[1])
         self.state("busy", command=request["argv"])
         started = time.monotonic()
         done = threading.Event()
@@ -244,25 +256,59 @@ class _Warm:
         self.replacing.acquire()
         with contextlib.suppress(OSError):
             os.unlink(f"{self.base}.starting")
-        if key(self.env, self.paths) == self.key:  # not for code that changed since
+        # not for code that changed since, nor for a process told to stop
+        if key(self.env, self.paths) == self.key and not self.stopped.is_set():
             with contextlib.suppress(OSError):
                 spawn(self.base, self.env, before=self.remove_files)
         self.remove_files()
         os._exit(0)
 
 
+def _request(frame: tuple[bytes, bytes], fds: list[int]) -> dict:
+    """The request of a command (`jaxchain._cli.warm.forward`) in `frame`, checked.
+
+    **Raises:** `ValueError` naming what is wrong: not a request ("r"), not three
+    file descriptors, not JSON, or a field missing or of the wrong type."""
+    kind, payload = frame
+    if kind != b"r":
+        raise ValueError(f"a frame of kind {kind!r}, not 'r'")
+    if len(fds) != 3:
+        raise ValueError(f"{len(fds)} file descriptors, not 3 (standard input, output, error)")
+    try:
+        request = json.loads(payload)
+    except (ValueError, UnicodeDecodeError) as err:
+        raise ValueError(f"not JSON ({err})") from None
+    if not isinstance(request, dict):
+        raise ValueError("not a JSON object")
+    fields = {"argv": list, "cwd": str, "env": dict, "umask": int}
+    for name, kind_ in fields.items():
+        if not isinstance(request.get(name), kind_) or isinstance(request[name], bool):
+            raise ValueError(f"{name!r} missing or not a {kind_.__name__}")
+    if not all(isinstance(a, str) for a in request["argv"]):
+        raise ValueError("'argv' holds a value that is not a string")
+    if not all(isinstance(k, str) and isinstance(v, str) for k, v in request["env"].items()):
+        raise ValueError("'env' holds a name or value that is not a string")
+    if not 0 <= request["umask"] <= 0o777:
+        raise ValueError(f"'umask' {request['umask']} out of 0 ... 0o777")
+    if not isinstance(request.setdefault("argv0", "jaxchain"), str):
+        raise ValueError("'argv0' is not a string")
+    return request
+
+
 def _run(main, request: dict, fds: list[int], done: threading.Event) -> int:
     """`main(argv)` with the command's standard streams (`fds`), working directory,
-    environment and umask, all restored after it: its exit status."""
+    environment, umask and `sys.argv` (the `history` of its results names the
+    command, not this process), all restored after it: its exit status."""
     saved = [os.dup(fd) for fd in (0, 1, 2)]
-    saved_env, saved_cwd = dict(os.environ), os.getcwd()
+    saved_env, saved_cwd, saved_argv = dict(os.environ), os.getcwd(), sys.argv
     for stream in (sys.stdout, sys.stderr):
         stream.flush()
     for target, fd in enumerate(fds):
         os.dup2(fd, target)
         os.close(fd)
     sys.stdout.reconfigure(line_buffering=sys.stdout.isatty())  # as in a process of its own
-    umask = os.umask(request.get("umask", 0o022))
+    umask = os.umask(request["umask"])
+    sys.argv = [request["argv0"], *request["argv"]]
     try:
         os.environ.clear()
         os.environ.update(request["env"])
@@ -295,6 +341,7 @@ def _run(main, request: dict, fds: list[int], done: threading.Event) -> int:
         os.environ.update(saved_env)
         os.chdir(saved_cwd)
         os.umask(umask)
+        sys.argv = saved_argv
 
 
 def _serve(base: str) -> None:
@@ -341,8 +388,8 @@ def _serve(base: str) -> None:
         warm.log(f"ended pid={os.getpid()}: {ended}")
         with warm.lock:
             warm.closing = warm.closing or b"b"
-        if ended in ("memory", "interrupted"):
-            warm.replace()
+        if ended in ("memory", "interrupted") and not warm.stopped.is_set():
+            warm.replace()  # a fresh process in its place, unless it was told to stop
         with contextlib.suppress(OSError):
             server.shutdown(socket.SHUT_RDWR)  # wakes the listener thread
         server.close()
