@@ -276,10 +276,10 @@ def served_runs(args: list[str], cache: Path, folder: Path, repeats: int, say, n
     command = [str(exe)] if exe.exists() else [
         sys.executable, "-c", "from jaxchain._cli.warm import command; command()"]
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    env.update(JAXCHAIN_CACHE_DIR=str(cache), JAXCHAIN_SERVER="1", TMPDIR=str(folder / "t"),
-               JAXCHAIN_SERVER_IDLE="300")
-    (folder / "t").mkdir()
-    sockets = folder / "t" / f"jaxchain-{os.getuid()}"
+    env.update(JAXCHAIN_CACHE_DIR=str(cache), JAXCHAIN_SERVER="1",
+               XDG_RUNTIME_DIR=str(folder / "t"), JAXCHAIN_SERVER_IDLE="300")
+    (folder / "t").mkdir(mode=0o700)
+    sockets = folder / "t" / "jaxchain"
 
     def one() -> dict:
         started = time.time()

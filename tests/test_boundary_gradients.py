@@ -20,9 +20,9 @@ PAD = jc.ChainParams(graph=jc.Graph.lattice(2, 3, "free"),
 
 
 def _eq1_table() -> jc.Tabulated:
-    """A measured friction curve: eq. (1) sampled at 21 speeds, with a bump."""
+    """A measured friction curve: eq. (1) sampled at 21 speeds, with a small bump."""
     v = np.linspace(0.0, 4.0, 21)
-    return jc.Tabulated(v=v, mu=0.5 + 0.5 * np.exp(-v / 0.5) + 0.02 * np.sin(v))
+    return jc.Tabulated(v=v, mu=0.5 + 0.5 * np.exp(-v / 0.5) + 0.005 * np.sin(v))
 
 
 def _pad(theta):
