@@ -198,19 +198,22 @@ def test_a_sweep_overwrite_killed_at_any_batch_or_before_its_swap_leaves_the_old
     assert new.attrs["batches_run"] == 0
     assert new.attrs["batches_done"] == new.attrs["batches_total"] == 2
     assert new["v_d"].values.tolist() == [1.6]
-    assert sorted(p.name for p in out.iterdir()) == [".jaxchain-results.json", "sweep.png",
-                                                     "sweep.zarr"]  # and the manifest
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(
+        ".jaxchain-lock")) == [".jaxchain-results.json", "sweep.png", "sweep.zarr"]
+    # and the manifest (the folder's lock and the killed command's name beside it aside)
 
     os.rename(store, pending)  # a complete overwrite killed in its swap: the new
     os.rename(tmp_path / "old.zarr", replaced)  # store beside, the old one renamed
     again = small_sweep("1.6", store=store, resume=True)
     assert again.attrs["batches_run"] == 0 and again["v_d"].values.tolist() == [1.6]
-    assert sorted(p.name for p in out.iterdir()) == [".jaxchain-results.json", "sweep.png",
-                                                     "sweep.zarr"]  # and the manifest
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(
+        ".jaxchain-lock")) == [".jaxchain-results.json", "sweep.png", "sweep.zarr"]
+    # and the manifest (the folder's lock and the killed command's name beside it aside)
     os.rename(store, replaced)  # the same, with no new store beside
     SweepStore(store).recover()
-    assert sorted(p.name for p in out.iterdir()) == [".jaxchain-results.json", "sweep.png",
-                                                     "sweep.zarr"]  # and the manifest
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(
+        ".jaxchain-lock")) == [".jaxchain-results.json", "sweep.png", "sweep.zarr"]
+    # and the manifest (the folder's lock and the killed command's name beside it aside)
     assert jc.open_sweep(store)["v_d"].values.tolist() == [1.6]
 
 

@@ -10,7 +10,8 @@ from .._physics.mistuning import mistune
 from .._physics.params import ChainParams
 from .._errors import ValidationError
 from .._physics.record import chain_from_file
-from .common import UsageError
+from .._engine.options import SimulationOptions
+from .common import UsageError, check_footprint
 
 CHAIN_HELP = """\
 The chain: --boundary ring (eq. (5) of the paper, the default), free (an open line)
@@ -94,6 +95,8 @@ def _parse_friction(text: str | None):
             return Tabulated.from_csv(rest)
         except ValidationError as err:
             raise UsageError(f"--friction table: {err}") from None
+        except UnicodeDecodeError as err:
+            raise UsageError(f"--friction table: {not_utf8(rest, err)}") from None
     if name not in FRICTION_LAWS:
         raise UsageError(f"--friction: unknown law {name!r}; choose one of "
                          f"{', '.join(FRICTION_LAWS)}")
@@ -120,20 +123,50 @@ def chain_params(args, n_osc: int, **fields) -> ChainParams:
 
     **Raises:**
 
-    `UsageError` or `ValidationError` (exit status 2) for a bad chain.
+    `UsageError` or `ValidationError` (exit status 2) for a bad chain, a file
+    that is not UTF-8 (named), or a chain too large for this machine's memory
+    over the command's --t-end (`check_footprint`), refused before it is built.
     """
     lattice = getattr(args, "lattice", None)
+    horizon = _typed_horizon(args)
     if lattice is None:
+        check_footprint(n_osc, None, horizon)
         topology = {"n_osc": n_osc, "boundary": args.boundary}
     else:
+        n_lattice = lattice[0] * lattice[1]
+        check_footprint(n_lattice, f"--lattice {lattice[0]}x{lattice[1]} ({n_lattice} "
+                        f"oscillators)", horizon)
         topology = {"graph": Graph.lattice(*lattice, args.boundary)}
     base = ChainParams(**topology, friction=_parse_friction(args.friction), **fields)
     params = base
     if args.chain is not None:
         try:
             params = chain_from_file(args.chain, base)
+        except UnicodeDecodeError as err:
+            raise UsageError(f"--chain {not_utf8(args.chain, err)}") from None
         except (ValueError, TypeError) as err:
             raise UsageError(f"--chain {err}") from None
+        check_footprint(params.n_osc, f"--chain {args.chain} ({params.n_osc} oscillators)",
+                        horizon)
     if getattr(args, "mistuning", None) is not None:
         params = mistune(params, args.mistuning, args.mistuning_seed)
     return params
+
+
+def _typed_horizon(args) -> SimulationOptions | None:
+    """The horizon that the command's --t-end and --transient name, for the
+    estimate of `check_footprint` before the chain is built; None where the
+    command has none, or where the command refuses them later itself."""
+    if not hasattr(args, "t_end"):
+        return None
+    try:
+        return SimulationOptions(t_end=args.t_end, transient=getattr(args, "transient", 0.0))
+    except (ValidationError, TypeError):
+        return None
+
+
+def not_utf8(path, err: UnicodeDecodeError) -> str:
+    """The refusal of a text file that is not UTF-8, naming it and the first byte
+    that is not."""
+    return (f"{path}: not UTF-8 text (byte 0x{err.object[err.start]:02x} at offset "
+            f"{err.start}); save it as UTF-8")

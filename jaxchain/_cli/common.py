@@ -25,6 +25,8 @@ from .._engine.options import SimulationOptions
 from .._physics.params import ChainParams
 from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
 from .._physics.forces import DEFAULT_EPS
+from .footprint import check_footprint
+from .folder_lock import command_line, lock_folder, release_folder
 from .parser import Parser, UsageError  # noqa: F401  (for the commands)
 
 
@@ -209,11 +211,27 @@ def simulation_options(args, **fields) -> SimulationOptions:
 
     **Raises:**
 
-    `ValidationError` for a bad combination (transient >= t_end, say): exit
+    `ValidationError` for a bad combination (transient >= t_end, say), and
+    `UsageError` for a run that this machine cannot hold (`check_footprint`): exit
     status 2.
     """
     given = {name: getattr(args, name) for name in _RUN_FIELDS if hasattr(args, name)}
-    return SimulationOptions(**(given | fields))
+    options = SimulationOptions(**(given | fields))
+    check_footprint(*_size_of_chain(args), options)
+    return options
+
+
+def _size_of_chain(args) -> tuple[int, str]:
+    """The number of oscillators that a command's options name (--lattice, --n-osc)
+    before its chain is built, and the option in words (1 where they name none: a
+    chain file's chain is estimated when it is read, `chain_params`)."""
+    lattice = getattr(args, "lattice", None)
+    if lattice is not None:
+        n_osc = lattice[0] * lattice[1]
+        return n_osc, f"--lattice {lattice[0]}x{lattice[1]} ({n_osc} oscillators)"
+    n_osc = getattr(args, "n_osc", None)
+    n_osc = n_osc if isinstance(n_osc, int) else 1
+    return n_osc, f"--n-osc {n_osc}"
 
 
 def engine_of(args, options: SimulationOptions, params: ChainParams | None = None
@@ -303,13 +321,16 @@ def _figure_formats(text: str) -> list[str]:
 
 def add_output_options(p: argparse.ArgumentParser, *, resume: str | None = None,
                        figures: bool = True) -> None:
-    """--out, --overwrite, --resume (where the command resumes: `resume` says what it
-    continues), --format (where it draws), --json and --no-progress."""
+    """--out, --overwrite, --wait, --resume (where the command resumes: `resume` says
+    what it continues), --format (where it draws), --json and --no-progress."""
     g = p.add_argument_group("output")
     g.add_argument("--out", type=Path, default=Path("jaxchain-out"), metavar="DIR",
                    help="folder of the results (default ./jaxchain-out/)")
     g.add_argument("--overwrite", action="store_true",
                    help="replace this command's results in DIR (refused by default)")
+    g.add_argument("--wait", action="store_true",
+                   help="wait for a command that is writing into DIR to end (by default "
+                        "this one is refused: one command at a time per folder)")
     if resume is not None:
         g.add_argument("--resume", action="store_true", help=f"continue {resume}")
     if figures:
@@ -325,6 +346,10 @@ class Outputs:
     """The files a command writes under --out: claimed before it computes, written
     whole or not at all, and listed by name in its JSON (`as_json`).
 
+    The folder is locked from here to the end of the command (`lock_folder`,
+    released by `record_outputs`): a second command into it is refused in one line
+    naming the first, or waits for it with --wait.
+
     Each file written is recorded in the folder's `MANIFEST` with the command and
     the digest of its settings (`_settings_digest`). A claimed file that exists is
     replaced when the manifest says that this command made it with the same
@@ -339,9 +364,13 @@ class Outputs:
         self.written: dict[str, Path] = {}
         self.made_by = {"command": getattr(args, "command", None),
                         "settings": _settings_digest(args)}
+        self.locked = False
         _OUTPUTS.append(self)
         claimed = list(data) + [f"{stem}.{fmt}" for stem in figures for fmt in self.formats]
         _writable_folder(self.folder)
+        lock_folder(self.folder, command_line(self.made_by["command"], self.folder),
+                    wait=getattr(args, "wait", False))
+        self.locked = True
         existing = [name for name in claimed if (self.folder / name).exists()]
         made = self._manifest()
         self.again = bool(existing) and all(made.get(n) == self.made_by for n in existing)
@@ -415,8 +444,8 @@ class Outputs:
 MANIFEST = ".jaxchain-results.json"
 
 #: Options that change how a command shows its results, not what they are.
-_PRESENTATION = ("run", "command", "out", "overwrite", "resume", "json", "no_progress",
-                 "format")
+_PRESENTATION = ("run", "command", "out", "overwrite", "wait", "resume", "json",
+                 "no_progress", "format")
 
 
 def _settings_digest(args) -> str:
@@ -456,12 +485,16 @@ def record_outputs(ran: bool) -> None:
     """At the end of a command: when it ran (its results written, some runs failed
     perhaps), record its files in their folders' manifests; when it was refused or
     failed before its results, record nothing, so that a folder it refused is left
-    as it was."""
+    as it was. Either way, release the folders' locks (`release_folder`)."""
     while _OUTPUTS:
         outputs = _OUTPUTS.pop()
-        if ran:
-            with contextlib.suppress(OSError):
-                outputs.record()
+        try:
+            if ran:
+                with contextlib.suppress(OSError):
+                    outputs.record()
+        finally:
+            if outputs.locked:
+                release_folder(outputs.folder)
 
 
 def print_json(payload: dict, outputs: Outputs) -> None:
@@ -555,7 +588,14 @@ def _writable_folder(path: Path) -> None:
 
     **Raises:**
 
-    `UsageError` naming --out if it cannot be created or written."""
+    `UsageError` naming --out if its name is not UTF-8 (netCDF, JSON and the
+    manifest name their files in UTF-8), or if it cannot be created or written."""
+    try:
+        str(path).encode("utf-8")
+    except UnicodeEncodeError:
+        shown = os.fsencode(path).decode("utf-8", "backslashreplace")
+        raise UsageError(f"--out {shown}: the folder's name is not UTF-8; choose a name "
+                         f"in UTF-8") from None
     try:
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=path):

@@ -2,6 +2,7 @@
 with their standard errors, and the choice between friction laws."""
 
 import argparse
+import os
 import time
 import warnings
 from pathlib import Path
@@ -44,7 +45,8 @@ and the information criteria AIC and BIC; the law with the lowest held-out resid
 is written as the fitted chain.
 
 Writes <out>/identified_chain.toml (a chain file every command reads with
---chain), <out>/fit_<record>.csv (measured, fitted, residual), and the figures
+--chain), <out>/fit_<record>.csv (measured, fitted, residual; records of the same
+name in different folders as fit_<folder>_<record>.csv), and the figures
 <out>/identification_fits.png and <out>/identified_friction.png (mu(v) with its
 95 % band)."""
 
@@ -100,9 +102,9 @@ def _assignments(text: str) -> dict:
 
 def run(args) -> None:
     options, files, held_files = _check_identify(args)
+    names = _fit_names(files)
     params, records, held_out = _read_records(args, files, held_files)
-    outputs = Outputs(args, data=["identified_chain.toml"] +
-                      [f"fit_{f.stem}.csv" for f in files],
+    outputs = Outputs(args, data=["identified_chain.toml", *names],
                       figures=["identification_fits", "identified_friction"])
     start = time.perf_counter()
     result, comparison = _fit(args, records, held_out, params, options)
@@ -111,7 +113,7 @@ def run(args) -> None:
         if not row["best"]:
             for text in row["fit"].warnings:
                 note(f"{row['law']}: warning: {text}")
-    _write(outputs, result, files, records)
+    _write(outputs, result, names, records)
     _print(args, result, comparison, files, held_files, wall, outputs)
     if not result.converged:
         raise RunsFailed("the fit did not converge; its last iterate is written")
@@ -138,6 +140,31 @@ def _check_identify(args) -> tuple[IdentifyOptions, list, list]:
     elif args.held_out:
         raise UsageError("--held-out is for --laws")
     return options, files, held_files
+
+
+def _fit_names(files) -> list[str]:
+    """The name of each record's fit: fit_<record>.csv, or where two records share a
+    name (a/rig.csv, b/rig.csv), fit_<folder>_<record>.csv with as many of their
+    folders as tell them apart.
+
+    **Raises:** `UsageError` for a record given twice, or records that no folder
+    tells apart (rig.csv and rig.txt)."""
+    parts = [Path(os.path.abspath(f)).with_suffix("").parts[1:] for f in files]
+    names = []
+    for i, own in enumerate(parts):
+        others = [p for j, p in enumerate(parts) if j != i]
+        depth = 1
+        while depth < len(own) and any(p[-depth:] == own[-depth:] for p in others):
+            depth += 1
+        names.append("fit_" + "_".join(own[-depth:]) + ".csv")
+    for i, name in enumerate(names):
+        if name in names[:i]:
+            first = files[names.index(name)]
+            same = os.path.abspath(first) == os.path.abspath(files[i])
+            raise UsageError(f"{files[i]}: given twice" if same else
+                             f"{first} and {files[i]}: records of the same name, told apart by no "
+                             f"folder (their fits would both be {name}); rename one")
+    return names
 
 
 def _read_records(args, files, held_files) -> tuple:
@@ -186,14 +213,15 @@ def _fit(args, records, held_out, params, options) -> tuple:
     return result, comparison
 
 
-def _write(outputs, result, files, records) -> None:
-    """The fitted chain file, each record's fit as CSV, and the two figures."""
+def _write(outputs, result, names, records) -> None:
+    """The fitted chain file, each record's fit as CSV (`names`), and the two
+    figures."""
     from .._plots.identification import plot_friction_band, plot_record_fits
     from .._sweeps.chain_files import write_chain_file
 
     write_chain_file(result.chain, outputs.path("identified_chain.toml"))
-    for f, rec, fitted in zip(files, records, result.fits):
-        outputs.text(_fit_csv(rec, fitted), f"fit_{f.stem}.csv")
+    for name, rec, fitted in zip(names, records, result.fits):
+        outputs.text(_fit_csv(rec, fitted), name)
     outputs.figure(plot_record_fits(result, records), "identification_fits")
     outputs.figure(plot_friction_band(result), "identified_friction")
 

@@ -82,8 +82,8 @@ def read_record(path: str | Path, v_d: float | None = None,
 
     **Raises:**
 
-    `ValidationError` naming the file and the column for a file that cannot be read,
-    no `t` column, no `x<n>` column, an unknown column, a value that is not a number
+    `ValidationError` naming the file and the column for a file that cannot be read
+    or is not UTF-8 text, no `t` column, no samples (a header alone), no `x<n>` column, an unknown column, a value that is not a number
     or is NaN, times that do not increase, a `v<n>` column without its `x<n>`, a
     `v_d` that is not constant or missing, or a belt speed <= 0.
     """
@@ -93,6 +93,9 @@ def read_record(path: str | Path, v_d: float | None = None,
             rows = list(csv.reader(f))
     except OSError as err:
         raise ValidationError(f"{path}: cannot read it ({err.strerror})") from None
+    except UnicodeDecodeError as err:
+        raise ValidationError(f"{path}: not UTF-8 text (byte 0x{err.object[err.start]:02x} "
+                              f"at offset {err.start}); save it as UTF-8") from None
     if not rows:
         raise ValidationError(f"{path}: empty file")
     header, body = [h.strip() for h in rows[0]], rows[1:]
@@ -125,6 +128,9 @@ def record_from_dataset(ds, v_d: float | None = None, scales: Scales | None = No
 def _record(columns: dict, source: str, v_d, scales: Scales | None) -> Record:
     if "t" not in columns:
         raise ValidationError(f"{source}: no column t (the sample times)")
+    if columns["t"].size == 0:
+        raise ValidationError(f"{source}: no samples (a header and no rows): a record "
+                              "holds at least one row of measured values")
     measured = {}
     for name in columns:
         if name in ("t", "v_d"):
