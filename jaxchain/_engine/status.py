@@ -10,7 +10,7 @@ import diffrax
 import jax.numpy as jnp
 import numpy as np
 
-from .options import SimulationOptions
+from .options import SimulationOptions, follow_eps
 from .._physics.model import mechanical_energy
 from .._physics.params import ChainParams
 from .solver.registry import DEFAULT_SOLVER, SOLVERS, stick_stiffness
@@ -161,6 +161,7 @@ def failure_hint(status: int, params: ChainParams, solver: diffrax.AbstractSolve
     has no hint of its own.
     """
     status = Status(int(status))
+    options = follow_eps(options, eps)  # tolerances left None: those of the run
     stiffness = stick_stiffness(params, eps)
     eps = float(np.max(np.asarray(eps)))
     name = _name(solver)
