@@ -69,6 +69,7 @@ def test_the_command_line_refuses_rtol_10(engine):
     assert len(lines) == 1 and "--rtol" in lines[0] and "(0, 1)" in lines[0]
 
 
+@pytest.mark.slow
 def test_a_run_whose_energy_balance_fails_is_flagged_on_the_smoothed_engine():
     """rtol = 0.03 at eps = 1e-2 (allowed: within 100 eps) integrates a single
     oscillator from rest so loosely that its energy E is off by a factor 25 (E from
