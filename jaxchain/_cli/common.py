@@ -21,7 +21,8 @@ import numpy as np
 from .._engine.solver.controller import CONTROLLERS
 from .._engine.engines import ENGINES, AbstractEngine, as_engine
 from .._engine.exact.options import NonsmoothOptions
-from .._engine.options import SimulationOptions
+from .._engine.options import (ATOL_PER_EPS, DEFAULT_ATOL, DEFAULT_RTOL, RTOL_PER_EPS,
+                               SimulationOptions)
 from .._physics.params import ChainParams
 from .._engine.solver.registry import DEFAULT_SOLVER, SOLVERS  # noqa: F401  (SOLVERS: for the commands)
 from .._physics.forces import DEFAULT_EPS
@@ -65,6 +66,14 @@ def positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
     if not (value > 0 and value < float("inf")):
         raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text!r}")
+    return value
+
+
+def tolerance(text: str) -> float:
+    """An argparse type: a tolerance, a number in (0, 1)."""
+    value = positive_float(text)
+    if value >= 1:
+        raise argparse.ArgumentTypeError(f"must be a number in (0, 1), got {text!r}")
     return value
 
 
@@ -289,15 +298,20 @@ class _Typed(argparse.Action):
 
 def add_tolerance_options(g, rtol: float = DEFAULTS.rtol, atol: float = DEFAULTS.atol
                           ) -> None:
-    """--rtol, --atol (defaults `rtol`, `atol`) and --controller, in the argument
-    group (or parser) `g`."""
+    """--rtol, --atol (defaults `rtol`, `atol`; None: the smoothed engine's follow
+    --eps, `follow_eps`), each in (0, 1), and --controller, in the argument group (or
+    parser) `g`."""
     exact = NonsmoothOptions()
-    g.add_argument("--rtol", type=positive_float, default=rtol, action=_Typed,
-                   help=f"relative tolerance (default {rtol:g}; with --engine exact "
-                        f"{exact.rtol:g})")
-    g.add_argument("--atol", type=positive_float, default=atol, action=_Typed,
-                   help=f"absolute tolerance (default {atol:g}; with --engine exact "
-                        f"{exact.atol:g})")
+    shown = {"rtol": f"min({DEFAULT_RTOL:g}, eps/{RTOL_PER_EPS:g})" if rtol is None
+             else f"{rtol:g}",
+             "atol": f"min({DEFAULT_ATOL:g}, eps/{ATOL_PER_EPS:g})" if atol is None
+             else f"{atol:g}"}
+    g.add_argument("--rtol", type=tolerance, default=rtol, action=_Typed,
+                   help=f"relative tolerance, in (0, 1) (default {shown['rtol']}; with "
+                        f"--engine exact {exact.rtol:g})")
+    g.add_argument("--atol", type=tolerance, default=atol, action=_Typed,
+                   help=f"absolute tolerance, in (0, 1) (default {shown['atol']}; with "
+                        f"--engine exact {exact.atol:g})")
     g.add_argument("--controller", choices=list(CONTROLLERS), default=DEFAULTS.controller,
                    help=f"step-size controller (default {DEFAULTS.controller}: a PI "
                         "controller that may shrink after an accepted step and, after "

@@ -92,12 +92,13 @@ def run(args) -> None:
     options = simulation_options(args)
     ref_options = NonsmoothOptions.reference(t_end=args.t_end, transient=args.transient,
                                              rtol=args.ref_rtol, atol=args.ref_rtol)
+    engine = engine_of(args, options, params)
     outputs = Outputs(args, data=["crosscheck.nc"], figures=["crosscheck"])
 
     start = time.perf_counter()
     with cluster_client(args) as client:
         ds = crosscheck(params, args.vd, ics, reference_options=ref_options,
-                        engine=engine_of(args, options, params),
+                        engine=engine,
                         checkpoint=outputs.path("crosscheck_cases"), client=client,
                         progress=show_progress(args))
     wall = time.perf_counter() - start
@@ -133,13 +134,13 @@ def run(args) -> None:
         print_json({
             "cases": rows, **summary, "chain": chain_record(params), **engine_record(args),
             "scheduler": args.scheduler,
-            "rtol": args.rtol, "reference_rtol": args.ref_rtol, "wall_time_s": wall,
+            "rtol": engine.options.rtol, "reference_rtol": args.ref_rtol, "wall_time_s": wall,
             f"{s}_wall_time_s": ds.attrs[f"wall_time_s_{s}"],
             "note": "irregular states are compared by statistics (amplitudes, E, "
                     "n_HALC), not as time series",
         }, outputs)
     else:
-        print(f"{s} ({engine_text(args)}, rtol {args.rtol:g}) against "
+        print(f"{s} ({engine_text(args)}, rtol {engine.options.rtol:g}) against "
               f"the non-smooth reference, N = {args.n_osc}, window "
               f"[{args.transient:g}, {args.t_end:g}]")
         print(f"{'v_d':>5} {'ic':>10} {'n_HALC s/r':>10} {'A err %':>8} {'E err %':>8}"

@@ -17,7 +17,7 @@ from .exact.options import NonsmoothOptions
 from .exact.solve import run_exact
 from .horizon import AbstractHorizon
 from .observables import Observables
-from .options import SimulationOptions
+from .options import SimulationOptions, check_stick_band, follow_eps
 from .smoothed import run, run_observers
 from .status import Status, failure_hint
 from .solver.registry import DEFAULT_SOLVER, SOLVERS
@@ -81,7 +81,9 @@ class Smoothed(AbstractEngine):
     - `solver`: a diffrax solver or the name of one (`SOLVERS`); `Ros34PW2()` by
         default (`DEFAULT_SOLVER`). "auto" (chosen from eps) is resolved by
         `as_engine`, which sees the chain.
-    - `options`: `SimulationOptions` (horizon, tolerances, sampling).
+    - `options`: `SimulationOptions` (horizon, tolerances, sampling). Tolerances
+        left None follow eps (`follow_eps`: rtol = min(3e-5, eps/30), atol =
+        min(3e-7, eps/3000)); the engine holds them resolved.
     - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
         dimensionless (a fraction of x_0 omega_n, eqs. (4)-(6)); `DEFAULT_EPS` =
         1e-3 by default. An array leaf: a new eps does not recompile, and
@@ -89,8 +91,10 @@ class Smoothed(AbstractEngine):
 
     **Raises:**
 
-    `ValidationError` for an unknown solver name or eps <= 0 (or not finite);
-    `TypeError` for options of another kind.
+    `ValidationError` for an unknown solver name, eps <= 0 (or not finite), or
+    tolerances given that cannot resolve the stick band |v_rel| <= 3 eps
+    (`check_stick_band`: rtol + atol > 100 eps); `TypeError` for options of
+    another kind.
     """
 
     name: ClassVar[str] = "smoothed"
@@ -101,7 +105,7 @@ class Smoothed(AbstractEngine):
     def __init__(self, solver: diffrax.AbstractSolver | str = DEFAULT_SOLVER,
                  options: SimulationOptions = SimulationOptions(), eps=DEFAULT_EPS):
         self.solver = as_solver(solver)
-        self.options = check_options(options)
+        self.options = follow_eps(check_options(options), eps)
         self.eps = eps
 
     def __check_init__(self):
@@ -109,6 +113,7 @@ class Smoothed(AbstractEngine):
         if np.ndim(self.eps) != 0:
             raise ValidationError(f"Smoothed.eps must be one number (shape ()), got shape "
                                   f"{np.shape(self.eps)}")
+        check_stick_band(self.options, self.eps)
 
     def run(self, params: ChainParams, y0: State, progress: bool = False) -> Observables:
         return run(params, self.eps, y0, self.solver, self.options, progress)

@@ -8,12 +8,14 @@ import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 from jaxtyping import Array, Int, PyTree
 
 from .compat import errors_as_nan
 from .solver.controller import step_size_controller
 from .._physics.custom_types import State
-from .status import Status
+from .status import SMOOTHED_BALANCE_FLOOR, Status, balance_status
+from .._physics.forces import smoothed_friction_force
 from .._physics.model import Model, model_field, model_split_field
 from .observables import Observables
 from .observers.base import AbstractObserver, Chunk, no_partial_answers, observe_chunk
@@ -51,8 +53,61 @@ def terms(solver: diffrax.AbstractSolver):
     return diffrax.ODETerm(model_field)
 
 
+def _work_rows(t, z, model: Model):
+    """The rows of the work integrals: the power of friction F_n x_n' and the
+    viscous dissipation 2 xi_n x_n'^2 of each oscillator (F_n the smoothed friction
+    force, eq. (2) with tanh(v_rel/eps); their sums are the rates in the energy
+    balance of `mechanical_energy`)."""
+    params, v = model.params, z[1]
+    force = smoothed_friction_force(params, v - params.v_d, model.eps)
+    return jnp.stack([v * force, 2 * params.xi * v**2])
+
+
+def _elastic_with_work(t, z, model):
+    return jnp.concatenate([model_split_field(t, z[:2], model)[0], _work_rows(t, z, model)])
+
+
+def _friction_with_work(t, z, model):
+    return jnp.concatenate([model_split_field(t, z[:2], model)[1], jnp.zeros_like(z[2:])])
+
+
+def _field_with_work(t, z, model):
+    return jnp.concatenate([model_field(t, z[:2], model), _work_rows(t, z, model)])
+
+
+def _with_work(solver: diffrax.AbstractSolver):
+    """The terms of eq. (5) on a state of shape (4, n_osc): x, x' and the work
+    integrals of `_work_rows`, which feed nothing back. For a solver of
+    `SPLIT_SOLVERS` the work rows are in the non-stiff term (the stiff term's
+    Jacobian stays diagonal). Module-level functions: one compiled run per solver."""
+    if isinstance(solver, SPLIT_SOLVERS):
+        return diffrax.MultiTerm(diffrax.ODETerm(_elastic_with_work),
+                                 diffrax.ODETerm(_friction_with_work))
+    return diffrax.ODETerm(_field_with_work)
+
+
+def _state_norm(error):
+    """The error norm of a state with work rows: the RMS norm of x and x' only (the
+    rows 0 and 1), so that the work integrals do not move the steps."""
+    return optx.rms_norm(error[:2])
+
+
+def _controller(options: SimulationOptions, work: bool):
+    """The step-size controller of `options`; with `work` rows in the state, its
+    error norm is that of x and x' alone (`_state_norm`)."""
+    controller = step_size_controller(options)
+    return dataclasses.replace(controller, norm=_state_norm) if work else controller
+
+
+def _balanced(solver: diffrax.AbstractSolver) -> bool:
+    """Whether a run with `solver` integrates the work integrals beside the state
+    (`_with_work`): every solver but `Ros34PW2(block=True)`, whose W takes a state
+    of two rows."""
+    return not getattr(solver, "block", False)
+
+
 def _advance(terms_, solver, args, options, observers, progress, tangent, carry, t0, t1,
-             n_samples):
+             n_samples, work=False):
     """Integrate one chunk [t0, t1] and hand it to the observers: its `n_samples`
     dense samples (if any) and, with a `tangent` (static) carried beside the state,
     the log of its growth (it is then renormalised)."""
@@ -74,7 +129,7 @@ def _advance(terms_, solver, args, options, observers, progress, tangent, carry,
             terms_, solver, t0, t1, None, y, args,
             saveat=diffrax.SaveAt(subs=subs, solver_state=True, controller_state=True,
                                   made_jump=True),
-            stepsize_controller=step_size_controller(options),
+            stepsize_controller=_controller(options, work),
             max_steps=options.max_steps, throw=False,
             solver_state=solver_state, controller_state=controller_state,
             made_jump=made_jump,
@@ -87,9 +142,11 @@ def _advance(terms_, solver, args, options, observers, progress, tangent, carry,
         log_growth = jnp.log(norm)
         y_end = jnp.stack([y_end[0], y_end[1] / norm])
         samples = None if ts is None else samples[:, 0]
+    if work and ts is not None:
+        samples = samples[:, :2]
     chunk = Chunk(t0=t0, t1=t1, ts=ts, ys=samples, log_growth=log_growth)
     states = observe_chunk(observers, states, chunk, args, options)
-    state_end = y_end[0] if tangent else y_end
+    state_end = y_end[0] if tangent else y_end[:2]
     # Where a failed solve stopped: its t1 save holds the time it reached.
     mean_step = (sol.ts[0][-1] - t0) / jnp.maximum(sol.stats["num_steps"], 1)
     code = jnp.where(jnp.all(jnp.isfinite(state_end)),
@@ -123,14 +180,15 @@ def _with_tangent(terms_):
 
 
 def _initial_states(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
-                    options: SimulationOptions, t0, t1) -> tuple[PyTree, PyTree]:
+                    options: SimulationOptions, t0, t1, work: bool = False
+                    ) -> tuple[PyTree, PyTree]:
     """The solver's and the step-size controller's states at the start of a run, as
     `diffrax.diffeqsolve` makes them when it is given none (each one's `init`, the
     controller choosing the first step), for the first chunk [t0, t1]: so that the
     first chunk too is a step of the scan over chunks, and the run compiles one copy
     of the solve per phase instead of two. Not differentiated (diffrax stops the
     gradient of the states it makes itself)."""
-    controller = step_size_controller(options)
+    controller = _controller(options, work)
     tnext, controller_state = controller.init(terms_, t0, t1, y0, None, args, solver.func,
                                               solver.error_order(terms_))
     solver_state = solver.init(terms_, t0, jnp.minimum(tnext, t1), y0, args)
@@ -148,7 +206,8 @@ def _spans(options: SimulationOptions) -> list[tuple[float, float, int, int]]:
 
 def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
               options: SimulationOptions, observers: Sequence[AbstractObserver],
-              progress: bool = False) -> tuple[tuple[dict, ...], PyTree, Array, Array]:
+              progress: bool = False, work: bool = False
+              ) -> tuple[tuple[dict, ...], PyTree, Array, Array]:
     """Integrate any ODE in chunks, observing while integrating: the pure,
     traceable engine under `run` and `observe`, not specific to the chain.
 
@@ -162,6 +221,12 @@ def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
     vector field; `_with_tangent`), under the same error control, and
     renormalised after each chunk.
 
+    With `work`, the chain's work integrals are integrated beside the state (the
+    terms are those of `_with_work`, on a state of shape (4, n_osc); the error
+    norm is that of x and x' alone, so the steps are those of the run without
+    them), and a run whose energy balance fails is `Status.energy_balance_failed`
+    (`balance_status`).
+
     **Arguments:**
 
     - `terms_`: diffrax terms of the ODE; `args` is passed to them.
@@ -169,6 +234,8 @@ def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
     - `y0`: the initial state (an array).
     - `observers`: the observers (`AbstractObserver`).
     - `progress` (static): tick the active progress bar once per chunk.
+    - `work` (static): the terms carry the work rows of `_with_work` (`args` a
+        `Model`); not with an observer that `needs_tangent`.
 
     **Returns:**
 
@@ -184,9 +251,12 @@ def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
     if tangent:
         y = jnp.stack([y0, lyapunov[0].initial_tangent(y0)])
         terms_ = _with_tangent(terms_)
+    if work:
+        y = jnp.concatenate([y0, jnp.zeros_like(y0)])
     spans = _spans(options)
     solver_state, controller_state = _initial_states(terms_, solver, y, args, options,
-                                                     spans[0][0], spans[0][0] + spans[0][1])
+                                                     spans[0][0], spans[0][0] + spans[0][1],
+                                                     work)
     carry = (y, solver_state, controller_state, jnp.array(False), states, jnp.array(0),
              status)
     # Every chunk of a phase is one step of its scan, the first too (its solver and
@@ -196,16 +266,31 @@ def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
 
         def body(c, t0, length=length, samples=samples):
             return _advance(terms_, solver, args, options, observers, progress,
-                            tangent, c, t0, t0 + length, samples), None
+                            tangent, c, t0, t0 + length, samples, work), None
 
         carry, _ = jax.lax.scan(body, carry, t0s)
     y_final, _, _, _, states, steps, status = carry
     if tangent:
         y_final = y_final[0]
+    if work:
+        y_final, (friction_work, dissipation) = y_final[:2], jnp.sum(y_final[2:], axis=-1)
+        status = balance_status(status, args.params, y0, y_final, friction_work,
+                                dissipation, options.rtol, options.atol,
+                                SMOOTHED_BALANCE_FLOOR)
     ok = status == Status.ok
     results = tuple(no_partial_answers(o.result(s, args, options), ok)
                     for o, s in zip(observers, states))
     return results, y_final, steps, status
+
+
+def _integrate_chain(params: ChainParams, eps, y0: State, solver: diffrax.AbstractSolver,
+                     options: SimulationOptions, observers: tuple, progress: bool):
+    """`integrate` eq. (5) at the smoothing velocity `eps`, with its energy balance
+    checked (`work`) unless an observer needs a tangent or the solver cannot carry
+    the work rows (`_balanced`)."""
+    work = _balanced(solver) and not any(o.needs_tangent for o in observers)
+    return integrate(_with_work(solver) if work else terms(solver), solver, y0,
+                     Model(params, eps), options, observers, progress, work)
 
 
 def run(params: ChainParams, eps, y0: State, solver: diffrax.AbstractSolver,
@@ -214,8 +299,8 @@ def run(params: ChainParams, eps, y0: State, solver: diffrax.AbstractSolver,
     (5) at the smoothing velocity `eps` by `integrate`; no checks, no exceptions.
     `run_lanes` maps it over lanes. With `progress` (static), each chunk ticks the
     active progress bar through a host callback."""
-    (extrema,), y_final, steps, status = integrate(
-        terms(solver), solver, y0, Model(params, eps), options, (Extrema(),), progress)
+    (extrema,), y_final, steps, status = _integrate_chain(params, eps, y0, solver, options,
+                                                          (Extrema(),), progress)
     kept = {f.name for f in dataclasses.fields(Observables)}
     return Observables(**{k: v for k, v in extrema.items() if k in kept},
                        y_initial=y0, y_final=y_final, num_steps=steps, status=status)
@@ -232,9 +317,8 @@ def run_observers(params: ChainParams, eps, y0: State, solver: diffrax.AbstractS
     Every observer's results by name, with `y_initial`, `y_final`, `num_steps` and
     `status` (see `Observables`).
     """
-    results, y_final, steps, status = integrate(terms(solver), solver, y0,
-                                                Model(params, eps), options, observers,
-                                                progress)
+    results, y_final, steps, status = _integrate_chain(params, eps, y0, solver, options,
+                                                       observers, progress)
     merged = {"y_initial": y0, "y_final": y_final, "num_steps": steps, "status": status}
     for r in results:
         merged |= r

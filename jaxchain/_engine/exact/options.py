@@ -3,6 +3,7 @@
 import equinox as eqx
 
 from ..horizon import AbstractHorizon, positive
+from ..options import check_tolerances
 from ..._errors import ValidationError
 from .stepping import SOLVERS
 
@@ -60,7 +61,8 @@ class NonsmoothOptions(AbstractHorizon):
     **Raises:**
 
     `ValidationError` naming the field for t_end <= 0, transient outside [0, t_end),
-    a tolerance, length or budget that is not a finite number > 0, an unknown
+    rtol or atol outside (0, 1), a tolerance, length or budget that is not a
+    finite number > 0, an unknown
     solver or adjoint, or `held` not a tuple of indices >= 0.
     """
 
@@ -85,8 +87,8 @@ class NonsmoothOptions(AbstractHorizon):
         return cls(**(REFERENCE_TOLERANCES | fields))
 
     def __check_init__(self):
-        for name in ("rtol", "atol", "root_tol", "switch_tol", "max_steps", "max_events",
-                     "log_size"):
+        check_tolerances("NonsmoothOptions", self.rtol, self.atol)
+        for name in ("root_tol", "switch_tol", "max_steps", "max_events", "log_size"):
             value = getattr(self, name)
             if not positive(value):
                 raise ValidationError(f"NonsmoothOptions.{name} must be a finite number > 0, "

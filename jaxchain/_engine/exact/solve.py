@@ -16,7 +16,7 @@ from ..compat import checks_as_nan
 from ..observers.base import no_partial_answers
 from ..observables import Observables
 from ..progress import progress_bar
-from ..status import Status
+from ..status import Status, balance_status
 from ..._errors import ValidationError
 from .options import NonsmoothOptions
 from .stepping import OBSERVERS, Carry, chunk, initial_carry, observe_samples, observers_args
@@ -112,6 +112,8 @@ def _run(params: ChainParams, y0: State, options: NonsmoothOptions,
 
     c, _ = jax.lax.scan(body, c, (jnp.asarray(np.concatenate(ends)),
                                   jnp.asarray(np.concatenate(observed))))
+    c = eqx.tree_at(lambda d: d.status, c, balance_status(
+        c.status, params, y0, c.y, c.work[0], c.work[1], options.rtol, options.atol))
 
     ok = c.status == Status.ok
     (extrema,) = (no_partial_answers(o.result(s, observers_args(params), options), ok)
