@@ -43,9 +43,9 @@ def test_tolerances_that_cannot_resolve_the_stick_band_are_refused(tolerance):
             "smoothed", options=jc.SimulationOptions(**{tolerance: 3e-5}), eps=1e-8))
 
 
-def test_the_command_line_refuses_a_tolerance_that_misses_the_stick_band():
+def test_the_command_line_refuses_a_tolerance_that_misses_the_stick_band(tmp_path):
     done = _jaxchain("localized", "--n-osc", "4", "--eps", "1e-7", "--rtol", "3e-5",
-                     "--no-progress", "--out", "unused")
+                     "--no-progress", "--out", str(tmp_path / "unused"))
     assert done.returncode == 2
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "--rtol" in lines[0] and "stick band" in lines[0]
@@ -61,9 +61,9 @@ def test_tolerances_outside_the_unit_interval_are_refused(options, field):
 
 
 @pytest.mark.parametrize("engine", ["smoothed", "exact"])
-def test_the_command_line_refuses_rtol_10(engine):
+def test_the_command_line_refuses_rtol_10(engine, tmp_path):
     done = _jaxchain("localized", "--n-osc", "4", "--engine", engine, "--rtol", "10",
-                     "--atol", "10", "--no-progress", "--out", "unused")
+                     "--atol", "10", "--no-progress", "--out", str(tmp_path / "unused"))
     assert done.returncode == 2
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "--rtol" in lines[0] and "(0, 1)" in lines[0]

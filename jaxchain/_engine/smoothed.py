@@ -16,11 +16,12 @@ from .solver.controller import step_size_controller
 from .._physics.custom_types import State
 from .status import SMOOTHED_BALANCE_FLOOR, Status, balance_status
 from .._physics.forces import smoothed_friction_force
+from .._physics.friction import concrete
 from .._physics.model import Model, model_field, model_split_field
 from .observables import Observables
 from .observers.base import AbstractObserver, Chunk, no_partial_answers, observe_chunk
 from .observers.extrema import Extrema
-from .options import SimulationOptions
+from .options import DEFAULT_ATOL, DEFAULT_RTOL, SimulationOptions
 from .._physics.params import ChainParams
 from .progress import tick
 from .solver.rosenbrock import Ros34PW2
@@ -283,12 +284,27 @@ def integrate(terms_, solver: diffrax.AbstractSolver, y0: PyTree, args: PyTree,
     return results, y_final, steps, status
 
 
+def _unverified(options: SimulationOptions) -> bool:
+    """Whether a run's tolerances are looser than `DEFAULT_RTOL` or `DEFAULT_ATOL`, the
+    loosest at which the cross-check against the exact engine holds (every n_HALC
+    agrees): such a run is audited by its energy balance. Runs at or inside them
+    are not (the work rows cost about 40 % per step on the Fig. 4 chain).
+    Tolerances that are not concrete (traced) are the engine's own, inside them."""
+    values = [concrete(v) for v in (options.rtol, options.atol)]
+    if any(v is None for v in values):
+        return False
+    rtol, atol = (float(np.max(v)) for v in values)
+    return rtol > DEFAULT_RTOL or atol > DEFAULT_ATOL
+
+
 def _integrate_chain(params: ChainParams, eps, y0: State, solver: diffrax.AbstractSolver,
                      options: SimulationOptions, observers: tuple, progress: bool):
     """`integrate` eq. (5) at the smoothing velocity `eps`, with its energy balance
-    checked (`work`) unless an observer needs a tangent or the solver cannot carry
-    the work rows (`_balanced`)."""
-    work = _balanced(solver) and not any(o.needs_tangent for o in observers)
+    checked (`work`) where its tolerances are looser than those the cross-check
+    verified (`_unverified`), unless an observer needs a tangent or the solver
+    cannot carry the work rows (`_balanced`)."""
+    work = (_unverified(options) and _balanced(solver)
+            and not any(o.needs_tangent for o in observers))
     return integrate(_with_work(solver) if work else terms(solver), solver, y0,
                      Model(params, eps), options, observers, progress, work)
 
