@@ -1,8 +1,9 @@
 """A small program of each kind that jaxchain builds, run in a process of its own
 by tests/test_setup.py once with jaxchain's XLA flag (`jc.XLA_FLAGS`) and once
 without, whose results it compares: both engines, forward and reverse mode, under
-`jax.jit` and `jax.vmap` (the smoothed engine has no reverse mode), shooting and the Hopf
-point's continuation. Prints
+`jax.jit` and `jax.vmap` (the smoothed engine has no reverse mode), the shooting residuals
+of both and their Jacobians (what Newton's method and continuation compile), the
+Hopf point and its derivative. Prints
 {name: values} as JSON."""
 
 import json
@@ -35,14 +36,17 @@ def exact(v_d, xi, adjoint="forward"):
 
 
 SHOOTING = jc.ShootingOptions(rtol=TOL, atol=TOL)
+EXACT_SHOOTING = jc.ExactShooting(flow=jc.NonsmoothOptions.reference(
+    t_end=1.0, transient=0.0, rtol=TOL, atol=TOL))
+#: The unknowns of shooting: the start Y0 and the period T.
+U = jnp.concatenate([jnp.ravel(Y0), jnp.array([T])])
 
 
 def smoothed(v_d, xi):
     """The shooting residual of the smoothed engine (its flow over a period T from
     Y0, minus Y0), weighted: one number."""
-    u = jnp.concatenate([jnp.ravel(Y0), jnp.array([T])])
     params = jc.ChainParams(n_osc=4, v_d=v_d, xi=xi)
-    return jnp.sum(jnp.ravel(WEIGHTS) * jc.shooting_residual(u, params, SHOOTING, eps=1e-2)[:8])
+    return jnp.sum(jnp.ravel(WEIGHTS) * jc.shooting_residual(U, params, SHOOTING, eps=1e-2)[:8])
 
 
 def hopf(xi):
@@ -52,7 +56,8 @@ def hopf(xi):
 speeds = jnp.array([1.2, 1.4])
 results = {
     "exact, jit": jax.jit(exact)(1.2, 0.05),
-    "exact, forward mode, jit": jax.jit(jax.jacfwd(exact, argnums=(0, 1)))(1.2, 0.05),
+    "exact shooting, its Jacobian (forward mode), jit": jax.jit(jax.jacfwd(
+        jc.exact_shooting_residual))(U, jc.ChainParams(n_osc=4, v_d=1.2), EXACT_SHOOTING),
     "exact, reverse mode, jit": jax.jit(jax.grad(lambda v, x: exact(v, x, "reverse"),
                                                  argnums=(0, 1)))(1.2, 0.05),
     "exact, vmap": jax.jit(jax.vmap(exact, in_axes=(0, None)))(speeds, 0.05),
@@ -61,5 +66,5 @@ results = {
     "smoothed, vmap": jax.jit(jax.vmap(smoothed, in_axes=(0, None)))(speeds, 0.05),
     "Hopf point and its derivative": (hopf(0.05), jax.grad(hopf)(0.05)),
 }
-json.dump({name: np.ravel(np.asarray(jax.tree.leaves(value))).tolist()
+json.dump({name: np.concatenate([np.ravel(v) for v in jax.tree.leaves(value)]).tolist()
            for name, value in results.items()}, sys.stdout)

@@ -117,8 +117,8 @@ def _programs(flags: str) -> subprocess.Popen:
 @pytest.mark.numerics
 def test_every_kind_of_program_computes_the_same_with_and_without_the_flag():
     """A small program of each kind that jaxchain builds (tests/flag_programs.py: both
-    engines, forward and reverse mode, under jit and vmap, shooting, the Hopf
-    point and its derivative) gives the same values with `jc.XLA_FLAGS` as without
+    engines, forward and reverse mode, under jit and vmap, the shooting residuals
+    and their Jacobians, the Hopf point and its derivative) gives the same values with `jc.XLA_FLAGS` as without
     it, within 100 times their integration tolerance (the two are different
     compiled programs, which round differently; the values of the exact engine
     differed by 1.5e-10). With the exact engine's workaround in reverse mode taken
