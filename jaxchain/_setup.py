@@ -25,7 +25,11 @@ VERSION = _installed_version()
 #: XLA's CPU backend runs a while loop op by op, through its runtime, unless the
 #: loop's buffers are smaller than this threshold (in bytes). Raised, a diffrax step
 #: loop compiles into one kernel: 0.85 us per step instead of 4.2 on the Fig. 4
-#: chain (benchmarks/run.py).
+#: chain (benchmarks/run.py). Such a kernel rounds some operations differently
+#: from the same operations outside it (benchmarks/xla_loop_flag.py), which once
+#: made reverse-mode gradients of the exact engine wrong (docs/exact.md); every
+#: kind of program that jaxchain builds is tested to compute the same with and
+#: without it (tests/test_setup.py).
 XLA_FLAGS = ("--xla_backend_extra_options="
              "xla_cpu_small_while_loop_byte_threshold=1000000000")
 
@@ -61,7 +65,10 @@ def configure(devices: int | None = None) -> None:
         unless `devices` is given;
     - the XLA flag `XLA_FLAGS` that lets XLA compile the step loop into one kernel
         (about 5x faster per step on a CPU), unless XLA_FLAGS is already set (then
-        it is kept as it is).
+        it is kept as it is). It holds for the whole process, the user's own JAX
+        code included, and rounds some operations inside small loops differently
+        (benchmarks/xla_loop_flag.py); to run without it, set XLA_FLAGS before
+        (`os.environ["XLA_FLAGS"] = ""`, or `XLA_FLAGS= python ...`).
 
     The device count and the XLA flags take effect only before JAX's backends
     start (the first computation or `jax.devices()`); afterwards they are left as
