@@ -215,6 +215,8 @@ def test_fuzzed_options_are_accepted_exactly_when_valid(field, value):
         valid = isinstance(value, int) and not isinstance(value, bool) and value >= 1
     elif field == "t_end":
         valid = number and math.isfinite(value) and value > 10000.0
+    elif field in ("rtol", "atol"):  # in (0, 1), or None: following eps
+        valid = value is None or (number and math.isfinite(value) and 0 < value < 1)
     else:
         valid = number and math.isfinite(value) and value > 0
     if valid:

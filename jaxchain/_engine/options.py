@@ -126,8 +126,14 @@ def follow_eps(options: SimulationOptions, eps) -> SimulationOptions:
     rtol = min(`DEFAULT_RTOL`, eps / `RTOL_PER_EPS`), atol = min(`DEFAULT_ATOL`,
     eps / `ATOL_PER_EPS`) (at the default eps = 1e-3 exactly the defaults, Python
     floats). For an `eps` that is not concrete (traced) they are JAX arrays, outside
-    the derivative. The tolerances given are kept."""
-    value = concrete(eps)
+    the derivative. The tolerances given are kept; an eps that is not a number > 0
+    leaves them as they are (the engine's check of eps names it)."""
+    try:
+        value = concrete(eps)
+    except (TypeError, ValueError):
+        return options
+    if value is not None and not (value.size and np.all(np.isfinite(value) & (value > 0))):
+        return options
 
     def follow(default, per_eps):
         if value is None:
