@@ -48,12 +48,14 @@ from jaxchain._sweeps.zarr_store import SweepStore
 def _snapshot(folder: Path) -> dict:
     """Every entry under `folder` (or the file `folder`) by relative path: the
     bytes of a file, None for a folder; the temporary files of writes cut short
-    (`*.partial`) left out."""
+    (`*.partial`) and the folder's lock (`.jaxchain-lock`, an empty file, and the
+    name of its last holder beside it: not results) left out."""
     folder = Path(folder)
     if folder.is_file():
         return {".": folder.read_bytes()}
     return {str(p.relative_to(folder)): (p.read_bytes() if p.is_file() else None)
-            for p in sorted(folder.rglob("*")) if not p.name.endswith(".partial")}
+            for p in sorted(folder.rglob("*")) if not p.name.endswith(".partial")
+            and not p.name.startswith(".jaxchain-lock")}
 
 
 #: Rewrites, in four threads of one process, a netCDF file (`save_dataset`, the
@@ -261,6 +263,7 @@ _WRITERS = {
     "_sweeps/zarr_store.py": {"to_zarr": 3},
     "_cli/warm_process.py": {"open": 1},  # the warm process's log, appended
     "_cli/common.py": {"write_text": 1},  # an output folder's manifest, renamed into place
+    "_cli/folder_lock.py": {"open": 1, "dump": 1},  # the lock's holder, renamed into place
 }
 
 
