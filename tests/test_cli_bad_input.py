@@ -26,6 +26,7 @@ def _record(path: Path, rows: int, source: str = EXAMPLE_RECORD) -> Path:
     return path
 
 
+@pytest.mark.study
 @pytest.mark.slow
 def test_records_of_the_same_name_in_two_folders_each_get_their_fit(tmp_path):
     examples = Path(EXAMPLE_RECORD).parent

@@ -54,6 +54,7 @@ def test_grad_at_the_defaults_refuses_in_one_line():
         assert "NonsmoothOptions(adjoint='reverse')" in message
 
 
+@pytest.mark.study
 @pytest.mark.slow
 @pytest.mark.numerics
 def test_forward_and_reverse_mode_agree_with_scipy_central_differences():

@@ -69,6 +69,7 @@ def test_the_command_line_refuses_rtol_10(engine, tmp_path):
     assert len(lines) == 1 and "--rtol" in lines[0] and "(0, 1)" in lines[0]
 
 
+@pytest.mark.study
 @pytest.mark.slow
 def test_a_run_whose_energy_balance_fails_is_flagged_on_the_smoothed_engine():
     """rtol = 0.03 at eps = 1e-2 (allowed: within 100 eps) integrates a single
@@ -106,6 +107,7 @@ def test_a_run_whose_energy_balance_fails_is_flagged_on_the_exact_engine():
                                    rel=1e-4)
 
 
+@pytest.mark.study
 @pytest.mark.slow
 def test_a_small_eps_follows_with_its_tolerances_to_the_right_n_halc():
     """Four oscillators excited 1 ... 4 at eps = 1e-7 (t_end 300): with rtol 3e-5

@@ -403,6 +403,7 @@ def test_settings_that_limit_a_command_or_that_libraries_read_keep_it_out(warm_e
     assert _forward(["localized", "--help"], dict(env, COLUMNS="33"), tmp_path)[0] == 0
 
 
+@pytest.mark.study
 @pytest.mark.slow
 def test_an_environment_variable_that_zarr_reads_at_import_is_honoured(warm_env, tmp_path):
     """ZARR_DEFAULT_ZARR_FORMAT=2 gives a sweep store of zarr's format 2, as in a
