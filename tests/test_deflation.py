@@ -220,6 +220,7 @@ def test_a_start_that_is_not_periodic_is_deflated_from_its_eq8_state(tmp_path,
     assert all(copies_distance(other, u) > 1e-2 for other, _ in at.values())
 
 
+@pytest.mark.study
 def test_a_deflated_orbit_on_a_branch_already_followed_is_reported_not_followed(
         tmp_path, monkeypatch, simulated):
     """Deflation's orbits replaced by two known ones: the two-site state rotated by

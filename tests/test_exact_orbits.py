@@ -115,6 +115,7 @@ def test_the_damped_newton_method_reaches_a_weakly_unstable_orbit_from_farther()
         np.testing.assert_allclose(np.asarray(again.y0), np.asarray(orbit.y0), atol=1e-7)
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 def test_smoothed_multipliers_approach_the_exact_ones_as_eps_falls(guess):
     """Two oscillators in phase on a ring (the coupling idle: each is the single
@@ -140,6 +141,7 @@ def test_smoothed_multipliers_approach_the_exact_ones_as_eps_falls(guess):
     assert distances[2] < 2e-4
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 def test_exact_cycles_continued_in_v_d_are_the_scipy_cycles_up_to_the_existence_limit(guess):
     """Pseudo-arclength continuation of the exact stick-slip cycle in v_d

@@ -364,6 +364,7 @@ def test_halc_clusters_follow_the_graph_and_a_1d_study_says_so(tmp_path, capsys)
                        "1-D by nature", capsys)
 
 
+@pytest.mark.study
 def test_the_nonsmooth_reference_with_masses_on_a_lattice_against_the_smoothed_model():
     """A 1 x 2 lattice (two sectors, one link) with unequal masses and a table: the
     event-driven reference and the smoothed model (eps = 1e-4) reach the same

@@ -445,6 +445,7 @@ def _start(env) -> dict:
     return _server(env)
 
 
+@pytest.mark.study
 def test_server_stop_lets_the_running_command_finish(tmp_path):
     """`jaxchain server stop` (from a shell of another $TMPDIR) while a command runs
     (held, reading its chain file from standard input): past the seconds after
