@@ -118,6 +118,7 @@ def test_the_snake_switches_branches_at_its_branch_points(branch_point, tmp_path
                           found["datasets"]["k=2 switched 1"]["u"].values)
 
 
+@pytest.mark.study
 def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch, tmp_path):
     """The first start's continuation raises (as it did where the start's phase
     condition was not the problem's): that start is reported with the reason, the
@@ -209,6 +210,7 @@ def test_critical_directions_are_the_kernel_less_the_branch(symmetric, critical)
         np.testing.assert_allclose(got @ projector.T @ projector, got, atol=1e-12)
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 def test_deflation_beside_the_branch_point_finds_keller_s_switched_orbit(branch_point):
     """`switch_by_deflation` (the followed orbit deflated at v_d = v_b -+ 0.002,

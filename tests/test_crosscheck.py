@@ -56,6 +56,7 @@ def _without_wall_times(ds: xr.Dataset) -> xr.Dataset:
     return ds.drop_vars("wall_time_s_reference")
 
 
+@pytest.mark.study
 def test_stored_reference_runs_are_read_back_only_for_equal_settings(tmp_path, monkeypatch):
     """A cross-check resumed in a folder that holds reference runs of other
     settings gives what a fresh one gives, case by case; a run of equal settings

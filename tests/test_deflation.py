@@ -277,6 +277,7 @@ def test_a_deflated_orbit_on_a_branch_already_followed_is_reported_not_followed(
                                atol=10 * jc.ShootingOptions().newton_tol)
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 def test_a_resumed_run_deflates_the_orbits_of_the_starts_it_read_back(tmp_path,
                                                                        monkeypatch):

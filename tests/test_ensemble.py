@@ -51,6 +51,7 @@ GOOD_AND_FAILING = jc.SimulationOptions(t_end=60.0, transient=30.0, chunk_length
 
 # the queue compares a lane with itself in one program (bitwise under any rounding);
 # vmap compares two programs, and repeats every other check on the same lanes
+@pytest.mark.study
 @pytest.mark.parametrize("engine", ["queue", pytest.param("vmap", marks=pytest.mark.numerics)])
 def test_good_lanes_are_kept_beside_failing_ones(engine):
     """One ensemble mixes good lanes (steady sliding, a decaying perturbation of it)

@@ -24,6 +24,7 @@ def guess():
     return float(obs.x_max[1, 0]), scipy_stick_slip_cycle(ONE)
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 @pytest.mark.parametrize("dx, period_factor", [(0.01, 1.02), (-0.05, 0.97), (0.08, 1.04)])
 def test_exact_stick_slip_cycle_from_perturbed_starts_is_the_scipy_cycle(guess, dx,

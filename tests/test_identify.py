@@ -140,6 +140,7 @@ def test_the_exact_engine_fits_exact_records_without_the_smoothing_bias(clean_re
         assert entry["value"] == pytest.approx(TRUE[label], rel=1e-6), label
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 def test_noise_free_records_give_the_parameters_and_offsets(clean_records):
     """Without noise the parameters come back within the smoothing's bias, which

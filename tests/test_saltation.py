@@ -65,6 +65,7 @@ def _first_switch(kind):
     return float(obs.log_time[i]), int(obs.log_osc[i])
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 @pytest.mark.parametrize("kind", [0, 1, 2], ids=list(jc.SWITCH_KINDS))
 def test_saltation_matrix_is_the_flow_s_jump_across_each_kind_of_switch(kind):
@@ -128,6 +129,7 @@ def _weighted_final_state(v_d, xi, y0, options):
     return jnp.sum(WEIGHTS * ys[0])
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 @pytest.mark.parametrize("adjoint", ["forward", "reverse"])
 def test_chain_of_four_gradients_through_every_switch_are_finite_differences(adjoint):

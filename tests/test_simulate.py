@@ -53,6 +53,7 @@ def _dense_amplitude(p, y0, t_end, transient, dt):
     return 0.5 * (x.max(0) - x.min(0))
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 def test_amplitude_resolution_against_densely_saved_run():
     """Observed amplitudes agree with a run saved every 1e-3 to a relative 1e-3;
@@ -164,6 +165,7 @@ def test_failure_raises_with_advice_or_returns_status():
     assert obs.status == jc.Status.max_steps_reached and np.all(np.isnan(obs.amplitudes))
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 def test_imex_kencarp_matches_an_explicit_solver():
     """KenCarp4 with the friction force implicit (`split_vector_field`) gives the

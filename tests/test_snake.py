@@ -26,6 +26,7 @@ def one_site(tmp_path_factory):
     return found, out
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 def test_shooting_from_simulation_gives_the_simulated_state_and_its_multipliers():
     """The 1-site state of a ring of 4 at v_d = 1.5: the orbit has the simulated
@@ -227,6 +228,7 @@ def test_stored_branches_are_read_back_only_for_equal_settings(one_site):
     assert fresh["datasets"]["k=1"].sizes["point"] <= 7 < a.sizes["point"]  # recomputed
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 def test_recurrences_of_a_periodic_orbit_return_after_one_period():
     """On the single oscillator's exact stick-slip cycle every turning point x' = 0

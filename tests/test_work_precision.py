@@ -24,6 +24,7 @@ def test_numpy_field_for_scipy_matches_the_model():
                        flat(jc.vector_field(0.0, y, p, 1e-2)), rtol=1e-13, atol=1e-13)
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 def test_study_errors_fall_with_eps_and_the_recommendation_holds(tmp_path):
     """For the single oscillator, the amplitude and trajectory errors against the
