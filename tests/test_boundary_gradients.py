@@ -160,3 +160,40 @@ def test_fold_derivatives_on_every_structure(case):
     assert np.all(np.isfinite(fd))
     np.testing.assert_allclose(forward, fd, rtol=1e-5, atol=1e-7)
     np.testing.assert_allclose(reverse, forward, rtol=1e-10, atol=1e-12)
+
+
+def _scipy_hopf_vd(params) -> float:
+    """The Hopf belt speed by an independent route: scipy's brentq on the largest
+    real part of NumPy's eigenvalues of the Jacobian at steady sliding, bracketed,
+    no Newton method and no JAX derivative."""
+    from scipy.optimize import brentq
+
+    def growth(v):
+        jac = np.asarray(jc.jacobian(jc.with_parameter(params, "v_d", v)))
+        return float(np.max(np.linalg.eigvals(jac).real))
+
+    return brentq(growth, 0.9, 1.4, xtol=1e-15, rtol=1e-15, maxiter=200)
+
+
+@pytest.mark.numerics
+def test_pad_hopf_gradient_against_scipy_central_differences():
+    """On the 2 x 3 pad: `jax.grad` and `jax.jacfwd` of `hopf_vd` in eta_c, a mass
+    and a damping ratio against central differences of the scipy root."""
+
+    def hopf(t):
+        return jc.hopf_vd(_pad(t))
+
+    picked = [0, 1, 2]  # eta_c, mass_2, xi_3
+    full = np.asarray(CASES["pad"][1], dtype=float)
+    fd = []
+    for i in picked:
+        e = np.zeros_like(full)
+        e[i] = 1e-5 * max(1.0, abs(full[i]))
+        f1 = _scipy_hopf_vd(_pad(full + e)) - _scipy_hopf_vd(_pad(full - e))
+        f2 = _scipy_hopf_vd(_pad(full + 2 * e)) - _scipy_hopf_vd(_pad(full - 2 * e))
+        fd.append((8 * f1 - f2) / (12 * e[i]))
+    reverse = np.asarray(jax.grad(hopf)(jnp.asarray(full)))[picked]
+    forward = np.asarray(jax.jacfwd(hopf)(jnp.asarray(full)))[picked]
+    assert abs(_scipy_hopf_vd(_pad(full)) - float(hopf(full))) < 1e-12
+    np.testing.assert_allclose(reverse, fd, rtol=1e-5, atol=1e-9)
+    np.testing.assert_allclose(forward, fd, rtol=1e-5, atol=1e-9)
