@@ -77,7 +77,8 @@ def main() -> None:
     k = args.n_osc // 4 if args.excited is None else args.excited
     params = jc.ChainParams(n_osc=args.n_osc, v_d=1.5)
     ic = jc.OutOfPhaseExcitation.eq8(jc.excited_block(args.n_osc, k))
-    options = jc.SimulationOptions(t_end=args.t_end, transient=args.transient)
+    options = jc.Smoothed(options=jc.SimulationOptions(
+        t_end=args.t_end, transient=args.transient)).options  # resolved at the default eps
     name = args.solver or jc.DEFAULT_SOLVER
     solver = jc.SOLVERS[name]()
     walls = []

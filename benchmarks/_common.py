@@ -82,7 +82,9 @@ def scene(t_end: float, transient: float, n_osc: int = N_OSC, k: int | None = K_
     package defaults for everything not named."""
     params = jc.ChainParams(n_osc=n_osc, v_d=V_D)
     ic = jc.OutOfPhaseExcitation.eq8(jc.excited_block(n_osc, k))
-    return params, ic, jc.SimulationOptions(t_end=t_end, transient=transient)
+    # the tolerances as the smoothed engine resolves them at the default eps
+    return params, ic, jc.Smoothed(options=jc.SimulationOptions(
+        t_end=t_end, transient=transient)).options
 
 
 def timed(fn: Callable, *args, **kwargs):
@@ -172,7 +174,7 @@ def machine_info() -> dict:
                 "numba"):
         info[pkg] = _version(pkg)
     info["jaxchain default solver"] = jc.DEFAULT_SOLVER
-    defaults = jc.SimulationOptions()
+    defaults = jc.Smoothed().options  # the tolerances resolved at the default eps
     info["jaxchain defaults"] = (f"eps = {jc.DEFAULT_EPS:g}, rtol = "
                                  f"{defaults.rtol:g}, atol = {defaults.atol:g}, "
                                  f"sample_dt = {defaults.sample_dt:g}, chunk_length = "
