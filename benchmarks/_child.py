@@ -101,7 +101,8 @@ def main() -> None:
 def _fig4(args, jc) -> None:
     tols = {k: v for k, v in (("rtol", args.rtol), ("atol", args.atol),
                               ("controller", args.controller)) if v is not None}
-    options = jc.SimulationOptions(t_end=args.t_end, transient=args.transient, **tols)
+    options = jc.Smoothed(options=jc.SimulationOptions(  # tolerances resolved at eps
+        t_end=args.t_end, transient=args.transient, **tols)).options
     solver = jc.SOLVERS[args.solver or jc.DEFAULT_SOLVER]()
     walls = []
     for _ in range(2):
