@@ -123,17 +123,11 @@ from ._bifurcation.hopf import (
 from ._bifurcation.lyapunov_coefficient import (
     first_lyapunov_coefficient as first_lyapunov_coefficient,
 )
-from ._bifurcation.shooting import (
+from ._bifurcation.orbit_method import (
     periodic_orbit as periodic_orbit, PeriodicOrbit as PeriodicOrbit,
-    ShootingOptions as ShootingOptions, floquet_multipliers as floquet_multipliers,
-    monodromy as monodromy, shooting_residual as shooting_residual,
+    AbstractOrbitMethod as AbstractOrbitMethod, cycle_problem as cycle_problem,
 )
-from ._bifurcation.exact_orbit import (
-    exact_periodic_orbit as exact_periodic_orbit, ExactOrbit as ExactOrbit,
-    ExactShooting as ExactShooting, exact_monodromy as exact_monodromy,
-    exact_shooting_residual as exact_shooting_residual,
-    exact_cycle_problem as exact_cycle_problem,
-)
+from ._bifurcation.shooting import Shooting as Shooting
 from ._bifurcation.deflation import (
     distinct_orbits as distinct_orbits, deflated_orbit as deflated_orbit,
     DeflatedOrbit as DeflatedOrbit, deflation as deflation, Deflation as Deflation,
@@ -166,9 +160,7 @@ from ._bifurcation.bifurcations import (
     locate_bifurcations as locate_bifurcations, BifurcationPoint as BifurcationPoint,
     BIFURCATION_KINDS as BIFURCATION_KINDS,
 )
-from ._bifurcation.limit_cycles import (
-    limit_cycle_problem as limit_cycle_problem, hopf_cycle as hopf_cycle,
-)
+from ._bifurcation.limit_cycles import hopf_cycle as hopf_cycle
 from ._bifurcation.fold import (
     fold_point as fold_point, FoldPoint as FoldPoint, solve_fold as solve_fold,
 )

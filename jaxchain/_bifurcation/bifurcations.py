@@ -140,7 +140,7 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
                         algorithm: PseudoArclength = PseudoArclength(), *,
                         steps: int = 24) -> tuple[BifurcationPoint, ...]:
     """Classify and locate the folds and changes of stability of a branch of
-    periodic orbits (`continuation` of `limit_cycle_problem`).
+    periodic orbits (`continuation` of `cycle_problem`).
 
     Between two converged points z_i, z_(i+1) where dp/ds changes sign (a fold) or
     the largest non-trivial Floquet multiplier leaves the unit circle, the point is

@@ -211,7 +211,7 @@ def describe_point(describe: Callable, u, params: ChainParams, p, where):
     """`describe(u, params with the parameter `where` set to p)`, compiled once for
     each describe module (its static options), shape of u, kind of params and
     `where`: the records of continuation and the results of shooting
-    (`periodic_orbit`, `exact_periodic_orbit`) share one program, the largest of a
+    (`periodic_orbit`) share one program, the largest of a
     periodic orbit's (multipliers, samples). Every caller passes all five arguments,
     in this order: the program's key is the arguments as given, and a `where` left
     to a default would key a second copy of the same program."""

@@ -10,7 +10,7 @@ from jaxtyping import Array, Float
 from .._physics.params import with_parameter
 from .continuation import ContinuationProblem
 from .hopf import check_eps
-from .limit_cycles import problem_eps
+from .orbit_method import cycle_method
 from .two_parameter import fold_curve, hopf_vd_and_derivative
 from .._checks import check_positive
 from .._printing import values_repr
@@ -63,7 +63,7 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
     - `tol`: tolerance on |window - target|.
     - `eps`: the smoothing velocity of the Hopf point (> 0, shape (),
         dimensionless); None (the default) takes that of the problem's limit
-        cycles (`problem_eps`).
+        cycles (its method's engine, `AbstractEngine.smoothing`).
 
     **Returns:**
 
@@ -75,7 +75,8 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
     `RuntimeError` if a fold along the way is lost or the Hopf point is not found.
     """
     check_positive("target", target)
-    eps = problem_eps(problem) if eps is None else check_eps(eps)
+    eps = (cycle_method(problem).engine.smoothing("smallest_damping") if eps is None
+           else check_eps(eps))
     n = problem.u0.size
     state = {"problem": problem, "solution": fold_solution}
 

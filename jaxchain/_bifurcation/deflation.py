@@ -4,7 +4,6 @@ copies (Farrell, Birkisson and Funke, *Deflation techniques for finding distinct
 solutions of nonlinear partial differential equations*, SIAM J. Sci. Comput. 37
 (2015) A2026)."""
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -13,14 +12,10 @@ import optimistix as optx
 from jaxtyping import Array, Bool, Float, Int
 
 from .._engine.compat import checks_as_nan
-from .._engine.exact.solve import nonsmooth_flow
 from .._errors import ValidationError
-from .._physics.model import steady_sliding
 from .._physics.params import ChainParams, is_homogeneous_ring
 from .continuation import ContinuationProblem
-from .exact_orbit import ExactShootingResidual
-from .limit_cycles import ShootingResidual
-from .shooting import flow, unpack
+from .orbit_method import cycle_method
 from .._printing import values_repr
 
 
@@ -39,27 +34,18 @@ def chain_symmetries(params: ChainParams) -> Int[Array, "g n_osc"]:
 
 def orbit_samples(problem: ContinuationProblem, u: Float[Array, " 2n+1"], n_samples: int,
                   params: ChainParams | None = None) -> Float[Array, "s 2n"]:
-    """The states of the periodic orbit `u` (shooting unknowns `pack(y0, T)`) at
-    `n_samples` equal steps of one period, the start included, each flattened as
-    (x_1..x_N, x_1'..x_N'), shape (n_samples, 2 n_osc): by the flow of the
-    problem's own model, the smoothed one (`ShootingResidual`: `flow` at its eps)
-    or the exact one (`ExactShootingResidual`: `nonsmooth_flow`).
+    """The states of the periodic orbit `u` (the unknowns of the problem's orbit
+    method) at `n_samples` equal steps of one period, the start included, each
+    flattened as (x_1..x_N, x_1'..x_N'), shape (n_samples, 2 n_osc): by the
+    problem's own method (`AbstractOrbitMethod.samples`).
 
-    **Raises:** `ValidationError` for a problem of neither kind."""
+    **Raises:** `ValidationError` for a problem that is not one of periodic orbits
+    (`cycle_problem`)."""
     params = problem.params if params is None else params
-    y0, period = unpack(u)
+    method = cycle_method(problem)
+    y0, period = method.orbit(u)
     ts = period * jnp.arange(n_samples) / n_samples
-    residual = problem.residual
-    if isinstance(residual, ShootingResidual):
-        ys = flow(params, y0, period, residual.options, diffrax.SaveAt(ts=ts),
-                  eps=residual.eps).ys
-    elif isinstance(residual, ExactShootingResidual):
-        later, _ = nonsmooth_flow(params, y0, ts[1:], residual.options.flow)
-        ys = jnp.concatenate([y0[None], later])
-    else:
-        raise ValidationError(f"deflation needs a shooting problem of periodic orbits "
-                              f"(limit_cycle_problem or exact_cycle_problem), got a "
-                              f"residual {type(residual).__name__}")
+    ys = jnp.concatenate([y0[None], method.samples(params, u, ts[1:])])
     return jnp.reshape(ys, (n_samples, -1))
 
 
@@ -155,8 +141,7 @@ def deflation(problem: ContinuationProblem, known=(), *, n_samples: int = 2048,
 
     **Arguments:**
 
-    - `problem`: a shooting `ContinuationProblem` (`limit_cycle_problem` or
-        `exact_cycle_problem`).
+    - `problem`: a shooting `ContinuationProblem` (`cycle_problem`).
     - `known`: the known orbits, each as shooting unknowns `pack(y0, T)`, shape
         (2 n_osc + 1,).
     - `n_samples`: samples of each orbit's curve.
@@ -182,8 +167,7 @@ def deflation(problem: ContinuationProblem, known=(), *, n_samples: int = 2048,
     unused = capacity - len(known)
     curves += [jnp.zeros((n_samples, 2 * n))] * unused
     periods += [jnp.zeros(())] * unused
-    eps = problem.residual.eps if isinstance(problem.residual, ShootingResidual) else None
-    equilibria = jnp.reshape(steady_sliding(params, eps), (1, -1))
+    equilibria = jnp.reshape(cycle_method(problem).engine.steady_sliding(params), (1, -1))
     return Deflation(curves=jnp.stack(curves) if curves else jnp.zeros((0, n_samples, 2 * n)),
                      perms=perms,
                      periods=jnp.asarray(periods, dtype=float).reshape(-1),
@@ -215,14 +199,14 @@ class DeflatedOrbit(eqx.Module):
 @checks_as_nan
 @eqx.filter_jit
 def _deflated_solve(problem: ContinuationProblem, params, operator: Deflation, u0):
-    options = problem.residual.options
-    tol = options.newton_tol
+    method = cycle_method(problem)
+    tol = method.newton_tol
 
     def deflated(u, p):
         return operator(u) * problem.residual(u, p)
 
     sol = optx.least_squares(deflated, optx.LevenbergMarquardt(rtol=tol, atol=tol), u0, params,
-                             options={"jac": "fwd"}, max_steps=5 * options.newton_steps,
+                             options={"jac": "fwd"}, max_steps=5 * method.newton_steps,
                              throw=False)
     residual = jnp.max(jnp.abs(problem.residual(sol.value, params)))
     distance = jnp.min(operator.distances(sol.value))
@@ -261,8 +245,7 @@ def distinct_orbits(problem: ContinuationProblem, start: Float[Array, " 2n+1"], 
 
     **Arguments:**
 
-    - `problem`: a shooting `ContinuationProblem` (`limit_cycle_problem`,
-        `exact_cycle_problem`).
+    - `problem`: a shooting `ContinuationProblem` (`cycle_problem`).
     - `start`: the start, shooting unknowns `pack(y0, T)` with the phase
         oscillator's velocity 0, shape (2 n_osc + 1,).
     - `known`: orbits already known, each `pack(y0, T)`.

@@ -105,7 +105,7 @@ def fold_point(problem: ContinuationProblem, near: Branch | Float[Array, " n+1"]
     (Moore & Spence, SIAM J. Numer. Anal. 17 (1980) 567; Kuznetsov, *Elements of
     Applied Bifurcation Theory*, Sect. 10.2), whose G_u w is a forward-mode
     derivative and whose Jacobian takes second derivatives by JAX. For limit
-    cycles G is `shooting_residual` and G_u is singular where a Floquet multiplier
+    cycles G is the method's residual (`Shooting.residual`) and G_u is singular where a Floquet multiplier
     crosses +1: the fold (saddle-node) of limit cycles.
 
     **Arguments:**

@@ -98,7 +98,7 @@ def stick_slip_grazing(params: ChainParams, where: str = "v_d", near: float | No
     (Di Bernardo, Budd, Champneys and Kowalczyk, *Piecewise-smooth Dynamical
     Systems*, Springer 2008, Sect. 7.2: grazing of a periodic orbit with a
     switching surface), started from a point `near` of the exact continuation
-    (`exact_cycle_problem`), whose first return to stick by the exact engine
+    (`cycle_problem` on the exact engine), whose first return to stick by the exact engine
     gives the arc's duration. The arc is integrated in slip with the exact
     model's slip field (Dopri8 at `rtol`), so that the condition is smooth on
     both sides of the grazing value.

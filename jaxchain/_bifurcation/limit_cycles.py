@@ -1,77 +1,19 @@
 """The limit-cycle branch born at the Hopf point of steady sliding: its first small
-cycle, and its continuation problem."""
+cycle."""
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
-from .._physics.forces import DEFAULT_EPS
-from .._physics.model import steady_sliding
 from .._physics.params import ChainParams, with_parameter
-from .continuation import ContinuationProblem
-from .hopf import check_eps, critical_mode, hopf_point
+from .hopf import critical_mode, hopf_point
 from .lyapunov_coefficient import first_lyapunov_coefficient
-from .shooting import (DescribeOrbit, PeriodicOrbit, ShootingOptions, pack,
-                       periodic_orbit, shooting_residual)
+from .orbit_method import PeriodicOrbit, periodic_orbit
+from .shooting import Shooting
 from .._checks import check_positive
-from .._errors import ValidationError
-
-
-class ShootingResidual(eqx.Module):
-    """`shooting_residual` with its options and smoothing velocity bound, as a
-    `ContinuationProblem` residual: equal options give equal residuals, so
-    continuation compiles once (eps is an array leaf: a new eps does not
-    recompile, and derivatives with respect to it flow).
-
-    **Fields:** `options` (`ShootingOptions`); `eps`, the smoothing velocity of
-    tanh(v_rel/eps) (> 0), shape (), dimensionless (`DEFAULT_EPS` by default)."""
-
-    options: ShootingOptions
-    eps: Float[Array, ""] = eqx.field(converter=check_eps, default=DEFAULT_EPS)
-
-    def __call__(self, u, params):
-        return shooting_residual(u, params, self.options, self.eps)
-
-
-def problem_eps(problem: ContinuationProblem) -> Float[Array, ""]:
-    """The smoothing velocity of the limit cycles that `problem` continues: the eps
-    of its `ShootingResidual` (`limit_cycle_problem`), or of the problem whose
-    folds a `FoldSystem` residual follows.
-
-    **Raises:**
-
-    `ValidationError` for a problem whose residual carries no eps (give eps
-    explicitly)."""
-    residual = problem.residual
-    while not isinstance(residual, ShootingResidual) and hasattr(residual, "problem"):
-        residual = residual.problem.residual
-    if not isinstance(residual, ShootingResidual):
-        raise ValidationError("eps: the problem is not one of limit cycles "
-                              "(limit_cycle_problem), whose shooting carries eps; give eps")
-    return residual.eps
-
-
-def limit_cycle_problem(orbit: PeriodicOrbit, options: ShootingOptions = ShootingOptions(),
-                        where="v_d") -> ContinuationProblem:
-    """The `ContinuationProblem` of the periodic orbits through `orbit`: unknowns
-    (y0, T) of `shooting_residual`, records `describe_orbit` (amplitudes, energy,
-    Floquet multipliers, stability), at the orbit's smoothing velocity `orbit.eps`.
-
-    **Arguments:**
-
-    - `orbit`: a converged `PeriodicOrbit`.
-    - `options`: `ShootingOptions` of every point.
-    - `where`: the continued parameter, a name or a lens (default the belt speed).
-    """
-    return ContinuationProblem(
-        residual=ShootingResidual(options, orbit.eps), u0=pack(orbit.y0, orbit.period),
-        params=orbit.params, where=where, describe=DescribeOrbit(options, orbit.eps))
 
 
 def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
-               options: ShootingOptions = ShootingOptions(), *,
-               eps=DEFAULT_EPS) -> PeriodicOrbit:
+               method: Shooting | None = None) -> PeriodicOrbit:
     """The small limit cycle born at the Hopf point of steady sliding in the critical
     mode `mode` (`critical_mode`; 0: in phase on the ring), a distance `offset` in
     v_d from the Hopf point on the side where the first Lyapunov coefficient puts
@@ -88,11 +30,9 @@ def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
     - `offset`: |v_d - v_d,H| of the cycle, > 0.
     - `mode`: Fourier mode with a real mode shape, 0 or N/2, on the homogeneous
         ring; 0 (the leading eigenvalue) on any other chain.
-    - `options`: `ShootingOptions`.
-    - `eps`: the smoothing velocity of tanh(v_rel/eps) in eq. (5), a finite number
-        > 0, shape (), dimensionless (a fraction of x_0 omega_n): that of the
-        Hopf point, the normal form and the orbit (`Smoothed.eps` of the smoothed
-        engine), `DEFAULT_EPS` by default.
+    - `method`: the orbit method (`Shooting()` by default); the Hopf point and
+        the normal form are those of its engine's smoothed vector field (its
+        `Smoothed.eps`).
 
     **Returns:**
 
@@ -100,10 +40,13 @@ def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
 
     **Raises:**
 
-    `ValidationError` for offset <= 0, eps <= 0 or a bad mode; `RuntimeError` if
+    `ValidationError` for offset <= 0, a bad mode or an engine that does not
+    smooth (the normal form needs the smoothed vector field); `RuntimeError` if
     shooting fails.
     """
     check_positive("offset", offset)
+    method = Shooting() if method is None else method
+    eps = method.engine.smoothing("hopf_cycle")
     hopf = hopf_point(params, eps=eps)
     at_hopf = with_parameter(params, "v_d", hopf.v_d[mode])
     l1 = first_lyapunov_coefficient(at_hopf, mode, eps=eps)
@@ -114,5 +57,5 @@ def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
     growth = hopf.slope[mode] * (v_d - hopf.v_d[mode])
     radius = jnp.sqrt(-growth / (l1 * hopf.omega[mode]))
     q = q * jnp.exp(1j * (np.pi / 2 - jnp.angle(q[n])))  # x_1' = 0 at the start
-    y0 = steady_sliding(near, eps) + jnp.reshape(2 * radius * q.real, (2, n))
-    return periodic_orbit(near, y0, float(2 * np.pi / hopf.omega[mode]), options, eps=eps)
+    y0 = method.engine.steady_sliding(near) + jnp.reshape(2 * radius * q.real, (2, n))
+    return periodic_orbit(near, (y0, float(2 * np.pi / hopf.omega[mode])), method)

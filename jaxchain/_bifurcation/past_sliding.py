@@ -26,6 +26,7 @@ from jaxtyping import Array, Float
 from .continuation import (ContinuationOptions, ContinuationProblem, PseudoArclength, _correct,
                            continuation)
 from .deflation import orbit_samples
+from .orbit_method import CycleResidual, cycle_method
 from .sliding import _phases, exact_problem
 from .._errors import ValidationError
 
@@ -36,19 +37,18 @@ def held_problem(problem: ContinuationProblem, oscillators) -> ContinuationProbl
     or reverse.
 
     **Raises:** `ValidationError` for a problem that is not one of exact orbits
-    (`exact_cycle_problem`) or an oscillator outside the chain."""
+    (`cycle_problem` on the exact engine) or an oscillator outside the chain."""
     if not exact_problem(problem):
         raise ValidationError("held_problem needs a problem of exact orbits "
-                              "(exact_cycle_problem)")
+                              "(cycle_problem with Shooting(Exact().for_orbits()))")
     held = tuple(int(n) for n in np.atleast_1d(oscillators))
     if not all(0 <= n < problem.params.n_osc for n in held):
         raise ValidationError(f"oscillators must be in 0..{problem.params.n_osc - 1}, got "
                               f"{oscillators!r}")
-    options = problem.residual.options
-    flow = dataclasses.replace(options.flow, held=held)
-    residual = dataclasses.replace(problem.residual,
-                                   options=dataclasses.replace(options, flow=flow))
-    return dataclasses.replace(problem, residual=residual)
+    method = cycle_method(problem)
+    held_method = eqx.tree_at(lambda m: m.engine, method, method.engine.holding(held))
+    # the residual holds them; the records describe the orbits as they are
+    return dataclasses.replace(problem, residual=CycleResidual(held_method))
 
 
 def slip_margin(problem: ContinuationProblem, z: Float[Array, " n+1"], oscillators, *,
@@ -87,7 +87,7 @@ def past_sliding_start(problem: ContinuationProblem, z: Float[Array, " n+1"],
 
     **Arguments:**
 
-    - `problem`: the branch's `ContinuationProblem` (`exact_cycle_problem`).
+    - `problem`: the branch's `ContinuationProblem` (`cycle_problem` on the exact engine).
     - `z`: the branch's orbit (u, p) next to the sliding point, shape (n + 1,).
     - `algorithm`: the corrector (`PseudoArclength`).
     - `oscillators`: those whose stick phases vanish there (0-based indices); by
@@ -106,7 +106,7 @@ def past_sliding_start(problem: ContinuationProblem, z: Float[Array, " n+1"],
     """
     if not exact_problem(problem):
         raise ValidationError("past_sliding_start needs a problem of exact orbits "
-                              "(exact_cycle_problem)")
+                              "(cycle_problem with Shooting(Exact().for_orbits()))")
     z = jnp.asarray(z, dtype=float)
     phases = _phases(problem, z)
     sticking = np.isfinite(phases)

@@ -13,7 +13,7 @@ from .._engine.status import Status
 from .._errors import ValidationError
 from .._physics.params import parameter_value, with_parameter
 from .continuation import ContinuationProblem, PseudoArclength, _correct, _record
-from .shooting import unpack
+from .orbit_method import cycle_method
 from .._printing import values_repr
 
 _STICK = SWITCH_KINDS.index("slip to stick")
@@ -40,7 +40,7 @@ def stick_phases(params, y0, period, options) -> Float[np.ndarray, " n_osc"]:
     - `params`: the chain parameters.
     - `y0`: a state on the orbit, shape (2, n_osc).
     - `period`: its period T (> 0), dimensionless (eq. (4)).
-    - `options`: `NonsmoothOptions` of the run (`ExactShooting.flow`).
+    - `options`: `NonsmoothOptions` of the run (the exact engine's, `Exact.options`).
 
     **Returns:**
 
@@ -84,7 +84,7 @@ class SlidingPoint(eqx.Module):
     - `z`: the orbit (u, p) nearest to it on the side where the stick phase
         exists, shape (n + 1,).
     - `stick`: the shortest stick phase of `oscillator` on that orbit, shape ().
-    - `record`: `problem.describe` of that orbit (an `ExactOrbit`).
+    - `record`: `problem.describe` of that orbit (a `PeriodicOrbit`).
     - `step`: the last change of the secant method's estimate of p (its
         resolution; inf if it did not converge), shape ().
     - `iterations`: orbits solved, the first included.
@@ -104,14 +104,15 @@ class SlidingPoint(eqx.Module):
 
 
 def exact_problem(problem: ContinuationProblem) -> bool:
-    """Whether `problem` continues orbits of the exact switch model (its residual
-    carries `ExactShooting` options, as `exact_cycle_problem`'s)."""
-    return hasattr(getattr(problem.residual, "options", None), "flow")
+    """Whether `problem` continues orbits whose engine has exact stick phases (the
+    exact switch model's, `AbstractEngine.has_stick_phases`)."""
+    return cycle_method(problem).engine.has_stick_phases
 
 
 def _phases(problem: ContinuationProblem, z) -> np.ndarray:
-    y0, period = unpack(z[:-1])
-    return stick_phases(problem.at(z[-1]), y0, period, problem.residual.options.flow)
+    method = cycle_method(problem)
+    y0, period = method.orbit(z[:-1])
+    return method.engine.stick_phases(problem.at(z[-1]), y0, period)
 
 
 def vanishing_stick(problem: ContinuationProblem, z_stick, z_other) -> int:
@@ -187,7 +188,7 @@ def locate_sliding(problem: ContinuationProblem, z_stick,
 
     **Arguments:**
 
-    - `problem`: the exact branch's `ContinuationProblem` (`exact_cycle_problem`).
+    - `problem`: the exact branch's `ContinuationProblem` (`cycle_problem` on the exact engine).
     - `z_stick`: a converged orbit (u, p) of the branch where the stick phase
         exists, shape (n + 1,).
     - `algorithm`: the corrector (`PseudoArclength`).
@@ -215,7 +216,7 @@ def locate_sliding(problem: ContinuationProblem, z_stick,
     """
     if not exact_problem(problem):
         raise ValidationError("locate_sliding needs the ContinuationProblem of exact orbits "
-                              "(exact_cycle_problem)")
+                              "(cycle_problem with Shooting(Exact().for_orbits()))")
     z = jnp.asarray(z_stick, dtype=float)
     d = _phases(problem, z)
     n = int(np.argmin(np.where(np.isfinite(d), d, np.inf))) if oscillator is None else oscillator
@@ -382,7 +383,7 @@ def sliding_curve(problem: ContinuationProblem, point: SlidingPoint, other: str,
 
     **Arguments:**
 
-    - `problem`: the exact branch's `ContinuationProblem` (`exact_cycle_problem`)
+    - `problem`: the exact branch's `ContinuationProblem` (`cycle_problem` on the exact engine)
         at the first point's parameters.
     - `point`: a converged `SlidingPoint` of that problem (`locate_sliding`).
     - `other`: the second parameter, a name that `with_parameter` takes.

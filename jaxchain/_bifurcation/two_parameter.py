@@ -17,7 +17,7 @@ from .continuation import (Branch, ContinuationOptions, ContinuationProblem, Pse
                            continuation)
 from .fold import FoldSystem, solve_fold
 from .hopf import check_eps, hopf_vd
-from .limit_cycles import problem_eps
+from .orbit_method import cycle_method
 from .._errors import ValidationError
 from .._printing import values_repr
 
@@ -90,7 +90,7 @@ def fold_curve_problem(problem: ContinuationProblem, fold_solution: Float[Array,
     **Arguments:**
 
     - `problem`: the one-parameter problem whose fold is followed (for example
-        `limit_cycle_problem`), at the parameters of `fold_solution`.
+        `cycle_problem`), at the parameters of `fold_solution`.
     - `fold_solution`: a solution (u, p, w) of its extended system, shape (2n + 1,).
     - `where`: the second parameter, a name (`"xi"`) or a lens.
     """
@@ -247,7 +247,7 @@ def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 
 
     **Arguments:**
 
-    - `problem`: the limit cycles' `ContinuationProblem` (`limit_cycle_problem`),
+    - `problem`: the limit cycles' `ContinuationProblem` (`cycle_problem`),
         at the parameters of `fold_solution`.
     - `fold_solution`: a solution (u, p, w) of the extended system there (from
         `solve_fold` or `fold_point`).
@@ -256,7 +256,7 @@ def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 
     - `options`: steps of the fold curve's continuation.
     - `eps`: the smoothing velocity of the Hopf point (> 0, shape (),
         dimensionless); None (the default) takes that of the problem's limit
-        cycles (`problem_eps`: the eps of `limit_cycle_problem`'s shooting), so
+        cycles (its method's engine, `AbstractEngine.smoothing`), so
         that both edges belong to one smoothed model.
     - `progress`: show tqdm bars.
 
@@ -267,11 +267,12 @@ def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 
     **Raises:**
 
     `ValidationError` if `values` is empty, or eps is None for a problem that
-    carries none (`problem_eps`); `ValueError` (a failed computation, not a
+    does not smooth; `ValueError` (a failed computation, not a
     `ValidationError`) if Newton's method does not converge from `fold_solution`.
     """
     values = np.sort(np.asarray(values, dtype=float))
-    eps = problem_eps(problem) if eps is None else check_eps(eps)
+    eps = (cycle_method(problem).engine.smoothing("boundary_curves") if eps is None
+           else check_eps(eps))
     solutions, derivatives, converged, branches = fold_curve(
         problem, fold_solution, where, values, options=options, progress=progress)
     hopf = [hopf_vd_and_derivative(problem.params, where, v, eps=eps) for v in values]

@@ -6,6 +6,7 @@ import dataclasses
 import time
 from pathlib import Path
 
+from .._bifurcation.shooting import Shooting
 from .._studies.snake.branch import SLIDING_PASSES, SNAKE_CONTINUATION
 from .._studies.snake.run import localized_branches
 from .._studies.snake.starts import SNAKE_START, check_starts, default_sites, default_starts
@@ -152,20 +153,19 @@ def run(args) -> None:
     start = time.perf_counter()
     options = dataclasses.replace(SNAKE_CONTINUATION, p_min=args.vd_min, p_max=args.vd_max,
                                   max_points=args.max_points)
-    smoothed = args.engine == "smoothed"
-    found = localized_branches(params, sites, engine=args.engine, continuation_options=options,
-                               start_options=engine_of(args, simulation_options(
-                                   args, t_end=SNAKE_START.t_end,
-                                   transient=SNAKE_START.transient), params).options,
-                               solver=args.solver if smoothed else None,
-                               eps=args.eps if smoothed else None,
+    # one engine, built once: the simulations' (starts and checks), and shooting
+    # on its model (`Shooting.from_simulations`)
+    engine = engine_of(args, simulation_options(args, t_end=SNAKE_START.t_end,
+                                                transient=SNAKE_START.transient), params)
+    found = localized_branches(params, sites, method=Shooting.from_simulations(engine),
+                               engine=engine, continuation_options=options,
+                               start_options=engine.options,
                                switch=not args.no_switch, deflate=args.deflate,
                                simulation_check=not args.no_simulation,
                                out=outputs.path("snake"), progress=show_progress(args),
                                workers=args.workers)
-    model = f"eps = {args.eps:g}" if smoothed else "the exact stick/slip model"
     outputs.figure(plot_snake(found["datasets"], sweep,
-                              title=f"N = {params.n_osc}, {model}: stable solid, "
+                              title=f"N = {params.n_osc}, {engine.model_text()}: stable solid, "
                                     "unstable dashed"), "snake")
     s = (found["summary"] | {"wall_time_s": time.perf_counter() - start,
                             "n_osc": params.n_osc, "v_d": float(params.v_d)}

@@ -5,16 +5,20 @@ stick/slip switch model of Leine et al. (1998), event by event). Every layer abo
 (`simulate`, `run_lanes`, `ensemble`) takes either without knowing which."""
 
 import abc
+import dataclasses
 from typing import ClassVar
 
 import diffrax
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
-from jaxtyping import ArrayLike
+from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .checks import as_solver, check_options
-from .exact.options import NonsmoothOptions
-from .exact.solve import run_exact
+from .exact.options import REFERENCE_TOLERANCES, NonsmoothOptions
+from .exact.solve import nonsmooth_flow, run_exact
+from .exact.switching import initial_modes, mode_field
+from .flow import smoothed_flow, smoothed_orbit_samples
 from .horizon import AbstractHorizon
 from .observables import Observables
 from .options import SimulationOptions, check_stick_band, follow_eps
@@ -24,7 +28,9 @@ from .solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._physics.custom_types import State
 from .._physics.forces import DEFAULT_EPS
 from .._physics.friction import as_parameter, check_values
+from .._physics.model import Model, steady_sliding, vector_field
 from .._physics.params import ChainParams
+from .._physics.stick import min_slip_speed, sticks
 from .._errors import ValidationError
 
 
@@ -60,6 +66,95 @@ class AbstractEngine(eqx.Module):
     def attributes(self) -> dict:
         """The engine and every setting that shapes its results, as dataset
         attributes and store keys (strings and numbers)."""
+
+    # --- the flow map: what orbit methods integrate (`Shooting`) ---
+
+    #: The flow's (rtol, atol) where an orbit method asks for accuracy
+    #: (`for_orbits`): the trivial Floquet multiplier is 1 only as far as the flow
+    #: is exact.
+    orbit_tolerances: ClassVar[tuple[float, float]]
+
+    #: The root finder that shooting starts from a simulated state with
+    #: (`Shooting.root_finder`), where a study shoots from simulations.
+    orbit_root_finder: ClassVar[str]
+
+    @abc.abstractmethod
+    def flow(self, params: ChainParams, y0: State, t) -> Array:
+        """The state after time `t` from `y0` at t = 0: shape (2, n_osc) for `t` of
+        shape (), or the states at each of the times `t` (increasing, > 0), shape
+        (m, 2, n_osc). Pure and traceable, differentiable in forward mode with
+        respect to `params` and `y0` (`jax.jacfwd`: the monodromy matrix); NaN where
+        the run failed. Integrated at the engine's own solver and tolerances."""
+
+    @abc.abstractmethod
+    def model_text(self) -> str:
+        """The engine's model in a few words, for titles and tables."""
+
+    @abc.abstractmethod
+    def steady_sliding(self, params: ChainParams) -> State:
+        """The fixed point of the engine's model, every oscillator sliding
+        (`steady_sliding`), shape (2, n_osc)."""
+
+    @abc.abstractmethod
+    def field(self, params: ChainParams, y: State) -> State:
+        """The vector field of the engine's model at the state `y` (shape (2, n_osc)):
+        the flow's direction, that of the trivial Floquet multiplier."""
+
+    @abc.abstractmethod
+    def orbit_samples(self, params: ChainParams, y0: State, period, n_samples: int
+                      ) -> tuple[Float[Array, "m 2 n"], Float[Array, ""]]:
+        """`n_samples` states of the orbit through `y0` over one `period`, and the
+        logarithm of its monodromy's determinant by Liouville's formula where the
+        engine integrates it (NaN otherwise)."""
+
+    @abc.abstractmethod
+    def on_halc(self, params: ChainParams, ys: Float[Array, "m 2 n"]) -> Bool[Array, " n"]:
+        """Whether each oscillator sticks at one of the states `ys` (the engine's
+        stick: exact, or inside the smoothed stick band `sticks`)."""
+
+    @abc.abstractmethod
+    def simulating(self) -> "AbstractEngine":
+        """The same model with the engine's default settings for simulations (its
+        default solver and tolerances): what a study simulates with beside the
+        orbits of an engine made `for_orbits`."""
+
+    def with_horizon(self, horizon: AbstractHorizon) -> "AbstractEngine":
+        """The engine with the horizon (t_end, transient, chunk_length) of
+        `horizon`, its other settings kept."""
+        options = dataclasses.replace(self.options, t_end=horizon.t_end,
+                                      transient=horizon.transient,
+                                      chunk_length=horizon.chunk_length)
+        return eqx.tree_at(lambda e: e.options, self, options)
+
+    def smoothing(self, what: str):
+        """The smoothing velocity eps of the engine's friction law, for `what` (an
+        analysis of the smoothed vector field: the Hopf point's normal form, say).
+        Raises `ValidationError` where the engine does not smooth."""
+        raise ValidationError(f"{what}: the {self.name} engine does not smooth the "
+                              "friction law; use Smoothed(eps=...)")
+
+    #: Whether the engine's orbits have exact stick phases (`stick_phases`).
+    has_stick_phases: ClassVar[bool] = False
+
+    def stick_phases(self, params: ChainParams, y0: State, period):
+        """The stick phases of the orbit through `y0` (`jaxchain.stick_phases`).
+        Raises `ValidationError` where the engine has none (it smooths stick)."""
+        raise ValidationError(f"the {self.name} engine has no exact stick phases: its "
+                              "friction law is smoothed; use the exact engine")
+
+    def holding(self, oscillators: tuple[int, ...]) -> "AbstractEngine":
+        """The engine with `oscillators` held in slip (`NonsmoothOptions.held`).
+        Raises `ValidationError` where the engine has no modes to hold."""
+        raise ValidationError(f"the {self.name} engine has no stick and slip modes to hold; "
+                              "use the exact engine")
+
+    @abc.abstractmethod
+    def for_orbits(self, rtol: float | None = None, atol: float | None = None
+                   ) -> "AbstractEngine":
+        """The same model integrated as orbit methods need it: Tsit5 (explicit, fifth
+        order: at shooting's tolerances an implicit method costs 20 times more per
+        period, measured on the ring of 4) at `rtol`, `atol` (`orbit_tolerances` where
+        None)."""
 
     def run_observers(self, params: ChainParams, y0: State, observers: tuple,
                       progress: bool = False) -> dict:
@@ -134,6 +229,50 @@ class Smoothed(AbstractEngine):
                 "solver": type(self.solver).__name__,
                 "rtol": self.options.rtol, "atol": self.options.atol}
 
+    orbit_tolerances: ClassVar[tuple[float, float]] = (1e-10, 1e-12)
+    # the smoothed flow's derivative is large across each stick-slip switch:
+    # Levenberg-Marquardt converges from a simulated chain's rough state
+    orbit_root_finder: ClassVar[str] = "levenberg-marquardt"
+
+    def _flow(self, params, y0, t1, saveat):
+        return smoothed_flow(Model(params, self.eps), self.solver, self.options.rtol,
+                             self.options.atol, self.options.max_steps, y0, t1, saveat)
+
+    def flow(self, params: ChainParams, y0: State, t) -> Array:
+        if np.ndim(t) == 0:
+            return self._flow(params, y0, t, diffrax.SaveAt(t1=True))[-1]
+        return self._flow(params, y0, t[-1], diffrax.SaveAt(ts=t))
+
+    def field(self, params: ChainParams, y: State) -> State:
+        return vector_field(0.0, y, params, self.eps)
+
+    def steady_sliding(self, params: ChainParams) -> State:
+        return steady_sliding(params, self.eps)
+
+    def smoothing(self, what: str):
+        return self.eps
+
+    def model_text(self) -> str:
+        return f"eps = {float(self.eps):g}"
+
+    def simulating(self) -> "Smoothed":
+        return Smoothed(eps=self.eps)
+
+    def orbit_samples(self, params, y0, period, n_samples):
+        # n_samples from 0 to the period, both ends included
+        return smoothed_orbit_samples(Model(params, self.eps), self.solver, self.options.rtol,
+                                      self.options.atol, self.options.max_steps, y0, period,
+                                      n_samples)
+
+    def on_halc(self, params, ys):
+        return sticks(min_slip_speed(ys[:, 1], params.v_d), self.eps)
+
+    def for_orbits(self, rtol=None, atol=None) -> "Smoothed":
+        default_rtol, default_atol = self.orbit_tolerances
+        return Smoothed(diffrax.Tsit5(), SimulationOptions(
+            rtol=default_rtol if rtol is None else rtol,
+            atol=default_atol if atol is None else atol), self.eps)
+
 
 class Exact(AbstractEngine):
     """The exact engine: the stick/slip switch model of Leine et al. (1998),
@@ -170,6 +309,53 @@ class Exact(AbstractEngine):
         return {"engine": self.name, "solver": self.options.solver,
                 "rtol": self.options.rtol, "atol": self.options.atol,
                 "root_tol": self.options.root_tol}
+
+    orbit_tolerances: ClassVar[tuple[float, float]] = (REFERENCE_TOLERANCES["rtol"],
+                                                       REFERENCE_TOLERANCES["atol"])
+    # Newton's method through the saltation matrices, damped where it fails
+    orbit_root_finder: ClassVar[str] = "newton"
+
+    def flow(self, params: ChainParams, y0: State, t) -> Array:
+        ys, status = nonsmooth_flow(params, y0, jnp.atleast_1d(t), self.options)
+        ys = jnp.where(status == Status.ok, ys, jnp.nan)
+        return ys[-1] if np.ndim(t) == 0 else ys
+
+    def field(self, params: ChainParams, y: State) -> State:
+        return mode_field(0.0, (y, None), (params, initial_modes(params, y)))[0]
+
+    def steady_sliding(self, params: ChainParams) -> State:
+        return steady_sliding(params)
+
+    has_stick_phases: ClassVar[bool] = True
+
+    def model_text(self) -> str:
+        return "the exact stick/slip model"
+
+    def simulating(self) -> "Exact":
+        return Exact()
+
+    def stick_phases(self, params: ChainParams, y0: State, period):
+        from .._bifurcation.sliding import stick_phases  # the bifurcation layer's record
+        return stick_phases(params, y0, period, self.options)
+
+    def holding(self, oscillators: tuple[int, ...]) -> "Exact":
+        return Exact(dataclasses.replace(self.options, held=tuple(oscillators)))
+
+    def orbit_samples(self, params, y0, period, n_samples):
+        # n_samples after the start, the last at the period; no Liouville integral
+        # (the saltation matrices' determinants are not integrated)
+        ts = period * jnp.linspace(0.0, 1.0, n_samples + 1)[1:]
+        return self.flow(params, y0, ts), jnp.asarray(jnp.nan)
+
+    def on_halc(self, params, ys):
+        return jnp.any(ys[:, 1] == params.v_d, axis=0)
+
+    def for_orbits(self, rtol=None, atol=None) -> "Exact":
+        default_rtol, default_atol = self.orbit_tolerances
+        return Exact(dataclasses.replace(
+            self.options, solver=REFERENCE_TOLERANCES["solver"], adjoint="forward",
+            rtol=default_rtol if rtol is None else rtol,
+            atol=default_atol if atol is None else atol, t_end=1.0, transient=0.0))
 
 
 #: The engines by name, each with its defaults.

@@ -12,9 +12,10 @@ from .._bifurcation.damping_design import DampingDesign, smallest_damping
 from .._bifurcation.fold import FoldPoint, fold_point
 from .._bifurcation.hopf import (HopfPoint, hopf_eps_correction, hopf_point, hopf_speed,
                                  hopf_vd_analytic)
-from .._bifurcation.limit_cycles import hopf_cycle, limit_cycle_problem
+from .._bifurcation.limit_cycles import hopf_cycle
+from .._bifurcation.orbit_method import cycle_problem, periodic_orbit
 from .._bifurcation.lyapunov_coefficient import first_lyapunov_coefficient
-from .._bifurcation.shooting import ShootingOptions, flow, periodic_orbit, unpack
+from .._bifurcation.shooting import Shooting, unpack
 from .._bifurcation.two_parameter import BoundaryCurves, boundary_curves
 from .._physics.initial import GivenState
 from .._bifurcation.existence import stick_slip_existence_limit
@@ -76,7 +77,7 @@ def _design_check(params: ChainParams, design: DampingDesign, target: float,
 
 
 def _stick_slip_cycle(single: ChainParams, branch: Branch, hopf_vd: float, fold_vd: float,
-                      options: ShootingOptions, eps):
+                      method: Shooting):
     """The single oscillator's stable cycle inside its bistable window, at v_d = 1.5
     (the paper's scene) when the window holds it, else at the window's middle:
     shooting from the stable point of the continued branch nearest to that v_d."""
@@ -88,28 +89,26 @@ def _stick_slip_cycle(single: ChainParams, branch: Branch, hopf_vd: float, fold_
                            "chain's stick-slip states from")
     nearest = stable[np.argmin(np.abs(p[stable] - v_d))]
     y0, period = unpack(np.asarray(branch.u)[np.asarray(branch.converged)][nearest])
-    return periodic_orbit(with_parameter(single, "v_d", v_d), y0, float(period), options,
-                          eps=eps)
+    return periodic_orbit(with_parameter(single, "v_d", v_d), (y0, float(period)), method)
 
 
-def _ring_state(params: ChainParams, single, kind: str, options, progress):
+def _ring_state(params: ChainParams, single, kind: str, method: Shooting, progress):
     """Continue the ring's fully stick-slipping state `kind` (in-phase or
     anti-phase: neighbours half a period apart) from the single oscillator's cycle
-    at `single.params.v_d` towards its fold, at the cycle's smoothing `single.eps`."""
+    at `single.params.v_d` towards its fold, by `method` (that of the cycle)."""
     n = params.n_osc
     if kind == "in-phase":
         y0 = jnp.tile(single.y0, (1, n))
     else:
-        half = flow(single.params, single.y0, single.period / 2, options,
-                    eps=single.eps).ys[-1]
+        half = method.engine.flow(single.params, single.y0, single.period / 2)
         y0 = jnp.tile(jnp.concatenate([single.y0, half], axis=1), (1, n // 2))
-    orbit = periodic_orbit(with_parameter(params, "v_d", single.params.v_d), y0,
-                           float(single.period), options, eps=single.eps, throw=False)
+    orbit = periodic_orbit(with_parameter(params, "v_d", single.params.v_d),
+                           (y0, float(single.period)), method, throw=False)
     out = {"at_vd": float(single.params.v_d), "converged": bool(orbit.converged),
            "stable": bool(orbit.stable), "multipliers": _multipliers(orbit)}
     if not orbit.converged:
         return out, None
-    problem = limit_cycle_problem(orbit, options)
+    problem = cycle_problem(orbit, method)
     branch = continuation(problem, options=ContinuationOptions(
         ds=0.05, ds_max=0.1, p_max=2.5, max_points=60), progress=progress)
     out["branch_points"] = int(np.sum(np.asarray(branch.converged)))
@@ -229,28 +228,29 @@ def _run_bistable(params: ChainParams, target: float, xi_values, ratio_values, r
     """The computations of `bistable_range` by name: the single oscillator's edges
     (`_run_single`), their curves and the design (`_run_curves`), and with `ring` the
     chain's (`_run_ring`)."""
-    run = _run_single(params, engine.eps, progress) | {"engine": engine}
+    run = _run_single(params, engine, progress) | {"engine": engine}
     run |= _run_curves(run, target, xi_values, ratio_values, progress)
     run["ring"], run["ring_branches"] = (_run_ring(params, run, progress) if ring
                                          else (None, {}))
     return run
 
 
-def _run_single(params: ChainParams, eps, progress: bool) -> dict:
+def _run_single(params: ChainParams, engine: Smoothed, progress: bool) -> dict:
     """The single oscillator's Hopf point, its first Lyapunov coefficient, the
-    limit-cycle branch from it (all smoothed at `eps`), the branch's fold and the
-    non-smooth existence limit."""
-    options = ShootingOptions()
+    limit-cycle branch from it (all of `engine`'s model, smoothed at its eps), the
+    branch's fold and the non-smooth existence limit."""
+    method = Shooting(engine.for_orbits())
+    eps = engine.eps
     single = single_oscillator(params)
     hopf = hopf_point(single, eps=eps)
     l1 = float(first_lyapunov_coefficient(with_parameter(single, "v_d", hopf.v_d[0]),
                                           eps=eps))
-    start = hopf_cycle(single, options=options, eps=eps)
-    problem = limit_cycle_problem(start, options)
+    start = hopf_cycle(single, method=method)
+    problem = cycle_problem(start, method)
     branch = continuation(problem, options=ContinuationOptions(
         ds=0.01, ds_max=0.1, p_min=0.5, p_max=2.5, max_points=90), progress=progress)
     fold = fold_point(problem, branch)
-    return {"options": options, "eps": eps, "single": single, "hopf": hopf, "l1": l1,
+    return {"method": method, "eps": eps, "single": single, "hopf": hopf, "l1": l1,
             "problem": problem,
             "branch": branch, "fold": fold, "limit": stick_slip_existence_limit(single),
             "exponential": isinstance(single.friction, ExponentialDecay)}
@@ -298,9 +298,9 @@ def _run_ring(params: ChainParams, run: dict, progress: bool) -> tuple[dict, dic
     branches = {}
     if params.n_osc % 2 == 0 and is_homogeneous_ring(params):
         cycle = _stick_slip_cycle(run["single"], run["branch"], float(run["hopf"].v_d[0]),
-                                  float(run["fold"].p), run["options"], run["eps"])
+                                  float(run["fold"].p), run["method"])
         for kind in ("in-phase", "anti-phase"):
-            summary[kind], branches[kind] = _ring_state(params, cycle, kind, run["options"],
+            summary[kind], branches[kind] = _ring_state(params, cycle, kind, run["method"],
                                                         progress)
     return summary, branches
 

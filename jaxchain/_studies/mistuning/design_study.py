@@ -7,12 +7,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._physics.chain import require_line
-from ..._bifurcation.limit_cycles import problem_eps
+from ..._bifurcation.orbit_method import cycle_method, periodic_orbit
 from ..._engine.engines import Smoothed, as_engine
 from ..._engine.options import SimulationOptions
 from ..._physics.forces import DEFAULT_EPS
 from ..._physics.params import chain_or_default, ChainParams, with_fields, with_parameter
-from ..._bifurcation.shooting import periodic_orbit
 from ..._engine.simulate import simulate
 from ..._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
 from .pattern_design import design_problems, intentional_mistuning, pattern_folds
@@ -71,7 +70,7 @@ def _fold_by_simulation(problem, solution, delta: np.ndarray, site: int, *,
     whose non-trivial Floquet multipliers lie inside the unit circle), which must
     persist; Tsit5 at rtol 1e-10 (`CHECK_OPTIONS`); at v_d = fold + offset from the
     fold's orbit, which must be lost (no cycle is left). Shooting and simulations
-    at the problem's eps (`problem_eps`).
+    of the problem's model (its method's engine).
 
     **Returns:**
 
@@ -79,19 +78,20 @@ def _fold_by_simulation(problem, solution, delta: np.ndarray, site: int, *,
     found below), `persists_above`, `agrees`.
     """
     n = problem.params.n_osc
-    centre = int(problem.residual.options.phase_oscillator)
+    method = cycle_method(problem)
+    centre = int(method.phase_oscillator)
     fold = float(solution[2 * n + 1])
     u, w = np.asarray(solution[: 2 * n + 1]), np.asarray(solution[2 * n + 2:])
     chain = _ring_like(problem.params, n, 1.0 + np.roll(np.asarray(delta), centre - site))
     below, above = (with_parameter(chain, "v_d", fold + s * offset) for s in (-1, 1))
-    eps = problem_eps(problem)
+    eps = method.engine.smoothing("the design's check by simulation")
     engine = Smoothed(diffrax.Tsit5(), options, eps)
     out = {"fold": fold, "offset": offset, "persists_below": None}
     for scale in (0.01, 0.03, 0.1):
         for sign in (1, -1):
             guess = u + sign * scale * w
-            orbit = periodic_orbit(below, guess[:-1].reshape(2, n), guess[-1],
-                                   problem.residual.options, eps=eps, throw=False)
+            orbit = periodic_orbit(below, (guess[:-1].reshape(2, n), guess[-1]), method,
+                                   throw=False)
             if bool(orbit.converged) and bool(orbit.stable):
                 obs = simulate(below, orbit.y0, engine=engine)
                 out["persists_below"] = _vibrates(obs)

@@ -16,8 +16,9 @@ import numpy as np
 from ..._engine.progress import tqdm
 from ..._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
 from ..._bifurcation.fold import FoldPoint, fold_point
-from ..._bifurcation.limit_cycles import limit_cycle_problem
-from ..._bifurcation.shooting import ShootingOptions, periodic_orbit
+from ..._bifurcation.orbit_method import cycle_problem, periodic_orbit
+from ..._bifurcation.shooting import Shooting
+from ..._engine.engines import Smoothed
 from ..._engine.engines import as_engine
 from ..._engine.lanes import run_lanes
 from ..._engine.options import SimulationOptions
@@ -25,7 +26,7 @@ from ..._physics.forces import DEFAULT_EPS
 from ..._physics.initial import OutOfPhaseExcitation, initial_states
 from ..._physics.params import ChainParams, stack_chains, with_parameter
 from ..snake.starts import _turning_point
-from ..snake.orbits import SNAKE_SHOOTING, SmoothedOrbits
+from ..snake.orbits import snake_orbits
 from ..._sweeps.result_store import read_dataset, write_dataset
 from ..._checks import check_count
 from ..._errors import ValidationError
@@ -158,7 +159,7 @@ FOLD_CONTINUATION = ContinuationOptions(ds=0.01, ds_max=0.05, p_max=2.2, max_poi
 def localized_orbit(params: ChainParams, site: int, *,
                     options: SimulationOptions = SimulationOptions(t_end=3000.0,
                                                                    transient=2500.0),
-                    shooting: ShootingOptions = SNAKE_SHOOTING, eps=DEFAULT_EPS):
+                    eps=DEFAULT_EPS):
     """The periodic single-site localized state at oscillator `site` (0-based) at
     `params.v_d`, refined by shooting (Levenberg-Marquardt) from a simulation of
     eq. (8) with that oscillator excited, both of the model smoothed at `eps` (the
@@ -167,7 +168,7 @@ def localized_orbit(params: ChainParams, site: int, *,
 
     **Returns:**
 
-    (`PeriodicOrbit`, the `ShootingOptions` of its phase condition), or
+    (`PeriodicOrbit`, the `Shooting` of its phase condition), or
     (None, None) when the simulated state is not periodic or does not vibrate. The
     orbit's chain has one stiffness per oscillator, shape (n_osc,), also where
     `params` gives one for all (the programs of a ring of its size are then those
@@ -184,18 +185,19 @@ def localized_orbit(params: ChainParams, site: int, *,
         # the homogeneous ring are then those of every mistuned ring of its size
         params = with_parameter(params, "stiffness", jnp.full(params.n_osc, params.stiffness))
     engine = as_engine("smoothed", None, options, params, eps=eps)
+    # shooting from the simulation (Levenberg-Marquardt), on the oscillator's phase
+    method = Shooting.from_simulations(engine, phase_oscillator=int(site))
     mask = np.arange(params.n_osc) == site
     y0 = OutOfPhaseExcitation(excited=jnp.asarray(mask), velocity=0.0, base_sign=-1.0)(params)
     obs = simulate(params, y0, engine=engine)
     if int(obs.status) != Status.ok or int(obs.n_halc) == 0:
         return None, None
-    opts = dataclasses.replace(shooting, phase_oscillator=int(site))
-    guess = _turning_point(SmoothedOrbits(opts, engine.eps, None), params,
-                           np.asarray(obs.y_final), int(site))
+    guess = _turning_point(snake_orbits(method, engine), params, np.asarray(obs.y_final),
+                           int(site))
     if guess is None:
         return None, None
-    orbit = periodic_orbit(params, guess[0], guess[1], opts, eps=engine.eps, throw=False)
-    return (orbit, opts) if bool(orbit.converged) else (None, None)
+    orbit = periodic_orbit(params, guess, method, throw=False)
+    return (orbit, method) if bool(orbit.converged) else (None, None)
 
 
 def localized_fold(params: ChainParams, site: int, *,
@@ -221,7 +223,7 @@ def localized_fold(params: ChainParams, site: int, *,
     orbit, opts = localized_orbit(params, site, eps=eps)
     if orbit is None:
         return None, None
-    problem = limit_cycle_problem(orbit, opts)
+    problem = cycle_problem(orbit, opts)
     branch = continuation(problem, PseudoArclength(), continuation_options)
     if not branch.folds:
         return None, None

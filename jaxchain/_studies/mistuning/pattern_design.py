@@ -14,6 +14,7 @@ from jaxtyping import Array, Float
 
 from ..._engine.compat import checks_as_nan
 from ..._bifurcation.fold import solve_fold
+from ..._bifurcation.orbit_method import cycle_method
 from ..._physics.forces import DEFAULT_EPS
 from ..._physics.initial import excited_block
 from ..._physics.params import chain_or_default, ChainParams
@@ -149,7 +150,7 @@ def pattern_folds(problem, solutions, theta_from, theta_to, budget, zero_mean):
     c - j), and their gradients in theta: (folds (n,), gradients (n, n),
     solutions, reached (n,))."""
     n = problem.params.n_osc
-    centre = int(problem.residual.options.phase_oscillator)
+    centre = int(cycle_method(problem).phase_oscillator)
     folds, grads, sols, ok = [], [], [], []
     for j, solution in enumerate(solutions):
         shift = jnp.asarray(centre - j)

@@ -18,6 +18,7 @@ from ..._bifurcation.branch_switching import (
     symmetric_directions,
 )
 from ..._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
+from ..._bifurcation.orbit_method import cycle_method
 from ..._bifurcation.past_sliding import past_sliding_start
 from ..._bifurcation.shooting import pack, unpack
 from ..._engine.status import Status
@@ -50,7 +51,7 @@ def _branch_dataset(k: int, problem, branch, bifurcations) -> xr.Dataset:
          "amplitudes": (("point", "osc"), np.asarray(r.amplitudes)),
          "u": (("point", "unknown"), np.asarray(branch.u)[ok])},
         coords={"v_d": ("point", np.asarray(branch.p)[ok])},
-        attrs={"excited": k, "phase_oscillator": problem.residual.options.phase_oscillator,
+        attrs={"excited": k, "phase_oscillator": cycle_method(problem).phase_oscillator,
                "stop": branch.stop.name,
                "bifurcations": json.dumps([
                    {"type": b.kind, "v_d": float(b.p), "energy": float(b.record.energy),

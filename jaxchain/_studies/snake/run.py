@@ -12,7 +12,6 @@ import numpy as np
 from ..._bifurcation.continuation import ContinuationOptions
 from ..._bifurcation.shooting import pack
 from ..._engine.options import SimulationOptions
-from ..._engine.solver.registry import DEFAULT_SOLVER
 from ..._errors import ValidationError
 from ..._physics.params import ChainParams, chain_or_default
 from ..._physics.record import chain_record
@@ -36,10 +35,10 @@ from .summary import _branches_summary
 
 
 def localized_branches(params: ChainParams | None = None, sites=None, *,
-                       engine: str = "smoothed", shooting=None,
+                       method=None, engine=None,
                        continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
                        start_options: SimulationOptions = SNAKE_START,
-                       solver=DEFAULT_SOLVER, eps=None, switch: bool = True,
+                       switch: bool = True,
                        deflate: int = 0,
                        simulation_check: bool = True,
                        out: Path | None = None, progress: bool = False,
@@ -58,21 +57,16 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     - `sites`: the starts: numbers of excited oscillators (eq. (8)'s block or a
         graph's patch) or named one-site starts (`start_site`); `default_starts`
         by default (the corner, edge and interior one-site states on a lattice).
-    - `engine`: "smoothed" (eq. (5) with tanh(v_rel/eps)) or "exact" (the stick/slip
-        switch model: exact shooting, exact Floquet multipliers, simulations on
-        the exact engine) for every orbit, branch and simulation.
-    - `shooting`: `ShootingOptions` (smoothed) or `ExactShooting` (exact) of every
-        orbit (`SNAKE_SHOOTING`, `EXACT_SNAKE_SHOOTING` by default).
+    - `method`: the orbit method of every orbit, branch and multiplier:
+        `Shooting(Smoothed(eps=...).for_orbits())` (eq. (5) with tanh(v_rel/eps))
+        or `Shooting(Exact().for_orbits())` (the stick/slip switch model: exact
+        Floquet multipliers); `Shooting.from_simulations(Smoothed())` by default.
+        Stored branches are read back only for an equal method.
+    - `engine`: the engine of every simulation (starts and checks), of the
+        method's model, its horizon replaced by each simulation's; the method's
+        engine `simulating` (default solver and tolerances) by default.
     - `continuation_options`: `ContinuationOptions` (direction is set both ways).
-    - `start_options`: `SimulationOptions` of the starting simulations.
-    - `solver`: the smoothed engine's solver of the simulations, the starts and the
-        checks (`SOLVERS`); shooting has its own (`shooting.solver`).
-    - `eps`: the smoothed engine's smoothing velocity of tanh(v_rel/eps) (None:
-        `DEFAULT_EPS`; None for the exact engine), a finite number > 0,
-        shape (), dimensionless (a fraction of x_0 omega_n): that of the smoothed
-        engine of every simulation (`Smoothed.eps`) and of every orbit, branch and
-        multiplier; `DEFAULT_EPS` by default. Stored branches are read back only
-        for an equal eps.
+    - `start_options`: the horizon of the starting simulations.
     - `switch`: at each branch point of a branch, switch onto the other branch
         through it and follow that too (`switch_branch`: the kernel direction that
         the followed branch does not take; where that fails, as at the branch
@@ -111,10 +105,10 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
 
     **Raises:**
 
-    `ValidationError` for bad sites, options or eps, an unknown engine, eps given
-    to the exact engine or shooting options of the other engine.
+    `ValidationError` for bad sites or options, or a method or engine of another
+    kind.
     """
-    params, sites, orbits = _check_branches(params, sites, engine, shooting, solver, eps)
+    params, sites, orbits = _check_branches(params, sites, method, engine)
     if not (isinstance(deflate, int) and deflate >= 0):
         raise ValidationError(f"deflate must be a whole number >= 0, got {deflate!r}")
     if not (isinstance(workers, int) and workers >= 1):
@@ -124,12 +118,11 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     return _branches_summary(*run, params.n_osc)
 
 
-def _check_branches(params: ChainParams | None, sites, engine, shooting, solver, eps
-                    ) -> tuple:
+def _check_branches(params: ChainParams | None, sites, method, engine) -> tuple:
     """The chain (the paper's ring where None), the starts (`check_starts`) and the
-    orbits of the engine (`snake_orbits`, which checks eps and the options)."""
+    orbits (`snake_orbits`, which checks the method and engine)."""
     params = chain_or_default(params)
-    orbits = snake_orbits(engine, shooting, eps, solver, params)
+    orbits = snake_orbits(method, engine)
     return params, check_starts(params.graph, sites), orbits
 
 

@@ -12,7 +12,6 @@ import numpy as np
 from ..._bifurcation.deflation import chain_symmetries
 from ..._engine.observers.crossings import downward_crossings
 from ..._engine.options import SimulationOptions
-from ..._engine.solver.registry import DEFAULT_SOLVER
 from ..._engine.status import Status
 from ..._errors import ValidationError
 from ..._physics.chain import Graph
@@ -165,8 +164,7 @@ def _closest_returns(ts, ys, down) -> list[tuple[np.ndarray, float]]:
 
 
 def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions = SNAKE_START,
-                 engine: str = "smoothed", shooting=None, solver=DEFAULT_SOLVER, eps=None,
-                 retry: tuple = RETRY_VD, progress: bool = False):
+                 method=None, engine=None, retry: tuple = RETRY_VD, progress: bool = False):
     """Periodic localized states of the chain at `params.v_d`, refined by shooting
     from direct simulation: eq. (8) with k oscillators excited (`excited_block`),
     integrated over `options`, then a turning point of the oscillator of largest
@@ -190,17 +188,10 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
         named one-site starts (`start_site`: "corner", "edge", "interior" on a
         lattice, "site:N"); `default_starts` by default.
     - `options`: `SimulationOptions` of the simulations.
-    - `engine`: "smoothed" (eq. (5) with tanh(v_rel/eps)) or "exact" (the stick/slip
-        switch model) for the simulations and shooting.
-    - `shooting`: `ShootingOptions` (smoothed) or `ExactShooting` (exact); its
-        `phase_oscillator` is replaced (`SNAKE_SHOOTING`, `EXACT_SNAKE_SHOOTING` by
-        default).
-    - `solver`: the smoothed engine's solver of the simulations (`SOLVERS`;
-        shooting has its own).
-    - `eps`: the smoothed engine's smoothing velocity of tanh(v_rel/eps), a finite
-        number > 0, shape (), dimensionless (a fraction of x_0 omega_n), of the
-        simulations and of shooting; `DEFAULT_EPS` when None. None for the exact
-        engine.
+    - `method`: the orbit method (`Shooting`), its phase oscillator replaced;
+        `Shooting.from_simulations(Smoothed())` by default (`snake_orbits`).
+    - `engine`: the engine of the simulations, of the method's model (its horizon
+        replaced by `options`'); the method's engine `simulating` by default.
     - `retry`: offsets of v_d, dimensionless, tried in turn for the starts that
         give no periodic orbit at `params.v_d`, or one with another number of
         sites on the HALC than they excite (`RETRY_VD`; () for none).
@@ -208,17 +199,17 @@ def start_orbits(params: ChainParams, sites=None, *, options: SimulationOptions 
 
     **Returns:**
 
-    A dict k -> (`PeriodicOrbit` or `ExactOrbit`, or None; the simulation's n_HALC,
+    A dict k -> (`PeriodicOrbit` or None; the simulation's n_HALC,
     energy and `v_d`; why it failed or None). The orbit lies at `orbit.params.v_d`.
     A start fails when at every belt speed tried the simulated state is not
     periodic (irregular: shooting does not converge) or never turns.
 
     **Raises:**
 
-    `ValidationError` for a k outside 1..n_osc, eps <= 0, eps given to the exact
-    engine or shooting options of the other engine.
+    `ValidationError` for a k outside 1..n_osc, or a method or engine of another
+    kind.
     """
-    orbits = snake_orbits(engine, shooting, eps, solver, params)
+    orbits = snake_orbits(method, engine)
     return _start_orbits(orbits, params, sites, options, progress, tuple(retry))
 
 

@@ -1,0 +1,330 @@
+"""Periodic orbits with the method as a value: `AbstractOrbitMethod` (what every way
+of computing an orbit provides), the one `PeriodicOrbit` record they all describe,
+`periodic_orbit` that solves for one, and `cycle_problem` that hands its branch to
+`continuation`. A new method (`Shooting` is the first) is one class: the
+continuation, the bifurcations on its branch and the studies above take it as it
+is (docs/adding-a-method.md)."""
+
+import abc
+
+import equinox as eqx
+import jax.numpy as jnp
+import optimistix as optx
+from jaxtyping import Array, Bool, Complex, Float, Int
+
+from .._checks import check_positive
+from .._engine.compat import checks_as_nan
+from .._errors import ValidationError
+from .._physics.custom_types import State
+from .._physics.params import ChainParams
+from .._printing import values_repr
+from .continuation import ContinuationProblem, describe_point
+
+
+class PeriodicOrbit(eqx.Module):
+    """A periodic orbit of eq. (5) and its stability, as any orbit method gives it.
+
+    **Fields:**
+
+    - `params`: the parameters it belongs to.
+    - `y0`: the state at t = 0, shape (2, n_osc); x_n'(0) = 0 for the method's
+        phase oscillator n.
+    - `period`: T, shape ().
+    - `amplitudes`: half of peak-to-peak of each x_n over the method's samples of
+        the period, shape (n_osc,).
+    - `energy`: E = 1/2 sum_n A_n^2 (eq. (9) of the paper), shape ().
+    - `on_halc`: whether each oscillator sticks during the period (the engine's
+        stick: x_n' = v_d exactly for the exact engine, inside the stick band
+        |x_n' - v_d| <= 3 eps for the smoothed one, `sticks`), shape (n_osc,).
+    - `n_halc`: the number of them, shape ().
+    - `multipliers`: Floquet multipliers by decreasing modulus, shape (2 n_osc,).
+    - `trivial`: index of the trivial multiplier (of the flow direction), shape ().
+    - `zero_multipliers`: multipliers of modulus below 1e-9 (a stick phase of the
+        exact model loses its oscillator's velocity perturbation), shape ().
+    - `resolved`: whether each multiplier lies above `multiplier_resolution` in
+        modulus, shape (2 n_osc,). An unresolved one is zero as far as the
+        computed monodromy tells: its value, sign included, is noise.
+    - `multiplier_resolution`: the bound (`multiplier_resolution`), shape ().
+    - `monodromy_determinant`: det M by Liouville's formula where the method's
+        engine integrates it (the smoothed engine), NaN otherwise, shape ().
+    - `stable`: all non-trivial multipliers inside the unit circle, shape ().
+    - `residual`: max-norm of the method's residual, shape ().
+    - `converged`: whether the solve converged and the residual is within 1e3
+        times the method's Newton tolerance, shape ().
+
+    All quantities are dimensionless (eqs. (4)-(6)).
+    """
+
+    params: ChainParams
+    y0: State
+    period: Float[Array, ""]
+    amplitudes: Float[Array, " n_osc"]
+    energy: Float[Array, ""]
+    on_halc: Bool[Array, " n_osc"]
+    n_halc: Int[Array, ""]
+    multipliers: Complex[Array, " 2n"]
+    trivial: Int[Array, ""]
+    zero_multipliers: Int[Array, ""]
+    resolved: Bool[Array, " 2n"]
+    multiplier_resolution: Float[Array, ""]
+    monodromy_determinant: Float[Array, ""]
+    stable: Bool[Array, ""]
+    residual: Float[Array, ""]
+    converged: Bool[Array, ""]
+
+    __repr__ = values_repr
+
+    @property
+    def critical_multiplier(self) -> Complex[Array, ""]:
+        """The largest non-trivial multiplier in modulus (batched like `trivial`)."""
+        return critical_multiplier(self.multipliers, self.trivial)
+
+
+def critical_multiplier(multipliers: Complex[Array, "... 2n"], trivial: Array
+                        ) -> Complex[Array, "..."]:
+    """The largest multiplier in modulus other than the trivial one, of multipliers
+    sorted by decreasing modulus (batched like `trivial`)."""
+    index = jnp.where(trivial == 0, 1, 0)
+    return jnp.take_along_axis(multipliers, index[..., None], axis=-1)[..., 0]
+
+
+def deflated_multipliers(m: Float[Array, "2n 2n"], direction: Float[Array, " 2n"]
+                         ) -> tuple[Complex[Array, " 2n"], Array]:
+    """The eigenvalues of a monodromy matrix `m` by decreasing modulus, the trivial one
+    (of the flow direction `direction`, the vector field at the orbit's start)
+    deflated: (multipliers, index of the trivial one).
+
+    The flow direction f is an eigenvector of M with multiplier 1 on an exact orbit.
+    In an orthonormal basis [f/|f|, V] (Householder QR of f), M is block upper
+    triangular up to the flow's error, so the non-trivial multipliers are the
+    eigenvalues of V^T M V (the linearized Poincare map on the quotient by the flow
+    direction), and the trivial one is the Rayleigh quotient f^T M f / |f|^2. No
+    multiplier near 1 (a weakly damped quiet oscillator, a slowly drifting phase
+    between sites) can then be taken for the trivial one (Seydel, *Practical
+    Bifurcation and Stability Analysis*, 3rd ed., Sect. 7.4; Wielandt deflation)."""
+    direction = direction / jnp.linalg.norm(direction)
+    basis, _ = jnp.linalg.qr(direction[:, None], mode="complete")
+    rest = basis[:, 1:]
+    values = jnp.concatenate([jnp.linalg.eigvals(rest.T @ m @ rest),
+                              (direction @ m @ direction)[None].astype(complex)])
+    order = jnp.argsort(-jnp.abs(values))
+    return values[order], jnp.argmax(order == values.size - 1)
+
+
+def multiplier_resolution(m: Float[Array, "2n 2n"], trivial_multiplier, rtol
+                          ) -> Float[Array, ""]:
+    """The smallest modulus a Floquet multiplier of the computed monodromy `m` can be
+    told from zero by: the error of `m` itself, estimated as the larger of
+    |m|_2 max(rtol, machine epsilon) (the flow's relative tolerance `rtol`, or
+    rounding) and the trivial multiplier's distance from 1 (the error the flow
+    shows in the one direction whose multiplier is known). An eigenvalue moves by
+    about the error of the matrix (Bauer-Fike, for a well-conditioned one), so a
+    multiplier below the bound is rounding or integration noise."""
+    floor = jnp.maximum(rtol, jnp.finfo(m.dtype).eps)
+    return jnp.maximum(jnp.linalg.norm(m, 2) * floor, jnp.abs(trivial_multiplier - 1))
+
+
+def orbit_record(params: ChainParams, y0: State, period, ys: Float[Array, "m 2 n"],
+                 on_halc, m: Float[Array, "2n 2n"], direction, rtol, log_det, residual,
+                 converged) -> PeriodicOrbit:
+    """The `PeriodicOrbit` of an orbit through `y0` of period `period`, from the
+    pieces a method computes: samples `ys` of the period, which oscillators stick
+    there, its monodromy `m` with the flow direction at y0 and the flow's `rtol`,
+    the logarithm of det M (or NaN), its residual's max-norm and whether the solve
+    converged (traceable)."""
+    multipliers, trivial = deflated_multipliers(m, jnp.reshape(direction, (-1,)))
+    resolution = multiplier_resolution(m, multipliers[trivial], rtol)
+    amplitudes = 0.5 * (ys[:, 0].max(0) - ys[:, 0].min(0))
+    others = jnp.where(jnp.arange(multipliers.size) == trivial, 0.0, jnp.abs(multipliers))
+    return PeriodicOrbit(
+        params=params, y0=y0, period=period, amplitudes=amplitudes,
+        energy=0.5 * jnp.sum(amplitudes**2), on_halc=on_halc, n_halc=jnp.sum(on_halc),
+        multipliers=multipliers, trivial=trivial,
+        zero_multipliers=jnp.sum(jnp.abs(multipliers) < 1e-9),
+        resolved=jnp.abs(multipliers) > resolution, multiplier_resolution=resolution,
+        monodromy_determinant=jnp.exp(log_det), stable=jnp.all(others < 1),
+        residual=residual, converged=jnp.asarray(converged))
+
+
+class AbstractOrbitMethod(eqx.Module):
+    """A way of computing periodic orbits of eq. (5): unknowns u that hold one orbit,
+    a residual that vanishes on it, and the orbit's description. `periodic_orbit`
+    solves for one, `cycle_problem` follows its branch with `continuation`; neither
+    asks which method it has.
+
+    A subclass implements `unknowns`, `pack`, `orbit`, `residual`, `describe` and
+    `samples`, and may
+    replace `solve` (Newton's method by optimistix on `residual` by default).
+    `Shooting` is the first."""
+
+    newton_tol: eqx.AbstractVar[float]
+    newton_steps: eqx.AbstractVar[int]
+
+    @abc.abstractmethod
+    def unknowns(self, params: ChainParams, y0: State, period) -> Float[Array, " n"]:
+        """The method's unknowns of a guess: a state on the orbit (shape (2, n_osc))
+        and its period. Raises `ValidationError` for a guess it cannot take."""
+
+    @abc.abstractmethod
+    def pack(self, y0: State, period) -> Float[Array, " n"]:
+        """The unknowns of the orbit through y0 with its period, as they are (a
+        converged orbit's; traceable)."""
+
+    @abc.abstractmethod
+    def orbit(self, u: Float[Array, " n"]) -> tuple[State, Float[Array, ""]]:
+        """(The state at t = 0, shape (2, n_osc); the period) of the unknowns u."""
+
+    @abc.abstractmethod
+    def residual(self, u: Float[Array, " n"], params: ChainParams) -> Float[Array, " n"]:
+        """The residual of the unknowns u at `params`: zero on a periodic orbit."""
+
+    @abc.abstractmethod
+    def describe(self, u: Float[Array, " n"], params: ChainParams) -> PeriodicOrbit:
+        """The `PeriodicOrbit` of the unknowns u (traceable; `orbit_record`)."""
+
+    @abc.abstractmethod
+    def samples(self, params: ChainParams, u: Float[Array, " n"], ts) -> Array:
+        """The orbit's states at the times `ts` (increasing, > 0, within a period),
+        shape (m, 2, n_osc)."""
+
+    def multipliers(self, params: ChainParams, u: Float[Array, " n"]
+                    ) -> tuple[Complex[Array, " 2n"], Int[Array, ""]]:
+        """(The Floquet multipliers of the orbit u by decreasing modulus, the index of
+        the trivial one). Raises `ValidationError` where the method gives none."""
+        raise ValidationError(f"{type(self).__name__} gives no Floquet multipliers")
+
+    def solve(self, params: ChainParams, u0: Float[Array, " n"]
+              ) -> tuple[Float[Array, " n"], Bool[Array, ""]]:
+        """(The unknowns solved from the guess u0; whether the solver converged):
+        optimistix's Newton method on `residual` by default."""
+        return _newton(self, params, u0)
+
+    def with_phase_oscillator(self, n: int) -> "AbstractOrbitMethod":
+        """The method with its phase condition on oscillator n (0-based)."""
+        raise ValidationError(f"{type(self).__name__} has no phase oscillator to choose")
+
+    def refine(self, factor: float) -> "AbstractOrbitMethod":
+        """The method `factor` times more accurate, to check a result (its flow's
+        tolerances divided by `factor`). Raises `ValidationError` where the method
+        has no accuracy to change."""
+        raise ValidationError(f"{type(self).__name__} has no accuracy to refine")
+
+
+@checks_as_nan
+@eqx.filter_jit
+def _newton(method: AbstractOrbitMethod, params: ChainParams, u0):
+    tol = method.newton_tol
+    sol = optx.root_find(lambda u, p: method.residual(u, p), optx.Newton(rtol=tol, atol=tol),
+                         u0, params, max_steps=method.newton_steps, throw=False)
+    return sol.value, sol.result == optx.RESULTS.successful
+
+
+class DescribeOrbit(eqx.Module):
+    """The method's `describe`, as a `ContinuationProblem` record: equal methods
+    give equal records, so continuation compiles once."""
+
+    method: AbstractOrbitMethod
+
+    def __call__(self, u, params):
+        return self.method.describe(u, params)
+
+
+class CycleResidual(eqx.Module):
+    """The method's `residual`, as a `ContinuationProblem` residual."""
+
+    method: AbstractOrbitMethod
+
+    def __call__(self, u, params):
+        return self.method.residual(u, params)
+
+
+def as_guess(guess) -> tuple[State, float]:
+    """(y0, period) of a guess: a `PeriodicOrbit`, or a pair (state, period)."""
+    if isinstance(guess, PeriodicOrbit):
+        return guess.y0, guess.period
+    try:
+        y0, period = guess
+    except (TypeError, ValueError):
+        raise ValidationError("guess must be a pair (y0, period) or a PeriodicOrbit, got "
+                              f"{type(guess).__name__}") from None
+    check_positive("period", period)
+    return jnp.asarray(y0, dtype=float), period
+
+
+def periodic_orbit(params: ChainParams, guess, method: AbstractOrbitMethod | None = None, *,
+                   throw: bool = True) -> PeriodicOrbit:
+    """Solve for a periodic orbit of eq. (5) from a guess by an orbit method, and
+    describe it: period, amplitudes, the oscillators on the HALC, Floquet
+    multipliers and stability.
+
+    **Arguments:**
+
+    - `params`: the chain parameters.
+    - `guess`: a pair (y0, period): a state on or near the orbit, shape (2, n_osc)
+        (the end of a long simulation, for instance), and the period's guess (> 0);
+        or a `PeriodicOrbit` (of other parameters, say).
+    - `method`: an `AbstractOrbitMethod`; `Shooting()` (single shooting on the
+        smoothed engine at eps = 1e-3) by default. `Shooting(Exact().for_orbits())`
+        solves the exact stick/slip model.
+    - `throw`: raise if the method does not converge (default); otherwise return
+        the orbit with `converged=False`.
+
+    **Returns:**
+
+    A `PeriodicOrbit`.
+
+    **Raises:**
+
+    `ValidationError` for a guess of the wrong shape, a non-positive period or a
+    phase oscillator outside the chain; `RuntimeError` if the method does not
+    converge and `throw=True`.
+    """
+    if method is None:
+        from .shooting import Shooting
+        method = Shooting()
+    y0, period = as_guess(guess)
+    u, ok = method.solve(params, method.unknowns(params, y0, period))
+    # the record by continuation's own program (`describe_point`), compiled once
+    orbit = describe_point(DescribeOrbit(method), u, params, params.v_d, "v_d")
+    orbit = eqx.tree_at(lambda o: o.converged, orbit, orbit.converged & ok)
+    if throw and not bool(orbit.converged):
+        raise RuntimeError(f"{type(method).__name__} did not converge: start from a state "
+                           "closer to the orbit (after a longer simulation) or a better "
+                           "period guess")
+    return orbit
+
+
+def cycle_problem(orbit: PeriodicOrbit, method: AbstractOrbitMethod | None = None,
+                  where="v_d") -> ContinuationProblem:
+    """The `ContinuationProblem` of the periodic orbits through `orbit`: the method's
+    unknowns and residual, its records (`PeriodicOrbit`: Floquet multipliers,
+    stability, n_HALC), to follow with `continuation` (pseudo-arclength, Keller
+    1977) in any parameter.
+
+    **Arguments:**
+
+    - `orbit`: a converged `PeriodicOrbit`.
+    - `method`: the method of every point (`Shooting()` by default); the one that
+        found `orbit`.
+    - `where`: the continued parameter, a name or a lens (default the belt speed).
+    """
+    if method is None:
+        from .shooting import Shooting
+        method = Shooting()
+    return ContinuationProblem(
+        residual=CycleResidual(method), u0=method.pack(orbit.y0, orbit.period),
+        params=orbit.params, where=where, describe=DescribeOrbit(method))
+
+
+def cycle_method(problem: ContinuationProblem) -> AbstractOrbitMethod:
+    """The orbit method of a problem of periodic orbits (`cycle_problem`), or of the
+    one whose folds a fold system follows (its `problem`).
+
+    **Raises:** `ValidationError` for a problem that is not one of periodic orbits."""
+    residual = problem.residual
+    while isinstance(getattr(residual, "problem", None), ContinuationProblem):
+        residual = residual.problem.residual
+    if not isinstance(residual, CycleResidual):
+        raise ValidationError("the problem is not one of periodic orbits (cycle_problem), "
+                              f"got a residual {type(residual).__name__}")
+    return residual.method
