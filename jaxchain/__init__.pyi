@@ -126,6 +126,7 @@ from ._bifurcation.lyapunov_coefficient import (
 from ._bifurcation.orbit_method import (
     periodic_orbit as periodic_orbit, PeriodicOrbit as PeriodicOrbit,
     AbstractOrbitMethod as AbstractOrbitMethod, cycle_problem as cycle_problem,
+    orbit_record as orbit_record, deflated_multipliers as deflated_multipliers,
 )
 from ._bifurcation.shooting import Shooting as Shooting
 from ._bifurcation.deflation import (
