@@ -136,6 +136,81 @@ def _sliding(problem: ContinuationProblem, algorithm: PseudoArclength, sides,
         return None
 
 
+def _bisection_test(problem: ContinuationProblem, algorithm: PseudoArclength, branch: Branch,
+                    zs, tangents, i: int, fold: bool) -> tuple:
+    """(test, f_hi): the test function of `_bisect` between the converged points i
+    and i + 1 (the orbit z_i + s t_i corrected onto the branch, and there dp/ds at
+    a fold, else |mu| - 1 of the critical multiplier mu; None where the corrector
+    fails), and its value at point i + 1."""
+    z0, t0 = zs[i], tangents[i]
+
+    def corrected(s):
+        new, good, _, _ = _correct(problem, algorithm, z0 + s * t0, t0)
+        return new if bool(good) else None
+
+    def test(s):
+        z = corrected(s)
+        if z is None:
+            return None
+        return (float(_tangent(problem, z, t0)[0][-1]) if fold
+                else _critical(_record(problem, z))[0]), z
+
+    if fold:
+        f_hi = float(tangents[i + 1, -1])
+    else:
+        f_hi = float(np.abs(np.asarray(branch.records.critical_multiplier)[i + 1]) - 1)
+    return test, f_hi
+
+
+def _locate_change(problem: ContinuationProblem, algorithm: PseudoArclength, branch: Branch,
+                   zs, tangents, i: int, fold: bool, steps: int) -> BifurcationPoint | None:
+    """The fold (`fold`) or change of stability between the converged points i and
+    i + 1 of `branch` (`zs`, `tangents`: theirs), located by bisection (`_bisect`,
+    `steps` steps) and classified (`_classified`); None where the test function
+    shows no sign change there."""
+    test, f_hi = _bisection_test(problem, algorithm, branch, zs, tangents, i, fold)
+    _, width, z, sides, stopped = _bisect(test, float(tangents[i] @ (zs[i + 1] - zs[i])),
+                                          steps, f_hi)
+    if z is None:
+        return None
+    if sides[1] is None:  # no trial beyond the change: the branch's next point
+        sides[1] = (f_hi, zs[i + 1])
+    return _classified(problem, algorithm, branch, i, fold, z, sides, stopped, width)
+
+
+def _classified(problem: ContinuationProblem, algorithm: PseudoArclength, branch: Branch,
+                i: int, fold: bool, z, sides, stopped: bool, width: float) -> BifurcationPoint:
+    """The bifurcation located by `_bisect` at `z` (its resolution `width`, the
+    trials either side `sides`, and whether it `stopped` at the corrector's
+    failures) after the converged point i, classified as `locate_bifurcations`
+    says: its kind, p and critical multiplier."""
+    record = _record(problem, z)
+    _, m = _critical(record)
+    p = z[-1]
+    if stopped:  # regula falsi between the converged points either side
+        (f_a, z_a), (f_b, z_b) = sides
+        p = z_a[-1] + (z_b[-1] - z_a[-1]) * f_a / (f_a - f_b)
+    if fold and _through_steady_sliding(branch, record, i):
+        kind, p = "Hopf", _hopf_p(branch, i, p)
+    elif fold:
+        kind = "fold"
+    elif sides[1] is not None and abs(sides[1][0] - sides[0][0]) > JUMP:
+        kind, zeros = _discontinuity(problem, sides)
+        point = (_sliding(problem, algorithm, sides, zeros)
+                 if kind == "sliding" and exact_problem(problem) else None)
+        if point is not None and point.converged:  # on its defining condition
+            p, z, width, record = point.p, point.z, float(point.step), point.record
+            _, m = _critical(record)
+    elif abs(m.imag) > 1e-6 * max(1.0, abs(m)) and abs(m.imag) > 1e-3:
+        kind = "Neimark-Sacker"
+    elif m.real < 0:
+        kind = "period doubling"
+    else:
+        kind = "branch point"
+    return BifurcationPoint(kind=kind, p=p, z=z, multiplier=jnp.asarray(m),
+                            record=record, after=int(i), width=float(width))
+
+
 def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
                         algorithm: PseudoArclength = PseudoArclength(), *,
                         steps: int = 24) -> tuple[BifurcationPoint, ...]:
@@ -194,55 +269,9 @@ def locate_bifurcations(problem: ContinuationProblem, branch: Branch,
     folds = set(branch.folds)
     found = []
     for i in sorted(folds | set(branch.stability_changes)):
-        z0, t0 = zs[i], tangents[i]
-        s_hi = float(t0 @ (zs[i + 1] - z0))
-
-        def corrected(s, z0=z0, t0=t0):
-            new, good, _, _ = _correct(problem, algorithm, z0 + s * t0, t0)
-            return new if bool(good) else None
-
-        if i in folds:
-            def test(s, t0=t0):
-                z = corrected(s)
-                return None if z is None else (float(_tangent(problem, z, t0)[0][-1]), z)
-        else:
-            def test(s):
-                z = corrected(s)
-                return None if z is None else (_critical(_record(problem, z))[0], z)
-        if i in folds:
-            f_hi = float(tangents[i + 1, -1])
-        else:
-            f_hi = float(np.abs(np.asarray(branch.records.critical_multiplier)[i + 1]) - 1)
-        s, width, z, sides, stopped = _bisect(test, s_hi, steps, f_hi)
-        if z is None:
-            continue
-        if sides[1] is None:  # no trial beyond the change: the branch's next point
-            sides[1] = (f_hi, zs[i + 1])
-        record = _record(problem, z)
-        _, m = _critical(record)
-        p = z[-1]
-        if stopped:  # regula falsi between the converged points either side
-            (f_a, z_a), (f_b, z_b) = sides
-            p = z_a[-1] + (z_b[-1] - z_a[-1]) * f_a / (f_a - f_b)
-        if i in folds and _through_steady_sliding(branch, record, i):
-            kind, p = "Hopf", _hopf_p(branch, i, p)
-        elif i in folds:
-            kind = "fold"
-        elif sides[1] is not None and abs(sides[1][0] - sides[0][0]) > JUMP:
-            kind, zeros = _discontinuity(problem, sides)
-            point = (_sliding(problem, algorithm, sides, zeros)
-                     if kind == "sliding" and exact_problem(problem) else None)
-            if point is not None and point.converged:  # on its defining condition
-                p, z, width, record = point.p, point.z, float(point.step), point.record
-                _, m = _critical(record)
-        elif abs(m.imag) > 1e-6 * max(1.0, abs(m)) and abs(m.imag) > 1e-3:
-            kind = "Neimark-Sacker"
-        elif m.real < 0:
-            kind = "period doubling"
-        else:
-            kind = "branch point"
-        found.append(BifurcationPoint(kind=kind, p=p, z=z, multiplier=jnp.asarray(m),
-                                      record=record, after=int(i), width=float(width)))
+        point = _locate_change(problem, algorithm, branch, zs, tangents, i, i in folds, steps)
+        if point is not None:
+            found.append(point)
     # beside a sliding point the exact Jacobian jumps, and a sign change there need
     # not pass through zero; but where a symmetric pair of sites loses its stick
     # phases at once, other branches do leave there (the ring of 20's eighteen-site

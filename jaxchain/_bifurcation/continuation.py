@@ -228,6 +228,45 @@ def _record(problem: ContinuationProblem, z):
     return describe_point(problem.describe, z[:-1], problem.params, z[-1], problem.where)
 
 
+def _first_point(problem: ContinuationProblem,
+                 algorithm: PseudoArclength) -> Float[Array, " n+1"]:
+    """The first point z = (u0, p) of a continuation, checked to be a solution
+    (`continuation`'s `ValueError` otherwise)."""
+    z = jnp.concatenate([jnp.asarray(problem.u0, dtype=float),
+                         jnp.atleast_1d(jnp.asarray(problem.value(), dtype=float))])
+    residual = float(jnp.max(jnp.abs(problem(z))))
+    if not residual <= 1e3 * algorithm.newton_tol:
+        raise ValueError(f"problem.u0 is not a solution at the given parameters (residual "
+                         f"{residual:.3g}); solve for it first")
+    return z
+
+
+def _branch(problem: ContinuationProblem, zs: list, tangents: list, converged: list,
+            records: list, signs: list, stop: Status) -> Branch:
+    """The `Branch` of a continuation's points (each z = (u, p), failed ones
+    included), their tangents, whether each converged, the records and the
+    bordered determinants' signs of the converged ones, and why it stopped: the
+    folds, changes of stability and branch points found between the converged
+    points."""
+    # Stacked on the host: on the device every operation would compile for each
+    # number of points.
+    zs, tangents = _stacked(zs), _stacked(tangents)
+    ok = np.asarray(converged)
+    records = jax.tree.map(lambda *xs: jnp.asarray(_stacked(xs)), *records)
+    stable = np.asarray(records.stable)
+    tp = tangents[ok, -1]
+    signs = np.asarray(_stacked(signs))
+    return Branch(
+        p=jnp.asarray(zs[:, -1]), u=jnp.asarray(zs[:, :-1]), tangent=jnp.asarray(tangents),
+        converged=jnp.asarray(ok),
+        records=records if problem.describe is not None else None,
+        stable=jnp.asarray(stable),
+        folds=tuple(int(i) for i in np.nonzero(np.sign(tp[1:]) != np.sign(tp[:-1]))[0]),
+        stability_changes=tuple(int(i) for i in np.nonzero(stable[1:] != stable[:-1])[0]),
+        stop=stop,
+        branch_points=tuple(int(i) for i in np.nonzero(signs[1:] * signs[:-1] < 0)[0]))
+
+
 def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = PseudoArclength(),
                  options: ContinuationOptions = ContinuationOptions(), *,
                  tangent: Float[Array, " n+1"] | None = None,
@@ -259,12 +298,7 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
     `ValueError` (a computed condition, not a `ValidationError`) if `problem.u0` is
     not a solution (residual above 1e3 x the Newton tolerance).
     """
-    z = jnp.concatenate([jnp.asarray(problem.u0, dtype=float),
-                         jnp.atleast_1d(jnp.asarray(problem.value(), dtype=float))])
-    residual = float(jnp.max(jnp.abs(problem(z))))
-    if not residual <= 1e3 * algorithm.newton_tol:
-        raise ValueError(f"problem.u0 is not a solution at the given parameters (residual "
-                         f"{residual:.3g}); solve for it first")
+    z = _first_point(problem, algorithm)
     start = (jnp.zeros(z.size).at[-1].set(float(options.direction)) if tangent is None
              else jnp.asarray(tangent, dtype=float))
     tangent, sign = _tangent(problem, z, start)
@@ -298,20 +332,4 @@ def continuation(problem: ContinuationProblem, algorithm: PseudoArclength = Pseu
             stop = Status.left_parameter_range
             break
     bar.close()
-    # Stacked on the host: on the device every operation would compile for each
-    # number of points.
-    zs, tangents = _stacked(zs), _stacked(tangents)
-    ok = np.asarray(converged)
-    records = jax.tree.map(lambda *xs: jnp.asarray(_stacked(xs)), *records)
-    stable = np.asarray(records.stable)
-    tp = tangents[ok, -1]
-    signs = np.asarray(_stacked(signs))
-    return Branch(
-        p=jnp.asarray(zs[:, -1]), u=jnp.asarray(zs[:, :-1]), tangent=jnp.asarray(tangents),
-        converged=jnp.asarray(ok),
-        records=records if problem.describe is not None else None,
-        stable=jnp.asarray(stable),
-        folds=tuple(int(i) for i in np.nonzero(np.sign(tp[1:]) != np.sign(tp[:-1]))[0]),
-        stability_changes=tuple(int(i) for i in np.nonzero(stable[1:] != stable[:-1])[0]),
-        stop=stop,
-        branch_points=tuple(int(i) for i in np.nonzero(signs[1:] * signs[:-1] < 0)[0]))
+    return _branch(problem, zs, tangents, converged, records, signs, stop)

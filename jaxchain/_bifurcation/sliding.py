@@ -154,6 +154,80 @@ def _predict(stick, trial: float, root: float):
     return (z1 + (st - s1) / (s2 - s1) * (z2 - z1)).at[-1].set(trial)
 
 
+def _checked_start(problem: ContinuationProblem, z_stick,
+                   oscillator: int | None) -> tuple:
+    """`locate_sliding`'s start, checked: (z, n, d_n), the orbit `z_stick` as an
+    array, the oscillator n whose stick phase vanishes (`oscillator`, or the one
+    with the shortest stick phase there) and the duration d_n of that phase.
+    Raises `ValidationError` as `locate_sliding` does."""
+    if not exact_problem(problem):
+        raise ValidationError("locate_sliding needs the ContinuationProblem of exact orbits "
+                              "(cycle_problem with Shooting(Exact().for_orbits()))")
+    z = jnp.asarray(z_stick, dtype=float)
+    d = _phases(problem, z)
+    n = int(np.argmin(np.where(np.isfinite(d), d, np.inf))) if oscillator is None else oscillator
+    if not 0 <= n < d.size or not np.isfinite(d[n]):
+        raise ValidationError(f"z_stick has no stick phase of oscillator {n}")
+    return z, n, d[n]
+
+
+def _sticking_orbits(problem: ContinuationProblem, z, d_n, n: int, seeds) -> list:
+    """The orbits the secant method starts from, as (p, g, orbit), g = d^2 the
+    squared duration of oscillator n's stick phase, the smallest g first: `z`
+    (whose phase lasts `d_n`) and each of `seeds` that has the phase."""
+    stick = [(float(z[-1]), float(d_n) ** 2, z)]  # (p, g, orbit) of orbits that stick
+    for seed in seeds:
+        seed = jnp.asarray(seed, dtype=float)
+        d_seed = _phases(problem, seed)[n]
+        if np.isfinite(d_seed) and d_seed > 0:
+            stick.append((float(seed[-1]), float(d_seed) ** 2, seed))
+    stick.sort(key=lambda q: q[1])
+    return stick
+
+
+def _secant(problem: ContinuationProblem, algorithm: PseudoArclength, stick: list, n: int,
+            held, *, delta: float, xtol: float, max_iterations: int) -> tuple:
+    """The trials of `locate_sliding` (see there) from the orbits `stick`
+    (`_sticking_orbits`), to which each orbit found that sticks is added in
+    place, the smallest g first, each corrected with p held (`held`, the
+    corrector's constraint); (root, change, iterations): the last root of the
+    secant method (NaN if none), its last change (inf if none) and the orbits
+    solved, the first included."""
+    probes = [] if len(stick) > 1 else [stick[0][0] + delta, stick[0][0] - delta]
+    root = _root(stick, np.nan)
+    change, fraction, iterations = np.inf, _FRACTION, 1
+    while iterations < max_iterations:
+        if len(stick) < 2:
+            if not probes:
+                break
+            trial = probes.pop(0)
+        elif not np.isfinite(root):  # g does not fall towards a root from here
+            break
+        else:  # towards the root, never onto it (d = 0 there: a degenerate orbit)
+            (p1, _, _), (p2, _, _) = stick[:2]
+            span = 10 * abs(p1 - p2)
+            trial = p1 + fraction * float(np.clip(root - p1, -span, span))
+        iterations += 1
+        new, ok, _, _ = _correct(problem, algorithm, _predict(stick, trial, root), held)
+        dn = _phases(problem, new)[n] if bool(ok) else np.nan
+        if not (np.isfinite(dn) and dn > 0):  # beyond p*, or another orbit: step shorter
+            fraction /= 2
+            if fraction < _WALL:
+                break
+            continue
+        fraction = _FRACTION
+        stick.append((trial, dn**2, new))
+        stick.sort(key=lambda q: q[1])  # the smallest g first: nearest the root
+        estimate = _root(stick, root)
+        if not np.isfinite(estimate):
+            continue
+        previous, root = root, estimate
+        change = abs(root - previous)
+        if len(stick) > 2 and change < xtol:
+            break
+    return root, change, iterations
+
+
 def locate_sliding(problem: ContinuationProblem, z_stick,
                    algorithm: PseudoArclength = PseudoArclength(), *,
                    oscillator: int | None = None, xtol: float = 1e-9,
@@ -214,54 +288,11 @@ def locate_sliding(problem: ContinuationProblem, z_stick,
     `ValidationError` if `problem.residual` is not an exact shooting residual or
     `z_stick` has no stick phase (of `oscillator`).
     """
-    if not exact_problem(problem):
-        raise ValidationError("locate_sliding needs the ContinuationProblem of exact orbits "
-                              "(cycle_problem with Shooting(Exact().for_orbits()))")
-    z = jnp.asarray(z_stick, dtype=float)
-    d = _phases(problem, z)
-    n = int(np.argmin(np.where(np.isfinite(d), d, np.inf))) if oscillator is None else oscillator
-    if not 0 <= n < d.size or not np.isfinite(d[n]):
-        raise ValidationError(f"z_stick has no stick phase of oscillator {n}")
+    z, n, d_n = _checked_start(problem, z_stick, oscillator)
     held = jnp.zeros(z.size).at[-1].set(1.0)  # the corrector's constraint: p as predicted
-    stick = [(float(z[-1]), float(d[n]) ** 2, z)]  # (p, g, orbit) of orbits that stick
-    for seed in seeds:
-        seed = jnp.asarray(seed, dtype=float)
-        d_seed = _phases(problem, seed)[n]
-        if np.isfinite(d_seed) and d_seed > 0:
-            stick.append((float(seed[-1]), float(d_seed) ** 2, seed))
-    stick.sort(key=lambda q: q[1])
-    probes = [] if len(stick) > 1 else [stick[0][0] + delta, stick[0][0] - delta]
-    root = _root(stick, np.nan)
-    change, fraction, iterations = np.inf, _FRACTION, 1
-    while iterations < max_iterations:
-        if len(stick) < 2:
-            if not probes:
-                break
-            trial = probes.pop(0)
-        elif not np.isfinite(root):  # g does not fall towards a root from here
-            break
-        else:  # towards the root, never onto it (d = 0 there: a degenerate orbit)
-            (p1, _, _), (p2, _, _) = stick[:2]
-            span = 10 * abs(p1 - p2)
-            trial = p1 + fraction * float(np.clip(root - p1, -span, span))
-        iterations += 1
-        new, ok, _, _ = _correct(problem, algorithm, _predict(stick, trial, root), held)
-        dn = _phases(problem, new)[n] if bool(ok) else np.nan
-        if not (np.isfinite(dn) and dn > 0):  # beyond p*, or another orbit: step shorter
-            fraction /= 2
-            if fraction < _WALL:
-                break
-            continue
-        fraction = _FRACTION
-        stick.append((trial, dn**2, new))
-        stick.sort(key=lambda q: q[1])  # the smallest g first: nearest the root
-        estimate = _root(stick, root)
-        if not np.isfinite(estimate):
-            continue
-        previous, root = root, estimate
-        change = abs(root - previous)
-        if len(stick) > 2 and change < xtol:
-            break
+    stick = _sticking_orbits(problem, z, d_n, n, seeds)
+    root, change, iterations = _secant(problem, algorithm, stick, n, held, delta=delta,
+                                       xtol=xtol, max_iterations=max_iterations)
     converged = bool(change < xtol)
     p, g, z = stick[0]
     return SlidingPoint(p=jnp.asarray(root if np.isfinite(root) else p), oscillator=n, z=z,

@@ -314,10 +314,27 @@ def _first_fall(interp, params, modes, t0, t1, y0, y_end, held):
     return jnp.where(fallen, jax.lax.stop_gradient(t), t1), fallen | at_end
 
 
-def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
-    """One step of the loop (see the module docstring). `observe` (traced: the chunk
-    lies in the observed window) adds the turning points and counts the stick time;
-    the observers take only samples in their window, by time."""
+class _Attempt(eqx.Module):
+    """One Runge-Kutta step from the carry's time, before any switch is located:
+    its span [t0, t1], its end (y, work), whether the controller keeps it, the
+    solver's and the controller's states after it, the step size the controller
+    proposes next, the step's dense output, and whether the solver and the
+    controller succeeded."""
+
+    t0: Float[Array, ""]
+    t1: Float[Array, ""]
+    end: tuple
+    keep: Array
+    solver_state: PyTree
+    controller_state: PyTree
+    next_dt: Float[Array, ""]
+    interp: diffrax.AbstractLocalInterpolation
+    solved: Array
+
+
+def _attempt(params: ChainParams, options, t_stop, c: Carry) -> _Attempt:
+    """Item 1 of the loop (see the module docstring): one step of the Runge-Kutta
+    pair from c.t by c.dt, cut at `t_stop`, judged by the PID controller."""
     solver, controller = _solver(options), _controller(options)
     args = (params, c.modes)
     t0 = c.t
@@ -331,62 +348,97 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
     keep, next_t0, next_t1, _, controller_state, controller_result = \
         controller.adapt_step_size(t0, t1, start, end, args, error,
                                    solver.error_order(_term(options)), c.controller_state)
-    interp = solver.interpolation_cls(t0=t0, t1=t1, **dense)
+    return _Attempt(
+        t0=t0, t1=t1, end=end, keep=keep, solver_state=solver_state,
+        controller_state=controller_state, next_dt=next_t1 - next_t0,
+        interp=solver.interpolation_cls(t0=t0, t1=t1, **dense),
+        solved=diffrax.is_okay(solver_result) & diffrax.is_okay(controller_result))
 
-    # the earliest switch within the step: the smallest guard fallen through 0 at
-    # the step's end or at one of its interior points on the dense output (a slip
-    # phase that touches v_rel = 0 and turns back within one step has both ends
-    # positive), the step then ending at the first such point
-    t1, event = _first_fall(interp, params, c.modes, t0, t1, c.y, end[0], options.held)
-    event = keep & event
-    at_end = keep & (t1 >= t_stop)
-    turning = observe & keep & jnp.any((c.modes != 0) & (c.y[1] * end[0][1] < 0))
 
-    def located():
-        """The switch (its time, the state there, the new modes), the turning
-        points before it, and the samples observed."""
-        tau, (y, work) = jax.lax.cond(
-            event, lambda: _switch_point(interp, params, c.modes, t0, t1, options.root_tol,
-                                         options.held),
-            lambda: (t1, end))
-        turn_ts, turn_ys = jax.lax.cond(
-            observe, lambda: _turning_points(interp, c, y, t0, tau),
-            lambda: (jnp.full(c.modes.shape, -jnp.inf),
-                     jnp.broadcast_to(y, c.modes.shape + y.shape)))
-        sample_t = jnp.where((observe & event) | at_end, tau, -jnp.inf)
-        observed = observe_samples(c.observed, jnp.append(turn_ts, sample_t),
-                                   jnp.concatenate([turn_ys, y[None]]), params, options)
-        switched = jax.lax.cond(
-            event, lambda: switch(params, y, c.modes, options.switch_tol, options.held),
-            lambda: (y, c.modes, jnp.full(c.modes.shape, -1), jnp.array(True)))
-        return (tau, y, work, observed) + switched
+def _located(params: ChainParams, options, observe, c: Carry, a: _Attempt, t1, event,
+             at_end) -> tuple:
+    """Items 2 and 3 of the loop on a kept step that ends at `t1` (the first fall
+    of the guard, `_first_fall`), switches (`event`), ends the chunk (`at_end`) or
+    holds a turning point: the switch (its time, the state there, the new modes),
+    the turning points before it, and the samples observed; (tau, y, work,
+    observed) + `switch`'s (y, modes, kind, resolved)."""
+    tau, (y, work) = jax.lax.cond(
+        event, lambda: _switch_point(a.interp, params, c.modes, a.t0, t1, options.root_tol,
+                                     options.held),
+        lambda: (t1, a.end))
+    turn_ts, turn_ys = jax.lax.cond(
+        observe, lambda: _turning_points(a.interp, c, y, a.t0, tau),
+        lambda: (jnp.full(c.modes.shape, -jnp.inf),
+                 jnp.broadcast_to(y, c.modes.shape + y.shape)))
+    sample_t = jnp.where((observe & event) | at_end, tau, -jnp.inf)
+    observed = observe_samples(c.observed, jnp.append(turn_ts, sample_t),
+                               jnp.concatenate([turn_ys, y[None]]), params, options)
+    switched = jax.lax.cond(
+        event, lambda: switch(params, y, c.modes, options.switch_tol, options.held),
+        lambda: (y, c.modes, jnp.full(c.modes.shape, -1), jnp.array(True)))
+    return (tau, y, work, observed) + switched
+
+
+def _events(params: ChainParams, options, observe, t_stop, c: Carry, a: _Attempt) -> tuple:
+    """The step's events: the earliest switch within it (the smallest guard
+    fallen through 0 at the step's end or at one of its interior points on the
+    dense output, `_first_fall`: a slip phase that touches v_rel = 0 and turns
+    back within one step has both ends positive), the step then ending at the
+    first such point; the chunk's end; the turning points. (event, (tau, y,
+    work, observed, y_switched, modes, kind, resolved)), through `_located` where
+    any of them happens and the step's end as it is elsewhere."""
+    t1, event = _first_fall(a.interp, params, c.modes, a.t0, a.t1, c.y, a.end[0], options.held)
+    event = a.keep & event
+    at_end = a.keep & (t1 >= t_stop)
+    turning = observe & a.keep & jnp.any((c.modes != 0) & (c.y[1] * a.end[0][1] < 0))
 
     def plain():
-        return (t1, end[0], end[1], c.observed, end[0], c.modes,
+        return (t1, a.end[0], a.end[1], c.observed, a.end[0], c.modes,
                 jnp.full(c.modes.shape, -1), jnp.array(True))
 
-    tau, y, work, observed, y_switched, modes, kind, resolved = jax.lax.cond(
-        event | at_end | turning, located, plain)
-    ok = keep & diffrax.is_okay(solver_result) & diffrax.is_okay(controller_result)
-    # a rejected step may overflow (the controller then shortens it): only an
-    # accepted state that is not finite ends the run
-    code = jnp.where(diffrax.is_okay(solver_result) & diffrax.is_okay(controller_result),
-                     jnp.where(~keep | jnp.all(jnp.isfinite(y)), Status.ok,
+    return event, jax.lax.cond(
+        event | at_end | turning,
+        lambda: _located(params, options, observe, c, a, t1, event, at_end), plain)
+
+
+def _status(a: _Attempt, y, event, resolved) -> Int[Array, ""]:
+    """The step's status: the solver's or the controller's failure; a kept state
+    that is not finite (a rejected step may overflow: the controller then
+    shortens it); a switch that no guard accounts for, which would repeat forever."""
+    code = jnp.where(a.solved,
+                     jnp.where(~a.keep | jnp.all(jnp.isfinite(y)), Status.ok,
                                Status.non_finite_state),
                      Status.solver_failed)
-    # a switch that no guard accounts for would repeat forever: stop the run
-    code = jnp.where((code == Status.ok) & event & ~resolved, Status.event_not_resolved,
+    return jnp.where((code == Status.ok) & event & ~resolved, Status.event_not_resolved,
                      code)
-    # the switch log, a ring buffer of switch instants: the time and every
-    # oscillator's kind of switch (a row written in place; a scatter of the
-    # switching oscillators into a list costs more than the step)
+
+
+def _logged(c: Carry, options, event, tau, kind) -> tuple:
+    """The switch log after the step, (log_time, log_kind): a ring buffer of switch
+    instants, the time and every oscillator's kind of switch (a row written in
+    place; a scatter of the switching oscillators into a list costs more than the
+    step)."""
     row = c.events % options.log_size
     log_time = jax.lax.dynamic_update_index_in_dim(
         c.log_time, jnp.where(event, tau, c.log_time[row]), row, 0)
     log_kind = jax.lax.dynamic_update_index_in_dim(
         c.log_kind, jnp.where(event, kind, c.log_kind[row]), row, 0)
+    return log_time, log_kind
+
+
+def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
+    """One step of the loop (see the module docstring): the Runge-Kutta step
+    (`_attempt`), its events (`_events`), its status (`_status`) and the switch
+    log (`_logged`). `observe` (traced: the chunk lies in the observed window) adds
+    the turning points and counts the stick time; the observers take only samples
+    in their window, by time."""
+    a = _attempt(params, options, t_stop, c)
+    event, (tau, y, work, observed, y_switched, modes, kind, resolved) = _events(
+        params, options, observe, t_stop, c, a)
+    keep = a.keep
+    log_time, log_kind = _logged(c, options, event, tau, kind)
     return Carry(
-        t=jnp.where(keep, tau, t0),
+        t=jnp.where(keep, tau, a.t0),
         y=jnp.where(event, y_switched, jnp.where(keep, y, c.y)),
         work=jnp.where(keep, work, c.work),
         modes=jnp.where(event, modes, c.modes),
@@ -394,18 +446,18 @@ def _step(params: ChainParams, options, observe, t_stop, c: Carry) -> Carry:
         # step factor): the grid shifts with each switch time, and no more, else a
         # step cut short at a chunk's end would amplify its time's derivative as
         # the steps grow again
-        dt=jax.lax.stop_gradient(next_t1 - next_t0),
-        solver_state=jax.tree.map(lambda a, b: jnp.where(keep, a, b), solver_state,
+        dt=jax.lax.stop_gradient(a.next_dt),
+        solver_state=jax.tree.map(lambda new, old: jnp.where(keep, new, old), a.solver_state,
                                   c.solver_state),
-        controller_state=controller_state,
-        made_jump=event | (c.made_jump & ~ok),
+        controller_state=a.controller_state,
+        made_jump=event | (c.made_jump & ~(keep & a.solved)),
         observed=observed,
-        stick_time=c.stick_time + jnp.where(observe & keep & (c.modes == 0), tau - t0, 0.0),
+        stick_time=c.stick_time + jnp.where(observe & keep & (c.modes == 0), tau - a.t0, 0.0),
         log_time=log_time, log_kind=log_kind,
         events=c.events + event,
         chunk_events=c.chunk_events + event, steps=c.steps + 1,
         chunk_steps=c.chunk_steps + 1,
-        status=jnp.where(c.status == Status.ok, code, c.status),
+        status=jnp.where(c.status == Status.ok, _status(a, y, event, resolved), c.status),
     )
 
 
