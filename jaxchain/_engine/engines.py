@@ -69,6 +69,65 @@ class AbstractEngine(eqx.Module):
                               "the HALC only (Extrema): run other observers with "
                               "engine='smoothed'")
 
+    # --- behaviour the studies ask of an engine ---
+
+    @abc.abstractmethod
+    def describe(self) -> str:
+        """The model this engine integrates, in one line for a result's summary
+        ("the smoothed model, eps = 1e-05")."""
+
+    @abc.abstractmethod
+    def can_observe(self, observers: tuple) -> bool:
+        """Whether `run_observers` runs `observers` (the smoothed engine runs any);
+        where not, the engine observes its `Observables` only."""
+
+    @abc.abstractmethod
+    def with_parameter(self, name: str, value) -> "AbstractEngine":
+        """This engine with its parameter `name` (one of the engine's own, such as
+        the smoothed engine's "eps") at `value`, every other setting kept, its
+        resolved tolerances included (`eqx.tree_at`: a swept value does not
+        recompile).
+
+        **Raises:**
+
+        `ValidationError` in one line where the engine has no such parameter.
+        """
+
+    @abc.abstractmethod
+    def as_smoothed(self, what: str) -> "Smoothed":
+        """This engine as the smoothed one, for `what`, which integrates the smoothed
+        model with its solver, options and eps.
+
+        **Raises:**
+
+        `ValidationError` in one line naming `what` where the engine smooths
+        nothing (the exact one).
+        """
+
+    @abc.abstractmethod
+    def states_at(self, params: ChainParams, y0: State, times) -> tuple:
+        """The states at `times` from `y0`: the flow map that a multiple-shooting
+        window integrates (`identify`). Pure and traceable (no checks, no
+        exceptions), and differentiable in forward mode (`jax.jacfwd`) in `params`,
+        `y0` and the engine's array leaves (the smoothed engine's eps: a new eps
+        does not recompile). At the engine's tolerances and budgets; its horizon
+        (t_end, transient) does not apply.
+
+        **Arguments:**
+
+        - `params`: the chain.
+        - `y0`: the state at t = 0, shape (2, n_osc).
+        - `times`: increasing times from 0, shape (K,), dimensionless (eq. (4)).
+
+        **Returns:**
+
+        (states, ok): the states at `times`, shape (K, 2, n_osc), and whether the
+        integration succeeded (bool, shape ()). The smoothed engine's `max_steps`
+        bounds the whole span (one diffrax solve, `diffrax.ForwardMode`); the exact
+        engine's, each interval between successive `times` (one chunk each,
+        `nonsmooth_flow`).
+        """
+
 
 class Smoothed(AbstractEngine):
     """The smoothed engine: eq. (5) with the friction law's sign(v_rel) smoothed as
@@ -134,6 +193,35 @@ class Smoothed(AbstractEngine):
                 "solver": type(self.solver).__name__,
                 "rtol": self.options.rtol, "atol": self.options.atol}
 
+    # --- behaviour the studies ask of an engine ---
+
+    def describe(self) -> str:
+        return f"the smoothed model, eps = {float(self.eps):g}"
+
+    def can_observe(self, observers: tuple) -> bool:
+        return True
+
+    def with_parameter(self, name: str, value) -> "Smoothed":
+        if name != "eps":
+            raise ValidationError(f"{name}: the smoothed engine's only parameter is eps "
+                                  "(the chain's are fields of ChainParams)")
+        return eqx.tree_at(lambda e: e.eps, self, value)
+
+    def as_smoothed(self, what: str) -> "Smoothed":
+        return self
+
+    def states_at(self, params: ChainParams, y0: State, times) -> tuple:
+        from .smoothed import terms
+        from .solver.controller import step_size_controller
+        from .._physics.model import Model
+
+        sol = diffrax.diffeqsolve(
+            terms(self.solver), self.solver, 0.0, times[-1], None, y0,
+            Model(params, self.eps), saveat=diffrax.SaveAt(ts=times),
+            stepsize_controller=step_size_controller(self.options),
+            adjoint=diffrax.ForwardMode(), max_steps=self.options.max_steps, throw=False)
+        return sol.ys, diffrax.is_successful(sol.result)
+
 
 class Exact(AbstractEngine):
     """The exact engine: the stick/slip switch model of Leine et al. (1998),
@@ -170,6 +258,29 @@ class Exact(AbstractEngine):
         return {"engine": self.name, "solver": self.options.solver,
                 "rtol": self.options.rtol, "atol": self.options.atol,
                 "root_tol": self.options.root_tol}
+
+    # --- behaviour the studies ask of an engine ---
+
+    def describe(self) -> str:
+        return "the exact stick/slip model"
+
+    def can_observe(self, observers: tuple) -> bool:
+        return False
+
+    def with_parameter(self, name: str, value) -> "Exact":
+        raise ValidationError(f"{name}: the exact engine has no {name} (it does not smooth "
+                              f"the friction law); give {name} to a jaxchain.Smoothed engine")
+
+    def as_smoothed(self, what: str) -> "Smoothed":
+        raise ValidationError(f"engine: {what} integrates the smoothed model; the "
+                              f"{self.name} engine has no eps to smooth it with: give "
+                              "engine='smoothed' or a jaxchain.Smoothed")
+
+    def states_at(self, params: ChainParams, y0: State, times) -> tuple:
+        from .exact.solve import nonsmooth_flow
+
+        ys, status = nonsmooth_flow(params, y0, times, self.options)
+        return ys, status == Status.ok
 
 
 #: The engines by name, each with its defaults.
