@@ -83,3 +83,36 @@ def test_the_command_line_refuses_a_bad_record_in_one_line(tmp_path, capsys, hea
     err = capsys.readouterr().err.strip().splitlines()
     assert status == 2 and len(err) == 1, err
     assert says in err[0] and "bad.csv" in err[0], err
+
+
+def test_the_command_lines_eps_builds_the_fitted_engine(tmp_path, capsys):
+    """--eps is the eps of the fit's engine, built before any fit: an eps whose stick
+    band the fit's tolerances (rtol 1e-6) cannot resolve (100 eps = 1e-7) is refused
+    by the engine, exit status 2 and one line naming eps."""
+    t = np.arange(40) * 0.5
+    path = _write(tmp_path / "rig.csv", ["t", "x1", "v_d"],
+                  [[v, np.sin(v), 1.0] for v in t])
+    status = jc.main(["identify", str(path), "--eps", "1e-9", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2 and len(err) == 1, err
+    assert "stick band" in err[0] and "eps = 1e-09" in err[0], err
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_fit_takes_its_model_as_an_engine_value():
+    """`IdentifyOptions.engine` is an engine value; a name gives that engine at the
+    fit's settings (eps 1e-5, rtol 1e-6, atol 1e-8, as docs/identification.md
+    says), and the settings the options held beside it before are refused in one
+    line that says where they go."""
+    smoothed, exact = (jc.IdentifyOptions(engine=name).engine for name in ("smoothed", "exact"))
+    assert smoothed.attributes() == {"engine": "smoothed", "eps": 1e-5, "solver": "Ros34PW2",
+                                     "rtol": 1e-6, "atol": 1e-8}
+    assert isinstance(exact, jc.Exact) and (exact.options.rtol, exact.options.atol) == (
+        1e-6, 1e-8)
+    assert jc.IdentifyOptions().engine.attributes() == smoothed.attributes()
+    for old in ({"eps": 1e-4}, {"rtol": 1e-7}, {"solver": "tsit5"}):
+        with pytest.raises(jc.ValidationError, match="the engine holds them now") as err:
+            jc.IdentifyOptions(**old)
+        assert "\n" not in str(err.value) and "jaxchain.Smoothed(" in str(err.value)
+    with pytest.raises(jc.ValidationError, match="'smoothed', 'exact' or an engine value"):
+        jc.IdentifyOptions(engine="stick")

@@ -103,6 +103,16 @@ def test_energy_balance_and_decay_rate_of_the_damped_linear_oscillator():
     assert internal("linear decay rate")(params) == pytest.approx(-xi, abs=1e-12)
 
 
+def test_the_energy_balance_refuses_the_exact_engine_in_one_line():
+    """The balance is that of the smoothed model at its eps: the exact engine, which
+    smooths nothing, is refused before anything runs, in one line naming the check."""
+    with pytest.raises(jc.ValidationError, match="the energy balance integrates the "
+                                                 "smoothed model; the exact engine") as err:
+        internal("stress energy balance")(jc.ChainParams(n_osc=1), jnp.zeros((2, 1)),
+                                          "exact")
+    assert "\n" not in str(err.value)
+
+
 @pytest.mark.numerics
 def test_existence_limit_with_steep_friction():
     """At v0 = 1e-3 the slip arc's peak is still resolved: the limit agrees with

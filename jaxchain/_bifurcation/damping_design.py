@@ -63,7 +63,7 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
     - `tol`: tolerance on |window - target|.
     - `eps`: the smoothing velocity of the Hopf point (> 0, shape (),
         dimensionless); None (the default) takes that of the problem's limit
-        cycles (its method's engine, `AbstractEngine.smoothing`).
+        cycles (its method's engine, `AbstractEngine.as_smoothed`).
 
     **Returns:**
 
@@ -75,7 +75,7 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
     `RuntimeError` if a fold along the way is lost or the Hopf point is not found.
     """
     check_positive("target", target)
-    eps = (cycle_method(problem).engine.smoothing("smallest_damping") if eps is None
+    eps = (cycle_method(problem).engine.as_smoothed("smallest_damping").eps if eps is None
            else check_eps(eps))
     n = problem.u0.size
     state = {"problem": problem, "solution": fold_solution}

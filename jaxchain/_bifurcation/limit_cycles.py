@@ -46,7 +46,7 @@ def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
     """
     check_positive("offset", offset)
     method = Shooting() if method is None else method
-    eps = method.engine.smoothing("hopf_cycle")
+    eps = method.engine.as_smoothed("hopf_cycle").eps
     hopf = hopf_point(params, eps=eps)
     at_hopf = with_parameter(params, "v_d", hopf.v_d[mode])
     l1 = first_lyapunov_coefficient(at_hopf, mode, eps=eps)

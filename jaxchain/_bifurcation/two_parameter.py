@@ -256,7 +256,7 @@ def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 
     - `options`: steps of the fold curve's continuation.
     - `eps`: the smoothing velocity of the Hopf point (> 0, shape (),
         dimensionless); None (the default) takes that of the problem's limit
-        cycles (its method's engine, `AbstractEngine.smoothing`), so
+        cycles (its method's engine, `AbstractEngine.as_smoothed`), so
         that both edges belong to one smoothed model.
     - `progress`: show tqdm bars.
 
@@ -271,7 +271,7 @@ def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 
     `ValidationError`) if Newton's method does not converge from `fold_solution`.
     """
     values = np.sort(np.asarray(values, dtype=float))
-    eps = (cycle_method(problem).engine.smoothing("boundary_curves") if eps is None
+    eps = (cycle_method(problem).engine.as_smoothed("boundary_curves").eps if eps is None
            else check_eps(eps))
     solutions, derivatives, converged, branches = fold_curve(
         problem, fold_solution, where, values, options=options, progress=progress)

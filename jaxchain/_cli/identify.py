@@ -11,7 +11,7 @@ import numpy as np
 
 from .._physics.params import parameter_names
 from .._physics.record import chain_record
-from .._studies.identification.fit import IdentifyOptions
+from .._studies.identification.fit import FIT_ATOL, FIT_EPS, FIT_RTOL, IdentifyOptions, fit_engine
 from .._studies.identification.unknowns import CHAIN_FITTABLE
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_solver_options,
@@ -22,9 +22,10 @@ HELP = "fit friction and damping to measured stick-slip records"
 DESCRIPTION = f"""\
 Fit the named parameters of the chain and its friction law (--fit) to measured
 records of the rig, one CSV file per belt speed, by least squares through the
-integration of eq. (5) (smoothed friction, eps = {IdentifyOptions().eps:g}; or with
---engine exact the stick/slip switch model itself, differentiated through every
-switch, without the smoothing's bias), and print them with their standard errors.
+integration of eq. (5) (smoothed friction, eps = {FIT_EPS:g} unless --eps says
+otherwise; or with --engine exact the stick/slip switch model itself, differentiated
+through every switch, without the smoothing's bias), and print them with their
+standard errors.
 
 A record has a column t, one column x<n> per measured oscillator (n from 1, as in
 the paper; any subset), optionally v<n> velocity columns, and a constant column v_d
@@ -78,10 +79,13 @@ def add_parser(sub):
     g.add_argument("--n-osc", type=positive_int, default=None, metavar="N",
                    help="number of oscillators (default: the highest measured)")
     add_chain_options(g, mistuning=False)
-    defaults = IdentifyOptions()
-    add_solver_options(p.add_argument_group(
-        "integration of the windows (tighter than a simulation's: the fit needs "
-        "accurate sensitivities)"), rtol=defaults.rtol, atol=defaults.atol)
+    g = p.add_argument_group("integration of the windows (tighter than a simulation's: "
+                             "the fit needs accurate sensitivities)")
+    add_solver_options(g, rtol=FIT_RTOL, atol=FIT_ATOL)
+    g.add_argument("--eps", type=positive_float, default=FIT_EPS,
+                   help=f"the smoothed engine's tanh smoothing velocity of sign(v_rel) "
+                        f"(default {FIT_EPS:g}: a bias of the fit, linear in eps; the "
+                        "exact engine has none)")
     add_output_options(p)
     p.set_defaults(run=run)
     return p
@@ -101,9 +105,14 @@ def _assignments(text: str) -> dict:
 
 
 def run(args) -> None:
-    options, files, held_files = _check_identify(args)
+    files, held_files = _check_identify(args)
     names = _fit_names(files)
     params, records, held_out = _read_records(args, files, held_files)
+    # the engine value, built once from --engine, --eps and the solver options
+    engine = fit_engine(args.engine, solver=args.solver, eps=args.eps, rtol=args.rtol,
+                        atol=args.atol, controller=args.controller,
+                        max_steps=args.max_steps, params=params)
+    options = IdentifyOptions(window=args.window, engine=engine)
     outputs = Outputs(args, data=["identified_chain.toml", *names],
                       figures=["identification_fits", "identified_friction"])
     start = time.perf_counter()
@@ -119,16 +128,12 @@ def run(args) -> None:
         raise RunsFailed("the fit did not converge; its last iterate is written")
 
 
-def _check_identify(args) -> tuple[IdentifyOptions, list, list]:
-    """The fit's options, and the records fitted and held out (for --laws: --held-out,
-    by default the last FILE).
+def _check_identify(args) -> tuple[list, list]:
+    """The records fitted and held out (for --laws: --held-out, by default the last
+    FILE).
 
     **Raises:** `UsageError` when every record is held out, or for --held-out
     without --laws."""
-    options = IdentifyOptions(window=args.window, engine=args.engine, solver=args.solver,
-                              rtol=args.rtol,
-                              atol=args.atol, controller=args.controller,
-                              max_steps=args.max_steps)
     files = list(args.records)
     held_files = []
     if args.laws:
@@ -139,7 +144,7 @@ def _check_identify(args) -> tuple[IdentifyOptions, list, list]:
                              "--held-out names")
     elif args.held_out:
         raise UsageError("--held-out is for --laws")
-    return options, files, held_files
+    return files, held_files
 
 
 def _fit_names(files) -> list[str]:

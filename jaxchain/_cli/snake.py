@@ -165,7 +165,7 @@ def run(args) -> None:
                                out=outputs.path("snake"), progress=show_progress(args),
                                workers=args.workers)
     outputs.figure(plot_snake(found["datasets"], sweep,
-                              title=f"N = {params.n_osc}, {engine.model_text()}: stable solid, "
+                              title=f"N = {params.n_osc}, {engine.describe()}: stable solid, "
                                     "unstable dashed"), "snake")
     s = (found["summary"] | {"wall_time_s": time.perf_counter() - start,
                             "n_osc": params.n_osc, "v_d": float(params.v_d)}

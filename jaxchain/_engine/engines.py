@@ -24,6 +24,7 @@ from .observables import Observables
 from .options import SimulationOptions, check_stick_band, follow_eps
 from .smoothed import run, run_observers
 from .status import Status, failure_hint
+from .solver.controller import step_size_controller
 from .solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._physics.custom_types import State
 from .._physics.forces import DEFAULT_EPS
@@ -84,11 +85,8 @@ class AbstractEngine(eqx.Module):
         shape (), or the states at each of the times `t` (increasing, > 0), shape
         (m, 2, n_osc). Pure and traceable, differentiable in forward mode with
         respect to `params` and `y0` (`jax.jacfwd`: the monodromy matrix); NaN where
-        the run failed. Integrated at the engine's own solver and tolerances."""
-
-    @abc.abstractmethod
-    def model_text(self) -> str:
-        """The engine's model in a few words, for titles and tables."""
+        the run failed. Integrated at the engine's own solver, step-size controller
+        and tolerances."""
 
     @abc.abstractmethod
     def steady_sliding(self, params: ChainParams) -> State:
@@ -126,13 +124,6 @@ class AbstractEngine(eqx.Module):
                                       chunk_length=horizon.chunk_length)
         return eqx.tree_at(lambda e: e.options, self, options)
 
-    def smoothing(self, what: str):
-        """The smoothing velocity eps of the engine's friction law, for `what` (an
-        analysis of the smoothed vector field: the Hopf point's normal form, say).
-        Raises `ValidationError` where the engine does not smooth."""
-        raise ValidationError(f"{what}: the {self.name} engine does not smooth the "
-                              "friction law; use Smoothed(eps=...)")
-
     #: Whether the engine's orbits have exact stick phases (`stick_phases`).
     has_stick_phases: ClassVar[bool] = False
 
@@ -163,6 +154,41 @@ class AbstractEngine(eqx.Module):
         raise ValidationError(f"the {self.name} engine observes amplitudes, energy and "
                               "the HALC only (Extrema): run other observers with "
                               "engine='smoothed'")
+
+    # --- behaviour the studies ask of an engine ---
+
+    @abc.abstractmethod
+    def describe(self) -> str:
+        """The model this engine integrates, in one line for a result's summary
+        ("the smoothed model, eps = 1e-05")."""
+
+    @abc.abstractmethod
+    def can_observe(self, observers: tuple) -> bool:
+        """Whether `run_observers` runs `observers` (the smoothed engine runs any);
+        where not, the engine observes its `Observables` only."""
+
+    @abc.abstractmethod
+    def with_parameter(self, name: str, value) -> "AbstractEngine":
+        """This engine with its parameter `name` (one of the engine's own, such as
+        the smoothed engine's "eps") at `value`, every other setting kept, its
+        resolved tolerances included (`eqx.tree_at`: a swept value does not
+        recompile).
+
+        **Raises:**
+
+        `ValidationError` in one line where the engine has no such parameter.
+        """
+
+    @abc.abstractmethod
+    def as_smoothed(self, what: str) -> "Smoothed":
+        """This engine as the smoothed one, for `what`, which integrates the smoothed
+        model with its solver, options and eps.
+
+        **Raises:**
+
+        `ValidationError` in one line naming `what` where the engine smooths
+        nothing (the exact one).
+        """
 
 
 class Smoothed(AbstractEngine):
@@ -235,8 +261,9 @@ class Smoothed(AbstractEngine):
     orbit_root_finder: ClassVar[str] = "levenberg-marquardt"
 
     def _flow(self, params, y0, t1, saveat):
-        return smoothed_flow(Model(params, self.eps), self.solver, self.options.rtol,
-                             self.options.atol, self.options.max_steps, y0, t1, saveat)
+        return smoothed_flow(Model(params, self.eps), self.solver,
+                             step_size_controller(self.options), self.options.max_steps, y0,
+                             t1, saveat)
 
     def flow(self, params: ChainParams, y0: State, t) -> Array:
         if np.ndim(t) == 0:
@@ -249,29 +276,41 @@ class Smoothed(AbstractEngine):
     def steady_sliding(self, params: ChainParams) -> State:
         return steady_sliding(params, self.eps)
 
-    def smoothing(self, what: str):
-        return self.eps
-
-    def model_text(self) -> str:
-        return f"eps = {float(self.eps):g}"
-
     def simulating(self) -> "Smoothed":
         return Smoothed(eps=self.eps)
 
     def orbit_samples(self, params, y0, period, n_samples):
         # n_samples from 0 to the period, both ends included
-        return smoothed_orbit_samples(Model(params, self.eps), self.solver, self.options.rtol,
-                                      self.options.atol, self.options.max_steps, y0, period,
-                                      n_samples)
+        return smoothed_orbit_samples(Model(params, self.eps), self.solver,
+                                      step_size_controller(self.options),
+                                      self.options.max_steps, y0, period, n_samples)
 
     def on_halc(self, params, ys):
         return sticks(min_slip_speed(ys[:, 1], params.v_d), self.eps)
 
     def for_orbits(self, rtol=None, atol=None) -> "Smoothed":
         default_rtol, default_atol = self.orbit_tolerances
+        # diffrax's PID controller: smooth in the start, as Newton's method wants
         return Smoothed(diffrax.Tsit5(), SimulationOptions(
             rtol=default_rtol if rtol is None else rtol,
-            atol=default_atol if atol is None else atol), self.eps)
+            atol=default_atol if atol is None else atol, controller="diffrax"), self.eps)
+
+    # --- behaviour the studies ask of an engine ---
+
+    def describe(self) -> str:
+        return f"the smoothed model, eps = {float(self.eps):g}"
+
+    def can_observe(self, observers: tuple) -> bool:
+        return True
+
+    def with_parameter(self, name: str, value) -> "Smoothed":
+        if name != "eps":
+            raise ValidationError(f"{name}: the smoothed engine's only parameter is eps "
+                                  "(the chain's are fields of ChainParams)")
+        return eqx.tree_at(lambda e: e.eps, self, value)
+
+    def as_smoothed(self, what: str) -> "Smoothed":
+        return self
 
 
 class Exact(AbstractEngine):
@@ -328,9 +367,6 @@ class Exact(AbstractEngine):
 
     has_stick_phases: ClassVar[bool] = True
 
-    def model_text(self) -> str:
-        return "the exact stick/slip model"
-
     def simulating(self) -> "Exact":
         return Exact()
 
@@ -356,6 +392,23 @@ class Exact(AbstractEngine):
             self.options, solver=REFERENCE_TOLERANCES["solver"], adjoint="forward",
             rtol=default_rtol if rtol is None else rtol,
             atol=default_atol if atol is None else atol, t_end=1.0, transient=0.0))
+
+    # --- behaviour the studies ask of an engine ---
+
+    def describe(self) -> str:
+        return "the exact stick/slip model"
+
+    def can_observe(self, observers: tuple) -> bool:
+        return False
+
+    def with_parameter(self, name: str, value) -> "Exact":
+        raise ValidationError(f"{name}: the exact engine has no {name} (it does not smooth "
+                              f"the friction law); give {name} to a jaxchain.Smoothed engine")
+
+    def as_smoothed(self, what: str) -> "Smoothed":
+        raise ValidationError(f"engine: {what} integrates the smoothed model; the "
+                              f"{self.name} engine has no eps to smooth it with: give "
+                              "engine='smoothed' or a jaxchain.Smoothed")
 
 
 #: The engines by name, each with its defaults.

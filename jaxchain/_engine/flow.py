@@ -14,17 +14,18 @@ from .._physics.custom_types import State
 from .._physics.model import Model, model_field, vector_field
 
 
-def smoothed_flow(model: Model, solver: diffrax.AbstractSolver, rtol, atol, max_steps: int,
+def smoothed_flow(model: Model, solver: diffrax.AbstractSolver,
+                  controller: diffrax.AbstractStepSizeController, max_steps: int,
                   y0: State, t1, saveat: diffrax.SaveAt) -> Array:
     """eq. (5) smoothed as `model` says, from `y0` at t = 0 over [0, t1], saved as
-    `saveat`, by `solver` under diffrax's PID controller at `rtol`, `atol`;
+    `saveat`, by `solver` under the step-size `controller`;
     forward-mode differentiable (`diffrax.ForwardMode`), NaN where the solve
     failed (no host callback: `errors_as_nan`)."""
     with errors_as_nan():  # diffrax's checks of its arguments: no host callback
         sol = diffrax.diffeqsolve(
             terms(solver), solver, 0.0, t1, None, y0, model, saveat=saveat,
             max_steps=max_steps, adjoint=diffrax.ForwardMode(),
-            stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol), throw=False)
+            stepsize_controller=controller, throw=False)
     return jnp.where(sol.result == diffrax.RESULTS.successful, sol.ys, jnp.nan)
 
 
@@ -52,13 +53,13 @@ def _liouville_field(t, z, model: Model):
     return model_field(t, y, model), jacobian_trace(model, y)
 
 
-def smoothed_orbit_samples(model: Model, solver: diffrax.AbstractSolver, rtol, atol,
-                           max_steps: int, y0: State, period, n_samples: int
+def smoothed_orbit_samples(model: Model, solver: diffrax.AbstractSolver,
+                           controller: diffrax.AbstractStepSizeController, max_steps: int, y0: State, period, n_samples: int
                            ) -> tuple[Float[Array, "m 2 n"], Float[Array, ""]]:
     """`n_samples` states over [0, period] (both ends included) from `y0`, and the
     integral of the Jacobian's trace over the period (`jacobian_trace`; the
     logarithm of det M by Liouville's formula), integrated alongside as one more
-    state at the same tolerances. The Jacobian's trace is that of eq. (5) itself, so
+    state under the same controller. The Jacobian's trace is that of eq. (5) itself, so
     the sum runs on `model_field` whatever `solver`'s terms."""
     ts = period * jnp.linspace(0.0, 1.0, n_samples)
     with errors_as_nan():  # as `smoothed_flow`
@@ -66,6 +67,6 @@ def smoothed_orbit_samples(model: Model, solver: diffrax.AbstractSolver, rtol, a
             diffrax.ODETerm(_liouville_field), solver, 0.0, period, None,
             (y0, jnp.zeros(())), model, saveat=diffrax.SaveAt(ts=ts),
             max_steps=max_steps, adjoint=diffrax.ForwardMode(),
-            stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol), throw=False)
+            stepsize_controller=controller, throw=False)
     ys, log_det = sol.ys
     return ys, log_det[-1]

@@ -22,7 +22,6 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import diffrax
-import equinox as eqx
 import jax
 import numpy as np
 from jaxtyping import ArrayLike, Float
@@ -152,9 +151,8 @@ def _plan(params, values, ics, engine, where, batch_size, store, resume, overwri
     check_count("batch_size", batch_size)
     if resume and overwrite:
         raise ValidationError("resume and overwrite exclude each other")
-    if grid.name == "eps" and engine.name != "smoothed":
-        raise ValidationError(f"where='eps': the {engine.name} engine has no eps (the "
-                              "smoothing of the smoothed engine); sweep another parameter")
+    if grid.name in ENGINE_PARAMETERS:  # the engine refuses a parameter it lacks
+        engine.with_parameter(grid.name, grid.values[0])
     if client is not None and store is None:
         raise ValidationError("store: a sweep on a Dask cluster needs a store its workers "
                               "can reach")
@@ -319,8 +317,7 @@ class _Batches:
             parts, order = [], []
             for value in np.unique(values):
                 lanes = np.flatnonzero(values == value)
-                engine = eqx.tree_at(lambda e: getattr(e, self.grid.name), self.engine,
-                                     np.asarray(value))
+                engine = self.engine.with_parameter(self.grid.name, np.asarray(value))
                 parts.append(run_lanes(take_lanes(lane_params, lanes), y0[lanes],
                                        engine=engine, schedule=self.schedule,
                                        block=self.block, progress=progress,

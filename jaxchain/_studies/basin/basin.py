@@ -17,7 +17,7 @@ from jaxtyping import ArrayLike, Float
 
 from ..._physics.record import check_recordable
 from ..._engine.checks import belt_speeds, check_params
-from ..._engine.engines import AbstractEngine, Smoothed, as_engine
+from ..._engine.engines import AbstractEngine, as_engine
 from ..._engine.horizon import AbstractHorizon
 from ..._analysis.classify import classify
 from ..._physics.initial import GivenState
@@ -76,9 +76,9 @@ def _check_run(params, v, states, engine, progress) -> dict:
     n_vd, n = v.size, states.shape[0]
     lanes = lane_params(params, n_vd * n, v_d=np.repeat(v, n))
     y0 = np.tile(np.asarray(states), (n_vd, 1, 1))
-    if isinstance(engine, Smoothed):
-        out = run_lanes(lanes, y0, engine=engine, progress=progress,
-                        observers=(Extrema(), PeakTimes()))
+    observers = (Extrema(), PeakTimes())
+    if engine.can_observe(observers):
+        out = run_lanes(lanes, y0, engine=engine, progress=progress, observers=observers)
     else:
         out = dataclasses.asdict(run_lanes(lanes, y0, engine=engine, progress=progress))
     return {k: np.asarray(out[k]).reshape((n_vd, n) + np.shape(out[k])[1:])

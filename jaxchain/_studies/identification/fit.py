@@ -14,22 +14,75 @@ import optimistix as optx
 
 from ..._engine.compat import checks_as_nan
 from ..._engine.checks import as_solver
+from ..._engine.engines import AbstractEngine, Exact, Smoothed
+from ..._engine.exact.options import NonsmoothOptions
 from ..._engine.options import SimulationOptions
-from ..._engine.solver.controller import CONTROLLERS
 from ..._engine.solver.registry import DEFAULT_SOLVER
 from ..._errors import ValidationError
 from ..._physics.params import ChainParams, parameter_value, with_parameter
 from .records import Record
 from .starts import breakaway_start, local_slopes
 from .unknowns import Unknowns, unknowns_of
-from .windows import (FlowOptions, Windows, column_noise, cut, residuals, window_flow,
-                      with_offsets)
+from .windows import Windows, column_noise, cut, residuals, window_flow, with_offsets
+
+
+#: The fit's smoothing and tolerances by default (`fit_engine`): eps = 1e-5 keeps the
+#: smoothing's bias below 0.5 % (1e-3, the simulations' `DEFAULT_EPS`, biases xi and
+#: v0 by about 3 %); rtol 1e-6, atol 1e-8, tighter than a simulation's, because the
+#: fit needs accurate forward-mode sensitivities (exact only for the discrete
+#: solution): at the simulations' rtol 3e-5 Levenberg-Marquardt stalls far from the
+#: minimum on the test records.
+FIT_EPS, FIT_RTOL, FIT_ATOL = 1e-5, 1e-6, 1e-8
+
+#: The former settings of `IdentifyOptions` that the engine value holds now.
+_MOVED = ("eps", "solver", "rtol", "atol", "controller", "max_steps")
+
+
+def fit_engine(name: str = "smoothed", *, solver=DEFAULT_SOLVER, eps=FIT_EPS,
+               rtol: float = FIT_RTOL, atol: float = FIT_ATOL,
+               controller: str = SimulationOptions().controller,
+               max_steps: int = SimulationOptions().max_steps,
+               params: ChainParams | None = None) -> AbstractEngine:
+    """The engine of a fit named `name`, at the fit's settings: what
+    `IdentifyOptions(engine=name)` and `jaxchain identify --engine` fit.
+
+    **Arguments:**
+
+    - `name`: "smoothed" (`Smoothed`: eq. (5) with tanh(v_rel/eps), by diffrax with
+        `solver` and the step-size `controller`) or "exact" (`Exact`: the stick/slip
+        switch model, event by event, with its own Runge-Kutta pair,
+        `NonsmoothOptions.solver`; `solver`, `controller` and `eps` do not apply).
+    - `eps`: the smoothed model's smoothing velocity (> 0), dimensionless;
+        `FIT_EPS` = 1e-5 by default.
+    - `rtol`, `atol`, `max_steps`: the integration of each window
+        (`AbstractEngine.flow`); `FIT_RTOL`, `FIT_ATOL` by default.
+    - `params`: the chain, for `solver="auto"` (`as_solver`).
+
+    **Returns:**
+
+    An `AbstractEngine`.
+
+    **Raises:**
+
+    `ValidationError` for another name, or a setting the engine refuses.
+    """
+    makers = {
+        "smoothed": lambda: Smoothed(
+            as_solver(solver, params=params, eps=eps),
+            SimulationOptions(rtol=rtol, atol=atol, controller=controller,
+                              max_steps=max_steps), eps),
+        "exact": lambda: Exact(NonsmoothOptions(rtol=rtol, atol=atol, max_steps=max_steps))}
+    if name not in makers:
+        raise ValidationError(f"IdentifyOptions.engine must be 'smoothed', 'exact' or an "
+                              f"engine value (jaxchain.Smoothed, jaxchain.Exact), got "
+                              f"{name!r}")
+    return makers[name]()
 
 
 class IdentifyOptions(eqx.Module):
     """How `identify` fits.
 
-    **Arguments** (static; times dimensionless, eq. (4)):
+    **Arguments** (times dimensionless, eq. (4)):
 
     - `window`: the length of a multiple-shooting window. The default, 10, is
         about one stick-slip period at the paper's parameters: long enough that
@@ -37,23 +90,19 @@ class IdentifyOptions(eqx.Module):
         mu(v) and xi), short enough that the misfit stays smooth in the window's
         initial state (measured in `benchmarks/identification_windows.py` and on
         the documentation page "Identification").
-    - `engine`: the fitted model: "smoothed" (eq. (5) with tanh(v_rel/eps), by
-        diffrax) or "exact" (the stick/slip switch model, event by event, its
-        derivatives through every switch: no smoothing bias, at the cost of
-        locating every event of every window).
-    - `eps`: the smoothing velocity of the smoothed model, tanh(v_rel/eps) (> 0),
-        dimensionless (a fraction of x_0 omega_n): the fit integrates the smoothed
-        vector field at this eps (the chain holds no eps). Records of real
-        stick-slip (or of the exact model) make eps a bias: 1e-5 keeps it below
-        0.5 % (1e-3, the simulations' default `DEFAULT_EPS`, biases xi and v0 by
-        about 3 %). Not read by the exact engine.
-    - `solver`, `controller`: the smoothed model's solver and step-size
-        controller (the exact engine steps with its own Runge-Kutta pair,
-        `NonsmoothOptions.solver`).
-    - `rtol`, `atol`, `max_steps`: the integration of
-        each window, as in `SimulationOptions`, but at rtol 1e-6, atol 1e-8: the
-        fit needs the forward-mode sensitivities, which are exact only for the
-        discrete solution, to be accurate too; at the simulations' rtol 3e-5
+    - `engine`: the fitted model, as an engine value holding everything that shapes
+        the integration of a window (its solver, tolerances, step budget):
+        `Smoothed` (eq. (5) with tanh(v_rel/eps), by diffrax; the fit integrates the
+        smoothed vector field at the engine's eps, an array leaf: a new eps does
+        not recompile, and derivatives with respect to it flow through the fit) or
+        `Exact` (the stick/slip switch model, event by event, its derivatives
+        through every switch: no smoothing bias, at the cost of locating every
+        event of every window). Or a name, "smoothed" (the default) or "exact",
+        for that engine at the fit's settings (eps 1e-5, rtol 1e-6, atol 1e-8). Records of real stick-slip (or of the exact model) make eps a
+        bias: 1e-5 keeps it below 0.5 % (1e-3, the simulations' default
+        `DEFAULT_EPS`, biases xi and v0 by about 3 %). An engine value given
+        without tolerances resolves them from its eps (`follow_eps`); the fit needs
+        them tight (rtol <= 1e-6): at the simulations' rtol 3e-5
         Levenberg-Marquardt stalls far from the minimum on the test records.
     - `tol`: the Levenberg-Marquardt tolerance (optimistix, rtol = atol).
     - `max_iterations`: iteration budget of each stage.
@@ -64,46 +113,50 @@ class IdentifyOptions(eqx.Module):
     - `condition_limit`: the condition number of the parameters' correlation
         matrix above which the fit warns that a direction is poorly determined.
 
-    **Raises:** `ValidationError` naming the field for a value that is not > 0, or
-    for an engine other than "smoothed" and "exact".
+    **Raises:** `ValidationError` naming the field for a value that is not > 0, for
+    an engine name other than "smoothed" and "exact", or for `eps`, `solver`,
+    `rtol`, `atol`, `controller` or `max_steps` given here (the engine holds them);
+    `TypeError` for an engine of another kind.
     """
 
-    window: float = eqx.field(static=True, default=10.0)
-    engine: str = eqx.field(static=True, default="smoothed")
-    eps: float = eqx.field(static=True, default=1e-5)
-    solver: str = eqx.field(static=True, default=DEFAULT_SOLVER)
-    rtol: float = eqx.field(static=True, default=1e-6)
-    atol: float = eqx.field(static=True, default=1e-8)
-    controller: str = eqx.field(static=True, default=SimulationOptions().controller)
-    max_steps: int = eqx.field(static=True, default=SimulationOptions().max_steps)
-    tol: float = eqx.field(static=True, default=1e-6)
-    max_iterations: int = eqx.field(static=True, default=200)
-    weights: tuple = eqx.field(static=True, default=(1.0, 1e3))
-    condition_limit: float = eqx.field(static=True, default=1e6)
+    window: float = eqx.field(static=True)
+    engine: AbstractEngine
+    tol: float = eqx.field(static=True)
+    max_iterations: int = eqx.field(static=True)
+    weights: tuple = eqx.field(static=True)
+    condition_limit: float = eqx.field(static=True)
+
+    def __init__(self, window: float = 10.0, engine: AbstractEngine | str = "smoothed", *,
+                 tol: float = 1e-6, max_iterations: int = 200, weights: tuple = (1.0, 1e3),
+                 condition_limit: float = 1e6, **moved):
+        unknown = sorted(set(moved) - set(_MOVED))
+        if unknown:
+            raise TypeError(f"IdentifyOptions got an unexpected keyword {unknown[0]!r}")
+        if moved:
+            names = ", ".join(sorted(moved))
+            raise ValidationError(
+                f"IdentifyOptions.{names}: the engine holds them now: give "
+                "engine=jaxchain.Smoothed(solver, jaxchain.SimulationOptions(rtol=..., "
+                "atol=...), eps=...) or jaxchain.Exact(jaxchain.NonsmoothOptions(...))")
+        self.window = window
+        self.engine = fit_engine(engine) if isinstance(engine, str) else engine
+        self.tol = tol
+        self.max_iterations = max_iterations
+        self.weights = weights
+        self.condition_limit = condition_limit
 
     def __check_init__(self):
-        for name in ("window", "eps", "rtol", "atol", "max_steps", "tol", "max_iterations",
-                     "condition_limit"):
+        for name in ("window", "tol", "max_iterations", "condition_limit"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and value > 0):
                 raise ValidationError(f"IdentifyOptions.{name} must be a number > 0, got "
                                       f"{value!r}")
-        as_solver(self.solver, "IdentifyOptions.solver")
-        if self.engine not in ("smoothed", "exact"):
-            raise ValidationError(f"IdentifyOptions.engine must be 'smoothed' or 'exact', "
-                                  f"got {self.engine!r}")
-        if self.controller not in CONTROLLERS:
-            raise ValidationError(f"IdentifyOptions.controller must be one of "
-                                  f"{', '.join(CONTROLLERS)}, got {self.controller!r}")
+        if not isinstance(self.engine, AbstractEngine):
+            raise TypeError(f"IdentifyOptions.engine must be 'smoothed', 'exact' or an "
+                            f"engine value, got {type(self.engine).__name__}")
         if not self.weights or any(not w > 0 for w in self.weights):
             raise ValidationError(f"IdentifyOptions.weights must be numbers > 0, got "
                                   f"{self.weights!r}")
-
-    @property
-    def flow(self) -> FlowOptions:
-        return FlowOptions(engine=self.engine, solver=self.solver, rtol=self.rtol,
-                           atol=self.atol,
-                           controller=self.controller, max_steps=self.max_steps)
 
 
 class _Problem(eqx.Module):
@@ -111,11 +164,10 @@ class _Problem(eqx.Module):
     states, the records' sensor offsets)."""
 
     base: ChainParams
-    eps: jnp.ndarray  # the fitted model's smoothing, shape (): traced, not static
+    engine: AbstractEngine  # its array leaves (the smoothed engine's eps) are traced
     unknowns: Unknowns = eqx.field(static=True)
     windows: Windows
     offsets: bool = eqx.field(static=True)
-    flow_options: FlowOptions = eqx.field(static=True)
     frozen: jnp.ndarray  # bool: the parameters held at their start (`held_out_rms`)
 
     def unpack(self, u):
@@ -133,7 +185,7 @@ class _Problem(eqx.Module):
     def flow(self, theta, state, times, v_d):
         """One window: the states at `times` from `state`, at belt speed `v_d`."""
         params = with_parameter(self.unknowns.params(self.base, theta), "v_d", v_d)
-        return _window_flow(params, self.eps, state, times, self.flow_options)
+        return _window_flow(params, state, times, self.engine)
 
     def predictions(self, u):
         """The model at every window's times, offsets included, shape (W, K + 1, 2,
@@ -251,10 +303,11 @@ class Identification:
     **Fields:**
 
     - `chain`: the fitted chain (`ChainParams`: physics only, no smoothing).
-    - `engine`: the fitted model, "smoothed" or "exact" (`IdentifyOptions.engine`).
-    - `eps`: the smoothing velocity of the fitted smoothed model
-        (`IdentifyOptions.eps`), dimensionless: the values are those of the
-        smoothed model at this eps; None for the exact engine.
+    - `engine`: the fitted model, the engine value (`IdentifyOptions.engine`):
+        `Smoothed` with its eps, or `Exact`.
+    - `eps`: the smoothing velocity of the fitted smoothed model (the engine's
+        eps), dimensionless: the values are those of the smoothed model at this
+        eps; None for the exact engine.
     - `labels`: the fitted parameters (a vector parameter gets one label per
         entry), shape (P,).
     - `values`, `standard_errors`: their values and standard errors, shape (P,).
@@ -283,7 +336,7 @@ class Identification:
     """
 
     chain: ChainParams
-    engine: str
+    engine: AbstractEngine
     eps: float | None
     labels: tuple
     values: np.ndarray
@@ -333,7 +386,7 @@ class Identification:
         out = {"parameters": {label: {"value": float(v), "standard_error": float(s)}
                               for label, v, s in zip(self.labels, self.values,
                                                      self.standard_errors)},
-               "correlation": self.correlation.tolist(), "engine": self.engine,
+               "correlation": self.correlation.tolist(), "engine": self.engine.name,
                "eps": self.eps,
                "sigma": self.sigma,
                "rss": self.rss, "n_data": self.n_data, "n_free": self.n_free,
@@ -347,9 +400,7 @@ class Identification:
     def summary(self) -> str:
         """The fitted model (engine, eps) and the fitted parameters with their
         standard errors, as a table."""
-        model = ("the exact stick/slip model" if self.engine == "exact" else
-                 f"the smoothed model, eps = {self.eps:g}")
-        lines = [f"fitted by {model}",
+        lines = [f"fitted by {self.engine.describe()}",
                  f"{'parameter':<12}{'value':>14}{'std. error':>14}{'rel.':>9}"]
         for label, v, s in zip(self.labels, self.values, self.standard_errors):
             rel = f"{abs(s / v):8.2%}" if v else "       -"
@@ -371,8 +422,9 @@ def identify(records: list[Record], chain: ChainParams, fit=("mu_st", "mu_d", "v
 
     Each record is cut into windows of `options.window` (multiple shooting: Bock
     (1983); van Domselaar & Hemker (1975)); each window is integrated by the
-    smoothed model (eq. (5), tanh(v_rel/eps) friction, eps = `options.eps`) from
-    its own fitted initial state (or by the exact switch model, `options.engine`),
+    fitted model, `options.engine` (the smoothed model, eq. (5) with tanh(v_rel/eps)
+    friction at the engine's eps, or the exact switch model) from its own fitted
+    initial state,
     and the residuals are the model minus every
     measured value, plus the jumps between consecutive windows. Levenberg-Marquardt
     (`optimistix.LevenbergMarquardt`, Jacobians by forward-mode autodiff through
@@ -464,10 +516,8 @@ def _problem(records, chain, fit, start, offsets, options, frozen: bool = False
     base = chain
     if not frozen:
         base = _start_chain(records, base, unknowns, start or {})
-    problem = _Problem(base=base, eps=jnp.asarray(options.eps, dtype=float),
-                       unknowns=unknowns, windows=windows,
-                       offsets=offsets, flow_options=options.flow,
-                       frozen=jnp.asarray(frozen))
+    problem = _Problem(base=base, engine=options.engine, unknowns=unknowns,
+                       windows=windows, offsets=offsets, frozen=jnp.asarray(frozen))
     states = _start_states(records, windows, chain.n_osc)
     parts = [unknowns.theta(base), np.ravel(states)]
     if offsets:
@@ -559,8 +609,7 @@ def _result(problem: _Problem, records, chain, answer: _Answer, noise, converged
         off_se = np.concatenate([[0.0], np.sqrt(np.maximum(np.diag(cov_u)[cov_u.shape[0] - k:],
                                                            0.0))])
     return Identification(
-        chain=fitted, engine=options.engine,
-        eps=float(options.eps) if options.engine == "smoothed" else None,
+        chain=fitted, engine=options.engine, eps=options.engine.attributes().get("eps"),
         labels=problem.unknowns.labels,
         values=values, standard_errors=se,
         covariance=cov, correlation=corr, offsets=off, offset_errors=off_se,

@@ -15,8 +15,8 @@ from ..._physics.params import (ChainParams, parameter_lens, parameter_names,
                                 parameter_value, revalidated, with_fields)
 
 #: Fields of `ChainParams` a fit may take: each is >= 0 or > 0 (log-parametrised).
-#: `v_d` is each record's own, and eps is the fit's smoothing (`IdentifyOptions.eps`),
-#: not the rig's.
+#: `v_d` is each record's own, and eps is the fit's smoothing (the eps of the
+#: `Smoothed` engine of `IdentifyOptions.engine`), not the rig's.
 CHAIN_FITTABLE = ("xi", "eta_c", "stiffness", "load", "mass")
 
 #: The value a log-parametrised start of 0 (a viscous term, a damping) is raised
@@ -132,7 +132,7 @@ def unknowns_of(params: ChainParams, fit) -> Unknowns:
         if name in ("v_d", "eps"):
             raise ValidationError(f"fit: {name} cannot be fitted (v_d is each record's "
                                   "belt speed; eps is the smoothing of the model, "
-                                  "IdentifyOptions.eps)")
+                                  "the eps of IdentifyOptions.engine)")
         if name not in allowed or name not in parameter_names(params):
             raise ValidationError(f"fit: unknown parameter {name!r} for the {law.__name__} "
                                   f"law: choose from {', '.join(allowed)}")

@@ -1,5 +1,5 @@
 """Multiple shooting over the records: each record cut into windows, each window
-integrated from its own fitted initial state by the smoothed model, and the
+integrated from its own fitted initial state by the fitted model, and the
 residuals of the fit (misfit to the samples, continuity between windows).
 
 Multiple shooting for parameter estimation in ODEs: Bock (1983), "Recent advances
@@ -10,21 +10,14 @@ van Domselaar & Hemker (1975), Report NW 18/75, Mathematisch Centrum, Amsterdam.
 
 from __future__ import annotations
 
-import diffrax
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
-from ..._engine.checks import as_solver
-from ..._engine.exact.options import NonsmoothOptions
-from ..._engine.exact.solve import nonsmooth_flow
-from ..._engine.smoothed import terms
-from ..._engine.status import Status
-from ..._engine.solver.controller import step_size_controller
+from ..._engine.engines import AbstractEngine
 from ..._checks import check_positive
 from ..._errors import ValidationError
-from ..._physics.model import Model
 from ..._physics.params import ChainParams
 from .records import Record
 
@@ -103,49 +96,25 @@ def cut(records: list[Record], n_osc: int, window: float) -> Windows:
                    start=tuple((r, int(c[0])) for r, c, _ in pieces))
 
 
-class FlowOptions(eqx.Module):
-    """How a window is integrated: by the `engine` ("smoothed" or "exact"); the
-    smoothed one with the solver (a name of `SOLVERS`) and the step-size controller
-    (of `CONTROLLERS`), both at `rtol`, `atol` and the step budget, as in
-    `SimulationOptions`; forward-mode differentiable (`diffrax.ForwardMode`) for
-    the Jacobian of the fit."""
-
-    engine: str = eqx.field(static=True)
-    solver: str = eqx.field(static=True)
-    rtol: float = eqx.field(static=True)
-    atol: float = eqx.field(static=True)
-    controller: str = eqx.field(static=True)
-    max_steps: int = eqx.field(static=True)
-
-
-def window_flow(params: ChainParams, eps, y0, times, options: FlowOptions):
+def window_flow(params: ChainParams, y0, times, engine: AbstractEngine):
     """The model's states at `times` (from 0) from `y0`, shape (len(times), 2,
-    n_osc); NaN where the integration failed. The smoothed model (eq. (5) with
-    tanh(v_rel/eps)) by diffrax, or the exact stick/slip switch model event by
-    event (`nonsmooth_flow`, the exact engine's Runge-Kutta pair at the same
-    tolerances), whose derivatives cross every switch (the event times by the
-    implicit function theorem).
+    n_osc); NaN where the integration failed. Integrated by the `engine`
+    (`AbstractEngine.flow`): the smoothed model (eq. (5) with tanh(v_rel/eps))
+    by diffrax in forward mode, or the exact stick/slip switch model event by event,
+    whose derivatives cross every switch (the event times by the implicit function
+    theorem).
 
     **Arguments:**
 
     - `params`: the chain.
-    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
-        dimensionless (`IdentifyOptions.eps`); traced, so that derivatives with
-        respect to it flow through the integration. Not read by the exact engine.
     - `y0`: the state at t = 0, shape (2, n_osc).
     - `times`: increasing times from 0, shape (K,).
-    - `options`: `FlowOptions`.
+    - `engine`: the fitted model (`IdentifyOptions.engine`), with its solver,
+        tolerances and step budget; its array leaves (the smoothed engine's eps)
+        are traced, so that a new eps does not recompile and derivatives with
+        respect to it flow through the integration.
     """
-    if options.engine == "exact":
-        ys, status = nonsmooth_flow(params, y0, times, NonsmoothOptions(
-            rtol=options.rtol, atol=options.atol, max_steps=options.max_steps))
-        return jnp.where(status == Status.ok, ys, jnp.nan)
-    solver = as_solver(options.solver)
-    sol = diffrax.diffeqsolve(
-        terms(solver), solver, 0.0, times[-1], None, y0, Model(params, eps),
-        saveat=diffrax.SaveAt(ts=times), stepsize_controller=step_size_controller(options),
-        adjoint=diffrax.ForwardMode(), max_steps=options.max_steps, throw=False)
-    return jnp.where(diffrax.is_successful(sol.result), sol.ys, jnp.nan)
+    return engine.flow(params, y0, times)
 
 
 def with_offsets(ys, windows: Windows, offsets):

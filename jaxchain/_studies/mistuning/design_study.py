@@ -84,7 +84,7 @@ def _fold_by_simulation(problem, solution, delta: np.ndarray, site: int, *,
     u, w = np.asarray(solution[: 2 * n + 1]), np.asarray(solution[2 * n + 2:])
     chain = _ring_like(problem.params, n, 1.0 + np.roll(np.asarray(delta), centre - site))
     below, above = (with_parameter(chain, "v_d", fold + s * offset) for s in (-1, 1))
-    eps = method.engine.smoothing("the design's check by simulation")
+    eps = method.engine.as_smoothed("the design's check by simulation").eps
     engine = Smoothed(diffrax.Tsit5(), options, eps)
     out = {"fold": fold, "offset": offset, "persists_below": None}
     for scale in (0.01, 0.03, 0.1):

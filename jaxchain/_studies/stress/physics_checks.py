@@ -20,7 +20,6 @@ from ..._bifurcation.existence import stick_slip_existence_limit
 from ..._engine.observers.base import AbstractObserver
 from ..._engine.smoothed import SPLIT_SOLVERS, integrate
 from ..._engine.status import Status
-from ..._errors import ValidationError
 
 #: Largest |E(t_end) - E(0) - W| allowed, relative to the energy that went through
 #: the ring (E(0) + E(t_end) + the integral of |power|): 100 rtol. The local error
@@ -154,12 +153,7 @@ def _smoothed(engine: AbstractEngine | str, what: str) -> Smoothed:
 
     `ValidationError` for the exact engine, in one line naming `what`.
     """
-    engine = as_engine(engine)
-    if not isinstance(engine, Smoothed):
-        raise ValidationError(f"engine: {what} integrates the smoothed model; the "
-                              f"{engine.name} engine has no eps to smooth it with: give "
-                              "engine='smoothed' or a jaxchain.Smoothed")
-    return engine
+    return as_engine(engine).as_smoothed(what)
 
 
 def balance_run(params, y0, engine: AbstractEngine | str = "smoothed") -> dict:
