@@ -22,7 +22,6 @@ chromium`) or the system's (Debian's `chromium` package; found on PATH, or named
 import argparse
 import functools
 import http.server
-import re
 import shutil
 import sys
 import threading
@@ -48,13 +47,15 @@ PAGE_CHECK = """([rawTex, progress, isNotebook]) => {
   for (let node; (node = walker.nextNode());) {
     if (node.parentElement.closest("pre, code, script, style, math, .jp-OutputArea")) continue;
     const m = node.textContent.match(tex);
-    if (m) problems.push(`raw TeX ${JSON.stringify(m[0])} in "${node.textContent.trim().slice(0, 80)}"`);
+    const text = node.textContent.trim().slice(0, 80);
+    if (m) problems.push(`raw TeX ${JSON.stringify(m[0])} in "${text}"`);
   }
   // formulas: MathML elements that the browser laid out
   const maths = [...article.querySelectorAll("math")];
   for (const m of maths) {
     const r = m.getBoundingClientRect();
-    if (!(r.width > 0 && r.height > 0)) problems.push(`formula not laid out: ${m.textContent.slice(0, 60)}`);
+    if (!(r.width > 0 && r.height > 0))
+      problems.push(`formula not laid out: ${m.textContent.slice(0, 60)}`);
   }
   // wide blocks: each one wider than its box scrolls, and none passes the column
   let wide = 0;
@@ -68,14 +69,16 @@ PAGE_CHECK = """([rawTex, progress, isNotebook]) => {
       if (scrolls) wide += 1;
       else if (!el.parentElement.closest("pre, .md-typeset__table, math"))
         problems.push(`cut off: <${el.tagName.toLowerCase()} class="${el.className}"> ` +
-                      `${el.scrollWidth}px of content in ${el.clientWidth}px, overflow-x ${style.overflowX}`);
+                      `${el.scrollWidth}px of content in ${el.clientWidth}px, ` +
+                      `overflow-x ${style.overflowX}`);
     }
     let scroller = el.parentElement;
     while (scroller && scroller !== article &&
-           !["auto", "scroll"].includes(getComputedStyle(scroller).overflowX)) scroller = scroller.parentElement;
+           !["auto", "scroll"].includes(getComputedStyle(scroller).overflowX))
+      scroller = scroller.parentElement;
     if (r.right > column.right + 1 && (!scroller || scroller === article))
-      problems.push(`past the column: <${el.tagName.toLowerCase()}> ends at ${Math.round(r.right)}px, ` +
-                    `the column at ${Math.round(column.right)}px`);
+      problems.push(`past the column: <${el.tagName.toLowerCase()}> ends at ` +
+                    `${Math.round(r.right)}px, the column at ${Math.round(column.right)}px`);
   }
   // the page itself: nothing pushes it wider than the window
   if (document.documentElement.scrollWidth > window.innerWidth + 1)

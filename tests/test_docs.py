@@ -111,7 +111,7 @@ def test_the_file_the_docs_say_holds_the_public_names_holds_them():
         assert sorted(set(jc.__all__) - bound) == [], f"{pages} say {path} holds them"
 
 
-#: What arithmatex (the extension of mkdocs.yml that hands formulas to MathJax) takes
+#: What arithmatex (the extension of mkdocs.yml that marks formulas for docs/hooks.py) takes
 #: for a formula: a dollar sign ($...$, $$...$$), \(...\), \[...\] or a TeX command
 #: such as \frac or \begin.
 TEX = re.compile(r"\$|\\[A-Za-z(\[]")
