@@ -6,7 +6,7 @@ the machine that ran it.
 
     python docs/execute_notebooks.py [NAME ...]
     python docs/execute_notebooks.py --compact   (the stored copies' figures and
-                                                  progress bars only, no run)
+                                                  printed outputs only, no run)
 """
 
 import base64
@@ -51,11 +51,19 @@ def _redraw(line: str) -> str:
     return shown.rstrip()
 
 
+#: A line of a text progress bar (tqdm's: "sweep: 100%|####| 420/420 [01:44<00:00,
+#: 4.04trajectory/s]", or "12it [00:01, 8.00it/s]" without a total): a terminal's
+#: display, which a page shows as raw text.
+PROGRESS = re.compile(r"\d+%\|[^\n]*\|[^\n]*\[[\d:]+"
+                      r"|\[\d+:\d\d(?::\d\d)?(?:<[\d:?]+)?, *[\d.?]+ ?[^\]\n/]*/[^\]\n]*\]")
+
+
 def compact_streams(nb) -> None:
-    """Join each run of printed outputs of a cell (stdout or stderr) into one, and
-    keep of a progress bar what a terminal would show at the end: its last state, or
-    nothing for a bar that erased itself. Without this, each redraw of a bar is an
-    output of its own, and the documentation shows them all."""
+    """Join each run of printed outputs of a cell (stdout or stderr) into one, keep of
+    each line what a terminal would show at the end (the last state of a line redrawn
+    by carriage returns), and drop the lines of progress bars (`PROGRESS`): the run's
+    display, not its result. Without this, each redraw of a bar is an output of its
+    own, and the documentation shows them all as raw text."""
     for cell in nb.cells:
         joined = []
         for output in cell.get("outputs", []):
@@ -68,8 +76,8 @@ def compact_streams(nb) -> None:
         for output in joined:
             if output.get("output_type") == "stream":
                 lines = output["text"].split("\n")
-                output["text"] = "\n".join(_redraw(line) for line in lines
-                                            if "\r" not in line or _redraw(line))
+                shown = (_redraw(line) for line in lines if "\r" not in line or _redraw(line))
+                output["text"] = "\n".join(line for line in shown if not PROGRESS.search(line))
         if "outputs" in cell:
             cell["outputs"] = [o for o in joined if o.get("output_type") != "stream"
                                or o["text"].strip()]

@@ -2,8 +2,10 @@
 name has an entry in the API reference, the README's layout lists the package's
 folders, every file of the repository that the documentation names is there, the
 executed notebooks of the documentation hold the code of the notebooks in examples/
-and show no path of the machine that ran them, and the home page reads without
-MathJax (which comes from a CDN)."""
+and show no path of the machine that ran them and no progress bar, the home page
+reads without a math renderer, the site loads nothing from the network (formulas are
+MathML made at build time, docs/hooks.py), and the task index ("How do I ...")
+is linked from the home page and names only public names and existing commands."""
 
 import ast
 import re
@@ -109,7 +111,7 @@ def test_the_file_the_docs_say_holds_the_public_names_holds_them():
         assert sorted(set(jc.__all__) - bound) == [], f"{pages} say {path} holds them"
 
 
-#: What arithmatex (the extension of mkdocs.yml that hands formulas to MathJax) takes
+#: What arithmatex (the extension of mkdocs.yml that marks formulas for docs/hooks.py) takes
 #: for a formula: a dollar sign ($...$, $$...$$), \(...\), \[...\] or a TeX command
 #: such as \frac or \begin.
 TEX = re.compile(r"\$|\\[A-Za-z(\[]")
@@ -123,10 +125,11 @@ def _prose(markdown: str) -> str:
 
 
 def test_the_home_page_reads_without_mathjax():
-    """MathJax comes from a CDN: a formula left to it is raw TeX to a reader offline.
-    The home page's formulas are text and HTML, so that arithmatex finds none: no
-    dollar sign and no TeX command outside code. Read from the page's source, so
-    that the README's test command, which installs no documentation tools, runs it."""
+    """The home page's formulas are text and HTML, so that arithmatex finds none: no
+    dollar sign and no TeX command outside code, and the page reads the same wherever
+    its Markdown is shown (the repository's own view of docs/index.md renders no TeX).
+    Read from the page's source, so that the README's test command, which installs
+    no documentation tools, runs it."""
     prose = _prose((ROOT / "docs" / "index.md").read_text())
     assert TEX.findall(prose) == []
     # the check sees a formula where one is, and none in code
@@ -170,6 +173,77 @@ def test_stored_outputs_show_a_progress_bar_once(path):
     compact_streams), not every state of the bar one under the other."""
     for i, text in _output_texts(nbformat.read(path, as_version=4)):
         assert "\r" not in text, f"{path.name}, cell {i}: {text[:300]!r}"
+
+
+#: What a text progress bar (tqdm's) leaves in an output: "100%|" before its bar, a
+#: rate such as "4.04trajectory/s]" or "2.96s/it]" at its end.
+PROGRESS_TEXT = re.compile(r"\d%\||\d(?:[A-Za-z]+/s|s/[A-Za-z]+)\]")
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_stored_outputs_show_no_progress_bar(path):
+    """A page shows a stored progress bar as raw text (its bar, counts and rate):
+    docs/execute_notebooks.py drops the bars' lines when it stores a run."""
+    for i, text in _output_texts(nbformat.read(path, as_version=4)):
+        for line in text.splitlines():
+            assert not PROGRESS_TEXT.search(line), f"{path.name}, cell {i}: {line!r}"
+    # the check sees the bars of the two notebooks that showed them, and no table
+    assert PROGRESS_TEXT.search("sweep: 100%|##########| 420/420 [01:44<00:00,  4.04trajectory/s]")
+    assert PROGRESS_TEXT.search("simulation check: 5/5 [00:14<00:00,  2.96s/it]")
+    assert not PROGRESS_TEXT.search("v_d = 1.300:  2 distinct states, n_HALC in [1, 20]")
+    assert not PROGRESS_TEXT.search("belt speed 0.1 [m/s], 50% | 50%")
+
+
+MKDOCS = (ROOT / "mkdocs.yml").read_text()
+
+
+def test_the_site_loads_nothing_from_the_network():
+    """An offline reader sees the whole site: no script or style sheet from a URL
+    (formulas are rendered to MathML at build time by docs/hooks.py, not by MathJax
+    from a CDN) and no web font (`theme.font: false`)."""
+    import yaml
+
+    config = yaml.safe_load(MKDOCS)
+    assets = [*config.get("extra_javascript", []), *config.get("extra_css", [])]
+    assert [a for a in assets if "://" in str(a) or str(a).startswith("//")] == []
+    for asset in assets:
+        assert (ROOT / "docs" / asset).is_file(), asset
+    assert config["theme"].get("font") is False
+    assert "docs/hooks.py" in config["hooks"]
+    assert "def on_page_content" in (ROOT / "docs" / "hooks.py").read_text()
+
+
+TASKS = (ROOT / "docs" / "tasks.md").read_text()
+
+
+def test_the_task_index_is_linked_from_the_home_page_and_near_the_top_of_the_nav():
+    assert "(tasks.md)" in (ROOT / "docs" / "index.md").read_text()
+    nav = [line.strip() for line in MKDOCS.split("\nnav:", 1)[1].splitlines() if line.strip()]
+    assert any(line.endswith(": tasks.md") for line in nav[:4]), nav[:4]
+
+
+def test_the_task_index_names_public_names_and_existing_commands(capsys):
+    """Each `jc.NAME` of the task index is a public name (its attribute too, as in
+    `jc.Graph.lattice`), each `jaxchain COMMAND` a command (`jaxchain COMMAND --help`
+    exits 0; for one that does not exist, 2), and it has twenty tasks, each with a
+    Python or shell example."""
+    names = re.findall(r"\bjc\.(\w+(?:\.\w+)?)", TASKS)
+    assert len(set(names)) >= 40
+    for name in set(names):
+        head, _, attr = name.partition(".")
+        assert head in jc.__all__, name
+        if attr and head[0].isupper():
+            assert hasattr(getattr(jc, head), attr), name
+    commands = set(re.findall(r"(?<!import )\bjaxchain ([a-z][\w-]*)", TASKS))
+    assert len(commands) >= 10
+    for command, status in [*((c, 0) for c in sorted(commands)), ("no-such-command", 2)]:
+        with pytest.raises(SystemExit) as exc:
+            jc.main([command, "--help"])
+        assert exc.value.code == status, command
+    capsys.readouterr()
+    sections = TASKS.split("\n## ")[1:]
+    assert len(sections) == 20
+    assert all("```python" in s or "```bash" in s for s in sections)
 
 
 @pytest.mark.parametrize("name", sorted(p.name for p in (ROOT / "examples").glob("*.ipynb")))
