@@ -102,13 +102,14 @@ def run(args) -> None:
     options = simulation_options(args, t_end=t_end, transient=transient)
     params = chain_params(args, n_osc)
     n_osc = params.n_osc
+    engine = engine_of(args, options, params)
     outputs = Outputs(args, data=["basin.zarr", "basin.nc"], figures=["basin", "basin_halc"])
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
     start = time.perf_counter()
     with cluster_client(args) as client:
         ds = basin_stability(params, v_d, samples, box, args.sample_seed,
-                             engine=engine_of(args, options, params), n_check=args.check,
+                             engine=engine, n_check=args.check,
                              store=outputs.path("basin.zarr"),
                              resume=args.resume or outputs.again,
                              overwrite=args.overwrite, client=client,
@@ -122,7 +123,7 @@ def run(args) -> None:
     if args.json:
         print_json({
             "v_d": ds["v_d"].values.tolist(), "classes": classes,
-            **engine_record(args),
+            **engine_record(engine),
             "chain": chain_record(params),
             "counts": ds["counts"].values.tolist(),
             "fractions": ds["fraction"].values.tolist(),

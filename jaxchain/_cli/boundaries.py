@@ -81,8 +81,12 @@ def run(args) -> None:
             raise UsageError(f"--{name.replace('_', '-')}: give positive numbers, got {values}")
     if min(args.ratio_values) <= 1:
         raise UsageError("--ratio-values: mu_st/mu_d must be > 1 for a Hopf point")
-    if args.engine == "exact":
-        return _run_exact(args, params)
+    _RUNS[args.engine](args, params)
+
+
+def _run_smoothed(args, params) -> None:
+    """--engine smoothed: the Hopf point, the fold, their curves and the design of
+    the smoothed model (`bistable_range`), with the simulation dots of Fig. 3(a)."""
     outputs = Outputs(args, data=["boundaries.json"],
                       figures=["bifurcation_single", "bistable_region"])
     progress = show_progress(args)
@@ -136,6 +140,11 @@ def _run_exact(args, params) -> None:
     if missing:
         raise RunsFailed(f"the grazing point was not found at {missing} points of the "
                          f"two-parameter curves (null in {outputs.path('boundaries.json')})")
+
+
+#: The study of each --engine: the fold of limit cycles ends the smoothed model's
+#: stick-slip cycle, the grazing point the exact model's.
+_RUNS = {"smoothed": _run_smoothed, "exact": _run_exact}
 
 
 def _curves(s: dict):

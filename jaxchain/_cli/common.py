@@ -249,31 +249,35 @@ def engine_of(args, options: SimulationOptions, params: ChainParams | None = Non
     --eps, the smoothed engine's; "auto" resolved with `params`) and `options` (the
     exact engine takes their horizon, and its own tolerances unless --rtol or
     --atol was typed)."""
-    if getattr(args, "engine", "smoothed") == "exact":
-        engine = as_engine("exact", options=options)
-        # --rtol, --atol typed on the command line set the exact engine's tolerances
-        # too; their defaults are the smoothed engine's
-        given = {name: getattr(args, name) for name in getattr(args, "typed_tolerances", ())}
-        return dataclasses.replace(engine, options=dataclasses.replace(engine.options, **given))
+    return _ENGINE_OF[getattr(args, "engine", "smoothed")](args, options, params)
+
+
+def _smoothed_of(args, options: SimulationOptions, params: ChainParams | None):
     return as_engine("smoothed", args.solver, options, params, eps=args.eps)
 
 
-def engine_record(args) -> dict:
-    """The engine of a command for its JSON: its name, with eps and the solver for
-    the smoothed one, the tolerances for the exact one."""
-    if args.engine == "smoothed":
-        return {"engine": "smoothed", "eps": args.eps, "solver": args.solver}
-    if hasattr(args, "rtol"):
-        options = engine_of(args, SimulationOptions()).options
-        return {"engine": args.engine, "rtol": options.rtol, "atol": options.atol}
-    return {"engine": args.engine}
+def _exact_of(args, options: SimulationOptions, params: ChainParams | None):
+    engine = as_engine("exact", options=options)
+    # --rtol, --atol typed on the command line set the exact engine's tolerances
+    # too; their defaults are the smoothed engine's
+    given = {name: getattr(args, name) for name in getattr(args, "typed_tolerances", ())}
+    return dataclasses.replace(engine, options=dataclasses.replace(engine.options, **given))
 
 
-def engine_text(args) -> str:
-    """The engine of a command for its table's heading."""
-    if args.engine == "smoothed":
-        return f"eps = {args.eps:g}, {args.solver}"
-    return "exact stick/slip engine"
+#: The engine of each --engine name, from the command's options.
+_ENGINE_OF = {"smoothed": _smoothed_of, "exact": _exact_of}
+
+
+def engine_record(engine: AbstractEngine) -> dict:
+    """The engine of a command for its JSON: its name and every setting that shapes
+    its results (`AbstractEngine.attributes`)."""
+    return engine.attributes()
+
+
+def engine_text(engine: AbstractEngine) -> str:
+    """The engine of a command for its table's heading: its model and solver."""
+    solver = engine.attributes()["solver"]
+    return f"{engine.describe()}, {solver}"
 
 
 def smoothed_only(args, what: str) -> None:
@@ -283,7 +287,7 @@ def smoothed_only(args, what: str) -> None:
     **Raises:**
 
     `UsageError` when --engine is exact."""
-    if getattr(args, "engine", "smoothed") != "smoothed":
+    if not ENGINES[getattr(args, "engine", "smoothed")].smooths:
         raise UsageError(f"--engine {args.engine}: {what}; run it with --engine smoothed")
 
 

@@ -132,7 +132,7 @@ def run(args) -> None:
     }
     if args.json:
         print_json({
-            "cases": rows, **summary, "chain": chain_record(params), **engine_record(args),
+            "cases": rows, **summary, "chain": chain_record(params), **engine_record(engine),
             "scheduler": args.scheduler,
             "rtol": engine.options.rtol, "reference_rtol": args.ref_rtol, "wall_time_s": wall,
             f"{s}_wall_time_s": ds.attrs[f"wall_time_s_{s}"],
@@ -140,7 +140,7 @@ def run(args) -> None:
                     "n_HALC), not as time series",
         }, outputs)
     else:
-        print(f"{s} ({engine_text(args)}, rtol {engine.options.rtol:g}) against "
+        print(f"{s} ({engine_text(engine)}, rtol {engine.options.rtol:g}) against "
               f"the non-smooth reference, N = {args.n_osc}, window "
               f"[{args.transient:g}, {args.t_end:g}]")
         print(f"{'v_d':>5} {'ic':>10} {'n_HALC s/r':>10} {'A err %':>8} {'E err %':>8}"

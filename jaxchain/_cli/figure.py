@@ -116,8 +116,8 @@ def run(args) -> None:
     start = time.perf_counter()
     for v_d, stem in zip(speeds, stems):
         params = chain_params(args, size["n_osc"], v_d=v_d)
-        ds, fig = _scene(args.name, size, params, engine_of(args, options, params),
-                         show_progress(args))
+        engine = engine_of(args, options, params)
+        ds, fig = _scene(args.name, size, params, engine, show_progress(args))
         ds.attrs |= {"figure": args.name, "quick": int(args.quick)}
         outputs.dataset(ds, f"{stem}.nc")
         outputs.figure(fig, stem)
@@ -139,13 +139,13 @@ def run(args) -> None:
     wall = time.perf_counter() - start
     if args.json:
         print_json({"figure": args.name, "runs": reports, "ics": ics,
-                    "n_osc": params.n_osc, "chain": chain_record(params), **engine_record(args),
+                    "n_osc": params.n_osc, "chain": chain_record(params), **engine_record(engine),
                     "quick": args.quick, "wall_time_s": wall},
                    outputs)
     else:
         for report in reports:
             print(f"Fig. {args.name}{' (quick)' if args.quick else ''}: "
-                  f"v_d = {report['v_d']:g}, N = {params.n_osc}, {engine_text(args)}, "
+                  f"v_d = {report['v_d']:g}, N = {params.n_osc}, {engine_text(engine)}, "
                   f"ics = {ics}")
             if args.name in CLASSIFIED:
                 print(f"{'excited':>7} {'n_HALC':>6} {'class':>10} {'delays':>9} "

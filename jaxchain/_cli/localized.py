@@ -49,14 +49,14 @@ def run(args) -> None:
     prefetch(*RESULT_MODULES)
     params = chain_params(args, args.n_osc, v_d=args.vd[0])
     args.vd = speeds_of_chain(args, params)
-    options = simulation_options(args)
+    engine = engine_of(args, simulation_options(args), params)
     stems = [f"localized_vd{v:g}" for v in args.vd]
     outputs = Outputs(args, data=[f"{stem}.nc" for stem in stems], figures=stems)
     ics = localized_family(params.n_osc, args.ics, params.graph)
     n_excited = np.arange(1, params.n_osc + 1)
 
     start = time.perf_counter()
-    ds = ensemble(params, args.vd, ics, engine=engine_of(args, options, params),
+    ds = ensemble(params, args.vd, ics, engine=engine,
                   progress=show_progress(args))
     wall = time.perf_counter() - start
 
@@ -78,12 +78,12 @@ def run(args) -> None:
                      "num_steps": row["num_steps"].values.tolist()})
         status += rows[-1]["status"]
     if args.json:
-        print_json({"runs": rows, "wall_time_s": wall, **engine_record(args),
+        print_json({"runs": rows, "wall_time_s": wall, **engine_record(engine),
                     "ics": args.ics, "chain": chain_record(params)}, outputs)
     else:
         for r in rows:
             print(f"v_d = {r['v_d']:g}, N = {params.n_osc}, {params.boundary}, "
-                  f"{engine_text(args)}, ics = {args.ics}")
+                  f"{engine_text(engine)}, ics = {args.ics}")
             print(f"{'n_excited':>9} {'n_HALC':>6} {'E':>9} {'E/n_HALC':>8}  status")
             for k, nh, e, s in zip(n_excited, r["n_halc"], r["energy"], r["status"]):
                 ratio = f"{e / nh:8.3f}" if nh > 0 else f"{'-':>8}"

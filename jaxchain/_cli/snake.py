@@ -169,7 +169,7 @@ def run(args) -> None:
                                     "unstable dashed"), "snake")
     s = (found["summary"] | {"wall_time_s": time.perf_counter() - start,
                             "n_osc": params.n_osc, "v_d": float(params.v_d)}
-         | engine_record(args))
+         | engine_record(engine))
     report(s, outputs, "snake.json", args.json, _print_summary, s["wall_time_s"])
     disagree = [c for b in s["branches"] for c in b.get("simulation_check", [])
                 if c["agrees"] is False]

@@ -85,7 +85,7 @@ def add_parser(sub):
 
 def run(args) -> None:
     params = chain_params(args, args.n_osc)
-    options = simulation_options(args)
+    engine = engine_of(args, simulation_options(args), params)
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
     outputs = Outputs(args, data=["sweep.zarr"], figures=["sweep"])
@@ -94,7 +94,7 @@ def run(args) -> None:
 
     start = time.perf_counter()
     with cluster_client(args) as client:
-        ds = sweep(params, args.vd, ics, engine=engine_of(args, options, params),
+        ds = sweep(params, args.vd, ics, engine=engine,
                    batch_size=args.batch_size, store=store, resume=args.resume or outputs.again,
                    overwrite=args.overwrite, client=client,
                    progress=show_progress(args)).load()
@@ -133,11 +133,11 @@ def run(args) -> None:
             "batches_total": ds.attrs["batches_total"],
             "batches_run": ds.attrs["batches_run"],
             "wall_time_s": wall,
-            **engine_record(args),
+            **engine_record(engine),
         }, outputs)
         note(summary)
     else:
-        print(f"N = {args.n_osc}, {engine_text(args)}, ics = "
+        print(f"N = {args.n_osc}, {engine_text(engine)}, ics = "
               f"{','.join(args.ics)}, t_end = {args.t_end:g}, transient = {args.transient:g}")
         print(f"{'v_d':>6} {'states':>6} {'invading':>8} {'receding':>8}  n_HALC found")
         for i, v in enumerate(v_d):

@@ -124,6 +124,9 @@ class AbstractEngine(eqx.Module):
                                       chunk_length=horizon.chunk_length)
         return eqx.tree_at(lambda e: e.options, self, options)
 
+    #: Whether the engine smooths the friction law (and has an eps).
+    smooths: ClassVar[bool] = False
+
     #: Whether the engine's orbits have exact stick phases (`stick_phases`).
     has_stick_phases: ClassVar[bool] = False
 
@@ -219,6 +222,7 @@ class Smoothed(AbstractEngine):
     """
 
     name: ClassVar[str] = "smoothed"
+    smooths: ClassVar[bool] = True
     solver: diffrax.AbstractSolver
     options: SimulationOptions
     eps: ArrayLike = eqx.field(converter=as_parameter)

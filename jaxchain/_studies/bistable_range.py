@@ -205,11 +205,7 @@ def _smoothed_engine(engine: AbstractEngine | str, what: str) -> Smoothed:
     **Raises:**
 
     `ValidationError` in one line for the exact engine, which `what` cannot use."""
-    engine = as_engine(engine)
-    if not isinstance(engine, Smoothed):
-        raise ValidationError(f"engine={engine.name!r}: {what} needs the smoothed engine "
-                              "(its eps); give engine='smoothed' or jaxchain.Smoothed(eps=...)")
-    return engine
+    return as_engine(engine).as_smoothed(what)
 
 
 def _check_bistable(params: ChainParams | None, target, engine) -> tuple[ChainParams, Smoothed]:

@@ -18,7 +18,6 @@ from ..._bifurcation.continuation import ContinuationOptions, PseudoArclength, c
 from ..._bifurcation.fold import FoldPoint, fold_point
 from ..._bifurcation.orbit_method import cycle_problem, periodic_orbit
 from ..._bifurcation.shooting import Shooting
-from ..._engine.engines import Smoothed
 from ..._engine.engines import as_engine
 from ..._engine.lanes import run_lanes
 from ..._engine.options import SimulationOptions
