@@ -17,6 +17,16 @@ from .._physics.record import chain_record
 from .bistable_range import BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES
 
 
+def _check_grids(**grids) -> None:
+    """Each grid, by name, increasing and positive; else `ValidationError`."""
+    for name, values in grids.items():
+        values = np.asarray(values, dtype=float)
+        if values.ndim != 1 or values.size == 0 or values.min() <= 0 or np.any(
+                np.diff(values) <= 0):
+            raise ValidationError(f"{name} must be increasing positive numbers, got "
+                                  f"{values.tolist()}")
+
+
 def exact_bistable_range(params: ChainParams | None = None, *, xi_values=BISTABLE_XI_VALUES,
                          ratio_values=BISTABLE_RATIO_VALUES) -> tuple[dict, list]:
     """The edges of the bistable range of the exact switch model for the chain's first
@@ -48,12 +58,7 @@ def exact_bistable_range(params: ChainParams | None = None, *, xi_values=BISTABL
     when steady sliding has no Hopf point to start from.
     """
     params = chain_or_default(params)
-    for name, values in (("xi_values", xi_values), ("ratio_values", ratio_values)):
-        values = np.asarray(values, dtype=float)
-        if values.ndim != 1 or values.size == 0 or values.min() <= 0 or np.any(
-                np.diff(values) <= 0):
-            raise ValidationError(f"{name} must be increasing positive numbers, got "
-                                  f"{values.tolist()}")
+    _check_grids(xi_values=xi_values, ratio_values=ratio_values)
     single = single_oscillator(params)
     point = stick_slip_grazing(single)
     limit = stick_slip_existence_limit(single)

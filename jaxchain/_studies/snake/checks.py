@@ -129,36 +129,46 @@ def _check_by_simulation(orbits, params: ChainParams, branch: xr.Dataset, segmen
             sides.append(("outside",) + _unstable_point(v, stable, growth, beyond, last, end,
                                                         delta, perturbation))
         for side, vd, start, expected in sides:
-            y_orbit, _ = unpack(jnp.asarray(branch["u"].values[start]))
-            a = branch["amplitudes"].values[start]
-            sites = np.flatnonzero(a > 0.5 * a.max())
-            lags = _phase_lags(orbits, with_parameter(params, "v_d", float(v[start])), y_orbit,
-                               sites)
-            y0 = np.asarray(y_orbit).copy()
-            y0[0] += perturbation * rng.standard_normal(y0.shape[1])
-            p = with_parameter(params, "v_d", float(vd))
-            obs = simulate(p, GivenState(jnp.asarray(y0)), engine=orbits.simulation(options, p))
-            amp = np.asarray(obs.amplitudes)
-            # where the orbit's sites stick, the simulation's must too: a chain that
-            # decays to steady sliding keeps the orbit's pattern in its vanishing
-            # oscillation, on no HALC
-            halc = np.asarray(obs.on_halc) | (int(branch["n_halc"].values[start]) == 0)
-            sim_sites = np.flatnonzero((amp > 0.5 * amp.max()) & halc)
-            lag_difference = None
-            if np.array_equal(sites, sim_sites) and lags is not None:
-                sim_lags = _phase_lags(orbits, p, obs.y_final, sites)
-                if sim_lags is not None:
-                    d = np.mod(sim_lags - lags, 1.0)
-                    lag_difference = float(np.max(np.minimum(d, 1 - d)))
-            persists = lag_difference is not None and lag_difference < 0.05
-            resolved = expected is None or perturbation * expected > 1.0
-            out.append({"end": end["type"], "end_v_d": end["v_d"], "side": side,
-                        "v_d": float(vd), "start_v_d": float(v[start]),
-                        "sites_orbit": sites.tolist(), "sites_simulation": sim_sites.tolist(),
-                        "phase_lag_difference": lag_difference, "persists": persists,
-                        "expected_growth": expected,
-                        "agrees": (persists == (side == "inside")) if resolved else None})
+            out.append(_simulated_side(orbits, params, branch, options, rng, perturbation,
+                                       end, side, vd, start, expected))
     return out
+
+
+def _simulated_side(orbits, params: ChainParams, branch: xr.Dataset, options, rng,
+                    perturbation: float, end: dict, side: str, vd: float, start: int,
+                    expected) -> dict:
+    """One row of `_check_by_simulation`: the simulation at v_d = `vd` from the
+    branch's orbit `start`, its positions perturbed, and whether the state
+    persists there (the orbit's sites on the HALC with the same phase lags)."""
+    v = branch["v_d"].values
+    y_orbit, _ = unpack(jnp.asarray(branch["u"].values[start]))
+    a = branch["amplitudes"].values[start]
+    sites = np.flatnonzero(a > 0.5 * a.max())
+    lags = _phase_lags(orbits, with_parameter(params, "v_d", float(v[start])), y_orbit, sites)
+    y0 = np.asarray(y_orbit).copy()
+    y0[0] += perturbation * rng.standard_normal(y0.shape[1])
+    p = with_parameter(params, "v_d", float(vd))
+    obs = simulate(p, GivenState(jnp.asarray(y0)), engine=orbits.simulation(options, p))
+    amp = np.asarray(obs.amplitudes)
+    # where the orbit's sites stick, the simulation's must too: a chain that
+    # decays to steady sliding keeps the orbit's pattern in its vanishing
+    # oscillation, on no HALC
+    halc = np.asarray(obs.on_halc) | (int(branch["n_halc"].values[start]) == 0)
+    sim_sites = np.flatnonzero((amp > 0.5 * amp.max()) & halc)
+    lag_difference = None
+    if np.array_equal(sites, sim_sites) and lags is not None:
+        sim_lags = _phase_lags(orbits, p, obs.y_final, sites)
+        if sim_lags is not None:
+            d = np.mod(sim_lags - lags, 1.0)
+            lag_difference = float(np.max(np.minimum(d, 1 - d)))
+    persists = lag_difference is not None and lag_difference < 0.05
+    resolved = expected is None or perturbation * expected > 1.0
+    return {"end": end["type"], "end_v_d": end["v_d"], "side": side,
+            "v_d": float(vd), "start_v_d": float(v[start]),
+            "sites_orbit": sites.tolist(), "sites_simulation": sim_sites.tolist(),
+            "phase_lag_difference": lag_difference, "persists": persists,
+            "expected_growth": expected,
+            "agrees": (persists == (side == "inside")) if resolved else None}
 
 
 def _segment_point(v, stable, last, target) -> int:

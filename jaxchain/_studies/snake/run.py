@@ -37,12 +37,10 @@ from .summary import _branches_summary
 def localized_branches(params: ChainParams | None = None, sites=None, *,
                        method=None, engine=None,
                        continuation_options: ContinuationOptions = SNAKE_CONTINUATION,
-                       start_options: SimulationOptions = SNAKE_START,
-                       switch: bool = True,
-                       deflate: int = 0,
-                       simulation_check: bool = True,
-                       out: Path | None = None, progress: bool = False,
-                       workers: int = 1) -> dict:
+                       start_options: SimulationOptions = SNAKE_START, switch: bool = True,
+                       deflate: int = 0, simulation_check: bool = True,
+                       out: Path | None = None, progress: bool = False, workers: int = 1
+                       ) -> dict:
     """The snake: each localized periodic state that simulation finds at
     `params.v_d` (eq. (8) with k excited, for k in `sites`), refined by shooting,
     continued over v_d both ways by pseudo-arclength through its folds, with its
@@ -108,19 +106,21 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     `ValidationError` for bad sites or options, or a method or engine of another
     kind.
     """
-    params, sites, orbits = _check_branches(params, sites, method, engine)
-    if not (isinstance(deflate, int) and deflate >= 0):
-        raise ValidationError(f"deflate must be a whole number >= 0, got {deflate!r}")
-    if not (isinstance(workers, int) and workers >= 1):
-        raise ValidationError(f"workers must be a whole number >= 1, got {workers!r}")
+    params, sites, orbits = _check_branches(params, sites, method, engine, deflate, workers)
     run = _run_branches(orbits, params, sites, continuation_options, start_options, switch,
                         deflate, simulation_check, out, progress, workers)
     return _branches_summary(*run, params.n_osc)
 
 
-def _check_branches(params: ChainParams | None, sites, method, engine) -> tuple:
+def _check_branches(params: ChainParams | None, sites, method, engine, deflate, workers
+                    ) -> tuple:
     """The chain (the paper's ring where None), the starts (`check_starts`) and the
-    orbits (`snake_orbits`, which checks the method and engine)."""
+    orbits (`snake_orbits`, which checks the method and engine), with `deflate` and
+    `workers` checked."""
+    if not (isinstance(deflate, int) and deflate >= 0):
+        raise ValidationError(f"deflate must be a whole number >= 0, got {deflate!r}")
+    if not (isinstance(workers, int) and workers >= 1):
+        raise ValidationError(f"workers must be a whole number >= 1, got {workers!r}")
     params = chain_or_default(params)
     orbits = snake_orbits(method, engine)
     return params, check_starts(params.graph, sites), orbits
