@@ -21,7 +21,6 @@ from .._physics.initial import GivenState
 from .._bifurcation.existence import stick_slip_existence_limit
 from .._engine.engines import AbstractEngine, Smoothed, as_engine
 from .._engine.options import SimulationOptions
-from .._errors import ValidationError
 from .._physics.forces import DEFAULT_EPS
 from .._physics.friction import ExponentialDecay
 from .._physics.params import (
