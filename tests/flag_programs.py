@@ -35,9 +35,8 @@ def exact(v_d, xi, adjoint="forward"):
     return jnp.sum(WEIGHTS * ys[0])
 
 
-SHOOTING = jc.ShootingOptions(rtol=TOL, atol=TOL)
-EXACT_SHOOTING = jc.ExactShooting(flow=jc.NonsmoothOptions.reference(
-    t_end=1.0, transient=0.0, rtol=TOL, atol=TOL))
+SHOOTING = jc.Shooting(jc.Smoothed(eps=1e-2).for_orbits(TOL, TOL))
+EXACT_SHOOTING = jc.Shooting(jc.Exact().for_orbits(TOL, TOL))
 #: The unknowns of shooting: the start Y0 and the period T.
 U = jnp.concatenate([jnp.ravel(Y0), jnp.array([T])])
 
@@ -46,7 +45,7 @@ def smoothed(v_d, xi):
     """The shooting residual of the smoothed engine (its flow over a period T from
     Y0, minus Y0), weighted: one number."""
     params = jc.ChainParams(n_osc=4, v_d=v_d, xi=xi)
-    return jnp.sum(jnp.ravel(WEIGHTS) * jc.shooting_residual(U, params, SHOOTING, eps=1e-2)[:8])
+    return jnp.sum(jnp.ravel(WEIGHTS) * SHOOTING.residual(U, params)[:8])
 
 
 def hopf(xi):
@@ -57,7 +56,7 @@ speeds = jnp.array([1.2, 1.4])
 results = {
     "exact, jit": jax.jit(exact)(1.2, 0.05),
     "exact shooting, its Jacobian (forward mode), jit": jax.jit(jax.jacfwd(
-        jc.exact_shooting_residual))(U, jc.ChainParams(n_osc=4, v_d=1.2), EXACT_SHOOTING),
+        EXACT_SHOOTING.residual))(U, jc.ChainParams(n_osc=4, v_d=1.2)),
     "exact, reverse mode, jit": jax.jit(jax.grad(lambda v, x: exact(v, x, "reverse"),
                                                  argnums=(0, 1)))(1.2, 0.05),
     "exact, vmap": jax.jit(jax.vmap(exact, in_axes=(0, None)))(speeds, 0.05),

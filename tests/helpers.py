@@ -304,7 +304,6 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "snake switched branch": ("jaxchain._studies.snake.branch", "_switched_branch"),
              "snake switch along axes": ("jaxchain._studies.snake.branch", "_switch_along_axes"),
              "snake orbits": ("jaxchain._studies.snake.orbits", "snake_orbits"),
-             "orbit description": ("jaxchain._bifurcation.shooting", "describe_orbit"),
              "mistuning design problems": ("jaxchain._studies.mistuning.pattern_design",
                                            "design_problems"),
              "pattern folds": ("jaxchain._studies.mistuning.pattern_design", "pattern_folds"),
@@ -321,7 +320,7 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "continuation corrector": ("jaxchain._bifurcation.continuation", "_correct"),
              "continuation tangent": ("jaxchain._bifurcation.continuation", "_tangent"),
              "continuation records": ("jaxchain._bifurcation.continuation", "describe_point"),
-             "shooting records": ("jaxchain._bifurcation.shooting", "describe_point"),
+             "shooting records": ("jaxchain._bifurcation.orbit_method", "describe_point"),
              "slip arc peak": ("jaxchain._bifurcation.existence", "_peak"),
              # the progress bar every bar of jaxchain is (test_examples.py)
              "progress bar": ("jaxchain._engine.progress", "progress_bar"),

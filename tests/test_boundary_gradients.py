@@ -142,7 +142,7 @@ def test_fold_derivatives_on_every_structure(case):
     differences of the fold solved again (`solve_fold`)."""
     base, build, theta = _fold_structures()[case]
     theta = np.asarray(theta, dtype=float)
-    problem = jc.limit_cycle_problem(jc.hopf_cycle(base))
+    problem = jc.cycle_problem(jc.hopf_cycle(base))
     branch = jc.continuation(problem, options=jc.ContinuationOptions(
         ds=0.01, ds_max=0.1, p_min=0.5, p_max=3.0, max_points=60))
     fold = jc.fold_point(problem, branch)

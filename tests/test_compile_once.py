@@ -123,10 +123,12 @@ def test_shooting_compiles_once_for_five_xi(monkeypatch):
     """Two Newton steps from a rough guess bring each orbit to within 1e-5 of
     periodic, by scipy's integration over its period."""
     traces = trace_once(monkeypatch, "shooting solve")
-    options = jc.ShootingOptions(newton_steps=2, rtol=1e-6, atol=1e-8, n_samples=64)
+    # two Newton steps and no damped Newton method after them
+    method = jc.Shooting(jc.Smoothed(eps=1e-2).for_orbits(1e-6, 1e-8), newton_steps=2,
+                         damped_steps=0, n_samples=64)
     for xi in FIVE:
         params = jc.ChainParams(n_osc=1, xi=xi)
-        orbit = jc.periodic_orbit(params, jnp.array([[2.2], [0.0]]), 6.3, options, eps=1e-2,
+        orbit = jc.periodic_orbit(params, (jnp.array([[2.2], [0.0]]), 6.3), method,
                                   throw=False)
         assert _periodicity_error(params, orbit.y0, orbit.period, 1e-2) < 1e-5, xi
     assert traces == ["_root"]
@@ -134,7 +136,7 @@ def test_shooting_compiles_once_for_five_xi(monkeypatch):
 
 @pytest.mark.numerics
 def test_continuation_compiles_once_for_five_problems(monkeypatch):
-    """A new `limit_cycle_problem` for each xi: its residual and records are equal
+    """A new `cycle_problem` for each xi: its residual and records are equal
     modules, not new lambdas, so the corrector, tangent and records trace once; the
     shooting that starts each branch makes its record by the same program.
     The continued point is a periodic orbit at its belt speed, by scipy."""
@@ -142,11 +144,11 @@ def test_continuation_compiles_once_for_five_problems(monkeypatch):
         "continuation corrector", "continuation tangent", "continuation records")]
     # shooting's results are records of the same program (`periodic_orbit`)
     replace_internal(monkeypatch, "shooting records", internal("continuation records"))
-    options = jc.ShootingOptions(rtol=1e-6, atol=1e-8, n_samples=64)
+    method = jc.Shooting(jc.Smoothed(eps=1e-2).for_orbits(1e-6, 1e-8), n_samples=64)
     for xi in FIVE:
         params = jc.ChainParams(n_osc=1, xi=xi)
-        orbit = jc.periodic_orbit(params, jnp.array([[2.2], [0.0]]), 6.3, options, eps=1e-2)
-        branch = jc.continuation(jc.limit_cycle_problem(orbit, options),
+        orbit = jc.periodic_orbit(params, (jnp.array([[2.2], [0.0]]), 6.3), method)
+        branch = jc.continuation(jc.cycle_problem(orbit, method),
                                  options=jc.ContinuationOptions(ds=0.01, max_points=2))
         assert bool(branch.converged[-1])
         u, v_d = np.asarray(branch.u[-1]), float(branch.p[-1])
@@ -194,9 +196,9 @@ def test_bifurcation_programs_hold_no_host_callback(monkeypatch):
         replace_internal(monkeypatch, what, recording(what))
     replace_internal(monkeypatch, "shooting records", recording("continuation records"))
     params = jc.ChainParams(n_osc=1, xi=FIVE[0])
-    options = jc.ShootingOptions(rtol=1e-6, atol=1e-8, n_samples=64)
-    orbit = jc.periodic_orbit(params, jnp.array([[2.2], [0.0]]), 6.3, options, eps=1e-2)
-    branch = jc.continuation(jc.limit_cycle_problem(orbit, options),
+    method = jc.Shooting(jc.Smoothed(eps=1e-2).for_orbits(1e-6, 1e-8), n_samples=64)
+    orbit = jc.periodic_orbit(params, (jnp.array([[2.2], [0.0]]), 6.3), method)
+    branch = jc.continuation(jc.cycle_problem(orbit, method),
                              options=jc.ContinuationOptions(ds=0.01, max_points=2))
     assert bool(branch.converged[-1])
     assert _periodicity_error(orbit.params, orbit.y0, orbit.period, 1e-2) < 1e-5

@@ -22,7 +22,7 @@ class _Point(eqx.Module):
 @pytest.fixture(scope="module")
 def branch():
     orbit = jc.hopf_cycle(jc.ChainParams(n_osc=1))
-    problem = jc.limit_cycle_problem(orbit)
+    problem = jc.cycle_problem(orbit)
     found = jc.continuation(problem, options=jc.ContinuationOptions(
         ds=0.01, ds_max=0.1, p_min=1.0, p_max=2.5, max_points=50))
     return problem, found, jc.fold_point(problem, found)

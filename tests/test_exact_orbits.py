@@ -13,6 +13,8 @@ import jaxchain as jc
 from helpers import internal, scipy_slip_arc, scipy_stick_slip_cycle
 
 ONE = jc.ChainParams(n_osc=1, v_d=1.5, xi=0.05)
+#: Shooting on the exact engine at the reference's tolerances (Tsit5, rtol = atol = 1e-12).
+EXACT = jc.Shooting(jc.Exact().for_orbits())
 
 
 @pytest.fixture(scope="module")
@@ -38,8 +40,8 @@ def test_exact_stick_slip_cycle_from_perturbed_starts_is_the_scipy_cycle(guess, 
     Poincare map x(0) -> x(T) on x' = 0 is constant near the orbit, its derivative
     zero)."""
     x_max, (amplitude, period) = guess
-    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max + dx], [0.0]]),
-                                    period * period_factor)
+    orbit = jc.periodic_orbit(ONE, (jnp.array([[x_max + dx], [0.0]]),
+                                    period * period_factor), EXACT)
     assert bool(orbit.converged)
     np.testing.assert_allclose(float(orbit.period), period, rtol=1e-9)
     np.testing.assert_allclose(float(orbit.amplitudes[0]), amplitude, rtol=1e-6)
@@ -56,40 +58,40 @@ def test_the_exact_cycle_s_stick_phase_is_the_scipy_stick(guess):
     the scipy cycle: from the return to the belt speed back to the stick exit
     point, (x_exit - x_return) / v_d, to the period's 1e-9 (relative)."""
     x_max, (_, period) = guess
-    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
+    orbit = jc.periodic_orbit(ONE, (jnp.array([[x_max], [0.0]]), period), EXACT)
     arc = scipy_slip_arc(ONE)
     stick = (arc.y[0, 0] - arc.y[0, -1]) / ONE.v_d
-    phases = jc.stick_phases(ONE, orbit.y0, orbit.period, jc.ExactShooting().flow)
+    phases = jc.stick_phases(ONE, orbit.y0, orbit.period, EXACT.engine.options)
     assert abs(phases[0] - stick) < 1e-9 * period
     # steady sliding has no stick phase
     sliding = jc.ChainParams(n_osc=1, v_d=3.0, xi=0.05)
     y = jc.steady_sliding(sliding)
-    assert np.isinf(jc.stick_phases(sliding, y, 6.0, jc.ExactShooting().flow)).all()
+    assert np.isinf(jc.stick_phases(sliding, y, 6.0, EXACT.engine.options)).all()
 
 
 def test_sliding_location_needs_exact_orbits_with_a_stick_phase():
     problem = jc.ContinuationProblem(residual=lambda u, p: u, u0=jnp.zeros(3), params=ONE)
-    with pytest.raises(ValueError, match="exact_cycle_problem"):
+    with pytest.raises(ValueError, match="cycle_problem"):
         jc.locate_sliding(problem, jnp.zeros(4))
     for past in (lambda: jc.held_problem(problem, 0),
                  lambda: jc.past_sliding_start(problem, jnp.zeros(4))):
-        with pytest.raises(ValueError, match="exact_cycle_problem"):
+        with pytest.raises(ValueError, match="cycle_problem"):
             past()
     with pytest.raises(ValueError, match="held"):
         jc.NonsmoothOptions(held=(-1,))
     with pytest.raises(ValueError, match="period"):
-        jc.stick_phases(ONE, jnp.zeros((2, 1)), 0.0, jc.ExactShooting().flow)
+        jc.stick_phases(ONE, jnp.zeros((2, 1)), 0.0, EXACT.engine.options)
 
 
 def test_exact_shooting_refuses_bad_input_in_one_line():
     with pytest.raises(ValueError, match="y0 must have shape"):
-        jc.exact_periodic_orbit(ONE, jnp.zeros((2, 2)), 6.0)
+        jc.periodic_orbit(ONE, (jnp.zeros((2, 2)), 6.0), EXACT)
     with pytest.raises(ValueError, match="period"):
-        jc.exact_periodic_orbit(ONE, jnp.zeros((2, 1)), -1.0)
+        jc.periodic_orbit(ONE, (jnp.zeros((2, 1)), -1.0), EXACT)
     with pytest.raises(ValueError, match="adjoint"):
-        jc.ExactShooting(flow=jc.NonsmoothOptions.reference(adjoint="reverse"))
+        jc.Shooting(jc.Exact(jc.NonsmoothOptions.reference(adjoint="reverse")))
     with pytest.raises(ValueError, match="damped_steps"):
-        jc.ExactShooting(damped_steps=-1)
+        jc.Shooting(jc.Exact().for_orbits(), damped_steps=-1)
 
 
 @pytest.mark.numerics
@@ -104,14 +106,14 @@ def test_the_damped_newton_method_reaches_a_weakly_unstable_orbit_from_farther()
     after it (the default) every one converges to the same orbit: period to 1e-9,
     state to 1e-7."""
     ring = jc.ChainParams(n_osc=8, v_d=1.4)
-    options = jc.ExactShooting(phase_oscillator=2)
+    method = EXACT.with_phase_oscillator(2)
     near = jnp.array([[0.566, 0.726, 2.118, 1.409, -0.377, -0.824, -0.245, 0.67],
                       [0.063, 0.317, 0.0, -1.289, -1.088, -0.014, -1.226, -0.31]])
-    orbit = jc.exact_periodic_orbit(ring, near, 6.292, options)
+    orbit = jc.periodic_orbit(ring, (near, 6.292), method)
     assert int(orbit.n_halc) == 5 and not bool(orbit.stable)
     for seed in range(4, 8):
         moved = orbit.y0 + 0.05 * np.random.default_rng(seed).normal(size=(2, 8))
-        again = jc.exact_periodic_orbit(ring, moved, orbit.period, options)
+        again = jc.periodic_orbit(ring, (moved, orbit.period), method)
         assert abs(float(again.period - orbit.period)) < 1e-9, seed
         np.testing.assert_allclose(np.asarray(again.y0), np.asarray(orbit.y0), atol=1e-7)
 
@@ -128,7 +130,7 @@ def test_smoothed_multipliers_approach_the_exact_ones_as_eps_falls(guess):
     within 2e-4 at eps = 1e-4."""
     x_max, (_, period) = guess
     pair = jc.ChainParams(n_osc=2, v_d=1.5, xi=0.05)
-    exact = jc.exact_periodic_orbit(pair, jnp.array([[x_max, x_max], [0.0, 0.0]]), period)
+    exact = jc.periodic_orbit(pair, (jnp.array([[x_max, x_max], [0.0, 0.0]]), period), EXACT)
     multipliers = np.asarray(exact.multipliers)
     assert int(exact.zero_multipliers) == 2
     assert abs(multipliers[int(exact.trivial)] - 1) < 1e-8
@@ -136,7 +138,8 @@ def test_smoothed_multipliers_approach_the_exact_ones_as_eps_falls(guess):
                                               np.abs(multipliers)))]
     distances = []
     for eps in (1e-2, 1e-3, 1e-4):
-        smoothed = jc.periodic_orbit(pair, exact.y0, float(exact.period), eps=eps)
+        smoothed = jc.periodic_orbit(pair, (exact.y0, float(exact.period)),
+                                     jc.Shooting(jc.Smoothed(eps=eps).for_orbits()))
         distances.append(abs(complex(smoothed.critical_multiplier) - critical))
     assert distances[0] > 5 * distances[1] > 25 * distances[2]
     assert distances[2] < 2e-4
@@ -146,16 +149,16 @@ def test_smoothed_multipliers_approach_the_exact_ones_as_eps_falls(guess):
 @pytest.mark.numerics
 def test_exact_cycles_continued_in_v_d_are_the_scipy_cycles_up_to_the_existence_limit(guess):
     """Pseudo-arclength continuation of the exact stick-slip cycle in v_d
-    (`exact_cycle_problem`): at every converged point below the existence limit
+    (`cycle_problem` on the exact engine): at every converged point below the existence limit
     (`stick_slip_existence_limit`, independent: an arc integrated by diffrax) the
     period is scipy's cycle's to 1e-8 (0.02 below the limit and lower), the cycle
     stable with its non-trivial multiplier 0; the cycle exists up to 1e-3 below the
     limit, where its slip arc comes to graze v_rel = 0 (the branch leaves the range
     there, it does not fail)."""
     x_max, (_, period) = guess
-    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
+    orbit = jc.periodic_orbit(ONE, (jnp.array([[x_max], [0.0]]), period), EXACT)
     limit = jc.stick_slip_existence_limit(ONE)
-    branch = jc.continuation(jc.exact_cycle_problem(orbit), jc.PseudoArclength(),
+    branch = jc.continuation(jc.cycle_problem(orbit, EXACT), jc.PseudoArclength(),
                              jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0,
                                                     p_max=limit - 1e-3, max_points=30))
     p = np.asarray(branch.p)[np.asarray(branch.converged)]
@@ -186,11 +189,11 @@ def through_the_limit(guess):
     1.5 towards 0.05 beyond the existence limit, and on through the sliding point
     there: its pieces, each (problem, branch, bifurcations)."""
     x_max, (_, period) = guess
-    orbit = jc.exact_periodic_orbit(ONE, jnp.array([[x_max], [0.0]]), period)
+    orbit = jc.periodic_orbit(ONE, (jnp.array([[x_max], [0.0]]), period), EXACT)
     limit = jc.stick_slip_existence_limit(ONE)
     options = jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0, p_max=limit + 0.05,
                                      max_points=30)
-    return internal("snake through sliding")(jc.exact_cycle_problem(orbit),
+    return internal("snake through sliding")(jc.cycle_problem(orbit, EXACT),
                                              jc.PseudoArclength(), options)
 
 
@@ -250,7 +253,7 @@ def test_past_the_sliding_point_the_branch_is_the_cycle_without_stick_down_to_ho
     for u, p in list(zip(np.asarray(past.u)[ok], np.asarray(past.p)[ok]))[::6]:
         y0, period = jnp.reshape(u[:-1], (2, 1)), float(u[-1])
         phases = jc.stick_phases(jc.with_parameter(ONE, "v_d", float(p)), y0, period,
-                                 jc.ExactShooting().flow)
+                                 EXACT.engine.options)
         assert np.isinf(phases).all()
     (hopf,) = past_bifs
     amplitude = np.asarray(past.records.amplitudes)[:, 0]

@@ -49,7 +49,8 @@ def test_the_stick_slip_cycles_vanishing_multiplier_is_unresolved(eps, truth):
     arc = scipy_slip_arc(params)  # the non-smooth cycle's turning point: the guess
     x_turn = float(arc.y_events[1][0, 0])
     period = float(arc.t[-1]) + (float(arc.y[0, 0]) - float(arc.y[0, -1])) / params.v_d
-    orbit = jc.periodic_orbit(params, jnp.array([[x_turn], [0.0]]), period, eps=eps)
+    orbit = jc.periodic_orbit(params, (jnp.array([[x_turn], [0.0]]), period),
+                              jc.Shooting(jc.Smoothed(eps=eps).for_orbits()))
     assert bool(orbit.converged) and int(orbit.n_halc) == 1
     values, resolved = np.asarray(orbit.multipliers), np.asarray(orbit.resolved)
     trivial = int(orbit.trivial)
@@ -74,11 +75,12 @@ def test_the_determinant_is_the_product_of_resolved_multipliers(n_osc):
     """On the small cycle near the Hopf point (pure slip: no stick band, every
     multiplier resolved), Liouville's determinant equals the product of the
     multipliers and the scipy integral of the trace."""
-    orbit = jc.hopf_cycle(jc.ChainParams(n_osc=n_osc), offset=0.01)
+    method = jc.Shooting()
+    orbit = jc.hopf_cycle(jc.ChainParams(n_osc=n_osc), offset=0.01, method=method)
     values = np.asarray(orbit.multipliers)
     assert np.all(np.asarray(orbit.resolved))
     assert float(orbit.multiplier_resolution) < 1e-6
     det = float(orbit.monodromy_determinant)
     assert abs(np.prod(values) / det - 1) < 1e-6
-    log_det = scipy_liouville(orbit.params, float(orbit.eps), orbit.y0, float(orbit.period))
+    log_det = scipy_liouville(orbit.params, float(method.engine.eps), orbit.y0, float(orbit.period))
     assert det == pytest.approx(np.exp(log_det), rel=1e-8)

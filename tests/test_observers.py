@@ -96,7 +96,7 @@ def test_steady_sliding_exponent_is_half_the_effective_damping(steady_sliding_ru
 @pytest.fixture(scope="module")
 def stick_slip_orbit():
     params = jc.ChainParams(n_osc=1, v_d=1.5)
-    return params, jc.periodic_orbit(params, jnp.array([[2.78], [1.5]]), 6.9)
+    return params, jc.periodic_orbit(params, (jnp.array([[2.78], [1.5]]), 6.9))
 
 
 @pytest.mark.numerics

@@ -8,7 +8,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
-from helpers import SHORT, internal, reference_rhs, scipy_stick_slip_cycle
+from helpers import SHORT, reference_rhs, scipy_stick_slip_cycle
 
 
 def scipy_flow(params, y, period):
@@ -21,7 +21,7 @@ def scipy_flow(params, y, period):
 def test_stable_stick_slip_cycle_agrees_with_long_simulation():
     params = jc.ChainParams(n_osc=1, v_d=1.5)
     obs = jc.simulate(params, jnp.array([[2.0], [0.0]]), options=SHORT)
-    orbit = jc.periodic_orbit(params, obs.y_final, 6.3)
+    orbit = jc.periodic_orbit(params, (obs.y_final, 6.3))
     assert bool(orbit.converged) and bool(orbit.stable)
     assert abs(float(orbit.amplitudes[0] / obs.amplitudes[0]) - 1) < 1e-3
     assert int(orbit.n_halc) == 1
@@ -50,9 +50,9 @@ def test_n_halc_agrees_between_simulation_shooting_and_reference(state):
         t_end=SHORT.t_end, transient=SHORT.transient))
     if sliding:
         shooting_unknowns = jnp.concatenate([jnp.ravel(y0), jnp.array([2 * np.pi])])
-        orbit = internal("orbit description")(params, shooting_unknowns, jc.ShootingOptions())
+        orbit = jc.Shooting().describe(shooting_unknowns, params)
     else:
-        orbit = jc.periodic_orbit(params, obs.y_final, 6.3)
+        orbit = jc.periodic_orbit(params, (obs.y_final, 6.3))
     expected = 0 if sliding else 1
     assert int(obs.n_halc) == int(orbit.n_halc) == int(ref.n_halc) == expected
     if sliding:  # both models rest at x' = 0
@@ -71,8 +71,7 @@ def test_small_hopf_cycle_monodromy_against_finite_differences():
     # normal form of the subcritical Hopf: A = sqrt(8 v0 (v_d - v_d,H))
     assert abs(float(orbit.amplitudes[0]) / np.sqrt(8 * 0.5 * 0.01) - 1) < 0.03
     assert not bool(orbit.stable) and float(abs(orbit.critical_multiplier)) > 1
-    monodromy = np.asarray(jc.monodromy(orbit.params, orbit.y0, orbit.period,
-                                        jc.ShootingOptions()))
+    monodromy = np.asarray(jc.Shooting().monodromy(orbit.params, orbit.y0, orbit.period))
     h, y, T = 1e-6, np.ravel(orbit.y0), float(orbit.period)
     fd = np.stack([(scipy_flow(orbit.params, y + h * e, T) - scipy_flow(orbit.params, y - h * e, T))
                    / (2 * h) for e in np.eye(2)], axis=1)
@@ -83,11 +82,11 @@ def test_small_hopf_cycle_monodromy_against_finite_differences():
 @pytest.mark.numerics
 def test_shooting_jacobian_against_finite_differences():
     params = jc.ChainParams(n_osc=2, v_d=1.5, eta_c=0.1)
-    options = jc.ShootingOptions()
+    method = jc.Shooting()
     u = jnp.array([1.2, 0.9, 0.0, 0.3, 6.3])
 
     def residual(z):
-        return jc.shooting_residual(z, params, options)
+        return method.residual(z, params)
 
     jac = jax.jacfwd(residual)(u)
     h = 1e-6
@@ -99,14 +98,14 @@ def test_shooting_jacobian_against_finite_differences():
 def test_bad_arguments():
     params = jc.ChainParams(n_osc=1)
     with pytest.raises(ValueError, match="y0"):
-        jc.periodic_orbit(params, jnp.zeros((2, 3)), 6.3)
+        jc.periodic_orbit(params, (jnp.zeros((2, 3)), 6.3))
     with pytest.raises(ValueError, match="period"):
-        jc.periodic_orbit(params, jnp.zeros((2, 1)), -1.0)
+        jc.periodic_orbit(params, (jnp.zeros((2, 1)), -1.0))
     with pytest.raises(ValueError, match="rtol"):
-        jc.ShootingOptions(rtol=0.0)
-    with pytest.raises(RuntimeError, match="shooting did not converge"):
-        jc.periodic_orbit(params, jnp.array([[50.0], [0.0]]), 1.0,
-                          jc.ShootingOptions(newton_steps=3))
+        jc.Shooting(jc.Smoothed().for_orbits(rtol=0.0))
+    with pytest.raises(RuntimeError, match="Shooting did not converge"):
+        jc.periodic_orbit(params, (jnp.array([[50.0], [0.0]]), 1.0),
+                          jc.Shooting(newton_steps=3, damped_steps=0))
 
 
 @pytest.mark.numerics
@@ -131,8 +130,8 @@ def test_deflated_multipliers_obey_liouville(n_osc):
     assert abs(np.prod(values).real / det - 1) < 1e-6
     assert abs(np.prod(values).imag) < 1e-9
     # the deflated spectrum is the full one without the multiplier at 1
-    full = np.linalg.eigvals(np.asarray(jc.monodromy(orbit.params, orbit.y0, orbit.period,
-                                                     jc.ShootingOptions())))
+    full = np.linalg.eigvals(np.asarray(jc.Shooting().monodromy(orbit.params, orbit.y0,
+                                                                orbit.period)))
     others = np.delete(full, np.argmin(np.abs(full - 1)))
     nontrivial = np.delete(values, int(orbit.trivial))
     for m in nontrivial:

@@ -333,8 +333,9 @@ def test_a_mass_and_a_table_through_hopf_point_and_shooting():
                        engine=jc.Smoothed(options=options, eps=eps))
     times = np.asarray(peaks["peak_times"])[0]
     period = float(np.median(np.diff(times[np.isfinite(times)])))
-    orbit = jc.periodic_orbit(params, np.asarray(peaks["y_final"]), period,
-                              jc.ShootingOptions(root_finder="levenberg-marquardt"), eps=eps)
+    orbit = jc.periodic_orbit(params, (np.asarray(peaks["y_final"]), period),
+                              jc.Shooting(jc.Smoothed(eps=eps).for_orbits(),
+                                          root_finder="levenberg-marquardt"))
     assert bool(orbit.converged)
     assert abs(float(orbit.period) / period - 1) < 2e-3
     assert abs(float(orbit.amplitudes[0]) / float(peaks["amplitudes"][0]) - 1) < 2e-3
