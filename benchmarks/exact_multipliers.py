@@ -4,13 +4,14 @@ eps 1e-3, 1e-4 and 1e-5 approaching them.
 
 The start is the landed snake's (`start_orbits`: simulation of the smoothed model,
 then shooting); the exact orbit is solved by shooting on the exact engine from it
-(`exact_periodic_orbit`), and the smoothed orbits by shooting at each eps
-(`periodic_orbit`, Kvaerno5), each from the orbit at the eps before, the first from
-the exact orbit. Prints the exact orbit (period, n_HALC, how many
-multipliers are zero from stick), the multipliers of largest modulus other than
-the trivial one for each model, and the distance of each smoothed set from the
-exact one (each exact multiplier matched to the nearest smoothed one, among those
-of modulus above 1e-3). Run: `python benchmarks/exact_multipliers.py`.
+(`periodic_orbit` with `Shooting(Exact().for_orbits())`), and the smoothed orbits by
+shooting at each eps (`Shooting` on `Smoothed(Kvaerno5(), eps=eps)`), each from the
+orbit at the eps before, the first from the exact orbit. Prints the exact orbit
+(period, n_HALC, how many multipliers are zero from stick), the multipliers of
+largest modulus other than the trivial one for each model, and the distance of each
+smoothed set from the exact one (each exact multiplier matched to the nearest
+smoothed one, among those of modulus above 1e-3). Run:
+`python benchmarks/exact_multipliers.py`.
 """
 
 import time
@@ -46,8 +47,8 @@ def main() -> None:
     if orbit is None:
         raise SystemExit(f"no one-site start: {reason}")
     n = int(np.argmax(np.asarray(orbit.amplitudes)))
-    exact = jc.exact_periodic_orbit(params, orbit.y0, float(orbit.period),
-                                    jc.ExactShooting(phase_oscillator=n))
+    exact = jc.periodic_orbit(params, (orbit.y0, float(orbit.period)),
+                              jc.Shooting(jc.Exact().for_orbits(), phase_oscillator=n))
     if not bool(exact.converged):
         raise SystemExit(f"exact shooting did not converge (residual {float(exact.residual):.2g})")
     exact_m = np.asarray(exact.multipliers)
@@ -58,13 +59,15 @@ def main() -> None:
     print("leading exact:", np.array2string(_leading(exact_m, int(exact.trivial)),
                                             precision=8))
     # each eps from the orbit at the one before (the first from the exact orbit), with
-    # an implicit solver (eps 1e-5 is too stiff for shooting's explicit Tsit5)
-    shooting = jc.ShootingOptions(phase_oscillator=n, solver=diffrax.Kvaerno5(),
-                                  max_steps=1_000_000)
+    # an implicit solver (eps 1e-5 is too stiff for shooting's explicit Tsit5), at
+    # shooting's tolerances; Newton's method alone (no damped fallback), as before
+    flow = jc.SimulationOptions(rtol=1e-10, atol=1e-12, max_steps=1_000_000)
     previous = exact
     for eps in EPS:
-        smoothed = jc.periodic_orbit(params, previous.y0, float(previous.period), shooting,
-                                     eps=eps, throw=False)
+        shooting = jc.Shooting(jc.Smoothed(diffrax.Kvaerno5(), flow, eps=eps),
+                               phase_oscillator=n, damped_steps=0)
+        smoothed = jc.periodic_orbit(params, (previous.y0, float(previous.period)), shooting,
+                                     throw=False)
         previous = smoothed
         m = np.asarray(smoothed.multipliers)
         trivial = int(np.argmin(np.abs(m - 1)))

@@ -14,7 +14,7 @@ import jaxchain as jc
 from helpers import internal, replace_internal
 
 RING = jc.ChainParams(n_osc=2, v_d=1.5)
-SHOOTING = jc.ShootingOptions(root_finder="levenberg-marquardt", phase_oscillator=0)
+SHOOTING = jc.Shooting(root_finder="levenberg-marquardt", phase_oscillator=0)
 
 
 @pytest.fixture(scope="module")
@@ -27,9 +27,9 @@ def branch_point():
         RING, (1,), options=jc.SimulationOptions(t_end=2000.0, transient=1500.0), retry=())
     orbit, _, reason = found[1]
     assert reason is None
-    orbit = jc.periodic_orbit(RING, orbit.y0, float(orbit.period), SHOOTING)
+    orbit = jc.periodic_orbit(RING, (orbit.y0, float(orbit.period)), SHOOTING)
     assert abs(float(orbit.amplitudes[0] - orbit.amplitudes[1])) < 1e-6  # symmetric
-    problem = jc.limit_cycle_problem(orbit, SHOOTING)
+    problem = jc.cycle_problem(orbit, SHOOTING)
     branch = jc.continuation(problem, options=jc.ContinuationOptions(
         ds=0.02, ds_max=0.1, p_min=1.0, p_max=2.0, max_points=12))
     points = [b for b in jc.locate_bifurcations(problem, branch) if b.kind == "branch point"]
@@ -64,7 +64,7 @@ def test_switched_branch_breaks_the_symmetry_and_converges_under_refinement(bran
         assert p.min() < float(target.v_d)  # reaches the comparison point
         u = np.asarray(switched.u)[np.asarray(switched.converged)]
         near = u[np.argmin(np.abs(p - float(target.v_d)))]
-        orbits.append(jc.periodic_orbit(target, near[:-1].reshape(2, -1), float(near[-1]),
+        orbits.append(jc.periodic_orbit(target, (near[:-1].reshape(2, -1), float(near[-1])),
                                         SHOOTING))
     a, b = orbits
     assert abs(float(a.amplitudes[0] - a.amplitudes[1])) > 1e-4
@@ -167,7 +167,7 @@ def test_a_switch_that_fails_is_reported_with_its_branch_point(branch_point, mon
 
     monkeypatch.setattr("jaxchain._studies.snake.branch.switch_branch", fails)
     switched = internal("snake switched branch")
-    orbits = internal("snake orbits")("smoothed", SHOOTING, params=RING)
+    orbits = internal("snake orbits")(SHOOTING)
     args = (orbits, problem, branch, point, jc.ContinuationOptions(max_points=2),
             jc.PseudoArclength())
     # deflation beside the branch point finds the other branch instead
@@ -229,13 +229,13 @@ def test_deflation_beside_the_branch_point_finds_keller_s_switched_orbit(branch_
     _, switched = _switched(problem, branch, point, 0.01)
     ok = np.asarray(switched.converged)
     u = np.asarray(switched.u)[ok][np.argmin(np.abs(np.asarray(switched.p)[ok] - p))]
-    keller = jc.periodic_orbit(jc.with_parameter(RING, "v_d", p), u[:-1].reshape(2, -1),
-                               float(u[-1]), SHOOTING)
+    keller = jc.periodic_orbit(jc.with_parameter(RING, "v_d", p),
+                               (u[:-1].reshape(2, -1), float(u[-1])), SHOOTING)
     deflated = jc.periodic_orbit(jc.with_parameter(RING, "v_d", p),
-                                 np.asarray(new.u0[:-1]).reshape(2, -1), float(new.u0[-1]),
+                                 (np.asarray(new.u0[:-1]).reshape(2, -1), float(new.u0[-1])),
                                  SHOOTING)
     assert abs(float(deflated.period - keller.period)) < 1e-7
-    # amplitudes from 4096 samples a period (ShootingOptions.n_samples): the sampled
+    # amplitudes from 4096 samples a period (Shooting.n_samples): the sampled
     # extremes of one orbit started at another phase (the swapped copy starts at the
     # other oscillator's turning point) differ by up to |x''| dt^2 / 8, below 1e-6
     np.testing.assert_allclose(np.sort(np.asarray(deflated.amplitudes)),
@@ -257,12 +257,12 @@ def test_a_branch_point_on_an_unstable_branch_is_where_shooting_at_fixed_v_d_cro
     axis at +1 and leaves it as a real pair, one multiplier either side of +1)."""
     ring = jc.ChainParams(n_osc=3, v_d=1.38)
     found = internal("snake start orbits")(
-        ring, (1,), engine="exact", options=jc.SimulationOptions(t_end=2000.0,
-                                                                 transient=1500.0))
+        ring, (1,), method=jc.Shooting.from_simulations(jc.Exact()),
+        options=jc.SimulationOptions(t_end=2000.0, transient=1500.0))
     orbit, sim, reason = found[1]
     assert reason is None
-    shooting = jc.ExactShooting(phase_oscillator=sim["phase_oscillator"])
-    problem = jc.exact_cycle_problem(orbit, shooting)
+    shooting = jc.Shooting(jc.Exact().for_orbits(), phase_oscillator=sim["phase_oscillator"])
+    problem = jc.cycle_problem(orbit, shooting)
     branch = jc.continuation(problem, options=jc.ContinuationOptions(
         ds=0.02, ds_max=0.1, p_min=1.3, p_max=1.45, max_points=12, direction=-1))
     (point,) = [b for b in jc.locate_bifurcations(problem, branch) if b.kind == "branch point"]
@@ -275,8 +275,8 @@ def test_a_branch_point_on_an_unstable_branch_is_where_shooting_at_fixed_v_d_cro
     def at(side: int, delta: float) -> tuple[float, float]:
         """(sign of prod (mu_i - 1), min |mu_i - 1|) of the orbit at v_b + delta."""
         u = np.asarray(branch.u)[ok[side]]
-        shot = jc.exact_periodic_orbit(jc.with_parameter(ring, "v_d", v_b + delta),
-                                       u[:-1].reshape(2, -1), float(u[-1]), shooting)
+        shot = jc.periodic_orbit(jc.with_parameter(ring, "v_d", v_b + delta),
+                                 (u[:-1].reshape(2, -1), float(u[-1])), shooting)
         assert bool(shot.converged)
         m = np.delete(np.asarray(shot.multipliers), int(shot.trivial))
         return float(np.sign(np.prod(m - 1).real)), float(np.min(np.abs(m - 1)))

@@ -4,8 +4,6 @@ different stable states: repeated deflation from one start finds the state that
 simulation finds from it, then further periodic orbits that are none of its
 symmetric copies, each a periodic orbit of an independent integrator (scipy)."""
 
-import dataclasses
-
 import numpy as np
 import jax
 import jax.numpy as jnp
@@ -20,7 +18,7 @@ from helpers import internal, reference_rhs, replace_internal
 RING = jc.ChainParams(n_osc=3, v_d=1.5)
 #: The starts settle within 1500 time units on three oscillators.
 START = jc.SimulationOptions(t_end=2000.0, transient=1500.0)
-SHOOTING = jc.ShootingOptions(root_finder="levenberg-marquardt", phase_oscillator=1)
+SHOOTING = jc.Shooting(root_finder="levenberg-marquardt", phase_oscillator=1)
 
 
 @pytest.fixture(scope="module")
@@ -54,12 +52,12 @@ def scipy_return(u) -> float:
 
 def copies_distance(a, b) -> float:
     """The deflation distance of orbit b from orbit a and its symmetric copies."""
-    problem = jc.limit_cycle_problem(_orbit(a), SHOOTING)
+    problem = jc.cycle_problem(_orbit(a), SHOOTING)
     return float(jc.deflation(problem, [a]).distances(b)[0])
 
 
 def _orbit(u):
-    return jc.periodic_orbit(RING, jnp.reshape(u[:-1], (2, -1)), float(u[-1]), SHOOTING)
+    return jc.periodic_orbit(RING, (jnp.reshape(u[:-1], (2, -1)), float(u[-1])), SHOOTING)
 
 
 @pytest.mark.numerics
@@ -76,7 +74,7 @@ def test_repeated_deflation_from_one_start_finds_distinct_orbits(simulated, scal
     start = eq8_start(2)
     noise = np.random.default_rng(1).standard_normal(start.shape)
     start = (start * (1 + scale * noise)).at[3 + SHOOTING.phase_oscillator].set(0.0)
-    problem = jc.limit_cycle_problem(simulated[1], SHOOTING)
+    problem = jc.cycle_problem(simulated[1], SHOOTING)
     found = jc.distinct_orbits(problem, start, count=3)
     assert len(found) == 3
     assert abs(float(found[0][-1]) - float(simulated[2].period)) < 1e-7  # two Newton solves
@@ -98,7 +96,7 @@ def test_deflating_the_state_of_a_start_leads_elsewhere(simulated):
     for scipy, that is no copy of the one-site state."""
     start = eq8_start(1)
     one = packed(simulated[1].y0, simulated[1].period)
-    problem = jc.limit_cycle_problem(simulated[1], SHOOTING)
+    problem = jc.cycle_problem(simulated[1], SHOOTING)
     # Only the first orbit of each call is checked: it is the first solve, the same
     # whatever `count` (a free slot of the operator deflates nothing), and these counts
     # give the operator the two free slots of the solve that
@@ -116,7 +114,7 @@ def test_the_distance_from_an_orbit_is_to_the_nearest_point_of_its_copies(simula
     (y[:, perm]), every segment; the state near a copy of the orbit, near the orbit
     and far from both; its gradient against central differences."""
     one = packed(simulated[1].y0, simulated[1].period)
-    problem = jc.limit_cycle_problem(simulated[1], SHOOTING)
+    problem = jc.cycle_problem(simulated[1], SHOOTING)
     operator = jc.deflation(problem, [one], n_samples=64)
     samples = np.reshape(np.asarray(operator.curves[0]), (64, 2, 3))
 
@@ -149,7 +147,7 @@ def test_symmetries_of_the_ring_and_bad_arguments(simulated):
     assert perms.shape == (10, 5) and {tuple(sorted(p)) for p in perms} == {tuple(range(5))}
     assert np.asarray(jc.chain_symmetries(jc.ChainParams(n_osc=5, boundary="free"))).shape \
         == (1, 5)
-    problem = jc.limit_cycle_problem(simulated[1], SHOOTING)
+    problem = jc.cycle_problem(simulated[1], SHOOTING)
     with pytest.raises(ValueError, match="count"):
         jc.distinct_orbits(problem, problem.u0, count=0)
     with pytest.raises(ValueError, match="capacity"):
@@ -234,8 +232,8 @@ def test_a_deflated_orbit_on_a_branch_already_followed_is_reported_not_followed(
     two = simulated[2]
     rotated = jnp.roll(jnp.asarray(two.y0), 1, axis=1)
     phase = int(np.argmax(np.roll(np.asarray(two.amplitudes), 1)))
-    copy = jc.periodic_orbit(RING, rotated, float(two.period),
-                             dataclasses.replace(SHOOTING, phase_oscillator=phase))
+    copy = jc.periodic_orbit(RING, (rotated, float(two.period)),
+                             SHOOTING.with_phase_oscillator(phase))
     assert bool(copy.converged)
     one = (simulated[1], int(np.argmax(np.asarray(simulated[1].amplitudes))))
     # deflation's solutions stand apart from the shot orbits (phase conditions differ)
@@ -274,7 +272,7 @@ def test_a_deflated_orbit_on_a_branch_already_followed_is_reported_not_followed(
     start = found["datasets"]["k=2"]  # its first point: its start orbit, corrected again
     i = int(np.argmin(np.abs(start["v_d"].values - 1.5)))
     np.testing.assert_allclose(own, start["u"].values[i], rtol=0,
-                               atol=10 * jc.ShootingOptions().newton_tol)
+                               atol=10 * jc.Shooting().newton_tol)
 
 
 @pytest.mark.study
@@ -314,7 +312,7 @@ def test_a_resumed_run_deflates_the_orbits_of_the_starts_it_read_back(tmp_path,
     assert list(resumed["datasets"]) == list(whole["datasets"])
     # orbits of one residual, each to Newton's tolerance (1e-9, shooting and the
     # continuation's corrector alike) from its root
-    tol = 10 * jc.ShootingOptions().newton_tol
+    tol = 10 * jc.Shooting().newton_tol
     for label, ds in whole["datasets"].items():
         np.testing.assert_allclose(resumed["datasets"][label]["u"].values, ds["u"].values,
                                    rtol=0, atol=tol, err_msg=label)

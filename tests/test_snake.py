@@ -16,6 +16,9 @@ from helpers import (assert_usage_error, internal, internal_module, reference_rh
                      replace_internal)
 
 RING = jc.ChainParams(n_osc=4, v_d=1.5)
+#: Shooting on the exact stick/slip model: Newton's method through every switch (the
+#: snake's on the exact engine, `Shooting.from_simulations(jc.Exact())`).
+EXACT = jc.Shooting(jc.Exact().for_orbits())
 OPTIONS = jc.ContinuationOptions(ds=0.02, ds_max=0.1, p_min=1.2, p_max=1.75, max_points=14)
 
 
@@ -71,10 +74,10 @@ def test_continuation_reproduces_itself_from_a_perturbed_start(one_site):
     start = int(np.argmin(np.abs(ds["v_d"].values - 1.5)))
     u = ds["u"].values[start] * (1 + 1e-6)
     params = jc.with_parameter(RING, "v_d", float(ds["v_d"].values[start]))
-    options = jc.ShootingOptions(root_finder="levenberg-marquardt",
-                                 phase_oscillator=int(ds.attrs["phase_oscillator"]))
-    orbit = jc.periodic_orbit(params, u[:-1].reshape(2, -1), float(u[-1]), options)
-    problem = jc.limit_cycle_problem(orbit, options)
+    method = jc.Shooting(root_finder="levenberg-marquardt",
+                         phase_oscillator=int(ds.attrs["phase_oscillator"]))
+    orbit = jc.periodic_orbit(params, (u[:-1].reshape(2, -1), float(u[-1])), method)
+    problem = jc.cycle_problem(orbit, method)
     branch = jc.continuation(problem, options=jc.ContinuationOptions(
         ds=0.02, ds_max=0.1, p_min=1.2, p_max=1.75, max_points=14, direction=-1))
     ns = [b for b in jc.locate_bifurcations(problem, branch) if b.kind == "Neimark-Sacker"]
@@ -197,10 +200,10 @@ def test_the_one_site_edge_tends_to_the_single_oscillator_s_limit_as_eta_c_vanis
     ok = ds["critical_multiplier_abs"].values < 1  # stick-slip orbits, before the end
     i = int(np.argmax(np.where(ok, ds["v_d"].values, -np.inf)))
     u, v_d = ds["u"].values[i], float(ds["v_d"].values[i])
-    options = jc.ExactShooting(phase_oscillator=int(ds.attrs["phase_oscillator"]))
-    orbit = jc.exact_periodic_orbit(jc.with_parameter(RING, "v_d", v_d),
-                                    u[:-1].reshape(2, -1), u[-1], options)
-    problem = jc.exact_cycle_problem(orbit, options)
+    method = EXACT.with_phase_oscillator(int(ds.attrs["phase_oscillator"]))
+    orbit = jc.periodic_orbit(jc.with_parameter(RING, "v_d", v_d),
+                              (u[:-1].reshape(2, -1), u[-1]), method)
+    problem = jc.cycle_problem(orbit, method)
     point = jc.locate_sliding(problem, np.append(u, v_d))
     assert point.converged and abs(
         float(point.p) - branches[1]["stable_range_ends"][0][1]["v_d"]) < 1e-8
@@ -236,8 +239,8 @@ def test_recurrences_of_a_periodic_orbit_return_after_one_period():
     each a period apart to the sampling step (1e-3), the first one first, and each
     state returns to itself to the flow's accuracy after its time to the next."""
     one = jc.ChainParams(n_osc=1, v_d=1.5)
-    orbits = internal("snake orbits")("exact")
-    cycle = jc.exact_periodic_orbit(one, np.array([[2.2], [0.0]]), 6.3)
+    orbits = internal("snake orbits")(EXACT)
+    cycle = jc.periodic_orbit(one, (np.array([[2.2], [0.0]]), 6.3), EXACT)
     start = orbits.samples(one, cycle.y0, np.array([0.0, 1.0]))[-1]
     guesses = internal_module("snake symmetric orbit")._recurrences(orbits, one, start, 0)
     # the first turning point after `start` is the orbit's y0, T - 1 later
@@ -285,11 +288,11 @@ def test_inside_its_fixed_subspace_the_symmetric_start_reaches_an_orbit_unstable
     there, gives a five-site orbit fixed by the reflection that is unstable (a
     Floquet multiplier beyond 1) only across that subspace: the monodromy matrix
     restricted to it, by central finite differences of the exact engine's flow
-    (`nonsmooth_flow`) along an orthonormal basis of the subspace, has no
+    (`Exact.flow`) along an orthonormal basis of the subspace, has no
     multiplier beyond 1 + 1e-3, and the one at 1 (the flow's direction) is
     among them."""
     starts = internal_module("snake symmetric orbit")
-    orbits = internal("snake orbits")("exact")
+    orbits = internal("snake orbits")(EXACT)
     at = jc.ChainParams(n_osc=8, v_d=1.5)
     start = np.asarray(jc.OutOfPhaseExcitation.eq8(starts.start_mask(at.graph, 5))(at))
     perms = starts.isotropy(at, start.reshape(2, 8))
@@ -307,11 +310,10 @@ def test_inside_its_fixed_subspace_the_symmetric_start_reaches_an_orbit_unstable
             e = np.zeros((2, 8))
             e[row, list(pair)] = 1.0
             basis.append(e / np.linalg.norm(e))
-    h, flow = 1e-6, jc.ExactShooting().flow
+    h, flow = 1e-6, EXACT.engine.flow
     columns = []
     for e in basis:
-        ends = [np.asarray(jc.nonsmooth_flow(at, jnp.asarray(y0 + s * h * e),
-                                             jnp.array([period]), flow)[0][-1])
+        ends = [np.asarray(flow(at, jnp.asarray(y0 + s * h * e), jnp.array([period]))[-1])
                 for s in (1, -1)]
         columns.append((ends[0] - ends[1]).reshape(-1) / (2 * h))
     restricted = np.stack([e.reshape(-1) for e in basis]) @ np.stack(columns, axis=1)

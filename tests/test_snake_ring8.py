@@ -21,6 +21,9 @@ import jaxchain as jc
 pytestmark = pytest.mark.study
 
 N = 8
+#: Shooting on the exact stick/slip model (the snake's on the exact engine); its
+#: engine's flow at the reference tolerances (Tsit5 at rtol = atol = 1e-12).
+EXACT = jc.Shooting(jc.Exact().for_orbits())
 
 
 @pytest.fixture(scope="module")
@@ -49,7 +52,7 @@ def test_every_start_has_a_branch_of_its_own_number_of_sites(ring8):
     method), and the seven-site one, which reaches the whole ring at 1.5, keeps
     its seven sites at 1.6 (a start that loses its pattern is tried there). Each
     start orbit, read from its stored branch, returns to itself after one period
-    on the exact engine's own flow (`nonsmooth_flow`, no Newton iteration), to
+    on the exact engine's own flow (`Exact.flow`, no Newton iteration), to
     1e-8, and exactly k oscillators stick on it (x_n' = v_d at a sample of that
     flow)."""
     _, branches, folder = ring8
@@ -61,9 +64,8 @@ def test_every_start_has_a_branch_of_its_own_number_of_sites(ring8):
         params = jc.with_parameter(jc.ChainParams(n_osc=N), "v_d", start["v_d"])
         y0 = u[:-1].reshape(2, -1)
         ts = u[-1] * np.linspace(0.0, 1.0, 2001)[1:]
-        ys, status = jc.nonsmooth_flow(params, y0, ts, jc.ExactShooting().flow)
-        ys = np.asarray(ys)
-        assert np.all(np.asarray(status) == jc.Status.ok)
+        ys = np.asarray(EXACT.engine.flow(params, y0, ts))
+        assert np.all(np.isfinite(ys))  # the run's status: NaN where it failed
         assert np.max(np.abs(ys[-1] - y0)) < 1e-8, k
         assert int(np.sum(np.any(ys[:, 1] == start["v_d"], axis=0))) == k
 
@@ -88,8 +90,8 @@ def _critical(v_d: float, u: np.ndarray, phase_oscillator: int) -> tuple[float, 
     """(|critical multiplier| - 1, amplitude split of sites 4 and 5) of the exact
     orbit at v_d by shooting from u (no continuation)."""
     params = jc.with_parameter(jc.ChainParams(n_osc=N), "v_d", v_d)
-    orbit = jc.exact_periodic_orbit(params, u[:-1].reshape(2, -1), float(u[-1]),
-                                    jc.ExactShooting(phase_oscillator=phase_oscillator))
+    orbit = jc.periodic_orbit(params, (u[:-1].reshape(2, -1), float(u[-1])),
+                              EXACT.with_phase_oscillator(phase_oscillator))
     return float(abs(orbit.critical_multiplier)) - 1, float(
         abs(orbit.amplitudes[4] - orbit.amplitudes[5]))
 
@@ -144,7 +146,7 @@ def test_the_branch_switched_at_the_two_site_branch_point_breaks_the_symmetry(ri
 def _stick_count(u: np.ndarray, v_d: float) -> int:
     params = jc.with_parameter(jc.ChainParams(n_osc=N), "v_d", v_d)
     return int(np.isfinite(jc.stick_phases(params, u[:-1].reshape(2, -1), float(u[-1]),
-                                           jc.ExactShooting().flow)).sum())
+                                           EXACT.engine.options)).sum())
 
 
 def test_the_switched_branch_turns_at_its_sliding_point_onto_orbits_without_that_stick(
@@ -228,7 +230,7 @@ def test_a_start_not_periodic_at_the_snake_s_v_d_is_followed_from_a_neighbouring
     """The three-site state of eq. (8) is not periodic at v_d 1.5 (shooting from the
     simulated state does not converge) but is at 1.4 (`RETRY_VD`): its branch
     starts there, and its start orbit is periodic on the exact engine's own flow
-    (`nonsmooth_flow` over one period returns to the state within 1e-8, with no
+    (`Exact.flow` over one period returns to the state within 1e-8, with no
     Newton iteration). Beyond the fold below it the branch runs back through the
     mirror images of its own orbits: it is cut there (stop "retraced") and its
     other way is followed, up past the snake's v_d. (Before the isola test took
@@ -243,5 +245,5 @@ def test_a_start_not_periodic_at_the_snake_s_v_d_is_followed_from_a_neighbouring
     u = ds["u"].values[np.argmin(np.abs(ds["v_d"].values - 1.4))]
     params = jc.with_parameter(jc.ChainParams(n_osc=N), "v_d", 1.4)
     y0 = u[:-1].reshape(2, -1)
-    after, status = jc.nonsmooth_flow(params, y0, np.array([u[-1]]), jc.ExactShooting().flow)
-    assert int(status) == jc.Status.ok and np.max(np.abs(np.asarray(after)[0] - y0)) < 1e-8
+    after = np.asarray(EXACT.engine.flow(params, y0, np.array([u[-1]])))
+    assert np.all(np.isfinite(after)) and np.max(np.abs(after[0] - y0)) < 1e-8
