@@ -282,3 +282,116 @@ def test_version_is_the_installed_one_and_the_command_prints_it(capsys):
     with pytest.raises(SystemExit) as exc:
         jc.main(["--version"])
     assert exc.value.code == 0 and capsys.readouterr().out.strip() == f"jaxchain {jc.__version__}"
+
+
+LAYOUT = (ROOT / "docs" / "layout.md").read_text()
+#: An entry of the package's listing in docs/layout.md: a file or a folder, indented two
+#: spaces a level, then its description after two spaces or more (a description's
+#: second line starts deeper than any entry).
+LISTED = re.compile(r"^((?:  )*)([\w.]+/|[\w.]+\.pyi?)(?: {2,}|$)")
+
+
+def _layout_listing() -> list[str]:
+    """The files and folders that the listing of docs/layout.md names, as paths from
+    the repository's root (`jaxchain/_engine/exact/solve.py`, `jaxchain/_engine/`), in
+    the listing's order."""
+    listing = LAYOUT.split("## Layout", 1)[1].split("```")[1]
+    paths, folders = [], []
+    for line in listing.splitlines():
+        entry = LISTED.match(line)
+        if entry is None or len(entry[1]) // 2 > len(folders):
+            continue
+        del folders[len(entry[1]) // 2:]
+        paths.append("".join(folders) + entry[2])
+        if entry[2].endswith("/"):
+            folders.append(entry[2])
+    return paths
+
+
+def _layer(path: str) -> str:
+    """The layer of a file or folder of the package: the package's root (`jaxchain/`,
+    for the files that stand there) or the folder under it (`jaxchain/_engine/`)."""
+    parts = path.split("/")
+    return "jaxchain/" if len(parts) == 2 else f"jaxchain/{parts[1]}/"
+
+
+def _layer_order(paths) -> list[str]:
+    """The layers in the order a listing gives them, from the bottom up."""
+    return list(dict.fromkeys(_layer(path) for path in paths if path != "jaxchain/"))
+
+
+def _module_path(dotted: str) -> str:
+    """`jaxchain._engine.engines` as the file that holds it."""
+    path = ROOT / dotted.replace(".", "/")
+    return (path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+            ).relative_to(ROOT).as_posix()
+
+
+def _package_imports():
+    """Every import of a jaxchain module by a jaxchain module, read with `ast` (not the
+    modules that `importlib.import_module` is given as a string): (importer, imported,
+    whether the import is made inside a function), as paths from the repository's root."""
+    for path in sorted((ROOT / "jaxchain").rglob("*.py")):
+        importer = path.relative_to(ROOT).as_posix()
+        package = importer.split("/")[:-1]
+        tree = ast.parse(path.read_text())
+        inside = {id(node) for function in ast.walk(tree)
+                  if isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef))
+                  for node in ast.walk(function)}
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0:
+                targets = [node.module]
+            elif isinstance(node, ast.ImportFrom):
+                base = package[:len(package) - node.level + 1]
+                targets = ([".".join(base + [node.module])] if node.module else
+                           [".".join(base + [alias.name]) for alias in node.names])
+            else:
+                continue
+            for target in targets:
+                if target.split(".")[0] == "jaxchain":
+                    yield importer, _module_path(target), id(node) in inside
+
+
+def test_the_developers_page_lists_every_module():
+    """The listing of docs/layout.md names every module of the package and nothing
+    else: each file, and each folder (which stands for its `__init__.py`)."""
+    listed = _layout_listing()
+    package = ROOT / "jaxchain"
+    files = {p.relative_to(ROOT).as_posix() for p in package.rglob("*.py*")
+             if p.suffix in (".py", ".pyi")}
+    there = {f for f in files if not (f.endswith("/__init__.py") and f.count("/") > 1)}
+    there |= {p.parent.relative_to(ROOT).as_posix() + "/" for p in package.rglob("__init__.py")}
+    assert sorted(there - set(listed)) == [], "not on the developers' page"
+    assert sorted(set(listed) - there) == [], "on the developers' page, not in the package"
+    assert len(listed) == len(set(listed))
+
+
+def test_every_import_keeps_the_layer_order_of_the_developers_page():
+    """No module imports from a layer that docs/layout.md lists below its own (the
+    folders from the bottom up), except the imports that the page names as running
+    against the order; each of those is still there and made inside a function."""
+    order = _layer_order(_layout_listing())
+    assert order[:3] == ["jaxchain/", "jaxchain/_physics/", "jaxchain/_engine/"]
+    against = set(re.findall(r"^- `(jaxchain/[\w/]+\.py)` imports `(jaxchain/[\w/]+\.py)`",
+                             LAYOUT, re.MULTILINE))
+    crossing, named = [], {}
+    for importer, imported, lazy in _package_imports():
+        if order.index(_layer(imported)) <= order.index(_layer(importer)):
+            continue
+        if (importer, imported) in against:
+            named[importer, imported] = named.get((importer, imported), True) and lazy
+        else:
+            crossing.append(f"{importer} imports {imported}")
+    assert sorted(set(crossing)) == []
+    assert sorted(against - set(named)) == [], "named on the page, no longer in the code"
+    loaded = [pair for pair, lazy in named.items() if not lazy]
+    assert loaded == [], "against the order, and made when the module loads"
+
+
+def test_the_readme_gives_the_layer_order_of_the_developers_page():
+    listing = README.split("## Layout", 1)[1].split("```")[1]
+    readme = re.findall(r"^  (_\w+)/", listing, re.MULTILINE)
+    page = [layer.split("/")[1] for layer in _layer_order(_layout_listing())[1:]]
+    assert readme == page
