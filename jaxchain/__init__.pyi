@@ -77,6 +77,7 @@ from ._engine.exact.solve import (
     NonsmoothObservables as NonsmoothObservables,
 )
 from ._engine.exact.options import NonsmoothOptions as NonsmoothOptions
+from ._engine.exact.phases import stick_phases as stick_phases
 from ._engine.exact.switching import (
     SWITCH_KINDS as SWITCH_KINDS, saltation_matrix as saltation_matrix,
 )
@@ -124,9 +125,11 @@ from ._bifurcation.lyapunov_coefficient import (
     first_lyapunov_coefficient as first_lyapunov_coefficient,
 )
 from ._bifurcation.orbit_method import (
-    periodic_orbit as periodic_orbit, PeriodicOrbit as PeriodicOrbit,
-    AbstractOrbitMethod as AbstractOrbitMethod, cycle_problem as cycle_problem,
+    PeriodicOrbit as PeriodicOrbit, AbstractOrbitMethod as AbstractOrbitMethod,
     orbit_record as orbit_record, deflated_multipliers as deflated_multipliers,
+)
+from ._bifurcation.periodic_orbit import (
+    periodic_orbit as periodic_orbit, cycle_problem as cycle_problem,
 )
 from ._bifurcation.shooting import Shooting as Shooting
 from ._bifurcation.deflation import (
@@ -145,7 +148,7 @@ from ._bifurcation.grazing import (
 )
 from ._bifurcation.sliding import (
     locate_sliding as locate_sliding, SlidingPoint as SlidingPoint,
-    stick_phases as stick_phases, sliding_curve as sliding_curve,
+    sliding_curve as sliding_curve,
     SlidingCurve as SlidingCurve,
 )
 from ._bifurcation.past_sliding import (

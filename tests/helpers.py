@@ -320,7 +320,7 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "continuation corrector": ("jaxchain._bifurcation.continuation", "_correct"),
              "continuation tangent": ("jaxchain._bifurcation.continuation", "_tangent"),
              "continuation records": ("jaxchain._bifurcation.continuation", "describe_point"),
-             "shooting records": ("jaxchain._bifurcation.orbit_method", "describe_point"),
+             "shooting records": ("jaxchain._bifurcation.periodic_orbit", "describe_point"),
              "slip arc peak": ("jaxchain._bifurcation.existence", "_peak"),
              # the progress bar every bar of jaxchain is (test_examples.py)
              "progress bar": ("jaxchain._engine.progress", "progress_bar"),

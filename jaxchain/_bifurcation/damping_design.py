@@ -10,7 +10,7 @@ from jaxtyping import Array, Float
 from .._physics.params import with_parameter
 from .continuation import ContinuationProblem
 from .hopf import check_eps
-from .orbit_method import cycle_method
+from .periodic_orbit import cycle_method
 from .two_parameter import fold_curve, hopf_vd_and_derivative
 from .._checks import check_positive
 from .._printing import values_repr

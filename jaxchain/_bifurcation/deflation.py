@@ -15,7 +15,7 @@ from .._engine.compat import checks_as_nan
 from .._errors import ValidationError
 from .._physics.params import ChainParams, is_homogeneous_ring
 from .continuation import ContinuationProblem
-from .orbit_method import cycle_method
+from .periodic_orbit import cycle_method
 from .._printing import values_repr
 
 

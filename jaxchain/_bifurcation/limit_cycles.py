@@ -7,7 +7,8 @@ import numpy as np
 from .._physics.params import ChainParams, with_parameter
 from .hopf import critical_mode, hopf_point
 from .lyapunov_coefficient import first_lyapunov_coefficient
-from .orbit_method import PeriodicOrbit, periodic_orbit
+from .orbit_method import PeriodicOrbit
+from .periodic_orbit import periodic_orbit
 from .shooting import Shooting
 from .._checks import check_positive
 

@@ -1,9 +1,9 @@
-"""Periodic orbits with the method as a value: `AbstractOrbitMethod` (what every way
-of computing an orbit provides), the one `PeriodicOrbit` record they all describe,
-`periodic_orbit` that solves for one, and `cycle_problem` that hands its branch to
-`continuation`. A new method (`Shooting` is the first) is one class: the
-continuation, the bifurcations on its branch and the studies above take it as it
-is (docs/adding-a-method.md)."""
+"""The orbit method as a value: `AbstractOrbitMethod` (what every way of computing a
+periodic orbit provides) and the one `PeriodicOrbit` record they all describe, with
+the Floquet multipliers' deflation and resolution that every method shares. A new
+method (`Shooting` is the first) is one class: `periodic_orbit`, the continuation,
+the bifurcations on its branch and the studies above take it as it is
+(docs/adding-a-method.md)."""
 
 import abc
 
@@ -12,13 +12,11 @@ import jax.numpy as jnp
 import optimistix as optx
 from jaxtyping import Array, Bool, Complex, Float, Int
 
-from .._checks import check_positive
 from .._engine.compat import checks_as_nan
 from .._errors import ValidationError
 from .._physics.custom_types import State
 from .._physics.params import ChainParams
 from .._printing import values_repr
-from .continuation import ContinuationProblem, describe_point
 
 
 class PeriodicOrbit(eqx.Module):
@@ -217,114 +215,3 @@ def _newton(method: AbstractOrbitMethod, params: ChainParams, u0):
     sol = optx.root_find(lambda u, p: method.residual(u, p), optx.Newton(rtol=tol, atol=tol),
                          u0, params, max_steps=method.newton_steps, throw=False)
     return sol.value, sol.result == optx.RESULTS.successful
-
-
-class DescribeOrbit(eqx.Module):
-    """The method's `describe`, as a `ContinuationProblem` record: equal methods
-    give equal records, so continuation compiles once."""
-
-    method: AbstractOrbitMethod
-
-    def __call__(self, u, params):
-        return self.method.describe(u, params)
-
-
-class CycleResidual(eqx.Module):
-    """The method's `residual`, as a `ContinuationProblem` residual."""
-
-    method: AbstractOrbitMethod
-
-    def __call__(self, u, params):
-        return self.method.residual(u, params)
-
-
-def as_guess(guess) -> tuple[State, float]:
-    """(y0, period) of a guess: a `PeriodicOrbit`, or a pair (state, period)."""
-    if isinstance(guess, PeriodicOrbit):
-        return guess.y0, guess.period
-    try:
-        y0, period = guess
-    except (TypeError, ValueError):
-        raise ValidationError("guess must be a pair (y0, period) or a PeriodicOrbit, got "
-                              f"{type(guess).__name__}") from None
-    check_positive("period", period)
-    return jnp.asarray(y0, dtype=float), period
-
-
-def periodic_orbit(params: ChainParams, guess, method: AbstractOrbitMethod | None = None, *,
-                   throw: bool = True) -> PeriodicOrbit:
-    """Solve for a periodic orbit of eq. (5) from a guess by an orbit method, and
-    describe it: period, amplitudes, the oscillators on the HALC, Floquet
-    multipliers and stability.
-
-    **Arguments:**
-
-    - `params`: the chain parameters.
-    - `guess`: a pair (y0, period): a state on or near the orbit, shape (2, n_osc)
-        (the end of a long simulation, for instance), and the period's guess (> 0);
-        or a `PeriodicOrbit` (of other parameters, say).
-    - `method`: an `AbstractOrbitMethod`; `Shooting()` (single shooting on the
-        smoothed engine at eps = 1e-3) by default. `Shooting(Exact().for_orbits())`
-        solves the exact stick/slip model.
-    - `throw`: raise if the method does not converge (default); otherwise return
-        the orbit with `converged=False`.
-
-    **Returns:**
-
-    A `PeriodicOrbit`.
-
-    **Raises:**
-
-    `ValidationError` for a guess of the wrong shape, a non-positive period or a
-    phase oscillator outside the chain; `RuntimeError` if the method does not
-    converge and `throw=True`.
-    """
-    if method is None:
-        from .shooting import Shooting
-        method = Shooting()
-    y0, period = as_guess(guess)
-    u, ok = method.solve(params, method.unknowns(params, y0, period))
-    # the record by continuation's own program (`describe_point`), compiled once
-    orbit = describe_point(DescribeOrbit(method), u, params, params.v_d, "v_d")
-    orbit = eqx.tree_at(lambda o: o.converged, orbit, orbit.converged & ok)
-    if throw and not bool(orbit.converged):
-        raise RuntimeError(f"{type(method).__name__} did not converge: start from a state "
-                           "closer to the orbit (after a longer simulation) or a better "
-                           "period guess")
-    return orbit
-
-
-def cycle_problem(orbit: PeriodicOrbit, method: AbstractOrbitMethod | None = None,
-                  where="v_d") -> ContinuationProblem:
-    """The `ContinuationProblem` of the periodic orbits through `orbit`: the method's
-    unknowns and residual, its records (`PeriodicOrbit`: Floquet multipliers,
-    stability, n_HALC), to follow with `continuation` (pseudo-arclength, Keller
-    1977) in any parameter.
-
-    **Arguments:**
-
-    - `orbit`: a converged `PeriodicOrbit`.
-    - `method`: the method of every point (`Shooting()` by default); the one that
-        found `orbit`.
-    - `where`: the continued parameter, a name or a lens (default the belt speed).
-    """
-    if method is None:
-        from .shooting import Shooting
-        method = Shooting()
-    return ContinuationProblem(
-        residual=CycleResidual(method), u0=method.pack(orbit.y0, orbit.period),
-        params=orbit.params, where=where, describe=DescribeOrbit(method))
-
-
-def cycle_method(problem: ContinuationProblem) -> AbstractOrbitMethod:
-    """The orbit method of a problem of periodic orbits (`cycle_problem`), or of the
-    one whose folds a fold system follows (its `problem`).
-
-    **Raises:** `ValidationError` for a problem that is not one of periodic orbits."""
-    residual = problem.residual
-    while isinstance(getattr(residual, "problem", None), ContinuationProblem):
-        residual = residual.problem.residual
-    if not isinstance(residual, CycleResidual):
-        raise ValidationError("the problem is not one of periodic orbits (cycle_problem), "
-                              f"got a residual {type(residual).__name__}")
-    return residual.method

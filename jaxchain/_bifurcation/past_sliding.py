@@ -26,7 +26,7 @@ from jaxtyping import Array, Float
 from .continuation import (ContinuationOptions, ContinuationProblem, PseudoArclength, _correct,
                            continuation)
 from .deflation import orbit_samples
-from .orbit_method import CycleResidual, cycle_method
+from .periodic_orbit import CycleResidual, cycle_method
 from .sliding import _phases, exact_problem
 from .._errors import ValidationError
 

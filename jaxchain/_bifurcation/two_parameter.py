@@ -17,7 +17,7 @@ from .continuation import (Branch, ContinuationOptions, ContinuationProblem, Pse
                            continuation)
 from .fold import FoldSystem, solve_fold
 from .hopf import check_eps, hopf_vd
-from .orbit_method import cycle_method
+from .periodic_orbit import cycle_method
 from .._errors import ValidationError
 from .._printing import values_repr
 

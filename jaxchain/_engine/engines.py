@@ -16,6 +16,7 @@ from jaxtyping import Array, ArrayLike, Bool, Float
 
 from .checks import as_solver, check_options
 from .exact.options import REFERENCE_TOLERANCES, NonsmoothOptions
+from .exact.phases import stick_phases
 from .exact.solve import nonsmooth_flow, run_exact
 from .exact.switching import initial_modes, mode_field
 from .flow import smoothed_flow, smoothed_orbit_samples
@@ -375,7 +376,6 @@ class Exact(AbstractEngine):
         return Exact()
 
     def stick_phases(self, params: ChainParams, y0: State, period):
-        from .._bifurcation.sliding import stick_phases  # the bifurcation layer's record
         return stick_phases(params, y0, period, self.options)
 
     def holding(self, oscillators: tuple[int, ...]) -> "Exact":

@@ -13,7 +13,7 @@ from .._bifurcation.fold import FoldPoint, fold_point
 from .._bifurcation.hopf import (HopfPoint, hopf_eps_correction, hopf_point, hopf_speed,
                                  hopf_vd_analytic)
 from .._bifurcation.limit_cycles import hopf_cycle
-from .._bifurcation.orbit_method import cycle_problem, periodic_orbit
+from .._bifurcation.periodic_orbit import cycle_problem, periodic_orbit
 from .._bifurcation.lyapunov_coefficient import first_lyapunov_coefficient
 from .._bifurcation.shooting import Shooting, unpack
 from .._bifurcation.two_parameter import BoundaryCurves, boundary_curves

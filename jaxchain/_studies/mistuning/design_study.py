@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._physics.chain import require_line
-from ..._bifurcation.orbit_method import cycle_method, periodic_orbit
+from ..._bifurcation.periodic_orbit import cycle_method, periodic_orbit
 from ..._engine.engines import Smoothed, as_engine
 from ..._engine.options import SimulationOptions
 from ..._physics.forces import DEFAULT_EPS

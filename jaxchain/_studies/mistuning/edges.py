@@ -16,7 +16,7 @@ import numpy as np
 from ..._engine.progress import tqdm
 from ..._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
 from ..._bifurcation.fold import FoldPoint, fold_point
-from ..._bifurcation.orbit_method import cycle_problem, periodic_orbit
+from ..._bifurcation.periodic_orbit import cycle_problem, periodic_orbit
 from ..._bifurcation.shooting import Shooting
 from ..._engine.engines import as_engine
 from ..._engine.lanes import run_lanes

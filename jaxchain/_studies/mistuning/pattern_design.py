@@ -14,7 +14,7 @@ from jaxtyping import Array, Float
 
 from ..._engine.compat import checks_as_nan
 from ..._bifurcation.fold import solve_fold
-from ..._bifurcation.orbit_method import cycle_method
+from ..._bifurcation.periodic_orbit import cycle_method
 from ..._physics.forces import DEFAULT_EPS
 from ..._physics.initial import excited_block
 from ..._physics.params import chain_or_default, ChainParams

@@ -18,7 +18,7 @@ from ..._bifurcation.branch_switching import (
     symmetric_directions,
 )
 from ..._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
-from ..._bifurcation.orbit_method import cycle_method
+from ..._bifurcation.periodic_orbit import cycle_method
 from ..._bifurcation.past_sliding import past_sliding_start
 from ..._bifurcation.shooting import pack, unpack
 from ..._engine.status import Status

@@ -10,7 +10,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._bifurcation.continuation import ContinuationProblem
-from ..._bifurcation.orbit_method import AbstractOrbitMethod, cycle_problem, periodic_orbit
+from ..._bifurcation.orbit_method import AbstractOrbitMethod
+from ..._bifurcation.periodic_orbit import cycle_problem, periodic_orbit
 from ..._bifurcation.shooting import Shooting
 from ..._engine.compat import checks_as_nan
 from ..._engine.engines import AbstractEngine, Smoothed
