@@ -19,4 +19,14 @@ from ._setup import VERSION as __version__  # noqa: F401  (the package version)
 
 #: Every public name of `__init__.pyi`, for `from jaxchain import *` and the
 #: documentation; each is imported from its module when first used.
-__getattr__, __dir__, __all__ = lazy_loader.attach_stub(__name__, __file__)
+_public_getattr, __dir__, __all__ = lazy_loader.attach_stub(__name__, __file__)
+
+
+def __getattr__(name: str):
+    """A public name, loaded on first use; or one of the previous release's orbit
+    names, a deprecated alias for one release (`_deprecated`)."""
+    if name in ("ShootingOptions", "ExactShooting", "exact_periodic_orbit",
+                "exact_cycle_problem", "limit_cycle_problem", "floquet_multipliers"):
+        from ._deprecated import DEPRECATED
+        return DEPRECATED[name]
+    return _public_getattr(name)

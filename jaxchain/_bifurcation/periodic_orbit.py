@@ -34,6 +34,21 @@ class CycleResidual(eqx.Module):
         return self.method.residual(u, params)
 
 
+def _checked(method) -> AbstractOrbitMethod:
+    """`method`, or `Shooting()` where None.
+
+    **Raises:** `ValidationError` for anything else, with the form that replaced the
+    previous release's `periodic_orbit(params, y0, period, options, eps=...)`."""
+    if method is None:
+        return Shooting()
+    if not isinstance(method, AbstractOrbitMethod):
+        raise ValidationError(
+            f"method must be an orbit method such as jaxchain.Shooting, got "
+            f"{type(method).__name__}; periodic_orbit(params, y0, period, options) is "
+            "periodic_orbit(params, (y0, period), Shooting(...)) now")
+    return method
+
+
 def as_guess(guess) -> tuple[State, float]:
     """(y0, period) of a guess: a `PeriodicOrbit`, or a pair (state, period)."""
     if isinstance(guess, PeriodicOrbit):
@@ -75,7 +90,7 @@ def periodic_orbit(params: ChainParams, guess, method: AbstractOrbitMethod | Non
     phase oscillator outside the chain; `RuntimeError` if the method does not
     converge and `throw=True`.
     """
-    method = Shooting() if method is None else method
+    method = _checked(method)
     y0, period = as_guess(guess)
     u, ok = method.solve(params, method.unknowns(params, y0, period))
     # the record by continuation's own program (`describe_point`), compiled once
@@ -102,7 +117,7 @@ def cycle_problem(orbit: PeriodicOrbit, method: AbstractOrbitMethod | None = Non
         found `orbit`.
     - `where`: the continued parameter, a name or a lens (default the belt speed).
     """
-    method = Shooting() if method is None else method
+    method = _checked(method)
     return ContinuationProblem(
         residual=CycleResidual(method), u0=method.pack(orbit.y0, orbit.period),
         params=orbit.params, where=where, describe=DescribeOrbit(method))

@@ -1,0 +1,43 @@
+"""The previous release's orbit names, used by its documentation and notebooks, work
+for one more release as deprecated aliases of the method as a value: each warns and
+gives what the new form gives, bit for bit (the same compiled program)."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxchain as jc
+
+
+@pytest.fixture(scope="module")
+def start():
+    jc.configure()
+    params = jc.ChainParams(n_osc=1, v_d=1.5)
+    obs = jc.simulate(params, jnp.array([[2.0], [0.0]]),
+                      options=jc.SimulationOptions(t_end=600.0, transient=300.0))
+    return params, obs.y_final
+
+
+def test_the_old_names_warn_and_give_the_new_forms_results(start):
+    params, y = start
+    with pytest.warns(DeprecationWarning, match="ExactShooting is deprecated"):
+        old_exact = jc.ExactShooting(phase_oscillator=0)
+    with pytest.warns(DeprecationWarning, match="exact_periodic_orbit"):
+        old = jc.exact_periodic_orbit(params, y, 6.3, old_exact)
+    new = jc.periodic_orbit(params, (y, 6.3), jc.Shooting(jc.Exact().for_orbits()))
+    assert float(old.period) == float(new.period)
+    np.testing.assert_array_equal(old.multipliers, new.multipliers)
+    with pytest.warns(DeprecationWarning, match="ShootingOptions"):
+        options = jc.ShootingOptions()
+    smoothed = jc.periodic_orbit(params, (y, 6.3), jc.Shooting())
+    with pytest.warns(DeprecationWarning, match="floquet_multipliers"):
+        values, trivial = jc.floquet_multipliers(params, smoothed.y0, smoothed.period, options)
+    np.testing.assert_array_equal(values, smoothed.multipliers)
+    assert int(trivial) == int(smoothed.trivial)
+    assert "ShootingOptions" not in jc.__all__
+
+
+def test_the_old_call_of_periodic_orbit_says_the_new_one(start):
+    params, y = start
+    with pytest.raises(ValueError, match=r"periodic_orbit\(params, \(y0, period\)"):
+        jc.periodic_orbit(params, y, 6.3)
