@@ -108,6 +108,18 @@ def test_bad_arguments():
                           jc.Shooting(newton_steps=3, damped_steps=0))
 
 
+def test_the_method_takes_another_phase_oscillator_and_keeps_the_rest():
+    """`with_phase_oscillator` (the snake shoots each start on its own oscillator)
+    changes that one static field and nothing else; an engine at simulation
+    tolerances is refused, with the way to tighten it."""
+    method = jc.Shooting(jc.Exact().for_orbits(), newton_steps=7)
+    moved = method.with_phase_oscillator(2)
+    assert moved.phase_oscillator == 2 and moved.newton_steps == 7
+    assert moved.engine == method.engine
+    with pytest.raises(ValueError, match="for_orbits"):
+        jc.Shooting(jc.Smoothed())  # rtol 3e-5 at eps 1e-3: too loose
+
+
 @pytest.mark.numerics
 @pytest.mark.parametrize("n_osc", [1, 2])
 def test_deflated_multipliers_obey_liouville(n_osc):

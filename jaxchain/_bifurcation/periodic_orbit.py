@@ -123,15 +123,23 @@ def cycle_problem(orbit: PeriodicOrbit, method: AbstractOrbitMethod | None = Non
         params=orbit.params, where=where, describe=DescribeOrbit(method))
 
 
+def orbit_residual(problem: ContinuationProblem) -> CycleResidual | None:
+    """The `CycleResidual` of a problem of periodic orbits (`cycle_problem`), or of
+    the one whose folds a fold system follows (its `problem`); None for another
+    problem."""
+    residual = problem.residual
+    while isinstance(getattr(residual, "problem", None), ContinuationProblem):
+        residual = residual.problem.residual
+    return residual if isinstance(residual, CycleResidual) else None
+
+
 def cycle_method(problem: ContinuationProblem) -> AbstractOrbitMethod:
     """The orbit method of a problem of periodic orbits (`cycle_problem`), or of the
     one whose folds a fold system follows (its `problem`).
 
     **Raises:** `ValidationError` for a problem that is not one of periodic orbits."""
-    residual = problem.residual
-    while isinstance(getattr(residual, "problem", None), ContinuationProblem):
-        residual = residual.problem.residual
-    if not isinstance(residual, CycleResidual):
+    residual = orbit_residual(problem)
+    if residual is None:
         raise ValidationError("the problem is not one of periodic orbits (cycle_problem), "
-                              f"got a residual {type(residual).__name__}")
+                              f"got a residual {type(problem.residual).__name__}")
     return residual.method

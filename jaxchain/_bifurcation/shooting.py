@@ -2,6 +2,8 @@
 (`AbstractEngine.flow`) with its sensitivities, Newton's method on the period map,
 and the Floquet multipliers from the monodromy matrix."""
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -182,7 +184,7 @@ class Shooting(AbstractOrbitMethod):
         return u, ok
 
     def with_phase_oscillator(self, n: int) -> "Shooting":
-        return eqx.tree_at(lambda m: m.phase_oscillator, self, n)
+        return dataclasses.replace(self, phase_oscillator=n)  # a static field
 
     def refine(self, factor: float) -> "Shooting":
         """Shooting with the flow's tolerances divided by `factor`."""

@@ -11,7 +11,7 @@ from .._engine.status import Status
 from .._errors import ValidationError
 from .._physics.params import parameter_value, with_parameter
 from .continuation import ContinuationProblem, PseudoArclength, _correct, _record
-from .periodic_orbit import cycle_method
+from .periodic_orbit import cycle_method, orbit_residual
 from .._printing import values_repr
 
 #: The fraction of the way to the secant method's root that each trial goes.
@@ -56,9 +56,11 @@ class SlidingPoint(eqx.Module):
 
 
 def exact_problem(problem: ContinuationProblem) -> bool:
-    """Whether `problem` continues orbits whose engine has exact stick phases (the
-    exact switch model's, `AbstractEngine.has_stick_phases`)."""
-    return cycle_method(problem).engine.has_stick_phases
+    """Whether `problem` continues periodic orbits whose engine has exact stick
+    phases (the exact switch model's, `AbstractEngine.has_stick_phases`); False for
+    any other problem."""
+    residual = orbit_residual(problem)
+    return residual is not None and residual.method.engine.has_stick_phases
 
 
 def _phases(problem: ContinuationProblem, z) -> np.ndarray:
