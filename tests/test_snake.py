@@ -473,3 +473,36 @@ def test_snake_command_json_and_bad_options(tmp_path, capsys):
     assert_usage_error(["snake", "--vd", "3"], "--vd", capsys)
     # "all" is every k = 1 ... N, accepted as starts: the error is the belt speed's
     assert_usage_error(["snake", "--sites", "all", "--vd", "3"], "--vd must lie", capsys)
+
+
+#: The settings that the previous release keyed the default smoothed and exact
+#: snakes' stored branches by (its ShootingOptions and ExactShooting, as
+#: `canonical` wrote them): a store of the ring of 8 or 20 made then reads back.
+PREVIOUS_SETTINGS = [
+    '{"engine": "smoothed", "eps": 0.001, "shooting": {"class": "jaxchain._bifurcation.'
+    'shooting.ShootingOptions", "fields": {"atol": 1e-12, "max_steps": 200000, "n_samples":'
+    ' 4096, "newton_steps": 40, "newton_tol": 1e-09, "phase_oscillator": 0, "root_finder": '
+    '"levenberg-marquardt", "rtol": 1e-10, "solver": {"class": "diffrax._solver.tsit5.Tsit5"'
+    ', "fields": {"scan_kind": null}}}}, "solver": "ros34pw2"}',
+    '{"engine": "exact", "shooting": {"class": "jaxchain._bifurcation.exact_orbit.ExactShoot'
+    'ing", "fields": {"damped_steps": 120, "flow": {"class": "jaxchain._engine.exact.options'
+    '.NonsmoothOptions", "fields": {"adjoint": "forward", "atol": 1e-12, "chunk_length": 250'
+    '.0, "held": [], "log_size": 1024, "max_events": 100000, "max_steps": 100000, "root_tol"'
+    ': 1e-13, "rtol": 1e-12, "solver": "tsit5", "switch_tol": 1e-09, "t_end": 1.0, "transie'
+    'nt": 0.0}}, "n_samples": 4096, "newton_steps": 40, "newton_tol": 1e-09, "phase_oscillat'
+    'or": 0}}}',
+]
+
+
+def test_the_default_snakes_keep_the_previous_releases_store_key():
+    from jaxchain._engine.hashes import canonical  # the store's key, as it is written
+
+    orbits = internal("snake orbits")
+    now = [orbits(jc.Shooting.from_simulations(jc.Smoothed()), jc.Smoothed()),
+           orbits(jc.Shooting.from_simulations(jc.Exact()))]
+    for settings, previous in zip(now, PREVIOUS_SETTINGS):
+        assert json.dumps(canonical(settings.settings()), sort_keys=True) == previous
+    # a method the previous release did not have keys by itself, never by a
+    # previous method's key
+    damped = jc.Shooting(jc.Smoothed().for_orbits(), damped_steps=120)
+    assert "method" in orbits(damped, jc.Smoothed()).settings()

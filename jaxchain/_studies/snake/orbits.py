@@ -15,7 +15,9 @@ from ..._bifurcation.periodic_orbit import cycle_problem, periodic_orbit
 from ..._bifurcation.shooting import Shooting
 from ..._engine.compat import checks_as_nan
 from ..._engine.engines import AbstractEngine, Smoothed
+from ..._engine.hashes import canonical
 from ..._engine.horizon import AbstractHorizon
+from ..._engine.solver.registry import SOLVERS
 from ..._errors import ValidationError
 from ..._physics.params import ChainParams
 
@@ -67,7 +69,47 @@ class SnakeOrbits:
         return self.engine.with_horizon(options)
 
     def settings(self) -> dict:
-        return {"method": self.method, "simulations": self.engine}
+        """What keys a stored branch: in the previous release's form for the two
+        methods it had (`_previous_settings`), so that its stores read back;
+        otherwise the method and the simulations' engine themselves."""
+        previous = _previous_settings(self.method, self.engine)
+        return {"method": self.method, "simulations": self.engine} if previous is None \
+            else previous
+
+
+def _solver_name(solver) -> str:
+    """The registry's name of a solver (`SOLVERS`), or its class's name."""
+    return next((name for name, make in SOLVERS.items() if type(solver) is make),
+                type(solver).__name__)
+
+
+def _previous_settings(method, engine: AbstractEngine) -> dict | None:
+    """The settings of a branch in the previous release's words, where its method
+    had them: shooting on the smoothed engine's orbit flow (Tsit5, diffrax's PID
+    controller) without the damped fallback, or on the exact engine by Newton's
+    method; None otherwise. The key is then the one the previous release stored its
+    branches under (the previous options' class names and fields)."""
+    if not isinstance(method, Shooting):
+        return None
+    flow = method.engine
+    common = {"n_samples": method.n_samples, "newton_steps": method.newton_steps,
+              "newton_tol": method.newton_tol, "phase_oscillator": method.phase_oscillator}
+    if flow.has_stick_phases and method.root_finder == "newton":
+        return {"engine": "exact", "shooting": {
+            "class": "jaxchain._bifurcation.exact_orbit.ExactShooting",
+            "fields": common | {"damped_steps": method.damped_steps,
+                                "flow": canonical(flow.options)}}}
+    undamped = method.root_finder != "newton" or method.damped_steps == 0
+    if (flow.smooths and engine.smooths and undamped and flow.options.controller == "diffrax"
+            and float(flow.eps) == float(engine.eps)):
+        return {"engine": "smoothed", "eps": float(flow.eps), "shooting": {
+            "class": "jaxchain._bifurcation.shooting.ShootingOptions",
+            "fields": common | {"solver": canonical(flow.solver), "rtol": flow.options.rtol,
+                                "atol": flow.options.atol,
+                                "max_steps": flow.options.max_steps,
+                                "root_finder": method.root_finder}},
+            "solver": _solver_name(engine.solver)}
+    return None
 
 
 def snake_orbits(method: AbstractOrbitMethod | None = None,
