@@ -163,7 +163,10 @@ def test_the_commands_run_the_exact_engine_or_refuse_it_in_one_line(tmp_path, ca
             "--engine", "exact", "--out", str(tmp_path / "a"), "--json"]
     assert jc.main(argv) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["engine"] == "exact" and "eps" not in out and "solver" not in out
+    # the exact engine's own settings, its Runge-Kutta solver among them; no eps and
+    # not the smoothed engine's solver
+    assert out["engine"] == "exact" and "eps" not in out
+    assert out["solver"] == jc.Exact().options.solver != jc.DEFAULT_SOLVER
     one = jc.simulate(CHAIN, START, engine=jc.Exact(EXACT))
     assert out["runs"][0]["n_halc"][0] == int(one.n_halc)
     assert (out["rtol"], out["atol"]) == (jc.NonsmoothOptions().rtol, jc.NonsmoothOptions().atol)
