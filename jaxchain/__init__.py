@@ -24,9 +24,11 @@ _public_getattr, __dir__, __all__ = lazy_loader.attach_stub(__name__, __file__)
 
 def __getattr__(name: str):
     """A public name, loaded on first use; or one of the previous release's orbit
-    names, a deprecated alias for one release (`_deprecated`)."""
-    if name in ("ShootingOptions", "ExactShooting", "exact_periodic_orbit",
-                "exact_cycle_problem", "limit_cycle_problem", "floquet_multipliers"):
-        from ._deprecated import DEPRECATED
-        return DEPRECATED[name]
-    return _public_getattr(name)
+    names, a deprecated alias for one release (`_studies/deprecated.py`)."""
+    try:
+        return _public_getattr(name)
+    except AttributeError:
+        from ._studies.deprecated import DEPRECATED
+        if name in DEPRECATED:
+            return DEPRECATED[name]
+        raise

@@ -213,7 +213,6 @@ from ._studies.bistable_range import (
     bistable_range as bistable_range, BISTABLE_XI_VALUES as BISTABLE_XI_VALUES,
     BISTABLE_RATIO_VALUES as BISTABLE_RATIO_VALUES,
 )
-from ._studies.grazing_range import exact_bistable_range as exact_bistable_range
 from ._studies.scenes import (
     observe_solutions as observe_solutions, PAPER_SOLUTIONS as PAPER_SOLUTIONS,
     PAPER_FIGURES as PAPER_FIGURES, time_series_scene as time_series_scene,

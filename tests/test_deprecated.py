@@ -41,3 +41,21 @@ def test_the_old_call_of_periodic_orbit_says_the_new_one(start):
     params, y = start
     with pytest.raises(ValueError, match=r"periodic_orbit\(params, \(y0, period\)"):
         jc.periodic_orbit(params, y, 6.3)
+
+
+def test_the_exact_bistable_range_is_bistable_range_on_the_exact_engine():
+    """The previous `exact_bistable_range` is `bistable_range` with the exact model's
+    method: the same Hopf and grazing points and curves, its summary keys those of
+    the fold with `boundary` "grazing"; the grazing point lies at the closed-form
+    existence limit (an independent route to it) to 1e-8."""
+    jc.configure()
+    params = jc.ChainParams(n_osc=1)
+    found = jc.bistable_range(params, xi_values=[0.05, 0.06], ratio_values=[2.0, 2.5],
+                              method=jc.Shooting(jc.Exact().for_orbits()))
+    with pytest.warns(DeprecationWarning, match="exact_bistable_range"):
+        old, (curves_xi, _) = jc.exact_bistable_range(params, xi_values=[0.05, 0.06],
+                                                      ratio_values=[2.0, 2.5])
+    assert found.summary["boundary"] == "grazing" and found.design is None
+    assert found.summary == old
+    np.testing.assert_array_equal(found.curves_xi.fold_vd, curves_xi.fold_vd)
+    assert abs(found.summary["fold_minus_existence_limit"]) < 1e-8

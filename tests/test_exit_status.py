@@ -39,8 +39,7 @@ STUDIES = {
     "figure": [("jaxchain._cli.figure", "_scene")],
     "crosscheck": [("jaxchain._studies.crosscheck", "excited_block")],  # the initial states
     "work-precision": [("jaxchain._studies.work_precision", "CsvStore")],
-    "boundaries": [("jaxchain._cli.boundaries", "bistable_range"),
-                   ("jaxchain._cli.boundaries", "exact_bistable_range")],
+    "boundaries": [("jaxchain._cli.boundaries", "bistable_range")],
     "stress": [("jaxchain._cli.stress", "stress_cases")],  # builds every case
     "basin": [("jaxchain._studies.basin.basin", "sample_states")],
     "snake": [("jaxchain._cli.snake", "localized_branches")],

@@ -4,14 +4,14 @@ for one oscillator and for the ring."""
 import argparse
 import time
 
-from .._engine.engines import Smoothed
+from .._bifurcation.shooting import Shooting
+from .._engine.options import SimulationOptions
 from .._studies.bistable_range import (BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES,
                                        FIG3A_OPTIONS, bistable_range, fig3a_simulations)
-from .._studies.grazing_range import exact_bistable_range
 from .._plots.bifurcation import plot_bistable_region, plot_limit_cycle_branch
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
-                     add_solver_options, comma_list, param_default, positive_float, report,
+                     add_solver_options, comma_list, engine_of, param_default, positive_float, report,
                      show_progress, simulation_options)
 
 HELP = "Hopf and fold belt speeds of the bistable range (gradients, continuation)"
@@ -81,10 +81,13 @@ def run(args) -> None:
             raise UsageError(f"--{name.replace('_', '-')}: give positive numbers, got {values}")
     if min(args.ratio_values) <= 1:
         raise UsageError("--ratio-values: mu_st/mu_d must be > 1 for a Hopf point")
-    _RUNS[args.engine](args, params)
+    # one engine, built once from --engine and --eps: shooting and every analysis
+    # on its model
+    method = Shooting(engine_of(args, SimulationOptions(), params).for_orbits())
+    _RUNS[args.engine](args, params, method)
 
 
-def _run_smoothed(args, params) -> None:
+def _run_smoothed(args, params, method: Shooting) -> None:
     """--engine smoothed: the Hopf point, the fold, their curves and the design of
     the smoothed model (`bistable_range`), with the simulation dots of Fig. 3(a)."""
     outputs = Outputs(args, data=["boundaries.json"],
@@ -94,8 +97,8 @@ def _run_smoothed(args, params) -> None:
     # --eps smooths every analysis; the design's check keeps the default solver (the
     # solver options set the simulation dots)
     found = bistable_range(params, target=args.target, xi_values=args.xi_values,
-                       ratio_values=args.ratio_values, ring=not args.no_ring,
-                       engine=Smoothed(eps=args.eps), progress=progress)
+                           ratio_values=args.ratio_values, ring=not args.no_ring,
+                           method=method, progress=progress)
     s = found.summary
     sims = None if args.no_simulation else fig3a_simulations(
         params, solver=args.solver,
@@ -121,13 +124,14 @@ def _run_smoothed(args, params) -> None:
                          f"curves (null in {outputs.path('boundaries.json')})")
 
 
-def _run_exact(args, params) -> None:
+def _run_exact(args, params, method: Shooting) -> None:
     """--engine exact: the Hopf and grazing points of the exact switch model
-    (`exact_bistable_range`), in the JSON keys of the smoothed run's fold."""
+    (`bistable_range` on its engine), in the JSON keys of the smoothed run's fold."""
     outputs = Outputs(args, data=["boundaries.json"], figures=["bistable_region"])
     start = time.perf_counter()
-    s, (curves_xi, curves_ratio) = exact_bistable_range(
-        params, xi_values=sorted(args.xi_values), ratio_values=sorted(args.ratio_values))
+    found = bistable_range(params, xi_values=sorted(args.xi_values),
+                           ratio_values=sorted(args.ratio_values), method=method)
+    s, curves_xi, curves_ratio = found.summary, found.curves_xi, found.curves_ratio
     mu_d = float(params.friction.mu_d) if curves_ratio is not None else None
     limits = [s[c]["existence_limit_nonsmooth"] for c in ("xi_curve", "ratio_curve") if c in s]
     outputs.figure(plot_bistable_region(curves_xi, curves_ratio, mu_d, None, limits,

@@ -19,7 +19,9 @@ from .._bifurcation.shooting import Shooting, unpack
 from .._bifurcation.two_parameter import BoundaryCurves, boundary_curves
 from .._physics.initial import GivenState
 from .._bifurcation.existence import stick_slip_existence_limit
-from .._engine.engines import AbstractEngine, Smoothed, as_engine
+from .._engine.engines import Smoothed, as_engine
+from .._bifurcation.orbit_method import AbstractOrbitMethod
+from .grazing_range import grazing_range
 from .._engine.options import SimulationOptions
 from .._physics.forces import DEFAULT_EPS
 from .._physics.friction import ExponentialDecay
@@ -37,12 +39,12 @@ class Boundaries:
     """What `boundaries` found; `summary` is JSON-ready."""
 
     summary: dict
-    branch: Branch
-    fold: FoldPoint
-    hopf: HopfPoint
+    branch: Branch | None
+    fold: FoldPoint | None
+    hopf: HopfPoint | None
     curves_xi: BoundaryCurves
     curves_ratio: BoundaryCurves | None
-    design: DampingDesign
+    design: DampingDesign | None
     ring_branches: dict
 
 
@@ -149,9 +151,12 @@ BISTABLE_RATIO_VALUES = (1.6, 1.8, 2.0, 2.2, 2.4)
 
 def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
                    xi_values=BISTABLE_XI_VALUES, ratio_values=BISTABLE_RATIO_VALUES,
-                   ring: bool = True, engine: AbstractEngine | str = "smoothed",
+                   ring: bool = True, method: AbstractOrbitMethod | None = None,
                    progress: bool = False) -> Boundaries:
-    """The Hopf and fold belt speeds of the single oscillator and of the chain.
+    """The edges of the bistable range, where steady sliding and the stick-slip
+    cycle coexist: the Hopf point of steady sliding below, and above it where the
+    stick-slip cycle ends. On a model that smooths stick (`Smoothed`) the cycle
+    ends at a fold of limit cycles, and the whole study runs:
 
     1. Single oscillator (the chain's first, `single_oscillator`, with its friction
        law): the Hopf point (Newton on the growth rate), its first Lyapunov
@@ -173,69 +178,68 @@ def bistable_range(params: ChainParams | None = None, *, target: float = 0.5,
     - `target`: the design's window width, > 0.
     - `xi_values`, `ratio_values`: grids of xi and of mu_st/mu_d.
     - `ring`: also analyse the ring.
-    - `engine`: the smoothed engine, "smoothed" (`DEFAULT_EPS`, the default solver)
-        or a `Smoothed` value: its eps (the smoothing velocity of tanh(v_rel/eps),
-        > 0, dimensionless) is that of every Hopf point, shooting and fold, and
-        its solver that of the design's check by simulation (which keeps its own
-        horizon, `DESIGN_CHECK_OPTIONS`). The exact engine is refused: the edges
-        are found by Newton's method on the smoothed model (the exact model's are
-        `exact_bistable_range`'s).
+    On the exact stick/slip model (its engine has exact stick phases) the cycle
+    ends where its slip arc grazes the belt speed, a discontinuity-induced
+    bifurcation, not a fold: the Hopf point in closed form and the grazing point by
+    Newton's method on its defining condition, with both curves and the grazing
+    point's derivatives (`grazing_range`); there is no design and no ring.
+
+    **Arguments:**
+
+    - `params`: the chain parameters (eq. (7), eta_c, N).
+    - `target`: the design's window width, > 0.
+    - `xi_values`, `ratio_values`: grids of xi and of mu_st/mu_d.
+    - `ring`: also analyse the ring.
+    - `method`: the orbit method, `Shooting()` by default (the smoothed model at
+        eps = 1e-3). Its engine's eps (the smoothing velocity of tanh(v_rel/eps),
+        > 0, dimensionless) is that of every Hopf point, shooting and fold; the
+        design's check simulates its model with the default solver
+        (`AbstractEngine.simulating`, over `DESIGN_CHECK_OPTIONS`).
+        `Shooting(Exact().for_orbits())` takes the exact model's route.
     - `progress`: show tqdm bars.
 
     **Returns:**
 
-    `Boundaries`; `summary` holds `hopf_vd`, `fold_vd`, `eps`, `subcritical` and
-    the rest as plain numbers.
+    `Boundaries`; `summary` holds `hopf_vd`, `fold_vd` (the fold, or the grazing
+    point with `boundary` "grazing"), `eps`, `subcritical` and the rest as plain
+    numbers. On the exact model `branch`, `fold`, `hopf` and `design` are None.
 
     **Raises:**
 
-    `ValidationError` for target <= 0 or the exact engine; `RuntimeError` if a
+    `ValidationError` for target <= 0 or a bad grid; `RuntimeError` if a
     computation fails.
     """
-    params, engine = _check_bistable(params, target, engine)
-    run = _run_bistable(params, target, xi_values, ratio_values, ring, engine, progress)
+    params = chain_or_default(params)
+    check_positive("target", target)
+    method = Shooting() if method is None else method
+    if method.engine.has_stick_phases:  # stick exact: the cycle ends by grazing
+        summary, (curves_xi, curves_ratio) = grazing_range(params, xi_values=xi_values,
+                                                           ratio_values=ratio_values)
+        return Boundaries(summary=summary, branch=None,
+                          fold=None, hopf=None, curves_xi=curves_xi,
+                          curves_ratio=curves_ratio, design=None, ring_branches={})
+    method.engine.as_smoothed("bistable_range")
+    run = _run_bistable(params, target, xi_values, ratio_values, ring, method, progress)
     return _boundaries(params, target, run)
 
 
-def _smoothed_engine(engine: AbstractEngine | str, what: str) -> Smoothed:
-    """The smoothed engine that `engine` names (`as_engine`: "smoothed" at
-    `DEFAULT_EPS`, or a `Smoothed` value).
-
-    **Raises:**
-
-    `ValidationError` in one line for the exact engine, which `what` cannot use."""
-    return as_engine(engine).as_smoothed(what)
-
-
-def _check_bistable(params: ChainParams | None, target, engine) -> tuple[ChainParams, Smoothed]:
-    """The chain (the paper's ring where None) and the smoothed engine, with `target`
-    checked to be > 0."""
-    params = chain_or_default(params)
-    check_positive("target", target)
-    engine = _smoothed_engine(engine, "bistable_range (Newton's method on the smoothed "
-                                     "model's Hopf points and Floquet multipliers; "
-                                     "exact_bistable_range is the exact model's)")
-    return params, engine
-
-
 def _run_bistable(params: ChainParams, target: float, xi_values, ratio_values, ring: bool,
-                  engine: Smoothed, progress: bool) -> dict:
+                  method: Shooting, progress: bool) -> dict:
     """The computations of `bistable_range` by name: the single oscillator's edges
     (`_run_single`), their curves and the design (`_run_curves`), and with `ring` the
     chain's (`_run_ring`)."""
-    run = _run_single(params, engine, progress) | {"engine": engine}
+    run = _run_single(params, method, progress) | {"engine": method.engine.simulating()}
     run |= _run_curves(run, target, xi_values, ratio_values, progress)
     run["ring"], run["ring_branches"] = (_run_ring(params, run, progress) if ring
                                          else (None, {}))
     return run
 
 
-def _run_single(params: ChainParams, engine: Smoothed, progress: bool) -> dict:
+def _run_single(params: ChainParams, method: Shooting, progress: bool) -> dict:
     """The single oscillator's Hopf point, its first Lyapunov coefficient, the
-    limit-cycle branch from it (all of `engine`'s model, smoothed at its eps), the
+    limit-cycle branch from it (all of `method`'s model, smoothed at its eps), the
     branch's fold and the non-smooth existence limit."""
-    method = Shooting(engine.for_orbits())
-    eps = engine.eps
+    eps = method.engine.as_smoothed("bistable_range").eps
     single = single_oscillator(params)
     hopf = hopf_point(single, eps=eps)
     l1 = float(first_lyapunov_coefficient(with_parameter(single, "v_d", hopf.v_d[0]),

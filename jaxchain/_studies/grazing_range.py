@@ -14,7 +14,6 @@ from .._errors import ValidationError
 from .._physics.friction import ExponentialDecay
 from .._physics.params import ChainParams, chain_or_default, single_oscillator, with_parameter
 from .._physics.record import chain_record
-from .bistable_range import BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES
 
 
 def _check_grids(**grids) -> None:
@@ -27,8 +26,8 @@ def _check_grids(**grids) -> None:
                                   f"{values.tolist()}")
 
 
-def exact_bistable_range(params: ChainParams | None = None, *, xi_values=BISTABLE_XI_VALUES,
-                         ratio_values=BISTABLE_RATIO_VALUES) -> tuple[dict, list]:
+def grazing_range(params: ChainParams | None = None, *, xi_values,
+                  ratio_values) -> tuple[dict, list]:
     """The edges of the bistable range of the exact switch model for the chain's first
     oscillator (`single_oscillator`): the Hopf point of steady sliding (`hopf_speed`:
     the closed form of eq. (1), which the exact model has, since steady sliding

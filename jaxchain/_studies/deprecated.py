@@ -8,12 +8,12 @@ import warnings
 
 import diffrax
 
-from ._bifurcation.periodic_orbit import cycle_problem, periodic_orbit
-from ._bifurcation.shooting import Shooting, pack
-from ._engine.engines import Exact, Smoothed
-from ._engine.exact.options import NonsmoothOptions
-from ._engine.options import SimulationOptions
-from ._physics.forces import DEFAULT_EPS
+from .._bifurcation.periodic_orbit import cycle_problem, periodic_orbit
+from .._bifurcation.shooting import Shooting, pack
+from .._engine.engines import Exact, Smoothed
+from .._engine.exact.options import NonsmoothOptions
+from .._engine.options import SimulationOptions
+from .._physics.forces import DEFAULT_EPS
 
 
 def _warn(old: str, new: str) -> None:
@@ -80,7 +80,20 @@ def floquet_multipliers(params, y0, period, options: Shooting | None = None,
     return method.multipliers(params, pack(y0, period))
 
 
+def exact_bistable_range(params=None, *, xi_values=None, ratio_values=None):
+    """Deprecated: `bistable_range(params, method=Shooting(Exact().for_orbits()))`;
+    returns (summary, (curves in xi, curves in mu_st)) as before."""
+    _warn("exact_bistable_range", "jaxchain.bistable_range(params, "
+          "method=jaxchain.Shooting(jaxchain.Exact().for_orbits()))")
+    from .bistable_range import BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES
+    from .grazing_range import grazing_range
+
+    return grazing_range(params, xi_values=BISTABLE_XI_VALUES if xi_values is None else
+                         xi_values, ratio_values=BISTABLE_RATIO_VALUES
+                         if ratio_values is None else ratio_values)
+
+
 #: The deprecated names, for `jaxchain.__getattr__`.
 DEPRECATED = {f.__name__: f for f in (ShootingOptions, ExactShooting, exact_periodic_orbit,
                                       exact_cycle_problem, limit_cycle_problem,
-                                      floquet_multipliers)}
+                                      floquet_multipliers, exact_bistable_range)}
