@@ -83,7 +83,7 @@ class AbstractEngine(eqx.Module):
     @abc.abstractmethod
     def flow(self, params: ChainParams, y0: State, t) -> Array:
         """The state after time `t` from `y0` at t = 0: shape (2, n_osc) for `t` of
-        shape (), or the states at each of the times `t` (increasing, > 0), shape
+        shape (), or the states at each of the times `t` (increasing, >= 0), shape
         (m, 2, n_osc). Pure and traceable, differentiable in forward mode with
         respect to `params` and `y0` (`jax.jacfwd`: the monodromy matrix); NaN where
         the run failed. Integrated at the engine's own solver, step-size controller
