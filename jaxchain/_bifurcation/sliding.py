@@ -7,7 +7,6 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .._engine.status import Status
 from .._errors import ValidationError
 from .._physics.params import parameter_value, with_parameter
 from .continuation import ContinuationProblem, PseudoArclength, _correct, _record
