@@ -7,7 +7,8 @@ import time
 from pathlib import Path
 
 from .._bifurcation.shooting import Shooting
-from .._studies.snake.branch import SLIDING_PASSES, SNAKE_CONTINUATION
+from .._bifurcation.branches import SLIDING_PASSES
+from .._studies.snake.branch import SNAKE_CONTINUATION
 from .._studies.snake.run import localized_branches
 from .._studies.snake.starts import SNAKE_START, check_starts, default_sites, default_starts
 from .._plots.snake import plot_snake

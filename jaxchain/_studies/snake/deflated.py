@@ -9,19 +9,22 @@ import json
 import jax.numpy as jnp
 import numpy as np
 
+from ..._bifurcation.branches import passes_through
 from ..._bifurcation.deflation import distinct_orbits
 from ..._bifurcation.shooting import pack, unpack
 from ..._physics.initial import OutOfPhaseExcitation
 from ..._physics.params import ChainParams
-from .branch import _passes_through
+from .branch import stored_branch
 from .starts import _turning_point, start_mask
 
 
 def _on_followed_branch(orbits, params: ChainParams, orbit, branches: dict) -> str | None:
     """The label of a branch in `branches` that passes through the periodic orbit
-    `orbit` at `params.v_d` (`_passes_through`), or None."""
+    `orbit` at `params.v_d` (`passes_through`), or None."""
     return next((label for label, ds in branches.items()
-                 if _passes_through(orbits, params, orbit, ds) is not None), None)
+                 if passes_through(orbits.method.with_phase_oscillator(
+                     int(ds.attrs["phase_oscillator"])), params, orbit,
+                     stored_branch(ds)) is not None), None)
 
 
 def _stored_orbits(stored: dict, v_d: float) -> list:

@@ -4,6 +4,7 @@ checked."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -16,7 +17,8 @@ from ..._errors import ValidationError
 from ..._physics.params import ChainParams, chain_or_default
 from ..._physics.record import chain_record
 from ..._sweeps.result_store import read_dataset, write_dataset
-from .branch import BRANCH_METHOD, SLIDING_PASSES, SNAKE_CONTINUATION, _follow_branch
+from ..._bifurcation.branches import SLIDING_PASSES, FollowedBranch, follow_branch
+from .branch import BRANCH_METHOD, SNAKE_CONTINUATION, branch_dataset
 from .checks import _stable_range_checks
 from .deflated import _deflated_orbits, _on_followed_branch, _stored_orbits
 from .orbits import snake_orbits
@@ -226,8 +228,8 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
         if orbit is None:
             failed[k] = reason
         mine = {} if orbit is None else _labelled(own, orbit, mask, jobs[k].result())
-        if isinstance(mine, str):
-            starts[k], failed[k], mine = sim, mine, {}
+        if isinstance(mine, NoBranch):
+            starts[k], failed[k], mine = sim, mine.reason, {}
         followed, repeats, j = {}, [], 0
         for i, (o, m, _) in enumerate(deflated.get(k, [])):
             if o is None:  # shooting from deflation's solution did not converge
@@ -240,8 +242,8 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
             j += 1
             label = f"{own} deflated {j}"
             branches = _labelled(label, o, mask, jobs[k, i].result())
-            if isinstance(branches, str):
-                starts[label], failed[label] = sim, branches
+            if isinstance(branches, NoBranch):
+                starts[label], failed[label] = sim, branches.reason
                 continue
             _store_branches(out, _numbered(paths[k], "deflated", j), branches, settings, k)
             followed |= branches
@@ -265,24 +267,34 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
         datasets |= mine | followed
 
 
+@dataclasses.dataclass(frozen=True)
+class NoBranch:
+    """A start whose branch could not be followed, and why."""
+
+    reason: str
+
+
 def _follow_start(start, phase_oscillator: int, mask, *, orbits, continuation_options,
-                  switch, progress) -> tuple | str:
-    """The branch through the periodic orbit `start` (`_follow_branch`) and the
-    branches switched onto from it, (branch, [switched, ...]), or why its
-    continuation failed. Run in a worker process where `workers` > 1."""
+                  switch, progress) -> FollowedBranch | NoBranch:
+    """The branch through the periodic orbit `start` and the branches switched onto
+    from it (`follow_branch`), or why its continuation failed. Run in a worker
+    process where `workers` > 1."""
     try:
-        return _follow_branch(orbits, start, phase_oscillator, continuation_options,
-                              k=int(mask.sum()), switch=switch, progress=progress)
+        return follow_branch(start, orbits.method.with_phase_oscillator(phase_oscillator),
+                             continuation_options, switch=switch, progress=progress)
     except (ValueError, RuntimeError) as err:  # flagged; the other branches go on
-        return f"continuation failed: {err}"
+        return NoBranch(f"continuation failed: {err}")
 
 
-def _labelled(label: str, start, mask, followed: tuple | str) -> dict | str:
-    """The branches of `_follow_start` from `start`, labelled `label` and "<label>
-    switched <j>" (label -> dataset), or why its continuation failed."""
-    if isinstance(followed, str):
+def _labelled(label: str, start, mask, followed: FollowedBranch | NoBranch) -> dict | NoBranch:
+    """The branches of `_follow_start` from `start` in their stored form
+    (`branch_dataset`), labelled `label` and "<label> switched <j>" (label ->
+    dataset), or why its continuation failed."""
+    if isinstance(followed, NoBranch):
         return followed
-    ds, switched = followed
+    k = int(mask.sum())
+    ds = branch_dataset(dataclasses.replace(followed, switched=()), k)
+    switched = [branch_dataset(sw, k) for sw in followed.switched]
     first = ds.assign_attrs(start_vd=float(start.params.v_d), start_energy=float(start.energy),
                             start_n_halc=int(start.n_halc), switched=len(switched), deflated=0,
                             deflated_repeats="[]")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 import numpy as np
 
-from ..._bifurcation.deflation import chain_symmetries
+from ..._bifurcation.symmetry import isotropy
 from ..._engine.observers.crossings import downward_crossings
 from ..._engine.options import SimulationOptions
 from ..._engine.status import Status
@@ -337,21 +337,6 @@ def _shoot_guesses(orbits, params: ChainParams, guesses: list, n: int, perms=Non
             return orbit, None
     return None, (f"shooting did not converge (residual {float(orbit.residual):.2g}): the "
                   f"simulated state is not periodic")
-
-
-def isotropy(params: ChainParams, y, atol: float = 1e-12) -> np.ndarray:
-    """The symmetries of the chain (`chain_symmetries`: on a homogeneous ring its
-    rotations and reflections) that map the state y, shape (2, n_osc), onto itself
-    within `atol`: its isotropy subgroup, shape (s, n_osc), the identity first. For
-    eq. (8) on the ring, an odd block of excited oscillators is fixed by the
-    reflection about its centre; an even block by no symmetry (its signs
-    alternate). A state solved by shooting keeps its symmetry only to Newton's
-    tolerance: pass an `atol` above it."""
-    y = np.asarray(y)
-    perms = np.asarray(chain_symmetries(params))
-    fixed = perms[[np.allclose(y[:, p], y, rtol=0.0, atol=atol) for p in perms]]
-    return fixed[np.argsort([not np.array_equal(p, np.arange(y.shape[1])) for p in fixed],
-                            kind="stable")]
 
 
 def _projected(y, perms) -> np.ndarray:
