@@ -165,6 +165,9 @@ from ._bifurcation.bifurcations import (
     BIFURCATION_KINDS as BIFURCATION_KINDS,
 )
 from ._bifurcation.limit_cycles import hopf_cycle as hopf_cycle
+from ._bifurcation.branches import (
+    follow_branch as follow_branch, FollowedBranch as FollowedBranch,
+)
 from ._bifurcation.fold import (
     fold_point as fold_point, FoldPoint as FoldPoint, solve_fold as solve_fold,
 )
