@@ -117,6 +117,9 @@ class FollowedBranch:
     - `switched_from`: for a branch switched onto, p at its branch point.
     - `switched`: the branches switched onto at its branch points.
     - `failed_switches`: the branch points where switching failed (`SwitchFailure`).
+    - `pieces`: each continuation's (`ContinuationProblem`, `Branch`, its
+        `BifurcationPoint`s), in the order they were made (down, then up), uncut:
+        for what a study refines further (a fold by `fold_point`).
     """
 
     p: np.ndarray
@@ -134,6 +137,7 @@ class FollowedBranch:
     switched_from: float | None = None
     switched: tuple[FollowedBranch, ...] = ()
     failed_switches: tuple[SwitchFailure, ...] = ()
+    pieces: tuple = dataclasses.field(default=(), repr=False, compare=False)
 
     @property
     def points(self) -> int:
@@ -208,7 +212,8 @@ def follow_branch(orbit: PeriodicOrbit, method: AbstractOrbitMethod,
     halves, switched = [], []
     for direction in directions:
         if halves and halves[0].stops["end"] == "closed":  # an isola: all of it is known
-            halves.append(halves[0].take([0], bifurcations=(), stops={"end": "closed"}))
+            halves.append(halves[0].take([0], bifurcations=(), stops={"end": "closed"},
+                                         pieces=()))
             continue
         opts = dataclasses.replace(options, direction=direction)
         pieces = _through_sliding(problem, algorithm, opts, progress=progress)
@@ -234,7 +239,7 @@ def follow_branch(orbit: PeriodicOrbit, method: AbstractOrbitMethod,
     return _concat([down.take(slice(None, None, -1)), up.take(slice(1, None))],
                    bifurcations=tuple(bifs),
                    stops={"low": down.stops["end"], "high": up.stops["end"]},
-                   switched=others, failed_switches=failures)
+                   switched=others, failed_switches=failures, pieces=down.pieces + up.pieces)
 
 
 def _through_sliding(problem, algorithm: PseudoArclength, options: ContinuationOptions, *,
@@ -282,7 +287,8 @@ def _joined_pieces(pieces: list) -> FollowedBranch:
     for part in parts:
         bifs += [b.moved(offset + b.after) for b in part.bifurcations]
         offset += part.points
-    joined = _concat(parts, bifurcations=tuple(bifs), stops=parts[-1].stops)
+    joined = _concat(parts, bifurcations=tuple(bifs), stops=parts[-1].stops,
+                     pieces=tuple(pieces))
     hopf = [b for b in bifs if b.kind == "Hopf"]
     if not hopf:
         return joined

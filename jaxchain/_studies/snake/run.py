@@ -109,9 +109,33 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
     kind.
     """
     params, sites, orbits = _check_branches(params, sites, method, engine, deflate, workers)
-    run = _run_branches(orbits, params, sites, continuation_options, start_options, switch,
-                        deflate, simulation_check, out, progress, workers)
-    return _branches_summary(*run, params.n_osc)
+    found = _find_branches(orbits, params, sites, continuation_options, start_options, switch,
+                           deflate, out, progress, workers)
+    checks = _stable_range_checks(orbits, params, found.datasets, simulation_check, progress)
+    return _branches_summary(found.datasets, found.starts, found.failed, found.repeated,
+                             checks, params.n_osc)
+
+
+@dataclasses.dataclass(frozen=True)
+class FoundBranches:
+    """What the snake found, in the order of its starts.
+
+    **Fields:** `datasets` (label -> the stored form of a branch,
+    `branch_dataset`); `starts` (start -> its simulation's n_HALC and energy);
+    `failed` (start -> why it has no periodic orbit or no branch); `repeated` (the
+    deflated orbits that lie on a branch already followed, from starts without a
+    branch of their own; those of the others are their branch's attribute
+    `deflated_repeats`)."""
+
+    datasets: dict = dataclasses.field(default_factory=dict)
+    starts: dict = dataclasses.field(default_factory=dict)
+    failed: dict = dataclasses.field(default_factory=dict)
+    repeated: list = dataclasses.field(default_factory=list)
+
+    def __or__(self, other: FoundBranches) -> FoundBranches:
+        """Both, `self`'s first."""
+        return FoundBranches(self.datasets | other.datasets, self.starts | other.starts,
+                             self.failed | other.failed, self.repeated + other.repeated)
 
 
 def _check_branches(params: ChainParams | None, sites, method, engine, deflate, workers
@@ -128,35 +152,17 @@ def _check_branches(params: ChainParams | None, sites, method, engine, deflate, 
     return params, check_starts(params.graph, sites), orbits
 
 
-def _run_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
-                  start_options, switch, deflate, simulation_check, out, progress,
-                  workers: int = 1) -> tuple:
-    """The branches (`_find_branches`), then the checks of their stable ranges
-    (`_stable_range_checks`): (datasets, starts, failed starts, deflated orbits on
-    branches already followed, checks)."""
-    datasets, starts, failed, repeated = _find_branches(
-        orbits, params, sites, continuation_options, start_options, switch, deflate, out,
-        progress, workers)
-    checks = _stable_range_checks(orbits, params, datasets, simulation_check,
-                                  progress)
-    return datasets, starts, failed, repeated, checks
-
-
 def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_options,
                    start_options, switch, deflate, out, progress, workers: int = 1
-                   ) -> tuple[dict, dict, dict, list]:
+                   ) -> FoundBranches:
     """The branch of each start, with `deflate` the branches of the further orbits
     that deflation finds from its eq. (8) state (`_deflated_orbits`; one on a branch
     already followed is reported, `_on_followed_branch`, not followed again), and
     with `switch` the branches switched onto at their branch points: read back from
     `out` where stored with the same settings, else started by simulation and
-    shooting (`start_orbits`), continued (`_follow_start`) and stored. Returns
-    (label -> branch dataset, start -> the simulation's n_HALC and energy, start ->
-    why it has no periodic orbit, the deflated orbits on branches already followed
-    from starts without a branch of their own; those of the others are their
-    branch's attribute `deflated_repeats`). A start without a branch of its own is
-    stored as a record of why (`_read_branches`), so that a resumed run does not
-    compute it again."""
+    shooting (`start_orbits`), continued (`_follow_start`) and stored. A start
+    without a branch of its own is stored as a record of why (`_read_branches`), so
+    that a resumed run does not compute it again."""
 
     datasets, starts, failed, repeated, known = {}, {}, {}, [], []
     settings = {"chain": chain_record(params), **orbits.settings(),
@@ -183,8 +189,9 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
             starts[k] = json.loads(record.attrs["simulation"])
             repeated += json.loads(record.attrs["deflated_repeats"])
         datasets |= stored
+    before = FoundBranches(datasets, starts, failed, repeated)
     if not todo:
-        return datasets, starts, failed, repeated
+        return before
     lo, hi = continuation_options.p_min, continuation_options.p_max
     retry = tuple(d for d in RETRY_VD if lo < float(params.v_d) + d < hi)
     found = _start_orbits(orbits, params, todo, start_options, progress, retry)
@@ -206,20 +213,19 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
             for i, (o, m, _) in enumerate(deflated.get(k, [])):
                 if o is not None:
                     jobs[k, i] = pool.submit(_follow_start, o, m, mask, **follow)
-        _take_branches(orbits, params, found, deflated, jobs, out, paths, settings,
-                       (datasets, starts, failed, repeated))
-    return datasets, starts, failed, repeated
+        return before | _take_branches(orbits, params, found, deflated, jobs, out, paths,
+                                       settings, before.datasets)
 
 
 def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, jobs: dict,
-                   out, paths: dict, settings: dict, into: tuple) -> None:
+                   out, paths: dict, settings: dict, before: dict) -> FoundBranches:
     """The branches of `jobs` (`_find_branches`), in the order of the starts: each
     start's own, then those of its deflated orbits not on a branch followed before
-    (`_on_followed_branch`), labelled and stored, into (datasets, starts, failed,
-    repeated)."""
+    (`_on_followed_branch`: among `before`, the branches read back, and those taken
+    already), labelled and stored."""
     import xarray as xr
 
-    datasets, starts, failed, repeated = into
+    datasets, starts, failed, repeated = {}, {}, {}, []
     for k, (orbit, sim, reason) in found.items():
         starts[k] = sim
         own, mask = _start_label(k), start_mask(params.graph, k)
@@ -234,7 +240,7 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
         for i, (o, m, _) in enumerate(deflated.get(k, [])):
             if o is None:  # shooting from deflation's solution did not converge
                 continue
-            on = _on_followed_branch(orbits, params, o, datasets | mine | followed)
+            on = _on_followed_branch(orbits, params, o, before | datasets | mine | followed)
             if on is not None:
                 repeats.append({"start": own, "energy": float(o.energy),
                                 "n_halc": int(o.n_halc), "on": on})
@@ -265,6 +271,7 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
                 "deflated": j, "deflated_repeats": json.dumps(repeats), **known})},
                 settings, k)
         datasets |= mine | followed
+    return FoundBranches(datasets, starts, failed, repeated)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -280,10 +287,13 @@ def _follow_start(start, phase_oscillator: int, mask, *, orbits, continuation_op
     from it (`follow_branch`), or why its continuation failed. Run in a worker
     process where `workers` > 1."""
     try:
-        return follow_branch(start, orbits.method.with_phase_oscillator(phase_oscillator),
-                             continuation_options, switch=switch, progress=progress)
+        followed = follow_branch(start, orbits.method.with_phase_oscillator(phase_oscillator),
+                                 continuation_options, switch=switch, progress=progress)
     except (ValueError, RuntimeError) as err:  # flagged; the other branches go on
         return NoBranch(f"continuation failed: {err}")
+    # what is stored, without the continuations' problems (from a worker, pickled)
+    return dataclasses.replace(followed, pieces=(), switched=tuple(
+        dataclasses.replace(sw, pieces=()) for sw in followed.switched))
 
 
 def _labelled(label: str, start, mask, followed: FollowedBranch | NoBranch) -> dict | NoBranch:
