@@ -170,10 +170,28 @@ def _stats(values) -> dict:
 
 
 def study_summary(study) -> dict:
-    """The JSON summary of a `mistuning_study` (what `jaxchain mistuning` prints and
-    writes): per sigma, the staircase and basin
-    shares per belt speed with their intervals, the HALC correlation, and the
-    distributions of the edges and of the envelope decay."""
+    """The summary of a `mistuning_study`, what `jaxchain mistuning` prints and
+    writes as JSON.
+
+    **Arguments:**
+
+    - `study`: the Dataset of `mistuning_study`.
+
+    **Returns:**
+
+    A dict of plain Python values. `sigmas` holds one row per sigma: `v_d` and,
+    per belt speed, `staircase_fraction` (eq. (8) starts with k excited that end
+    with n_HALC = k), `basin_stability_vibrating` (random starts that end with
+    n_HALC >= 1) and `basin_stability_localized` (0 < n_HALC < N), each with its
+    95 % Wilson interval (`*_ci`) and run count; `halc_deviation_correlation` (the
+    Pearson correlation of being on the HALC with delta_n, over localized random
+    starts; NaN at sigma = 0) and `mean_deviation_on_halc_over_sigma`; the
+    distributions of the Hopf point, the upper edge and the envelope decay, the
+    folds found by shooting, and the Anderson localization factor at the state's
+    frequency. Beside it: the state's period and omega^2, the damped chain's
+    decay, the correlation of the site edges with the neighbours' detuning
+    (`site_edge_correlation`) and the study's sizes.
+    """
     stair, basin, corr = staircase_fraction(study), vibrating_fraction(study), \
         halc_correlation(study)
     local = localized_fraction(study)
