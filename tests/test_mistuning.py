@@ -12,7 +12,7 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from jaxchain._studies.mistuning.summary import envelope_decay, halc_correlation
+from jaxchain._studies.mistuning.summary import _halc_correlation as halc_correlation, envelope_decay
 
 from helpers import assert_usage_error, scipy_stick_slip_cycle
 

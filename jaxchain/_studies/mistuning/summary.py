@@ -56,7 +56,7 @@ def staircase_fraction(study) -> dict:
     return _share(hit.sum((1, 3)), ok.sum((1, 3)))
 
 
-def vibrating_fraction(study) -> dict:
+def _vibrating_fraction(study) -> dict:
     """Basin stability of the vibrating states: the share of random initial
     states that end with n_HALC >= 1, per (sigma, v_d), with Wilson intervals."""
     ok = study["basin_status"].values == Status.ok
@@ -83,7 +83,7 @@ def _share(k, n) -> dict:
             "high": np.where(n > 0, high, np.nan), "count": k, "total": n}
 
 
-def halc_correlation(study) -> dict:
+def _halc_correlation(study) -> dict:
     """Where the vibration sits: over the random starts that end localized
     (0 < n_HALC < N), the Pearson correlation between an oscillator being on the
     HALC and its stiffness deviation delta_n, and the mean delta_n / sigma of the
@@ -192,8 +192,8 @@ def study_summary(study) -> dict:
     decay, the correlation of the site edges with the neighbours' detuning
     (`site_edge_correlation`) and the study's sizes.
     """
-    stair, basin, corr = staircase_fraction(study), vibrating_fraction(study), \
-        halc_correlation(study)
+    stair, basin, corr = staircase_fraction(study), _vibrating_fraction(study), \
+        _halc_correlation(study)
     local = localized_fraction(study)
     n_halc = np.where(study["basin_status"].values == Status.ok,
                       study["basin_n_halc"].values, np.nan)
