@@ -90,27 +90,20 @@ from ._engine.horizon import AbstractHorizon as AbstractHorizon
 # --- Ensembles, sweeps and stores: many trajectories, datasets, resumable sweeps ---
 from ._sweeps.ensemble import ensemble as ensemble
 from ._sweeps.sweep import sweep as sweep, open_sweep as open_sweep
-from ._sweeps.datasets import to_dataset as to_dataset, save_dataset as save_dataset
+from ._sweeps.datasets import save_dataset as save_dataset
 from ._engine.lanes import run_lanes as run_lanes, lane_params as lane_params
 
 # --- Analysis: state classes, time delays, fronts, localization ---
-from ._analysis.classify import classify as classify, CLASSES as CLASSES
+from ._analysis.classify import classify as classify
 from ._analysis.states import (
     state_class as state_class, ClassTolerances as ClassTolerances,
 )
-from ._analysis.delays import (
-    time_delays as time_delays, delay_spread as delay_spread,
-    reference_oscillator as reference_oscillator,
-)
-from ._analysis.fronts import (
-    propagating_fronts as propagating_fronts, front_fractions as front_fractions,
-    front_ranges as front_ranges,
-)
+from ._analysis.delays import time_delays as time_delays
+from ._analysis.fronts import propagating_fronts as propagating_fronts
 from ._analysis.localization import (
     localization_factor as localization_factor,
     inverse_participation_ratio as inverse_participation_ratio,
-    passband_frequency as passband_frequency, damped_decay as damped_decay,
-    weak_disorder_localization as weak_disorder_localization,
+    damped_decay as damped_decay,
 )
 
 # --- Bifurcations and continuation: Hopf point, periodic orbits, branches, folds ---
@@ -121,9 +114,7 @@ from ._bifurcation.hopf import (
     leading_growth_rate as leading_growth_rate, mode_eigenvalues as mode_eigenvalues,
     steady_sliding_eigenvalues as steady_sliding_eigenvalues,
 )
-from ._bifurcation.lyapunov_coefficient import (
-    first_lyapunov_coefficient as first_lyapunov_coefficient,
-)
+from ._bifurcation.lyapunov_coefficient import first_lyapunov_coefficient as first_lyapunov_coefficient
 from ._bifurcation.orbit_method import (
     PeriodicOrbit as PeriodicOrbit, AbstractOrbitMethod as AbstractOrbitMethod,
     orbit_record as orbit_record, deflated_multipliers as deflated_multipliers,
@@ -186,53 +177,31 @@ from ._studies.crosscheck import crosscheck as crosscheck
 from ._studies.work_precision import work_precision as work_precision
 from ._studies.basin.basin import basin_stability as basin_stability
 from ._studies.basin.sampling import Box as Box, sample_states as sample_states
-from ._studies.basin.classes import (
-    halc_clusters as halc_clusters, wilson_interval as wilson_interval,
-)
+from ._studies.basin.classes import wilson_interval as wilson_interval
 from ._studies.stress.run import stress as stress
-from ._studies.stress.cases import stress_cases as stress_cases
-from ._studies.mistuning.study import (
-    mistuning_study as mistuning_study, study_chains as study_chains,
-)
+from ._studies.mistuning.study import mistuning_study as mistuning_study
 from ._studies.mistuning.summary import (
-    localization_table as localization_table, localized_fraction as localized_fraction,
-    vibrating_fraction as vibrating_fraction, staircase_fraction as staircase_fraction,
-    halc_correlation as halc_correlation, edge_correlations as edge_correlations,
-    envelope_decay as envelope_decay,
+    localization_table as localization_table, study_summary as study_summary,
 )
 from ._studies.mistuning.edges import (
     upper_edges as upper_edges, localized_fold as localized_fold,
 )
-from ._studies.mistuning.pattern_design import (
-    intentional_mistuning as intentional_mistuning, MistuningDesign as MistuningDesign,
-    pattern_deviations as pattern_deviations,
-)
+from ._studies.mistuning.pattern_design import intentional_mistuning as intentional_mistuning
 from ._studies.mistuning.design_study import design_study as design_study
 from ._studies.snake.run import localized_branches as localized_branches
-from ._studies.snake.starts import (
-    start_site as start_site, start_mask as start_mask, LATTICE_STARTS as LATTICE_STARTS,
-)
-from ._studies.bistable_range import (
-    bistable_range as bistable_range, BISTABLE_XI_VALUES as BISTABLE_XI_VALUES,
-    BISTABLE_RATIO_VALUES as BISTABLE_RATIO_VALUES,
-)
-from ._studies.scenes import (
-    observe_solutions as observe_solutions, PAPER_SOLUTIONS as PAPER_SOLUTIONS,
-    PAPER_FIGURES as PAPER_FIGURES, time_series_scene as time_series_scene,
-    phase_portrait_scene as phase_portrait_scene, time_delay_scene as time_delay_scene,
-    orbit_diagram_scene as orbit_diagram_scene,
-)
+from ._studies.snake.starts import start_site as start_site
+from ._studies.bistable_range import bistable_range as bistable_range
+from ._studies.scenes import observe_solutions as observe_solutions
 
 # --- Identification: friction laws and parameters from measured records ---
 from ._studies.identification.fit import (
     identify as identify, IdentifyOptions as IdentifyOptions,
-    Identification as Identification, held_out_rms as held_out_rms,
+    Identification as Identification,
 )
 from ._studies.identification.records import (
     Record as Record, read_record as read_record,
     record_from_dataset as record_from_dataset,
 )
-from ._studies.identification.unknowns import unknowns_of as unknowns_of
 from ._studies.identification.choice import compare_laws as compare_laws
 from ._studies.identification.synthetic import (
     reference_record as reference_record, write_record as write_record,
@@ -242,9 +211,8 @@ from ._studies.identification.synthetic import (
 from ._physics.scales import Scales as Scales
 from ._physics.units import to_physical as to_physical, from_physical as from_physical
 from ._physics.record import (
-    chain_from_file as chain_from_file, read_chain_file as read_chain_file,
-    chain_record as chain_record, chain_from_record as chain_from_record,
-    check_recordable as check_recordable,
+    chain_from_file as chain_from_file, chain_record as chain_record,
+    chain_from_record as chain_from_record,
 )
 from ._sweeps.chain_files import write_chain_file as write_chain_file
 from ._plots.localized import plot_localized_states as plot_localized_states

@@ -1,6 +1,7 @@
 """Small shared systems and references for the tests."""
 
 import contextlib
+import inspect
 import os
 import signal
 import sys
@@ -14,6 +15,10 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 from jaxchain._sweeps.atomic import HOLD  # the writers' test hook (see `hold_env`)
+
+#: The grids of `jc.bistable_range` (its defaults): xi, and mu_st / mu_d, of Fig. 3(a).
+BISTABLE_XI_VALUES = inspect.signature(jc.bistable_range).parameters["xi_values"].default
+BISTABLE_RATIO_VALUES = inspect.signature(jc.bistable_range).parameters["ratio_values"].default
 
 #: A short horizon that still reaches the stick-slip cycle of one oscillator.
 SHORT = jc.SimulationOptions(t_end=600.0, transient=300.0, chunk_length=100.0)

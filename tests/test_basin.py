@@ -72,7 +72,7 @@ def test_wilson_intervals_cover_a_known_probability_at_the_nominal_rate():
 
 def test_clusters_count_groups_across_the_ring_closure():
     on = np.array([[1, 1, 0, 0, 1, 0], [1, 0, 0, 0, 0, 1], [0] * 6, [1] * 6], dtype=bool)
-    assert jc.halc_clusters(on).tolist() == [2, 1, 0, 1]
+    assert jc.Graph.line(6).clusters(on).tolist() == [2, 1, 0, 1]  # basin's n_clusters
 
 
 def test_same_key_same_result_and_a_killed_run_resumes_to_the_same(tmp_path, monkeypatch):

@@ -256,9 +256,9 @@ def test_a_chain_file_gives_per_oscillator_arrays(tmp_path):
     path = tmp_path / "chain.toml"
     path.write_text('n_osc = 3\nboundary = "fixed"\neta_c = [0.01, 0.02, 0.03, 0.04]\n'
                     'load = [1.0, 0.9, 1.1]\nfriction = "polynomial"\nc1 = -0.4\n')
-    p = jc.chain_from_record(jc.read_chain_file(path))
+    p = jc.chain_from_file(path)
     assert p.boundary == "fixed" and np.array_equal(p.eta_c, [0.01, 0.02, 0.03, 0.04])
     assert isinstance(p.friction, jc.Polynomial) and float(p.friction.c1) == -0.4
     path.write_text("n_osc = 3\nstiffness = [1.0, 1.0]\n")
     with pytest.raises(ValueError, match="ChainParams.stiffness"):
-        jc.chain_from_record(jc.read_chain_file(path))
+        jc.chain_from_file(path)

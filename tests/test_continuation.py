@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
+from helpers import BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES
 
 
 class _Point(eqx.Module):
@@ -101,9 +102,9 @@ def default_curves(branch):
     problem, _, fold = branch
     start = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
     mu_d = float(problem.params.friction.mu_d)
-    return {"xi": jc.boundary_curves(problem, start, "xi", jc.BISTABLE_XI_VALUES),
+    return {"xi": jc.boundary_curves(problem, start, "xi", BISTABLE_XI_VALUES),
             "mu_st": jc.boundary_curves(problem, start, "mu_st",
-                                        mu_d * np.asarray(jc.BISTABLE_RATIO_VALUES))}
+                                        mu_d * np.asarray(BISTABLE_RATIO_VALUES))}
 
 
 @pytest.mark.numerics

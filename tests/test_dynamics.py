@@ -30,20 +30,26 @@ def test_time_delays_pair_each_reference_peak_with_the_next_one():
     assert np.isnan(phi[3, -1])
 
 
+def _delay_spread(peaks, t_from=0.0):
+    """`classify`'s delay spread and its period m, of oscillator 0's delays to the
+    reference of two oscillators on the HALC (oscillator 1, N // 2)."""
+    out = jc.classify(peaks, np.ones(2, bool), 2, 0, -1.0, 1e-3, t_from)
+    assert out["ref"] == 1
+    return out["delay_spread"], out["delay_period"]
+
+
 def test_delay_spread_finds_the_period_of_repeating_delays():
     period = 6.3
     alternating = np.tile([0.5, 1.5], 30)
-    peaks = synthetic_peaks(60, period, [0.0, 0.0]) + np.stack([np.zeros(60), alternating])
-    tau, phi = jc.time_delays(peaks, ref=0)
-    spread, m = jc.delay_spread(tau, phi[1:], t_from=0.0)
+    peaks = synthetic_peaks(60, period, [0.0, 0.0]) + np.stack([alternating, np.zeros(60)])
+    spread, m = _delay_spread(peaks)
     assert m == 2 and spread < 1e-12
     drifting = synthetic_peaks(60, period, [0.0, 0.0]) + np.stack(
-        [np.zeros(60), np.linspace(0, 3, 60) ** 2 / 3])
-    tau, phi = jc.time_delays(drifting, ref=0)
-    spread, _ = jc.delay_spread(tau, phi[1:], t_from=0.0)
+        [np.linspace(0, 3, 60) ** 2 / 3, np.zeros(60)])
+    spread, _ = _delay_spread(drifting)
     assert spread > 0.05
     # too few peaks after t_from to tell
-    assert jc.delay_spread(tau, phi[1:], t_from=tau[-10])[0] == np.inf
+    assert _delay_spread(drifting, t_from=drifting[1, -10])[0] == np.inf
 
 
 def test_classify_needs_both_signals_to_agree():
@@ -63,11 +69,12 @@ def test_classify_needs_both_signals_to_agree():
 
 
 def test_reference_is_the_11th_or_the_nearest_halc_oscillator():
+    peaks = synthetic_peaks(20, 6.3, np.zeros(20))
     on = np.zeros(20, dtype=bool)
     on[[2, 14, 17]] = True
-    assert jc.reference_oscillator(on) == 14
+    assert jc.classify(peaks, on, 3, 0, -1.0, 1e-3, 0.0)["ref"] == 14
     on[10] = True
-    assert jc.reference_oscillator(on) == 10
+    assert jc.classify(peaks, on, 4, 0, -1.0, 1e-3, 0.0)["ref"] == 10
 
 
 def run_figure(name, tmp_path, capsys):
@@ -89,7 +96,7 @@ def test_figure_command_quick_runs_every_scene_and_keeps_only_what_it_shows(tmp_
     Fig. 8 are those of Fig. 4's plain run, and its Lyapunov exponents are those
     of regular states."""
     reports, data = {}, {}
-    for name in jc.PAPER_FIGURES:
+    for name in ("4", "5", "6", "7", "8", "9", "10"):  # every figure of `jaxchain figure`
         reports[name], data[name] = run_figure(name, tmp_path, capsys)
     shown = {"5": {"series"}, "7": {"series"}, "6": {"peak_times", "lyapunov", "amplitudes"},
              "8": {"peak_times", "lyapunov", "amplitudes"}}

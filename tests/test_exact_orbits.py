@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-from helpers import internal, scipy_slip_arc, scipy_stick_slip_cycle
+from helpers import (BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES, internal, scipy_slip_arc,
+                     scipy_stick_slip_cycle)
 
 ONE = jc.ChainParams(n_osc=1, v_d=1.5, xi=0.05)
 #: Shooting on the exact engine at the reference's tolerances (Tsit5, rtol = atol = 1e-12).
@@ -301,8 +302,8 @@ def test_sliding_curves_in_xi_and_mu_st_are_the_existence_limits(past_the_limit)
     z = jnp.concatenate([branch.u, branch.p[:, None]], axis=1)[ok][stick]
     point = jc.locate_sliding(problem, z[int(np.argmax(z[:, -1]))])
     mu_d = float(ONE.friction.mu_d)
-    for where, values in (("xi", np.asarray(jc.BISTABLE_XI_VALUES)),
-                          ("mu_st", mu_d * np.asarray(jc.BISTABLE_RATIO_VALUES))):
+    for where, values in (("xi", np.asarray(BISTABLE_XI_VALUES)),
+                          ("mu_st", mu_d * np.asarray(BISTABLE_RATIO_VALUES))):
         curve = jc.sliding_curve(problem, point, where, values)
         assert np.asarray(curve.converged).all() and float(np.max(curve.step)) < 1e-8, where
         closed = [jc.stick_slip_existence_limit(jc.with_parameter(ONE, where, v))
@@ -323,8 +324,8 @@ def test_grazing_curves_against_xi_and_the_friction_ratio_are_the_existence_limi
     existence limit at every point; the default point is on both curves."""
     point = jc.stick_slip_grazing(ONE, "v_d", near=1.7)
     mu_d = float(ONE.friction.mu_d)
-    for where, values in (("xi", np.asarray(jc.BISTABLE_XI_VALUES)),
-                          ("mu_st", mu_d * np.asarray(jc.BISTABLE_RATIO_VALUES))):
+    for where, values in (("xi", np.asarray(BISTABLE_XI_VALUES)),
+                          ("mu_st", mu_d * np.asarray(BISTABLE_RATIO_VALUES))):
         curve = jc.grazing_curve(point, where, values)
         limits = [jc.stick_slip_existence_limit(jc.with_parameter(ONE, where, v))
                   for v in values]

@@ -16,6 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import jaxchain as jc
+from jaxchain._studies.identification.unknowns import unknowns_of
 from helpers import internal
 
 #: The rig of the tests: eq. (1) with parameters away from the defaults (which are
@@ -76,7 +77,7 @@ def test_every_unknown_gives_a_valid_law_and_back(theta):
     """For any unknowns, mu_st > mu_d > 0, v0 > 0 and xi > 0 (by the
     parametrisation, not by clipping), and the unknowns come back from the law."""
     jc.configure()
-    unknowns = jc.unknowns_of(RIG, ("mu_st", "mu_d", "v0", "xi"))
+    unknowns = unknowns_of(RIG, ("mu_st", "mu_d", "v0", "xi"))
     params = unknowns.params(RIG, jnp.asarray(theta))
     law = params.friction
     assert float(law.mu_st) > float(law.mu_d) > 0 and float(law.v0) > 0
@@ -89,7 +90,7 @@ def test_bad_fit_names_are_refused():
     for fit, says in [((), "at least one"), (("v_d",), "cannot be fitted"),
                       (("mu_s",), "unknown parameter"), (("xi", "xi"), "twice")]:
         with pytest.raises(jc.ValidationError, match=says):
-            jc.unknowns_of(RIG, fit)
+            unknowns_of(RIG, fit)
 
 
 #: The engines of the Jacobian's test, at tight tolerances (rtol 1e-10, atol 1e-12; the

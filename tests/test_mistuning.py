@@ -12,6 +12,7 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
+from jaxchain._studies.mistuning.summary import _halc_correlation as halc_correlation, envelope_decay
 
 from helpers import assert_usage_error, scipy_stick_slip_cycle
 
@@ -176,8 +177,8 @@ def test_envelope_decay_recovers_an_exponential_profile():
     n, kappa = 20, 1.7
     m = np.minimum(np.arange(n), n - np.arange(n))
     profile = np.roll(2.0 * np.exp(-kappa * m), 7)
-    assert abs(jc.envelope_decay(profile[None], np.array([1]))[0] - kappa) < 1e-12
-    assert np.isnan(jc.envelope_decay(profile[None], np.array([2]))[0])
+    assert abs(envelope_decay(profile[None], np.array([1]))[0] - kappa) < 1e-12
+    assert np.isnan(envelope_decay(profile[None], np.array([2]))[0])
 
 
 def test_halc_correlation_sees_which_oscillators_vibrate():
@@ -195,7 +196,7 @@ def test_halc_correlation_sees_which_oscillators_vibrate():
                      "basin_status": (("sigma", "draw", "v_d", "sample"),
                                       np.zeros_like(n_halc))},
                     coords={"sigma": [0.0, 2.0], "v_d": [1.5]}, attrs={"eta_c": 0.01})
-    out = jc.halc_correlation(ds)
+    out = halc_correlation(ds)
     assert np.isnan(out["correlation"][0, 0])
     assert out["correlation"][1, 0] > 0.5
     keep = (n_halc[1, :, 0, 0] > 0) & (n_halc[1, :, 0, 0] < 6)

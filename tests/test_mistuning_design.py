@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
+from jaxchain._studies.mistuning.pattern_design import pattern_deviations
 from helpers import internal
 
 design_problems = internal("mistuning design problems")
@@ -40,7 +41,7 @@ def test_followed_fold_is_the_mistuned_ring_s_own_fold(followed):
     chain whichever oscillator is numbered first, and the solve compiles the
     programs of the problem's site once."""
     _, folds, _, _, homogeneous = followed
-    delta = np.asarray(jc.pattern_deviations(jnp.asarray(THETA), BUDGET, 4, False))
+    delta = np.asarray(pattern_deviations(jnp.asarray(THETA), BUDGET, 4, False))
     turned = jc.ChainParams(n_osc=4, v_d=1.5, stiffness=1 + np.roll(delta, 1))
     fold, _ = jc.localized_fold(turned, 2)
     assert abs(float(fold.p) - folds[1]) < 1e-7
@@ -68,10 +69,10 @@ def test_fold_gradients_match_finite_differences(followed):
 @pytest.mark.numerics
 def test_pattern_keeps_budget_and_mean():
     theta = jnp.array([3.0, -0.5, 0.1, 2.0])
-    d = np.asarray(jc.pattern_deviations(theta, 0.05, 8, zero_mean=True))
+    d = np.asarray(pattern_deviations(theta, 0.05, 8, zero_mean=True))
     assert abs(d.mean()) < 1e-15 and np.abs(d).max() <= 0.05 + 1e-15
     np.testing.assert_array_equal(d[:4], d[4:])
-    free = np.asarray(jc.pattern_deviations(theta, 0.05, 4, zero_mean=False))
+    free = np.asarray(pattern_deviations(theta, 0.05, 4, zero_mean=False))
     np.testing.assert_allclose(free, 0.05 * np.tanh(np.asarray(theta)))
 
 

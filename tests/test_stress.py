@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
+from jaxchain._studies.stress.cases import stress_cases
 from helpers import assert_usage_error, internal, replace_internal, scipy_slip_arc
 
-QUICK = jc.stress_cases(quick=True)
+QUICK = stress_cases(quick=True)
 
 
 @pytest.mark.numerics

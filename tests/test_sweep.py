@@ -11,6 +11,7 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
+from jaxchain._analysis.fronts import front_ranges
 from helpers import (JAXCHAIN, SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, assert_cf_compliant,
                      batch_writes, batches_done, held, hold_env, internal, kill, release,
                      replace_internal, small_sweep, sweep_cli)
@@ -189,14 +190,14 @@ def test_fronts_follow_their_definition():
                     excited=[2, 1, 2, -1], status=[[0, 0, 0, 0], [0, 0, 3, 0]])
     front = jc.propagating_fronts(ds).values
     assert front.tolist() == [[1, 0, 0, 0], [1, -1, 0, 0]]
-    assert jc.front_ranges([1.0, 1.5], (front != 0).any(1)) == [(1.0, 1.5)]
+    assert front_ranges([1.0, 1.5], (front != 0).any(1)) == [(1.0, 1.5)]
 
 
 def test_front_ranges_are_runs_of_consecutive_values():
     values = np.array([1.2, 1.0, 1.1, 1.3, 1.4, 1.5])
     flags = np.array([False, True, True, False, True, True])
-    assert jc.front_ranges(values, flags) == [(1.0, 1.1), (1.4, 1.5)]
-    assert jc.front_ranges(values, np.zeros(6, bool)) == []
+    assert front_ranges(values, flags) == [(1.0, 1.1), (1.4, 1.5)]
+    assert front_ranges(values, np.zeros(6, bool)) == []
 
 
 def test_bad_input_names_the_argument(tmp_path):

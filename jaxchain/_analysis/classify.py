@@ -10,10 +10,6 @@ from .states import (FAILED, IRREGULAR, PERIODIC, STEADY_SLIDING, UNDECIDED,
 from .delays import delay_spread, reference_oscillator, time_delays
 from .._engine.status import Status
 
-#: The classes of a state in the scenes: its regularity, or steady sliding, or failed
-#: (the vocabulary of `jaxchain._analysis.states`).
-CLASSES = (PERIODIC, IRREGULAR, UNDECIDED, STEADY_SLIDING, FAILED)
-
 
 def _lyapunov_class(exponent: float, error: float) -> str:
     """"irregular" when the largest Lyapunov exponent is positive beyond its stated

@@ -189,7 +189,7 @@ def chain_from_record(record: dict, base: ChainParams | None = None) -> ChainPar
     return ChainParams(**fields, friction=law(**law_values))
 
 
-def read_chain_file(path) -> dict:
+def _read_chain_file(path) -> dict:
     """The settings of a TOML chain file, as a record for `chain_from_record`: n_osc,
     boundary, xi, eta_c (one value per link), stiffness, load (one value per
     oscillator), friction = "NAME" and the law's parameters.
@@ -235,7 +235,7 @@ def chain_from_file(path, base: ChainParams | None = None) -> ChainParams:
     from .friction import Tabulated
     from .units import from_physical
 
-    record = read_chain_file(path)
+    record = _read_chain_file(path)
     try:
         if "eps" in record:  # a chain holds physics only
             raise ValidationError(EPS_MOVED)

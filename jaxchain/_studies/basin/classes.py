@@ -7,7 +7,7 @@ import numpy as np
 from jaxtyping import Bool, Float, Int
 
 from ..._engine.checks import real_array
-from ..._physics.chain import Graph, as_graph, neighbours
+from ..._physics.chain import Graph, as_graph
 from ..._errors import ValidationError
 from ..._analysis.states import FAILED, STEADY_SLIDING, STICK_SLIP
 from ..._engine.status import Status
@@ -31,18 +31,11 @@ def halc_clusters(on_halc: Bool[np.ndarray, "*batch n_osc"],
 
     **Returns:**
 
-    Shape (...): the groups, counted by their first oscillator (on the HALC, its
-    left neighbour not; the left neighbour of oscillator 1 is oscillator N on the
-    ring and nothing on an open chain).
+    Shape (...): the groups, the connected components of the HALC oscillators in
+    the chain's `Graph` (`Graph.clusters`, scipy's `connected_components`).
     """
     on = np.asarray(on_halc, dtype=bool)
-    graph = as_graph(boundary, on.shape[-1])
-    if not graph.is_line:
-        return graph.clusters(on)
-    left_of, _ = neighbours(graph.kind, on.shape[-1])
-    left = np.where(left_of >= 0, on[..., left_of], False)
-    starts = (on & ~left).sum(-1)
-    return np.where(on.all(-1), 1, starts)
+    return as_graph(boundary, on.shape[-1]).clusters(on)
 
 
 def class_names(n_osc: int) -> list[str]:

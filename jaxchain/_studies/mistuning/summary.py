@@ -56,7 +56,7 @@ def staircase_fraction(study) -> dict:
     return _share(hit.sum((1, 3)), ok.sum((1, 3)))
 
 
-def vibrating_fraction(study) -> dict:
+def _vibrating_fraction(study) -> dict:
     """Basin stability of the vibrating states: the share of random initial
     states that end with n_HALC >= 1, per (sigma, v_d), with Wilson intervals."""
     ok = study["basin_status"].values == Status.ok
@@ -83,7 +83,7 @@ def _share(k, n) -> dict:
             "high": np.where(n > 0, high, np.nan), "count": k, "total": n}
 
 
-def halc_correlation(study) -> dict:
+def _halc_correlation(study) -> dict:
     """Where the vibration sits: over the random starts that end localized
     (0 < n_HALC < N), the Pearson correlation between an oscillator being on the
     HALC and its stiffness deviation delta_n, and the mean delta_n / sigma of the
@@ -170,12 +170,30 @@ def _stats(values) -> dict:
 
 
 def study_summary(study) -> dict:
-    """The JSON summary of a `mistuning_study` (what `jaxchain mistuning` prints and
-    writes): per sigma, the staircase and basin
-    shares per belt speed with their intervals, the HALC correlation, and the
-    distributions of the edges and of the envelope decay."""
-    stair, basin, corr = staircase_fraction(study), vibrating_fraction(study), \
-        halc_correlation(study)
+    """The summary of a `mistuning_study`, what `jaxchain mistuning` prints and
+    writes as JSON.
+
+    **Arguments:**
+
+    - `study`: the Dataset of `mistuning_study`.
+
+    **Returns:**
+
+    A dict of plain Python values. `sigmas` holds one row per sigma: `v_d` and,
+    per belt speed, `staircase_fraction` (eq. (8) starts with k excited that end
+    with n_HALC = k), `basin_stability_vibrating` (random starts that end with
+    n_HALC >= 1) and `basin_stability_localized` (0 < n_HALC < N), each with its
+    95 % Wilson interval (`*_ci`) and run count; `halc_deviation_correlation` (the
+    Pearson correlation of being on the HALC with delta_n, over localized random
+    starts; NaN at sigma = 0) and `mean_deviation_on_halc_over_sigma`; the
+    distributions of the Hopf point, the upper edge and the envelope decay, the
+    folds found by shooting, and the Anderson localization factor at the state's
+    frequency. Beside it: the state's period and omega^2, the damped chain's
+    decay, the correlation of the site edges with the neighbours' detuning
+    (`site_edge_correlation`) and the study's sizes.
+    """
+    stair, basin, corr = staircase_fraction(study), _vibrating_fraction(study), \
+        _halc_correlation(study)
     local = localized_fraction(study)
     n_halc = np.where(study["basin_status"].values == Status.ok,
                       study["basin_n_halc"].values, np.nan)
