@@ -7,13 +7,14 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from .._bifurcation.continuation import Branch, ContinuationOptions, continuation
+from .._bifurcation.branches import follow_branch
+from .._bifurcation.continuation import Branch, ContinuationOptions
 from .._bifurcation.damping_design import DampingDesign, smallest_damping
 from .._bifurcation.fold import FoldPoint, fold_point
 from .._bifurcation.hopf import (HopfPoint, hopf_eps_correction, hopf_point, hopf_speed,
                                  hopf_vd_analytic)
 from .._bifurcation.limit_cycles import hopf_cycle
-from .._bifurcation.periodic_orbit import cycle_problem, periodic_orbit
+from .._bifurcation.periodic_orbit import periodic_orbit
 from .._bifurcation.lyapunov_coefficient import first_lyapunov_coefficient
 from .._bifurcation.shooting import Shooting, unpack
 from .._bifurcation.two_parameter import BoundaryCurves, boundary_curves
@@ -109,9 +110,9 @@ def _ring_state(params: ChainParams, single, kind: str, method: Shooting, progre
            "stable": bool(orbit.stable), "multipliers": _multipliers(orbit)}
     if not orbit.converged:
         return out, None
-    problem = cycle_problem(orbit, method)
-    branch = continuation(problem, options=ContinuationOptions(
-        ds=0.05, ds_max=0.1, p_max=2.5, max_points=60), progress=progress)
+    followed = follow_branch(orbit, method, ContinuationOptions(
+        ds=0.05, ds_max=0.1, p_max=2.5, max_points=60), directions=(1,), progress=progress)
+    (problem, branch, _), *_ = followed.pieces
     out["branch_points"] = int(np.sum(np.asarray(branch.converged)))
     out["max_vd_on_branch"] = float(np.max(np.asarray(branch.p)[np.asarray(branch.converged)]))
     # Near the fold, every oscillator of the weakly coupled ring has a multiplier
@@ -245,9 +246,10 @@ def _run_single(params: ChainParams, method: Shooting, progress: bool) -> dict:
     l1 = float(first_lyapunov_coefficient(with_parameter(single, "v_d", hopf.v_d[0]),
                                           eps=eps))
     start = hopf_cycle(single, method=method)
-    problem = cycle_problem(start, method)
-    branch = continuation(problem, options=ContinuationOptions(
-        ds=0.01, ds_max=0.1, p_min=0.5, p_max=2.5, max_points=90), progress=progress)
+    followed = follow_branch(start, method, ContinuationOptions(
+        ds=0.01, ds_max=0.1, p_min=0.5, p_max=2.5, max_points=90), directions=(1,),
+        progress=progress)
+    (problem, branch, _), *_ = followed.pieces
     fold = fold_point(problem, branch)
     return {"method": method, "eps": eps, "single": single, "hopf": hopf, "l1": l1,
             "problem": problem,
