@@ -4,7 +4,6 @@ already followed."""
 
 from __future__ import annotations
 
-import json
 
 import jax.numpy as jnp
 import numpy as np
@@ -16,6 +15,7 @@ from ..._physics.initial import OutOfPhaseExcitation
 from ..._physics.params import ChainParams
 from .branch import stored_branch
 from .starts import _turning_point, start_mask
+from .store import StoredStart
 
 
 def _on_followed_branch(orbits, params: ChainParams, orbit, branches: dict) -> str | None:
@@ -27,20 +27,18 @@ def _on_followed_branch(orbits, params: ChainParams, orbit, branches: dict) -> s
                      stored_branch(ds)) is not None), None)
 
 
-def _stored_orbits(stored: dict, v_d: float) -> list:
+def _stored_orbits(stored: StoredStart, v_d: float) -> list:
     """The orbits at `v_d` that one start gave deflation in the run that stored its
-    branches, `stored` (`_read_branches`), as shooting unknowns (x, x', T): its
-    own orbit and every solution deflation found from it, as deflation had them
-    (the record's `deflation_known`). Files written before that attribute give the
-    first point of the start's own and deflated branches instead (not a switched
-    branch, nor one started at a neighbouring v_d)."""
-    record = next(iter(stored.values()))
-    if "deflation_known" in record.attrs:
-        return [jnp.asarray(u) for u in json.loads(record.attrs["deflation_known"])]
+    branches (`BranchStore.read`), as the method's unknowns (x, x', T): its own
+    orbit and every solution deflation found from it, as deflation had them
+    (`StoredStart.known`). Files written before those were kept give the first
+    point of the start's own and deflated branches instead (not a switched branch,
+    nor one started at a neighbouring v_d)."""
+    if stored.known is not None:
+        return [jnp.asarray(u) for u in stored.known]
     out = []
-    for label, ds in stored.items():
-        if " switched " in label or "no_branch" in ds.attrs or float(
-                ds.attrs["start_vd"]) != v_d:
+    for label, ds in stored.branches.items():
+        if " switched " in label or float(ds.attrs["start_vd"]) != v_d:
             continue
         i = int(np.argmin(np.abs(ds["v_d"].values - v_d)))
         if float(ds["v_d"].values[i]) == v_d:

@@ -16,7 +16,6 @@ from ..._engine.options import SimulationOptions
 from ..._errors import ValidationError
 from ..._physics.params import ChainParams, chain_or_default
 from ..._physics.record import chain_record
-from ..._sweeps.result_store import read_dataset, write_dataset
 from ..._bifurcation.branches import SLIDING_PASSES, FollowedBranch, follow_branch
 from .branch import BRANCH_METHOD, SNAKE_CONTINUATION, branch_dataset
 from .checks import _stable_range_checks
@@ -33,6 +32,7 @@ from .starts import (
     check_starts,
     start_mask,
 )
+from .store import BranchStore, deflation_known
 from .summary import _branches_summary
 
 
@@ -165,30 +165,23 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
     that a resumed run does not compute it again."""
 
     datasets, starts, failed, repeated, known = {}, {}, {}, [], []
-    settings = {"chain": chain_record(params), **orbits.settings(),
-                "continuation": continuation_options, "start": start_options,
-                "switch": bool(switch), "deflate": int(deflate),
-                "sliding_passes": SLIDING_PASSES, "branch_method": BRANCH_METHOD,
-                "retry_vd": list(RETRY_VD), "recurrences": RECURRENCES,
-                "symmetric_chunk": SYMMETRIC_CHUNK}
-    paths = {k: None if out is None else Path(out) / (
-        f"branch_{k}.nc" if isinstance(k, str) else f"branch_k{k}.nc").replace(":", "")
-        for k in sites}
+    store = BranchStore(out, {
+        "chain": chain_record(params), **orbits.settings(),
+        "continuation": continuation_options, "start": start_options, "switch": bool(switch),
+        "deflate": int(deflate), "sliding_passes": SLIDING_PASSES,
+        "branch_method": BRANCH_METHOD, "retry_vd": list(RETRY_VD),
+        "recurrences": RECURRENCES, "symmetric_chunk": SYMMETRIC_CHUNK})
     todo = []
     for k in sites:
-        stored = None if out is None else _read_branches(paths[k], k, _start_label(k),
-                                                         settings)
+        stored = store.read(k)
         if stored is None:
             todo.append(k)
             continue
         known += _stored_orbits(stored, float(params.v_d))
-        record = stored[_start_label(k)]
-        if "no_branch" in record.attrs:  # a start without a branch of its own
-            del stored[_start_label(k)]
-            failed[k] = record.attrs["no_branch"]
-            starts[k] = json.loads(record.attrs["simulation"])
-            repeated += json.loads(record.attrs["deflated_repeats"])
-        datasets |= stored
+        if stored.no_branch is not None:  # a start without a branch of its own
+            failed[k], starts[k] = stored.no_branch, stored.simulation
+            repeated += stored.repeats
+        datasets |= stored.branches
     before = FoundBranches(datasets, starts, failed, repeated)
     if not todo:
         return before
@@ -213,18 +206,16 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
             for i, (o, m, _) in enumerate(deflated.get(k, [])):
                 if o is not None:
                     jobs[k, i] = pool.submit(_follow_start, o, m, mask, **follow)
-        return before | _take_branches(orbits, params, found, deflated, jobs, out, paths,
-                                       settings, before.datasets)
+        return before | _take_branches(orbits, params, found, deflated, jobs, store,
+                                       before.datasets)
 
 
 def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, jobs: dict,
-                   out, paths: dict, settings: dict, before: dict) -> FoundBranches:
+                   store: BranchStore, before: dict) -> FoundBranches:
     """The branches of `jobs` (`_find_branches`), in the order of the starts: each
     start's own, then those of its deflated orbits not on a branch followed before
     (`_on_followed_branch`: among `before`, the branches read back, and those taken
     already), labelled and stored."""
-    import xarray as xr
-
     datasets, starts, failed, repeated = {}, {}, {}, []
     for k, (orbit, sim, reason) in found.items():
         starts[k] = sim
@@ -251,25 +242,20 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
             if isinstance(branches, NoBranch):
                 starts[label], failed[label] = sim, branches.reason
                 continue
-            _store_branches(out, _numbered(paths[k], "deflated", j), branches, settings, k)
+            store.write(k, branches, deflated=j)
             followed |= branches
         # every orbit this start gave deflation (`_deflated_orbits`), for a resumed run
         gave = ([] if orbit is None or float(orbit.params.v_d) != float(params.v_d)
                 else [pack(orbit.y0, orbit.period)])
         gave += [u for _, _, u in deflated.get(k, [])]
-        known = {"deflation_known": json.dumps([np.asarray(u, dtype=float).tolist()
-                                                for u in gave])}
         if own in mine:  # stored last: its attributes count the deflated branches
             mine[own] = mine[own].assign_attrs(deflated=j, deflated_repeats=json.dumps(repeats),
                                                start_symmetric=int(bool(sim.get("symmetric"))),
-                                               **known)
-            _store_branches(out, paths[k], mine, settings, k)
+                                               **deflation_known(gave))
+            store.write(k, mine)
         else:
             repeated += repeats
-            _store_branches(out, paths[k], {own: xr.Dataset(attrs={
-                "no_branch": failed[k], "simulation": json.dumps(sim), "switched": 0,
-                "deflated": j, "deflated_repeats": json.dumps(repeats), **known})},
-                settings, k)
+            store.write_no_branch(k, failed[k], sim, j, repeats, gave)
         datasets |= mine | followed
     return FoundBranches(datasets, starts, failed, repeated)
 
@@ -315,47 +301,3 @@ def _labelled(label: str, start, mask, followed: FollowedBranch | NoBranch) -> d
     return {label if j == 0 else f"{label} switched {j}":
             b.assign_attrs(start=label, start_sites=np.flatnonzero(mask).tolist())
             for j, b in enumerate(branches)}
-
-
-def _store_branches(out, path: Path | None, branches: dict, settings: dict, k) -> None:
-    """Write a start's branch and those switched onto from it (`_follow_start`) to
-    `path` and beside it, each with the key of its settings."""
-    if out is None:
-        return
-    Path(out).mkdir(parents=True, exist_ok=True)
-    label = next(iter(branches))
-    for j, b in enumerate(branches.values()):
-        write_dataset(b, _numbered(path, "switched", j), "snake branch", k=k, label=label,
-                      switched=j, **settings)
-
-
-def _numbered(path: Path | None, what: str, j: int) -> Path | None:
-    """The file of the j-th branch of kind `what` (switched, deflated) beside the
-    branch stored at `path` (j = 0: that branch)."""
-    return path if path is None or j == 0 else path.with_name(f"{path.stem}_{what}{j}.nc")
-
-
-def _read_branches(path: Path, k, label: str, settings: dict) -> dict | None:
-    """The stored branch `label` of start k, the branches switched onto from it and
-    the deflated branches of the start with theirs (label -> dataset), or None if
-    any of them is missing or was made with other settings. A start without a
-    branch of its own has a record instead of its branch: a dataset without
-    variables, its attributes `no_branch` (why), `simulation` (JSON: the start's
-    n_HALC and energy) and `deflated_repeats`."""
-    first = read_dataset(path, "snake branch", k=k, label=label, switched=0, **settings)
-    if first is None:
-        return None
-    out = {label: first}
-    for j in range(1, int(first.attrs.get("switched", 0)) + 1):
-        out[f"{label} switched {j}"] = read_dataset(_numbered(path, "switched", j),
-                                                    "snake branch", k=k, label=label,
-                                                    switched=j, **settings)
-    if any(ds is None for ds in out.values()):
-        return None
-    for j in range(1, int(first.attrs.get("deflated", 0)) + 1):
-        deflated = _read_branches(_numbered(path, "deflated", j), k, f"{label} deflated {j}",
-                                  settings)
-        if deflated is None:
-            return None
-        out |= deflated
-    return out
