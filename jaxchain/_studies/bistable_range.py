@@ -68,7 +68,7 @@ def _design_check(params: ChainParams, design: DampingDesign, target: float,
     out = {}
     for side, factor in (("below", 1 - margin), ("above", 1 + margin)):
         p = with_parameter(params, "xi", design.xi * factor)
-        v = hopf_speed(p, engine.eps) + target
+        v = hopf_speed(p, engine) + target
         p = with_parameter(p, "v_d", v)
         obs = simulate(p, GivenState(jnp.array([[3.5], [0.0]])), engine=engine)
         out[side] = {"xi": design.xi * factor, "v_d": v,
@@ -241,9 +241,9 @@ def _run_single(params: ChainParams, method: Shooting, progress: bool) -> dict:
     branch's fold and the non-smooth existence limit."""
     eps = method.engine.as_smoothed("bistable_range").eps
     single = single_oscillator(params)
-    hopf = hopf_point(single, eps=eps)
+    hopf = hopf_point(single, engine=Smoothed(eps=eps))
     l1 = float(first_lyapunov_coefficient(with_parameter(single, "v_d", hopf.v_d[0]),
-                                          eps=eps))
+                                          engine=Smoothed(eps=eps)))
     start = hopf_cycle(single, method=method)
     problem = cycle_problem(start, method)
     branch = continuation(problem, options=ContinuationOptions(
@@ -275,7 +275,7 @@ def _run_curves(run: dict, target: float, xi_values, ratio_values, progress: boo
     out["at"] = int(np.argmin(np.abs(np.asarray(out["curves_xi"].values) - float(single.xi))))
     exponential = run["exponential"]
     out |= {"hopf_vd_analytic": float(hopf_vd_analytic(single)) if exponential else None,
-            "hopf_eps_correction": (float(hopf_eps_correction(single, run["eps"]))
+            "hopf_eps_correction": (float(hopf_eps_correction(single, run["engine"]))
                                     if exponential else None),
             "xi_curve": _curve_summary(single, "xi", out["curves_xi"]),
             "design_check": _design_check(single, out["design"], target, run["engine"])}
@@ -287,7 +287,7 @@ def _run_curves(run: dict, target: float, xi_values, ratio_values, progress: boo
 def _run_ring(params: ChainParams, run: dict, progress: bool) -> tuple[dict, dict]:
     """The chain's Hopf point over its modes and, on the homogeneous ring of even N,
     the fully stick-slipping in-phase and anti-phase states (`_ring_state`)."""
-    ring_hopf = hopf_point(params, eps=run["eps"])
+    ring_hopf = hopf_point(params, engine=run["engine"])
     summary = {
         "n_osc": params.n_osc, "boundary": params.boundary,
         "hopf_vd": float(np.max(ring_hopf.v_d)),
