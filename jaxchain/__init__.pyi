@@ -77,7 +77,6 @@ from ._engine.exact.solve import (
     NonsmoothObservables as NonsmoothObservables,
 )
 from ._engine.exact.options import NonsmoothOptions as NonsmoothOptions
-from ._engine.exact.phases import stick_phases as stick_phases
 from ._engine.exact.switching import (
     SWITCH_KINDS as SWITCH_KINDS, saltation_matrix as saltation_matrix,
 )
@@ -109,9 +108,7 @@ from ._analysis.localization import (
 # --- Bifurcations and continuation: Hopf point, periodic orbits, branches, folds ---
 from ._bifurcation.hopf import (
     hopf_point as hopf_point, HopfPoint as HopfPoint, hopf_vd as hopf_vd,
-    hopf_speed as hopf_speed, hopf_vd_analytic as hopf_vd_analytic,
-    hopf_eps_correction as hopf_eps_correction, growth_rates as growth_rates,
-    leading_growth_rate as leading_growth_rate, mode_eigenvalues as mode_eigenvalues,
+    hopf_vd_analytic as hopf_vd_analytic, growth_rates as growth_rates,
     steady_sliding_eigenvalues as steady_sliding_eigenvalues,
 )
 from ._bifurcation.lyapunov_coefficient import first_lyapunov_coefficient as first_lyapunov_coefficient
@@ -124,15 +121,10 @@ from ._bifurcation.periodic_orbit import (
 )
 from ._bifurcation.shooting import Shooting as Shooting
 from ._bifurcation.deflation import (
-    distinct_orbits as distinct_orbits, deflated_orbit as deflated_orbit,
-    DeflatedOrbit as DeflatedOrbit, deflation as deflation, Deflation as Deflation,
-    chain_symmetries as chain_symmetries, orbit_samples as orbit_samples,
+    distinct_orbits as distinct_orbits, deflation as deflation,
+    chain_symmetries as chain_symmetries,
 )
-from ._bifurcation.branch_switching import (
-    switch_branch as switch_branch, branch_direction as branch_direction,
-    switch_by_deflation as switch_by_deflation, critical_directions as critical_directions,
-    symmetric_directions as symmetric_directions,
-)
+from ._bifurcation.branch_switching import switch_branch as switch_branch
 from ._bifurcation.grazing import (
     stick_slip_grazing as stick_slip_grazing, grazing_curve as grazing_curve,
     grazing_slope as grazing_slope, GrazingPoint as GrazingPoint,
@@ -140,12 +132,8 @@ from ._bifurcation.grazing import (
 from ._bifurcation.sliding import (
     locate_sliding as locate_sliding, SlidingPoint as SlidingPoint,
     sliding_curve as sliding_curve,
-    SlidingCurve as SlidingCurve,
 )
-from ._bifurcation.past_sliding import (
-    past_sliding_start as past_sliding_start, held_problem as held_problem,
-    slip_margin as slip_margin,
-)
+from ._bifurcation.past_sliding import past_sliding_start as past_sliding_start
 from ._bifurcation.continuation import (
     continuation as continuation, ContinuationProblem as ContinuationProblem,
     PseudoArclength as PseudoArclength, ContinuationOptions as ContinuationOptions,
@@ -153,7 +141,6 @@ from ._bifurcation.continuation import (
 )
 from ._bifurcation.bifurcations import (
     locate_bifurcations as locate_bifurcations, BifurcationPoint as BifurcationPoint,
-    BIFURCATION_KINDS as BIFURCATION_KINDS,
 )
 from ._bifurcation.limit_cycles import hopf_cycle as hopf_cycle
 from ._bifurcation.branches import (
@@ -164,9 +151,7 @@ from ._bifurcation.fold import (
 )
 from ._bifurcation.two_parameter import (
     boundary_curves as boundary_curves, BoundaryCurves as BoundaryCurves,
-    fold_curve as fold_curve, fold_curve_problem as fold_curve_problem,
-    fold_and_derivative as fold_and_derivative,
-    hopf_vd_and_derivative as hopf_vd_and_derivative,
+    fold_curve as fold_curve,
 )
 from ._bifurcation.damping_design import (
     smallest_damping as smallest_damping, DampingDesign as DampingDesign,

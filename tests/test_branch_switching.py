@@ -10,6 +10,10 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
+# building blocks of `switch_branch` and of the snake's switching, tested on their own
+from jaxchain._bifurcation.branch_switching import (critical_directions,
+                                                     switch_by_deflation,
+                                                     symmetric_directions)
 
 from helpers import internal, replace_internal
 
@@ -203,7 +207,7 @@ def test_critical_directions_are_the_kernel_less_the_branch(symmetric, critical)
     problem = _pitchfork(symmetric)
     z = jnp.array([0.0, 0.0, 1.0, 1.0])
     for sign in (1, -1):
-        got = jc.critical_directions(problem, z, sign * jnp.array([0.0, 0.0, 1.0, 1.0]))
+        got = critical_directions(problem, z, sign * jnp.array([0.0, 0.0, 1.0, 1.0]))
         assert got.shape == (len(critical), 4)
         np.testing.assert_allclose(got @ got.T, np.eye(len(critical)), atol=1e-12)
         projector = np.asarray(critical, dtype=float)
@@ -221,7 +225,7 @@ def test_deflation_beside_the_branch_point_finds_keller_s_switched_orbit(branch_
     the direction it returns points from the branch point to the orbit."""
     problem, branch, point = branch_point
     p = float(point.p) - 0.002
-    found = jc.switch_by_deflation(problem, branch, point, offset=0.002)
+    found = switch_by_deflation(problem, branch, point, offset=0.002)
     below = [(new, t) for new, t in found if abs(float(new.value()) - p) < 1e-12]
     assert below
     new, tangent = below[0]
@@ -312,13 +316,13 @@ def test_the_axes_of_a_symmetric_branch_point_are_the_lines_its_reflections_fix(
     problem, z, tangent = _s3_problem(), jnp.array([0.0, 0.0, 0.0, 1.0]), jnp.eye(4)[3]
     perms = [[0, 1, 2], [1, 2, 0], [2, 0, 1], [1, 0, 2], [0, 2, 1], [2, 1, 0]]
     actions = [p + [3] for p in perms]
-    axes = jc.symmetric_directions(problem, z, tangent, actions)
+    axes = symmetric_directions(problem, z, tangent, actions)
     assert axes.shape == (1, 4)
     np.testing.assert_allclose(axes[0], np.array([-1.0, -1.0, 2.0, 0.0]) / np.sqrt(6),
                                atol=1e-12)
-    assert jc.symmetric_directions(problem, z, tangent, actions[:3]).shape == (0, 4)
+    assert symmetric_directions(problem, z, tangent, actions[:3]).shape == (0, 4)
     with pytest.raises(ValueError, match="permutations"):
-        jc.symmetric_directions(problem, z, tangent, [[0, 1, 1, 3]])
+        symmetric_directions(problem, z, tangent, [[0, 1, 1, 3]])
     branch = type("Branch", (), {"converged": np.ones(1, bool), "tangent": tangent[None]})
     point = type("Point", (), {"kind": "branch point", "z": z, "after": 0, "p": 1.0})
     for side in (1, -1):

@@ -75,13 +75,20 @@ def test_bisection_along_the_branch_finds_the_fold_of_the_extended_system(branch
 def test_fold_derivative_against_finite_differences(branch, where, value):
     problem, _, fold = branch
     start = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
-    solution, derivative, ok = jc.fold_and_derivative(problem, where, value, start)
+    def fold_at(v, guess):
+        moved = problem.with_params(jc.with_parameter(problem.params, where, v))
+        return jc.solve_fold(moved, guess)
+
+    value = jnp.asarray(value, dtype=float)
+    solution, ok = fold_at(value, start)
     assert bool(ok)
+    # forward mode through the implicit function (optimistix's ImplicitAdjoint)
+    _, derivative = jax.jvp(lambda v: fold_at(v, solution)[0], (value,),
+                            (jnp.ones_like(value),))
     n = problem.u0.size
     h = 1e-5
-    plus, _, ok_plus = jc.fold_and_derivative(problem, where, value + h, solution + h * derivative)
-    minus, _, ok_minus = jc.fold_and_derivative(problem, where, value - h,
-                                                solution - h * derivative)
+    plus, ok_plus = fold_at(value + h, solution + h * derivative)
+    minus, ok_minus = fold_at(value - h, solution - h * derivative)
     assert bool(ok_plus) and bool(ok_minus)
     fd = (plus[n] - minus[n]) / (2 * h)
     assert abs(float(derivative[n]) - float(fd)) < 1e-4 * abs(float(fd))
@@ -89,8 +96,7 @@ def test_fold_derivative_against_finite_differences(branch, where, value):
     # reverse mode: the implicit function theorem's tangent transposes (a
     # forward-mode pass through diffrax's loop would not)
     def fold_vd(v):
-        moved = problem.with_params(jc.with_parameter(problem.params, where, v))
-        return jc.solve_fold(moved, solution)[0][n]
+        return fold_at(v, solution)[0][n]
 
     reverse = float(jax.grad(fold_vd)(jnp.asarray(value)))
     assert abs(reverse - float(derivative[n])) < 1e-10 * abs(reverse)
@@ -184,11 +190,14 @@ def test_a_failed_hopf_solve_is_nan_never_a_number():
     from a guess of v_d = 800 the exponential law's slope exp(-v_d/v0) underflows to
     zero in float64. A guess that is no belt speed is refused, naming it."""
     one = jc.ChainParams(n_osc=1)
-    hopf, d_xi = jc.hopf_vd_and_derivative(one, "xi", 0.05)
+    def hopf_and_derivative(params):
+        return jax.jvp(lambda xi: jc.hopf_vd(jc.with_parameter(params, "xi", xi)),
+                       (jnp.asarray(0.05),), (jnp.asarray(1.0),))
+
+    hopf, d_xi = hopf_and_derivative(one)
     assert abs(float(hopf) - 0.5 * np.log(10)) < 1e-10
     assert abs(float(d_xi) + 0.5 / 0.05) < 1e-8
-    value, derivative = jc.hopf_vd_and_derivative(jc.ChainParams(n_osc=1, mu_st=0.5),
-                                               "xi", 0.05)
+    value, derivative = hopf_and_derivative(jc.ChainParams(n_osc=1, mu_st=0.5))
     assert np.isnan(float(value)) and np.isnan(float(derivative))
     assert np.isnan(float(jc.hopf_vd(one, guess=800.0)))
     with pytest.raises(ValueError, match="guess"):

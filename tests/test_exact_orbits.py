@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-from helpers import (BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES, internal, scipy_slip_arc,
+from helpers import (BISTABLE_RATIO_VALUES, BISTABLE_XI_VALUES, scipy_slip_arc,
                      scipy_stick_slip_cycle)
 
 ONE = jc.ChainParams(n_osc=1, v_d=1.5, xi=0.05)
@@ -55,33 +55,31 @@ def test_exact_stick_slip_cycle_from_perturbed_starts_is_the_scipy_cycle(guess, 
 @pytest.mark.numerics
 def test_the_exact_cycle_s_stick_phase_is_the_scipy_stick(guess):
     """The stick phase of the single oscillator's exact stick-slip cycle, read from
-    the exact engine's switch log over its orbit (`stick_phases`), is the stick of
+    the exact engine's switch log over its orbit (`Exact.stick_phases`), is the stick of
     the scipy cycle: from the return to the belt speed back to the stick exit
     point, (x_exit - x_return) / v_d, to the period's 1e-9 (relative)."""
     x_max, (_, period) = guess
     orbit = jc.periodic_orbit(ONE, (jnp.array([[x_max], [0.0]]), period), EXACT)
     arc = scipy_slip_arc(ONE)
     stick = (arc.y[0, 0] - arc.y[0, -1]) / ONE.v_d
-    phases = jc.stick_phases(ONE, orbit.y0, orbit.period, EXACT.engine.options)
+    phases = EXACT.engine.stick_phases(ONE, orbit.y0, orbit.period)
     assert abs(phases[0] - stick) < 1e-9 * period
     # steady sliding has no stick phase
     sliding = jc.ChainParams(n_osc=1, v_d=3.0, xi=0.05)
     y = jc.steady_sliding(sliding)
-    assert np.isinf(jc.stick_phases(sliding, y, 6.0, EXACT.engine.options)).all()
+    assert np.isinf(EXACT.engine.stick_phases(sliding, y, 6.0)).all()
 
 
 def test_sliding_location_needs_exact_orbits_with_a_stick_phase():
     problem = jc.ContinuationProblem(residual=lambda u, p: u, u0=jnp.zeros(3), params=ONE)
     with pytest.raises(ValueError, match="cycle_problem"):
         jc.locate_sliding(problem, jnp.zeros(4))
-    for past in (lambda: jc.held_problem(problem, 0),
-                 lambda: jc.past_sliding_start(problem, jnp.zeros(4))):
-        with pytest.raises(ValueError, match="cycle_problem"):
-            past()
+    with pytest.raises(ValueError, match="cycle_problem"):
+        jc.past_sliding_start(problem, jnp.zeros(4))
     with pytest.raises(ValueError, match="held"):
         jc.NonsmoothOptions(held=(-1,))
     with pytest.raises(ValueError, match="period"):
-        jc.stick_phases(ONE, jnp.zeros((2, 1)), 0.0, EXACT.engine.options)
+        EXACT.engine.stick_phases(ONE, jnp.zeros((2, 1)), 0.0)
 
 
 def test_exact_shooting_refuses_bad_input_in_one_line():
@@ -186,16 +184,28 @@ def test_exact_cycles_continued_in_v_d_are_the_scipy_cycles_up_to_the_existence_
 
 @pytest.fixture(scope="module")
 def through_the_limit(guess):
-    """The snake's continuation (`_through_sliding`) of the exact cycle in v_d from
-    1.5 towards 0.05 beyond the existence limit, and on through the sliding point
-    there: its pieces, each (problem, branch, bifurcations)."""
+    """The continuation of the exact cycle in v_d from 1.5 towards 0.05 beyond the
+    existence limit (`continuation`), where the branch ends (its corrector fails) at
+    a sliding point, and on through it from the branch's last orbits
+    (`past_sliding_start`, the last of them first): its two pieces, each (problem,
+    branch, bifurcations)."""
     x_max, (_, period) = guess
     orbit = jc.periodic_orbit(ONE, (jnp.array([[x_max], [0.0]]), period), EXACT)
     limit = jc.stick_slip_existence_limit(ONE)
     options = jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0, p_max=limit + 0.05,
                                      max_points=30)
-    return internal("snake through sliding")(jc.cycle_problem(orbit, EXACT),
-                                             jc.PseudoArclength(), options)
+    algorithm, problem = jc.PseudoArclength(), jc.cycle_problem(orbit, EXACT)
+    branch = jc.continuation(problem, algorithm, options)
+    bifs = jc.locate_bifurcations(problem, branch, algorithm)
+    ok = np.asarray(branch.converged)
+    assert branch.stop.name == "newton_failed"
+    assert [b for b in bifs if b.kind == "sliding" and b.after >= int(ok.sum()) - 2]
+    last = [jnp.append(u, p) for u, p in zip(branch.u[ok][-3:], branch.p[ok][-3:])]
+    start = next(s for z in last[::-1]
+                 for s in [jc.past_sliding_start(problem, z, algorithm)] if s is not None)
+    new, tangent = start
+    past = jc.continuation(new, algorithm, options, tangent=tangent)
+    return [(problem, branch, bifs), (new, past, jc.locate_bifurcations(new, past, algorithm))]
 
 
 @pytest.fixture(scope="module")
@@ -230,43 +240,46 @@ def test_the_branch_continued_past_the_existence_limit_meets_a_sliding_point_the
 @pytest.mark.numerics
 def test_past_the_sliding_point_the_branch_is_the_cycle_without_stick_down_to_hopf(
         through_the_limit):
-    """Through the sliding point at the existence limit the snake's continuation
-    (`_through_sliding`: `past_sliding_start`, the oscillator held in slip,
-    `held_problem`, on the side where it never reaches the belt speed, `slip_margin`
-    > 0) goes on as the cycle without stick that the subcritical Hopf point of
-    steady sliding sends out: below the limit, as the stick-slip cycle (the branch
+    """Through the sliding point at the existence limit the continuation
+    (`past_sliding_start`: the oscillator held in slip, on the side where it never
+    reaches the belt speed: its relative velocity keeps its sign over the start's
+    orbit, by the exact engine's flow) goes on as the cycle without stick that the
+    subcritical Hopf point of steady sliding sends out: below the limit, as the stick-slip cycle (the branch
     turns at the sliding point), every orbit unstable and with no stick phase, down
     to the closed-form Hopf point (`hopf_vd_analytic`). There the branch passes
     through steady sliding (its amplitude changes sign, and v_d turns):
     `locate_bifurcations` names that turn a Hopf point, not a fold, at the zero of
-    the energy (linear in v_d to leading order), to 1e-6. The snake's dataset of the
-    pieces (`_pieces_dataset`) has the sliding point at the closed-form limit
-    (`stick_slip_existence_limit`) to 1e-6 and is cut at the Hopf point (stop
-    "hopf"): beyond it lie the same cycles half a period on, so every kept point
-    past the sliding point lies between the two, v_d falling along them."""
+    the energy (linear in v_d to leading order), to 1e-6. The sliding point lies at
+    the closed-form limit (`stick_slip_existence_limit`) to 1e-6; up to the Hopf
+    point (beyond it lie the same cycles half a period on) every orbit of the two
+    pieces past the sliding point lies between the two, v_d falling along them."""
     (problem, _, bifs), (new, past, past_bifs) = through_the_limit
     (end,) = [b for b in bifs if b.kind == "sliding"]
     assert float(new.value()) < float(end.p) and float(past.tangent[0, -1]) < 0
-    z = jnp.append(new.u0, new.value())
-    assert jc.slip_margin(jc.held_problem(problem, 0), z, 0) > 0
+    # the start's orbit (no stick: the exact flow held in slip or not is the same),
+    # 512 samples of its period: x' - v_d keeps the sign it has at t = 0
+    at = jc.with_parameter(ONE, "v_d", float(new.value()))
+    y0, period = jnp.reshape(new.u0[:-1], (2, 1)), float(new.u0[-1])
+    ys = EXACT.engine.flow(at, y0, period * jnp.linspace(0.0, 1.0, 513)[1:])
+    v_rel = np.concatenate([[float(y0[1, 0])], np.asarray(ys)[:, 1, 0]]) - float(at.v_d)
+    assert np.min(np.sign(v_rel[0]) * v_rel) > 0
     ok = np.asarray(past.converged)
     assert ok.sum() > 20 and not np.asarray(past.stable)[ok].any()
     for u, p in list(zip(np.asarray(past.u)[ok], np.asarray(past.p)[ok]))[::6]:
         y0, period = jnp.reshape(u[:-1], (2, 1)), float(u[-1])
-        phases = jc.stick_phases(jc.with_parameter(ONE, "v_d", float(p)), y0, period,
-                                 EXACT.engine.options)
+        phases = EXACT.engine.stick_phases(jc.with_parameter(ONE, "v_d", float(p)), y0,
+                                           period)
         assert np.isinf(phases).all()
     (hopf,) = past_bifs
     amplitude = np.asarray(past.records.amplitudes)[:, 0]
     closed_form = float(jc.hopf_vd_analytic(ONE))
     assert hopf.kind == "Hopf" and amplitude[hopf.after] < 0.1
     assert abs(float(hopf.p) - closed_form) < 1e-6
-    ds = internal("snake pieces")(1, through_the_limit)
-    kinds = {b["type"]: b for b in json.loads(ds.attrs["bifurcations"])}
     limit = float(jc.stick_slip_existence_limit(ONE))
-    assert ds.attrs["stop"] == "hopf" and abs(kinds["sliding"]["v_d"] - limit) < 1e-6
-    assert kinds["Hopf"]["after"] == ds.sizes["point"] - 1
-    beyond = ds["v_d"].values[kinds["sliding"]["after"] + 1:]
+    assert abs(float(end.p) - limit) < 1e-6
+    first = through_the_limit[0][1]
+    first_p = np.asarray(first.p)[np.asarray(first.converged)]
+    beyond = np.concatenate([first_p[end.after + 1:], np.asarray(past.p)[ok][:hopf.after + 1]])
     assert np.all(np.diff(beyond) < 0) and beyond.max() < limit and beyond.min() > closed_form
 
 

@@ -145,8 +145,8 @@ def test_the_branch_switched_at_the_two_site_branch_point_breaks_the_symmetry(ri
 
 def _stick_count(u: np.ndarray, v_d: float) -> int:
     params = jc.with_parameter(jc.ChainParams(n_osc=N), "v_d", v_d)
-    return int(np.isfinite(jc.stick_phases(params, u[:-1].reshape(2, -1), float(u[-1]),
-                                           EXACT.engine.options)).sum())
+    return int(np.isfinite(EXACT.engine.stick_phases(params, u[:-1].reshape(2, -1),
+                                                     float(u[-1]))).sum())
 
 
 def test_the_switched_branch_turns_at_its_sliding_point_onto_orbits_without_that_stick(

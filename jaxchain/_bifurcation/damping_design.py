@@ -8,8 +8,8 @@ import optax
 from jaxtyping import Array, Float
 
 from .._physics.params import with_parameter
+from .._engine.engines import AbstractEngine
 from .continuation import ContinuationProblem
-from .hopf import check_eps
 from .periodic_orbit import cycle_method
 from .two_parameter import fold_curve, hopf_vd_and_derivative
 from .._checks import check_positive
@@ -42,7 +42,8 @@ class DampingDesign(eqx.Module):
 
 def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, " 2n+1"],
                      target: float, *, learning_rate: float = 1.0, steps: int = 60,
-                     tol: float = 1e-8, eps=None) -> DampingDesign:
+                     tol: float = 1e-8, engine: AbstractEngine | None = None
+                     ) -> DampingDesign:
     """The smallest damping ratio xi at which the bistable window of belt speeds,
     fold_vd(xi) - hopf_vd(xi), is narrower than `target`.
 
@@ -61,9 +62,9 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
     - `target`: the window width, > 0.
     - `learning_rate`, `steps`: optax L-BFGS's step scale and iteration budget.
     - `tol`: tolerance on |window - target|.
-    - `eps`: the smoothing velocity of the Hopf point (> 0, shape (),
-        dimensionless); None (the default) takes that of the problem's limit
-        cycles (its method's engine, `AbstractEngine.as_smoothed`).
+    - `engine`: the engine whose model's Hopf point it is (`hopf_point`); None
+        (the default) takes the problem's limit cycles' (its method's engine,
+        `AbstractEngine.as_smoothed`).
 
     **Returns:**
 
@@ -71,12 +72,13 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
 
     **Raises:**
 
-    `ValidationError` if target <= 0, or eps is None for a problem that carries none;
+    `ValidationError` if target <= 0, or `engine` is None for a problem that does
+    not smooth;
     `RuntimeError` if a fold along the way is lost or the Hopf point is not found.
     """
     check_positive("target", target)
-    eps = (cycle_method(problem).engine.as_smoothed("smallest_damping").eps if eps is None
-           else check_eps(eps))
+    engine = (cycle_method(problem).engine.as_smoothed("smallest_damping") if engine is None
+              else engine)
     n = problem.u0.size
     state = {"problem": problem, "solution": fold_solution}
 
@@ -89,7 +91,7 @@ def smallest_damping(problem: ContinuationProblem, fold_solution: Float[Array, "
         solution, derivative = jnp.asarray(solutions[0]), derivatives[0]
         state.update(solution=solution,
                      problem=problem.with_params(with_parameter(problem.params, "xi", xi)))
-        hopf, d_hopf = hopf_vd_and_derivative(problem.params, "xi", xi, eps=eps)
+        hopf, d_hopf = hopf_vd_and_derivative(problem.params, "xi", xi, engine=engine)
         if not bool(jnp.isfinite(hopf)):
             raise RuntimeError(f"Newton's method did not find the Hopf point at xi = {xi:.6g}")
         return float(solution[n] - hopf), float(derivative[n] - d_hopf), float(hopf)

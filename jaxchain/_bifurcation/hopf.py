@@ -11,10 +11,10 @@ from jaxtyping import Array, Complex, Float
 
 from .._engine.compat import checks_as_nan
 from .._engine.checks import check_params, real_array
-from .._physics.forces import DEFAULT_EPS, friction_coefficient
-from .._physics.friction import ExponentialDecay, as_parameter
+from .._engine.engines import AbstractEngine, Smoothed
+from .._physics.forces import friction_coefficient
+from .._physics.friction import ExponentialDecay
 from .._physics.params import is_homogeneous_ring
-from .._physics.model import as_value, jacobian
 from .._physics.params import ChainParams, with_parameter
 from .._errors import ValidationError
 from .._printing import values_repr
@@ -27,8 +27,24 @@ def _require_ring(params: ChainParams, what: str) -> None:
                               "any chain")
 
 
-def _fourier_blocks(params: ChainParams, eps=DEFAULT_EPS) -> Complex[Array, "n_osc 2 2"]:
-    """The Jacobian of eq. (5) at steady sliding (`jacobian`, by `jax.jacfwd`),
+def check_engine(engine, owner: str = "engine") -> AbstractEngine:
+    """`engine` at its settings for orbits (`AbstractEngine.for_orbits`), which are
+    the same for every eps: the analyses of steady sliding read the engine's model
+    only (its `steady_sliding_jacobian`), so that a new eps, an array leaf traced
+    by `eqx.filter_jit`, does not recompile them, and derivatives with respect to
+    it flow.
+
+    **Raises:** `TypeError` naming `owner` for a value that is not an engine."""
+    if not isinstance(engine, AbstractEngine):
+        raise TypeError(f"{owner} must be an engine (jaxchain.Smoothed or jaxchain.Exact), "
+                        f"got {type(engine).__name__}")
+    return engine.for_orbits()
+
+
+def _fourier_blocks(params: ChainParams, engine: AbstractEngine
+                    ) -> Complex[Array, "n_osc 2 2"]:
+    """The Jacobian of eq. (5) at steady sliding (`steady_sliding_jacobian` of the
+    engine, by `jax.jacfwd`),
     block-diagonalised by the discrete Fourier transform of the ring.
 
     The Jacobian is block-circulant (every oscillator sees the same law, the ring
@@ -42,7 +58,7 @@ def _fourier_blocks(params: ChainParams, eps=DEFAULT_EPS) -> Complex[Array, "n_o
     **Arguments:**
 
     - `params`: the chain parameters.
-    - `eps`: the smoothing velocity of tanh(v_rel/eps), as `jacobian` takes it.
+    - `engine`: the engine whose model is linearised.
 
     **Returns:**
 
@@ -55,13 +71,14 @@ def _fourier_blocks(params: ChainParams, eps=DEFAULT_EPS) -> Complex[Array, "n_o
     """
     _require_ring(params, "fourier_blocks")
     n = params.n_osc
-    jac = jnp.reshape(jacobian(params, eps=eps), (2, n, 2, n))
+    jac = jnp.reshape(engine.steady_sliding_jacobian(params), (2, n, 2, n))
     k, m = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     modes = jnp.asarray(np.exp(2j * np.pi * k * m / n) / np.sqrt(n))  # (k, m)
     return jnp.einsum("km,imjl,kl->kij", modes.conj(), jac, modes)
 
 
-def mode_eigenvalues(params: ChainParams, eps=DEFAULT_EPS) -> Complex[Array, "n_osc 2"]:
+def mode_eigenvalues(params: ChainParams, engine: AbstractEngine = Smoothed()
+                     ) -> Complex[Array, "n_osc 2"]:
     """Eigenvalues of each Fourier block of the Jacobian at steady sliding, in
     closed form (lambda = tr/2 +- sqrt(tr^2/4 - det)), so that they are smooth in
     the parameters and JAX differentiates them exactly.
@@ -69,9 +86,10 @@ def mode_eigenvalues(params: ChainParams, eps=DEFAULT_EPS) -> Complex[Array, "n_
     **Arguments:**
 
     - `params`: the chain parameters (the homogeneous ring).
-    - `eps`: the smoothing velocity of tanh(v_rel/eps) in the vector field (> 0),
-        shape (), dimensionless (a fraction of x_0 omega_n); the smoothed engine's
-        (`Smoothed.eps`), `DEFAULT_EPS` by default.
+    - `engine`: the engine whose model is linearised (`AbstractEngine`):
+        `Smoothed()` (eps = 1e-3) by default; the smoothing velocity is its
+        `Smoothed.eps`, an array leaf (a new value does not recompile, and
+        derivatives with respect to it flow); `Exact()` gives the limit eps -> 0.
 
     **Returns:**
 
@@ -81,13 +99,13 @@ def mode_eigenvalues(params: ChainParams, eps=DEFAULT_EPS) -> Complex[Array, "n_
 
     `ValidationError` unless the chain is the homogeneous ring.
     """
-    return _mode_eigenvalues(params, as_value(eps))
+    return _mode_eigenvalues(params, check_engine(engine))
 
 
 @eqx.filter_jit
-def _mode_eigenvalues(params: ChainParams, eps) -> Complex[Array, "n_osc 2"]:
+def _mode_eigenvalues(params: ChainParams, engine) -> Complex[Array, "n_osc 2"]:
     """`mode_eigenvalues` as one compiled program (not op by op)."""
-    blocks = _fourier_blocks(params, eps)
+    blocks = _fourier_blocks(params, engine)
     half_trace = 0.5 * (blocks[:, 0, 0] + blocks[:, 1, 1])
     det = blocks[:, 0, 0] * blocks[:, 1, 1] - blocks[:, 0, 1] * blocks[:, 1, 0]
     root = jnp.sqrt(half_trace**2 - det)
@@ -95,56 +113,62 @@ def _mode_eigenvalues(params: ChainParams, eps) -> Complex[Array, "n_osc 2"]:
     return jnp.stack([half_trace + root, half_trace - root], axis=-1)
 
 
-def steady_sliding_eigenvalues(params: ChainParams, eps=DEFAULT_EPS
+def steady_sliding_eigenvalues(params: ChainParams, engine: AbstractEngine = Smoothed()
                                ) -> Complex[Array, " 2n_osc"]:
     """The eigenvalues of the Jacobian of eq. (5) at steady sliding, for any chain:
     by the Fourier route (`mode_eigenvalues`) on the homogeneous ring, by
-    `jnp.linalg.eigvals` of the Jacobian (`jacobian`, by `jax.jacfwd`) otherwise.
+    `jnp.linalg.eigvals` of the Jacobian (the engine's `steady_sliding_jacobian`,
+    by `jax.jacfwd`) otherwise.
 
     **Arguments:**
 
     - `params`: the chain parameters.
-    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
-        dimensionless; the smoothed engine's (`Smoothed.eps`), `DEFAULT_EPS` by
-        default. Steady sliding is the smoothed vector field's fixed point there.
+    - `engine`: the engine whose model is linearised (`AbstractEngine`):
+        `Smoothed()` (eps = 1e-3) by default; the smoothing velocity is its
+        `Smoothed.eps`, an array leaf (a new value does not recompile, and
+        derivatives with respect to it flow); `Exact()` gives the limit eps -> 0.
+        Steady sliding is the fixed point of the engine's model.
 
     **Returns:**
 
     Shape (2 n_osc,), complex, sorted by decreasing real part (then imaginary
     part), dimensionless (per unit of time, eq. (4)).
     """
-    return _steady_sliding_eigenvalues(params, as_value(eps))
+    return _steady_sliding_eigenvalues(params, check_engine(engine))
 
 
 @eqx.filter_jit
-def _steady_sliding_eigenvalues(params: ChainParams, eps) -> Complex[Array, " 2n_osc"]:
+def _steady_sliding_eigenvalues(params: ChainParams, engine) -> Complex[Array, " 2n_osc"]:
     """`steady_sliding_eigenvalues` as one compiled program (not op by op)."""
     if is_homogeneous_ring(params):
-        values = jnp.reshape(mode_eigenvalues(params, eps), (-1,))
+        values = jnp.reshape(_mode_eigenvalues(params, engine), (-1,))
     else:
-        values = jnp.linalg.eigvals(jacobian(params, eps=eps))
+        values = jnp.linalg.eigvals(engine.steady_sliding_jacobian(params))
     order = jnp.lexsort((-values.imag, -values.real))
     return values[order]
 
 
-def leading_growth_rate(params: ChainParams, eps=DEFAULT_EPS) -> Float[Array, ""]:
+def leading_growth_rate(params: ChainParams, engine: AbstractEngine = Smoothed()
+                        ) -> Float[Array, ""]:
     """max Re(lambda) over the eigenvalues of the Jacobian at steady sliding
-    (`steady_sliding_eigenvalues`, smoothed at `eps`, `DEFAULT_EPS` by default):
+    (`steady_sliding_eigenvalues` of `engine`'s model, `Smoothed()` by default):
     steady sliding is stable where it is negative. Dimensionless (per unit of
     time, eq. (4))."""
-    return jnp.max(steady_sliding_eigenvalues(params, eps).real)
+    return jnp.max(steady_sliding_eigenvalues(params, engine).real)
 
 
-def growth_rates(params: ChainParams, eps=DEFAULT_EPS) -> Float[Array, " modes"]:
+def growth_rates(params: ChainParams, engine: AbstractEngine = Smoothed()
+                 ) -> Float[Array, " modes"]:
     """Growth rates about steady sliding; steady sliding is stable when all are
     negative.
 
     **Arguments:**
 
     - `params`: the chain parameters.
-    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
-        dimensionless; the smoothed engine's (`Smoothed.eps`), `DEFAULT_EPS` by
-        default.
+    - `engine`: the engine whose model is linearised (`AbstractEngine`):
+        `Smoothed()` (eps = 1e-3) by default; the smoothing velocity is its
+        `Smoothed.eps`, an array leaf (a new value does not recompile, and
+        derivatives with respect to it flow); `Exact()` gives the limit eps -> 0.
 
     **Returns:**
 
@@ -153,8 +177,8 @@ def growth_rates(params: ChainParams, eps=DEFAULT_EPS) -> Float[Array, " modes"]
     (2 n_osc,), decreasing. Dimensionless (per unit of time, eq. (4)).
     """
     if is_homogeneous_ring(params):
-        return mode_eigenvalues(params, eps)[:, 0].real
-    return steady_sliding_eigenvalues(params, eps).real
+        return mode_eigenvalues(params, engine)[:, 0].real
+    return steady_sliding_eigenvalues(params, engine).real
 
 
 def hopf_vd_analytic(params: ChainParams) -> Float[Array, ""]:
@@ -188,7 +212,8 @@ def hopf_vd_analytic(params: ChainParams) -> Float[Array, ""]:
     return law.v0 * jnp.log(params.load * (law.mu_st - law.mu_d) / (2 * params.xi * law.v0))
 
 
-def hopf_eps_correction(params: ChainParams, eps=DEFAULT_EPS) -> Float[Array, ""]:
+def hopf_eps_correction(params: ChainParams, engine: AbstractEngine = Smoothed()
+                        ) -> Float[Array, ""]:
     """Leading-order shift of the Hopf belt speed by the tanh smoothing,
 
         v_d,H(eps) - v_d,H(0) = -v0 (2 + 2 mu(v_d,H) / (xi eps)) exp(-2 v_d,H / eps),
@@ -200,9 +225,9 @@ def hopf_eps_correction(params: ChainParams, eps=DEFAULT_EPS) -> Float[Array, ""
     **Arguments:**
 
     - `params`: the chain parameters (as `hopf_vd_analytic` takes them).
-    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
-        dimensionless (a fraction of x_0 omega_n); the smoothed engine's
-        (`Smoothed.eps`), `DEFAULT_EPS` by default. Differentiable in it.
+    - `engine`: the smoothed engine whose smoothing velocity eps
+        (`Smoothed.eps`) shifts the Hopf point; `Smoothed()` (eps = 1e-3) by
+        default. Differentiable in its eps.
 
     **Returns:**
 
@@ -210,8 +235,10 @@ def hopf_eps_correction(params: ChainParams, eps=DEFAULT_EPS) -> Float[Array, ""
 
     **Raises:**
 
-    As `hopf_vd_analytic`.
+    As `hopf_vd_analytic`; `ValidationError` for an engine that smooths nothing
+    (`AbstractEngine.as_smoothed`).
     """
+    eps = engine.as_smoothed("hopf_eps_correction").eps
     v = hopf_vd_analytic(params)
     mu = params.load * friction_coefficient(params, v)
     return -params.friction.v0 * (2 + 2 * mu / (params.xi * eps)) * jnp.exp(-2 * v / eps)
@@ -247,27 +274,28 @@ class HopfPoint(eqx.Module):
 
 
 def _mode_growth(v_d, args):
-    params, eps, k = args
-    return growth_rates(with_parameter(params, "v_d", v_d), eps)[k]
+    params, engine, k = args
+    return _mode_eigenvalues(with_parameter(params, "v_d", v_d), engine)[k, 0].real
 
 
 @checks_as_nan
 @eqx.filter_jit
-def _hopf_modes(params: ChainParams, eps, guess, rtol, atol):
+def _hopf_modes(params: ChainParams, engine, guess, rtol, atol):
     solver = optx.Newton(rtol=rtol, atol=atol)
 
     def one(k):
-        sol = optx.root_find(_mode_growth, solver, guess, (params, eps, k), max_steps=100,
+        sol = optx.root_find(_mode_growth, solver, guess, (params, engine, k), max_steps=100,
                              throw=False)
         at = with_parameter(params, "v_d", sol.value)
-        slope = jax.grad(_mode_growth)(sol.value, (params, eps, k))
-        return (sol.value, jnp.abs(mode_eigenvalues(at, eps)[k, 0].imag), slope,
-                growth_rates(at, eps)[k], sol.stats["num_steps"], sol.result)
+        slope = jax.grad(_mode_growth)(sol.value, (params, engine, k))
+        return (sol.value, jnp.abs(_mode_eigenvalues(at, engine)[k, 0].imag), slope,
+                _mode_eigenvalues(at, engine)[k, 0].real, sol.stats["num_steps"],
+                sol.result)
 
     return jax.vmap(one)(jnp.arange(params.n_osc))
 
 
-def critical_mode(params: ChainParams, mode: int = 0, eps=DEFAULT_EPS):
+def critical_mode(params: ChainParams, mode: int = 0, engine: AbstractEngine = Smoothed()):
     """The critical mode at a Hopf point (`params.v_d` at it): its frequency omega,
     the right eigenvector q of the Jacobian (A q = i omega q, |q| = 1) and the left
     one p (A^T p = -i omega p, <p, q> = conj(p) . q = 1), as the normal form of the
@@ -277,9 +305,8 @@ def critical_mode(params: ChainParams, mode: int = 0, eps=DEFAULT_EPS):
     On the homogeneous ring, Fourier mode `mode` (0 in phase or N/2 anti-phase, a
     real mode shape), from its 2x2 block (`_fourier_blocks`); on any other chain the
     eigenvalue of the Jacobian with the largest real part and positive imaginary
-    part (`mode` must be 0). The Jacobian is that of the vector field smoothed at
-    `eps` (> 0, shape (), dimensionless; `DEFAULT_EPS` by default, the smoothed
-    engine's `Smoothed.eps`).
+    part (`mode` must be 0). The Jacobian is that of `engine`'s model
+    (`steady_sliding_jacobian`; `Smoothed()` by default, smoothed at its eps).
 
     **Returns:**
 
@@ -294,7 +321,7 @@ def critical_mode(params: ChainParams, mode: int = 0, eps=DEFAULT_EPS):
         if mode != 0:
             raise ValidationError(f"mode must be 0 (the leading eigenvalue) on a chain other "
                                   f"than the homogeneous ring, got {mode!r}")
-        a = jacobian(params, eps=eps)
+        a = engine.steady_sliding_jacobian(params)
         values, right = jnp.linalg.eig(a)
         i = jnp.argmax(jnp.where(values.imag > 0, values.real, -jnp.inf))
         left_values, left = jnp.linalg.eig(a.T)
@@ -305,7 +332,7 @@ def critical_mode(params: ChainParams, mode: int = 0, eps=DEFAULT_EPS):
         if mode not in (0, n / 2):
             raise ValidationError(f"mode must be 0 or N/2 = {n / 2} (a real mode shape), "
                                   f"got {mode!r}")
-        block = _fourier_blocks(params, eps)[mode]
+        block = _fourier_blocks(params, engine)[mode]
         values, right = jnp.linalg.eig(block)
         i = jnp.argmax(values.imag)
         omega = values[i].imag
@@ -320,13 +347,14 @@ def critical_mode(params: ChainParams, mode: int = 0, eps=DEFAULT_EPS):
 
 
 def _leading_growth(v_d, args):
-    params, eps = args
-    return leading_growth_rate(with_parameter(params, "v_d", v_d), eps)
+    params, engine = args
+    return jnp.max(_steady_sliding_eigenvalues(with_parameter(params, "v_d", v_d),
+                                               engine).real)
 
 
 @checks_as_nan
 @eqx.filter_jit
-def _hopf_leading(params: ChainParams, eps, guess, rtol, atol):
+def _hopf_leading(params: ChainParams, engine, guess, rtol, atol):
     """The Hopf point of any chain: Newton's method (optimistix) on the leading
     growth rate, with shapes (1,) as `_hopf_modes` gives them per mode.
 
@@ -339,47 +367,29 @@ def _hopf_leading(params: ChainParams, eps, guess, rtol, atol):
     dg/dv_d, a derivative already, is held constant (`HopfPoint.slope`), since its
     own derivative would need them."""
     sol = optx.root_find(_leading_growth, optx.Newton(rtol=rtol, atol=atol), guess,
-                         (params, eps), max_steps=100, throw=False)
+                         (params, engine), max_steps=100, throw=False)
     at = with_parameter(params, "v_d", sol.value)
-    values = steady_sliding_eigenvalues(at, eps)
-    slope = jax.grad(_leading_growth)(*jax.lax.stop_gradient((sol.value, (params, eps))))
+    values = _steady_sliding_eigenvalues(at, engine)
+    slope = jax.grad(_leading_growth)(*jax.lax.stop_gradient((sol.value, (params, engine))))
     fields = (sol.value, jnp.abs(values[0].imag), slope, values[0].real,
               sol.stats["num_steps"])
     return (*(jnp.atleast_1d(a) for a in fields), sol.result)
 
 
-def _hopf_roots(params: ChainParams, eps, guess, rtol: float = 1e-12, atol: float = 1e-12):
-    """(v_d, omega, slope, residual, steps, result) of the Hopf point of the vector
-    field smoothed at `eps`: per Fourier mode on the homogeneous ring
+def _hopf_roots(params: ChainParams, engine, guess, rtol: float = 1e-12,
+                atol: float = 1e-12):
+    """(v_d, omega, slope, residual, steps, result) of the Hopf point of `engine`'s
+    model (as `check_engine` gives it): per Fourier mode on the homogeneous ring
     (`_hopf_modes`), of the leading eigenvalue otherwise (`_hopf_leading`), each of
     shape (modes,) (result: () or (modes,), optimistix's RESULTS). Traceable."""
     guess = jnp.asarray(guess, dtype=float)
     if is_homogeneous_ring(params):
-        return _hopf_modes(params, eps, guess, rtol, atol)
-    return _hopf_leading(params, eps, guess, rtol, atol)
+        return _hopf_modes(params, engine, guess, rtol, atol)
+    return _hopf_leading(params, engine, guess, rtol, atol)
 
 
-def check_eps(eps, owner: str = "eps"):
-    """`eps`, the smoothing velocity of an analysis of the smoothed vector field, as
-    a float64 array leaf (traced by `eqx.filter_jit`: a new value does not
-    recompile, and derivatives with respect to it flow), checked to be a finite
-    number > 0 of shape () where it is concrete (a tracer passes as it is).
-
-    **Raises:** `TypeError` for a value that is not a real number;
-    `ValidationError` naming `owner` for a non-finite value, eps <= 0 or a shape
-    other than ()."""
-    eps = as_parameter(eps)
-    if isinstance(eps, np.ndarray) and eps.dtype == object:
-        raise TypeError(f"{owner} must be a real number, got {eps.tolist()!r}")
-    if not isinstance(eps, jax.core.Tracer):
-        a = np.asarray(eps)
-        if a.ndim != 0 or not (np.isfinite(a) and a > 0):
-            raise ValidationError(f"{owner} must be a finite number > 0 of shape (), got "
-                                  f"{a.tolist()!r}")
-    return eps
-
-
-def hopf_point(params: ChainParams, guess: float = 1.0, *, eps=DEFAULT_EPS,
+def hopf_point(params: ChainParams, guess: float = 1.0, *,
+               engine: AbstractEngine = Smoothed(),
                rtol: float = 1e-12, atol: float = 1e-12, throw: bool = True) -> HopfPoint:
     """The Hopf boundary of steady sliding. On the homogeneous ring, mode by mode:
     the root in v_d of each Fourier mode's growth rate max Re(lambda)(v_d) = 0
@@ -393,7 +403,7 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, eps=DEFAULT_EPS,
 
     Differentiable (`jax.grad`, `jax.jvp`) in every other parameter of every chain
     (coupling, masses, damping, stiffnesses, loads, the friction law's parameters
-    and tables) and in `eps`, by the implicit function theorem on the Hopf condition
+    and tables) and in the engine's eps, by the implicit function theorem on the Hopf condition
     g(v_d, p) = Re lambda(v_d, p) = 0 (optimistix's `ImplicitAdjoint`): d v_d,H =
     -(dg/dp dp) / (dg/dv_d), with d lambda = w^T dJ v / (w^T v) from the left and
     right eigenvectors of the Jacobian (Govaerts, *Numerical Methods for
@@ -406,11 +416,11 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, eps=DEFAULT_EPS,
     - `guess`: starting belt speed of Newton's method, a finite number > 0 (a law
         with several Hopf points, such as a Stribeck curve, gives the one Newton's
         method reaches).
-    - `eps`: the smoothing velocity of tanh(v_rel/eps) in the vector field whose
-        steady sliding is analysed, a finite number > 0, shape (), dimensionless (a
-        fraction of x_0 omega_n); the smoothed engine's (`Smoothed.eps`),
-        `DEFAULT_EPS` by default. Traced: differentiable in it (implicitly, as in
-        the other parameters), and a new value does not recompile.
+    - `engine`: the engine whose model's steady sliding is analysed
+        (`AbstractEngine.steady_sliding_jacobian`): `Smoothed()` (eps = 1e-3) by
+        default, smoothed at its `Smoothed.eps`, traced: differentiable in it
+        (implicitly, as in the other parameters), and a new value does not
+        recompile. `Exact()` gives the limit eps -> 0 (the slip law's slope).
     - `rtol`, `atol`: Newton tolerances on v_d, finite numbers > 0.
     - `throw`: raise if Newton's method fails for a mode (the default), or give NaN
         as that mode's `v_d`, so that a failed solve never passes for a belt speed
@@ -424,9 +434,9 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, eps=DEFAULT_EPS,
 
     **Raises:**
 
-    `TypeError` if `params` is not a `ChainParams`, or `guess`, `rtol` or `atol` is
-    not a real number;
-    `ValidationError` naming `guess`, `eps`, `rtol` or `atol` for a value that is not
+    `TypeError` if `params` is not a `ChainParams`, `engine` not an engine, or
+    `guess`, `rtol` or `atol` not a real number;
+    `ValidationError` naming `guess`, `rtol` or `atol` for a value that is not
     a finite number > 0; `RuntimeError` with `throw=True` if Newton's method fails for
     a mode or gives v_d <= 0 (try another `guess`).
     """
@@ -436,8 +446,8 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, eps=DEFAULT_EPS,
         a = real_array(value, name)
         if a.ndim != 0 or not (np.isfinite(a) and a > 0):
             raise ValidationError(f"{name} must be a finite {what} > 0, got {a.tolist()!r}")
-    eps = check_eps(eps)
-    v, omega, slope, residual, steps, result = _hopf_roots(params, eps, guess, rtol, atol)
+    engine = check_engine(engine)
+    v, omega, slope, residual, steps, result = _hopf_roots(params, engine, guess, rtol, atol)
     found = (result == optx.RESULTS.successful) & (v > 0)
     if not throw:
         v = jnp.where(found, v, jnp.nan)
@@ -447,14 +457,14 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *, eps=DEFAULT_EPS,
     return HopfPoint(v_d=v, omega=omega, slope=slope, residual=residual, newton_steps=steps)
 
 
-def hopf_vd(params: ChainParams, guess: float = 1.0, *, eps=DEFAULT_EPS
-            ) -> Float[Array, ""]:
+def hopf_vd(params: ChainParams, guess: float = 1.0, *,
+            engine: AbstractEngine = Smoothed()) -> Float[Array, ""]:
     """The Hopf belt speed of steady sliding (the largest over the Fourier modes of
     the homogeneous ring, that of the leading eigenvalue on any other chain):
     `hopf_point` with `throw=False`, reduced to one number. Traceable and
-    differentiable in `params` and `eps` (the smoothing velocity, as `hopf_point`
-    takes it; `DEFAULT_EPS` by default) by implicit differentiation through
-    optimistix's Newton method.
+    differentiable in `params` and the eps of `engine` (as `hopf_point` takes it;
+    `Smoothed()` by default) by implicit differentiation through optimistix's
+    Newton method.
 
     **Returns:**
 
@@ -463,19 +473,19 @@ def hopf_vd(params: ChainParams, guess: float = 1.0, *, eps=DEFAULT_EPS
 
     **Raises:**
 
-    As `hopf_point` for a bad `guess` or `eps`.
+    As `hopf_point` for a bad `guess` or `engine`.
     """
-    return jnp.max(hopf_point(params, guess, eps=eps, throw=False).v_d)
+    return jnp.max(hopf_point(params, guess, engine=engine, throw=False).v_d)
 
 
-def hopf_speed(params: ChainParams, eps=DEFAULT_EPS) -> float:
+def hopf_speed(params: ChainParams, engine: AbstractEngine = Smoothed()) -> float:
     """The Hopf belt speed of steady sliding as a number: the closed form of eq. (1)
     where it holds (`hopf_vd_analytic`: the exponential law with uniform damping,
     load and law, xi > 0, mu_st > mu_d; the limit eps -> 0, which differs from the
     smoothed one by `hopf_eps_correction`, 1e-1000 at eps = 1e-3), else Newton's
-    method on the eigenvalues of the Jacobian smoothed at `eps` (`hopf_vd`; > 0,
-    dimensionless, `DEFAULT_EPS` by default); NaN where neither finds one."""
+    method on the eigenvalues of the Jacobian of `engine`'s model (`hopf_vd`;
+    `Smoothed()` by default); NaN where neither finds one."""
     try:
         return float(hopf_vd_analytic(params))
     except ValueError:
-        return float(hopf_vd(params, eps=eps))
+        return float(hopf_vd(params, engine=engine))

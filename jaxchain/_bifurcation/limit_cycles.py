@@ -47,14 +47,14 @@ def hopf_cycle(params: ChainParams, offset: float = 1e-3, mode: int = 0,
     """
     check_positive("offset", offset)
     method = Shooting() if method is None else method
-    eps = method.engine.as_smoothed("hopf_cycle").eps
-    hopf = hopf_point(params, eps=eps)
+    smoothed = method.engine.as_smoothed("hopf_cycle")
+    hopf = hopf_point(params, engine=smoothed)
     at_hopf = with_parameter(params, "v_d", hopf.v_d[mode])
-    l1 = first_lyapunov_coefficient(at_hopf, mode, eps=eps)
+    l1 = first_lyapunov_coefficient(at_hopf, mode, engine=smoothed)
     v_d = hopf.v_d[mode] + jnp.sign(l1) * offset
     near = with_parameter(params, "v_d", v_d)
     n = params.n_osc
-    _, q, _ = critical_mode(at_hopf, mode, eps)
+    _, q, _ = critical_mode(at_hopf, mode, smoothed)
     growth = hopf.slope[mode] * (v_d - hopf.v_d[mode])
     radius = jnp.sqrt(-growth / (l1 * hopf.omega[mode]))
     q = q * jnp.exp(1j * (np.pi / 2 - jnp.angle(q[n])))  # x_1' = 0 at the start

@@ -9,35 +9,35 @@ import lineax as lx
 from jaxtyping import Array, Float
 
 from .._engine.compat import checks_as_nan
-from .._physics.forces import DEFAULT_EPS
-from .._physics.model import as_value, jacobian, steady_sliding, vector_field
+from .._engine.engines import AbstractEngine, Smoothed
 from .._physics.params import ChainParams
-from .hopf import critical_mode
+from .hopf import check_engine, critical_mode
 
 
-def _derivative(params: ChainParams, eps, y, vectors) -> Array:
+def _derivative(params: ChainParams, engine, y, vectors) -> Array:
     """The multilinear form d^k f(y)[v_1, ..., v_k] of the flattened vector field
-    smoothed at `eps`, by nested forward-mode derivatives (real vectors)."""
+    of `engine`'s model (`AbstractEngine.field`), by nested forward-mode
+    derivatives (real vectors)."""
     def f(z):
-        return vector_field(0.0, z, params, eps)
+        return jnp.reshape(engine.field(params, jnp.reshape(z, (2, -1))), (-1,))
 
     for v in vectors:
         f = (lambda g, v: lambda z: jax.jvp(g, (z,), (v,))[1])(f, v)
     return f(y)
 
 
-def _complex_form(params: ChainParams, eps, y, vectors) -> Array:
+def _complex_form(params: ChainParams, engine, y, vectors) -> Array:
     """The multilinear form for complex vectors, expanded into real and imaginary
     parts (forward-mode tangents are real)."""
     out = 0.0
     for parts in itertools.product((0, 1), repeat=len(vectors)):
         real = [(v.imag if part else v.real) for v, part in zip(vectors, parts)]
-        out = out + (1j ** sum(parts)) * _derivative(params, eps, y, real)
+        out = out + (1j ** sum(parts)) * _derivative(params, engine, y, real)
     return out
 
 
-def first_lyapunov_coefficient(params: ChainParams, mode: int = 0, *, eps=DEFAULT_EPS
-                               ) -> Float[Array, ""]:
+def first_lyapunov_coefficient(params: ChainParams, mode: int = 0, *,
+                               engine: AbstractEngine = Smoothed()) -> Float[Array, ""]:
     """The first Lyapunov coefficient l1 of the Hopf bifurcation of steady sliding
     in Fourier mode `mode`, at `params.v_d` (pass the Hopf point's v_d):
 
@@ -46,8 +46,8 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0, *, eps=DEFAUL
 
     Kuznetsov, *Elements of Applied Bifurcation Theory* (3rd ed., 2004), eq.
     (3.20), with A q = i omega q, A^T p = -i omega p, <p, q> = <q, q> = 1. A is the
-    Jacobian of eq. (5) (`jax.jacfwd`), B and C its second and third derivatives
-    (nested `jax.jvp`), the linear solves by lineax. l1 > 0: subcritical (an
+    Jacobian of eq. (5) (`AbstractEngine.steady_sliding_jacobian`), B and C its
+    second and third derivatives (nested `jax.jvp`), the linear solves by lineax. l1 > 0: subcritical (an
     unstable cycle surrounds stable steady sliding); l1 < 0: supercritical.
 
     For the ring the in-phase mode (`mode=0`) is the one to ask: its subspace
@@ -65,10 +65,9 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0, *, eps=DEFAUL
     - `params`: the chain parameters, at the Hopf point.
     - `mode`: Fourier mode k with a real mode shape, 0 or N/2, on the homogeneous
         ring; 0 (the leading eigenvalue, `critical_mode`) on any other chain.
-    - `eps`: the smoothing velocity of tanh(v_rel/eps) in the vector field (> 0),
-        shape (), dimensionless (a fraction of x_0 omega_n); the smoothed engine's
-        (`Smoothed.eps`), `DEFAULT_EPS` by default. Pass that of the Hopf point
-        (`hopf_point`).
+    - `engine`: the engine whose model is expanded: `Smoothed()` (eps = 1e-3) by
+        default, smoothed at its `Smoothed.eps`; `Exact()` gives the limit eps ->
+        0 (the slip law). Pass that of the Hopf point (`hopf_point`).
 
     **Returns:**
 
@@ -76,20 +75,21 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0, *, eps=DEFAUL
 
     **Raises:**
 
-    `ValidationError` for a bad mode.
+    `ValidationError` for a bad mode; `TypeError` for an `engine` that is not one.
     """
-    return _first_lyapunov_coefficient(params, mode, as_value(eps))
+    return _first_lyapunov_coefficient(params, mode, check_engine(engine))
 
 
 @checks_as_nan
 @eqx.filter_jit
-def _first_lyapunov_coefficient(params: ChainParams, mode: int, eps) -> Float[Array, ""]:
+def _first_lyapunov_coefficient(params: ChainParams, mode: int, engine
+                                ) -> Float[Array, ""]:
     """`first_lyapunov_coefficient` as one compiled program (not op by op)."""
     n = params.n_osc
-    omega, q, p = critical_mode(params, mode, eps)
+    omega, q, p = critical_mode(params, mode, engine)
 
-    y = jnp.reshape(steady_sliding(params, eps), (-1,))
-    a = jacobian(params, y=jnp.reshape(y, (2, -1)), eps=eps).astype(complex)
+    y = jnp.reshape(engine.steady_sliding(params), (-1,))
+    a = engine.steady_sliding_jacobian(params).astype(complex)
 
     def solve(matrix, vector):
         # throw=False: a singular system gives NaN either way, and lineax's check
@@ -101,9 +101,9 @@ def _first_lyapunov_coefficient(params: ChainParams, mode: int, eps) -> Float[Ar
     def inner(u, v):
         return jnp.vdot(u, v)
 
-    c = _complex_form(params, eps, y, [q, q, q.conj()])
-    b1 = solve(a, _complex_form(params, eps, y, [q, q.conj()]))
-    b2 = solve(2j * omega * jnp.eye(2 * n) - a, _complex_form(params, eps, y, [q, q]))
-    value = (inner(p, c) - 2 * inner(p, _complex_form(params, eps, y, [q, b1]))
-             + inner(p, _complex_form(params, eps, y, [q.conj(), b2])))
+    c = _complex_form(params, engine, y, [q, q, q.conj()])
+    b1 = solve(a, _complex_form(params, engine, y, [q, q.conj()]))
+    b2 = solve(2j * omega * jnp.eye(2 * n) - a, _complex_form(params, engine, y, [q, q]))
+    value = (inner(p, c) - 2 * inner(p, _complex_form(params, engine, y, [q, b1]))
+             + inner(p, _complex_form(params, engine, y, [q.conj(), b2])))
     return value.real / (2 * omega)

@@ -11,43 +11,44 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from .._engine.compat import checks_as_nan
-from .._physics.forces import DEFAULT_EPS
+from .._engine.engines import AbstractEngine, Smoothed
 from .._physics.params import ChainParams, parameter_value, with_parameter
 from .continuation import (Branch, ContinuationOptions, ContinuationProblem, PseudoArclength,
                            continuation)
 from .fold import FoldSystem, solve_fold
-from .hopf import check_eps, hopf_vd
+from .hopf import check_engine, hopf_vd
 from .periodic_orbit import cycle_method
 from .._errors import ValidationError
 from .._printing import values_repr
 
 
 def hopf_vd_and_derivative(params: ChainParams, where: Callable | str, value, *,
-                           eps=DEFAULT_EPS):
+                           engine: AbstractEngine = Smoothed()):
     """`hopf_vd` at `where(params) = value` and its derivative in `value` (forward
     mode through the implicit function); both NaN where Newton's method failed.
-    Compiled once for every value of `value` and of `eps` (`where` is static).
+    Compiled once for every value of `value` and of the engine's eps (`where` is
+    static).
 
     **Arguments:**
 
     - `params`, `where`, `value`: the chain, the parameter (a name or a lens) and
         its value.
-    - `eps`: the smoothing velocity of tanh(v_rel/eps) (> 0), shape (),
-        dimensionless; the smoothed engine's (`Smoothed.eps`), `DEFAULT_EPS` by
-        default.
+    - `engine`: the engine whose model's Hopf point it is (`hopf_point`);
+        `Smoothed()` (eps = 1e-3) by default.
 
     **Raises:**
 
-    `ValidationError` for eps that is not a finite number > 0.
+    `TypeError` for an `engine` that is not one.
     """
     return _hopf_vd_and_derivative(params, where, jnp.asarray(value, dtype=float),
-                                   check_eps(eps))
+                                   check_engine(engine))
 
 
 @checks_as_nan
 @eqx.filter_jit
-def _hopf_vd_and_derivative(params, where, value, eps):
-    hopf, derivative = jax.jvp(lambda x: hopf_vd(with_parameter(params, where, x), eps=eps),
+def _hopf_vd_and_derivative(params, where, value, engine):
+    hopf, derivative = jax.jvp(lambda x: hopf_vd(with_parameter(params, where, x),
+                                                 engine=engine),
                                (value,), (jnp.ones_like(value),))
     return hopf, jnp.where(jnp.isnan(hopf), jnp.nan, derivative)
 
@@ -238,7 +239,8 @@ def fold_curve(problem: ContinuationProblem, fold_solution: Float[Array, " 2n+1"
 def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 2n+1"],
                     where: Callable | str, values, *,
                     options: ContinuationOptions = FOLD_CURVE_OPTIONS,
-                    eps=None, progress: bool = False) -> BoundaryCurves:
+                    engine: AbstractEngine | None = None,
+                    progress: bool = False) -> BoundaryCurves:
     """Continue the Hopf point of steady sliding and the fold of limit cycles in a
     second parameter: the fold by `fold_curve` (pseudo-arclength continuation of
     its extended system, polished at each value), the Hopf point by Newton's
@@ -254,10 +256,10 @@ def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 
     - `where`: the second parameter, a name (`"xi"`, `"mu_st"`) or a lens.
     - `values`: the values to visit, on either side of the current one.
     - `options`: steps of the fold curve's continuation.
-    - `eps`: the smoothing velocity of the Hopf point (> 0, shape (),
-        dimensionless); None (the default) takes that of the problem's limit
-        cycles (its method's engine, `AbstractEngine.as_smoothed`), so
-        that both edges belong to one smoothed model.
+    - `engine`: the engine whose model's Hopf point it is (`hopf_point`); None
+        (the default) takes the problem's limit cycles' (its method's engine,
+        `AbstractEngine.as_smoothed`), so that both edges belong to one smoothed
+        model.
     - `progress`: show tqdm bars.
 
     **Returns:**
@@ -266,16 +268,16 @@ def boundary_curves(problem: ContinuationProblem, fold_solution: Float[Array, " 
 
     **Raises:**
 
-    `ValidationError` if `values` is empty, or eps is None for a problem that
-    does not smooth; `ValueError` (a failed computation, not a
+    `ValidationError` if `values` is empty, or `engine` is None for a problem
+    that does not smooth; `ValueError` (a failed computation, not a
     `ValidationError`) if Newton's method does not converge from `fold_solution`.
     """
     values = np.sort(np.asarray(values, dtype=float))
-    eps = (cycle_method(problem).engine.as_smoothed("boundary_curves").eps if eps is None
-           else check_eps(eps))
+    engine = (cycle_method(problem).engine.as_smoothed("boundary_curves") if engine is None
+              else engine)
     solutions, derivatives, converged, branches = fold_curve(
         problem, fold_solution, where, values, options=options, progress=progress)
-    hopf = [hopf_vd_and_derivative(problem.params, where, v, eps=eps) for v in values]
+    hopf = [hopf_vd_and_derivative(problem.params, where, v, engine=engine) for v in values]
     n = problem.u0.size
     return BoundaryCurves(
         values=jnp.asarray(values), hopf_vd=jnp.stack([h for h, _ in hopf]),

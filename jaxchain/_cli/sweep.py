@@ -99,7 +99,7 @@ def run(args) -> None:
                    overwrite=args.overwrite, client=client,
                    progress=show_progress(args)).load()
     wall = time.perf_counter() - start
-    outputs.figure(plot_bifurcation_diagram(ds, hopf_vd=hopf_speed(params, eps=args.eps)),
+    outputs.figure(plot_bifurcation_diagram(ds, hopf_vd=hopf_speed(params, engine)),
                    "sweep")
 
     v_d = ds["v_d"].values

@@ -10,6 +10,7 @@ from typing import ClassVar
 
 import diffrax
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
@@ -30,7 +31,7 @@ from .solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._physics.custom_types import State
 from .._physics.forces import DEFAULT_EPS
 from .._physics.friction import as_parameter, check_values
-from .._physics.model import Model, steady_sliding, vector_field
+from .._physics.model import Model, jacobian, steady_sliding, vector_field
 from .._physics.params import ChainParams
 from .._physics.stick import min_slip_speed, sticks
 from .._errors import ValidationError
@@ -99,6 +100,20 @@ class AbstractEngine(eqx.Module):
         """The vector field of the engine's model at the state `y` (shape (2, n_osc)):
         the flow's direction, that of the trivial Floquet multiplier."""
 
+    def steady_sliding_jacobian(self, params: ChainParams) -> Float[Array, "2n 2n"]:
+        """The Jacobian of the engine's vector field (`field`) at its steady sliding
+        (`steady_sliding`), by `jax.jacfwd`, ordered (x_1..x_N, x_1'..x_N'): what
+        the stability of steady sliding and its Hopf point are read from
+        (`hopf_point`). The friction law's smoothing enters through the slope of
+        the friction force there; on the exact engine (every oscillator slipping)
+        that of the slip law, the limit eps -> 0 of the smoothed engine's."""
+        y = self.steady_sliding(params)
+
+        def field(z):
+            return jnp.reshape(self.field(params, jnp.reshape(z, y.shape)), (-1,))
+
+        return jax.jacfwd(field)(jnp.reshape(y, (-1,)))
+
     @abc.abstractmethod
     def orbit_samples(self, params: ChainParams, y0: State, period, n_samples: int
                       ) -> tuple[Float[Array, "m 2 n"], Float[Array, ""]]:
@@ -132,7 +147,7 @@ class AbstractEngine(eqx.Module):
     has_stick_phases: ClassVar[bool] = False
 
     def stick_phases(self, params: ChainParams, y0: State, period):
-        """The stick phases of the orbit through `y0` (`jaxchain.stick_phases`).
+        """The stick phases of the orbit through `y0` (the exact engine's switch log).
         Raises `ValidationError` where the engine has none (it smooths stick)."""
         raise ValidationError(f"the {self.name} engine has no exact stick phases: its "
                               "friction law is smoothed; use the exact engine")
@@ -280,6 +295,9 @@ class Smoothed(AbstractEngine):
 
     def steady_sliding(self, params: ChainParams) -> State:
         return steady_sliding(params, self.eps)
+
+    def steady_sliding_jacobian(self, params: ChainParams) -> Float[Array, "2n 2n"]:
+        return jacobian(params, eps=self.eps)  # one compiled program (`jacobian`)
 
     def simulating(self) -> "Smoothed":
         return Smoothed(eps=self.eps)

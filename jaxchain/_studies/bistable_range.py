@@ -69,7 +69,7 @@ def _design_check(params: ChainParams, design: DampingDesign, target: float,
     out = {}
     for side, factor in (("below", 1 - margin), ("above", 1 + margin)):
         p = with_parameter(params, "xi", design.xi * factor)
-        v = hopf_speed(p, engine.eps) + target
+        v = hopf_speed(p, engine) + target
         p = with_parameter(p, "v_d", v)
         obs = simulate(p, GivenState(jnp.array([[3.5], [0.0]])), engine=engine)
         out[side] = {"xi": design.xi * factor, "v_d": v,
@@ -242,9 +242,9 @@ def _run_single(params: ChainParams, method: Shooting, progress: bool) -> dict:
     branch's fold and the non-smooth existence limit."""
     eps = method.engine.as_smoothed("bistable_range").eps
     single = single_oscillator(params)
-    hopf = hopf_point(single, eps=eps)
+    hopf = hopf_point(single, engine=Smoothed(eps=eps))
     l1 = float(first_lyapunov_coefficient(with_parameter(single, "v_d", hopf.v_d[0]),
-                                          eps=eps))
+                                          engine=Smoothed(eps=eps)))
     start = hopf_cycle(single, method=method)
     followed = follow_branch(start, method, ContinuationOptions(
         ds=0.01, ds_max=0.1, p_min=0.5, p_max=2.5, max_points=90), directions=(1,),
@@ -277,7 +277,7 @@ def _run_curves(run: dict, target: float, xi_values, ratio_values, progress: boo
     out["at"] = int(np.argmin(np.abs(np.asarray(out["curves_xi"].values) - float(single.xi))))
     exponential = run["exponential"]
     out |= {"hopf_vd_analytic": float(hopf_vd_analytic(single)) if exponential else None,
-            "hopf_eps_correction": (float(hopf_eps_correction(single, run["eps"]))
+            "hopf_eps_correction": (float(hopf_eps_correction(single, run["engine"]))
                                     if exponential else None),
             "xi_curve": _curve_summary(single, "xi", out["curves_xi"]),
             "design_check": _design_check(single, out["design"], target, run["engine"])}
@@ -289,7 +289,7 @@ def _run_curves(run: dict, target: float, xi_values, ratio_values, progress: boo
 def _run_ring(params: ChainParams, run: dict, progress: bool) -> tuple[dict, dict]:
     """The chain's Hopf point over its modes and, on the homogeneous ring of even N,
     the fully stick-slipping in-phase and anti-phase states (`_ring_state`)."""
-    ring_hopf = hopf_point(params, eps=run["eps"])
+    ring_hopf = hopf_point(params, engine=run["engine"])
     summary = {
         "n_osc": params.n_osc, "boundary": params.boundary,
         "hopf_vd": float(np.max(ring_hopf.v_d)),

@@ -256,7 +256,7 @@ def _run_edges(chains, sigmas, n_draws, n, n_folds, solver, edge_options, eps, o
     hopf = np.full((sigmas.size, n_draws), np.nan)
     for c, (i, d, chain) in enumerate(chains):
         site_edge[i, d] = edges["edge"].values[c]
-        hopf[i, d] = float(np.max(hopf_point(chain, eps=eps).v_d))
+        hopf[i, d] = float(np.max(hopf_point(chain, engine=Smoothed(eps=eps)).v_d))
     with np.errstate(invalid="ignore"):
         upper = np.where(np.all(np.isnan(site_edge), -1), np.nan,
                          np.nanmax(np.where(np.isnan(site_edge), -np.inf, site_edge), -1))

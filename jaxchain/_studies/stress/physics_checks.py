@@ -199,7 +199,7 @@ def linear_rate(params, eps=DEFAULT_EPS) -> float:
     """The growth rate of steady sliding of the model smoothed at `eps` (> 0, shape
     (), dimensionless; `DEFAULT_EPS` by default): the largest max Re(lambda) over
     the ring's Fourier modes (`growth_rates`)."""
-    return float(jnp.max(growth_rates(params, eps=eps)))
+    return float(jnp.max(growth_rates(params, engine=Smoothed(eps=eps))))
 
 
 def _sliding_expected(params, eps) -> str:
