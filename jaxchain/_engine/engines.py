@@ -10,6 +10,7 @@ from typing import ClassVar
 
 import diffrax
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Float
@@ -30,7 +31,7 @@ from .solver.registry import DEFAULT_SOLVER, SOLVERS
 from .._physics.custom_types import State
 from .._physics.forces import DEFAULT_EPS
 from .._physics.friction import as_parameter, check_values
-from .._physics.model import Model, steady_sliding, vector_field
+from .._physics.model import Model, jacobian, steady_sliding, vector_field
 from .._physics.params import ChainParams
 from .._physics.stick import min_slip_speed, sticks
 from .._errors import ValidationError
@@ -98,6 +99,15 @@ class AbstractEngine(eqx.Module):
     def field(self, params: ChainParams, y: State) -> State:
         """The vector field of the engine's model at the state `y` (shape (2, n_osc)):
         the flow's direction, that of the trivial Floquet multiplier."""
+
+    def jacobian(self, params: ChainParams, y: State | None = None
+                 ) -> Float[Array, "2n 2n"]:
+        """The Jacobian of the flattened `field` at the state `y` (steady sliding,
+        `steady_sliding`, if None), by `jax.jacfwd`: shape (2 n_osc, 2 n_osc),
+        ordered (x_1..x_N, x_1'..x_N')."""
+        y = self.steady_sliding(params) if y is None else jnp.asarray(y)
+        return jax.jacfwd(lambda z: jnp.reshape(self.field(params, jnp.reshape(z, y.shape)),
+                                                (-1,)))(jnp.reshape(y, (-1,)))
 
     @abc.abstractmethod
     def orbit_samples(self, params: ChainParams, y0: State, period, n_samples: int
@@ -281,6 +291,11 @@ class Smoothed(AbstractEngine):
     def steady_sliding(self, params: ChainParams) -> State:
         return steady_sliding(params, self.eps)
 
+    def jacobian(self, params: ChainParams, y: State | None = None
+                 ) -> Float[Array, "2n 2n"]:
+        # one compiled program (`jaxchain._physics.model.jacobian`)
+        return jacobian(params, y, self.eps)
+
     def simulating(self) -> "Smoothed":
         return Smoothed(eps=self.eps)
 
@@ -322,8 +337,9 @@ class Exact(AbstractEngine):
     """The exact engine: the stick/slip switch model of Leine et al. (1998),
     Nonlinear Dynamics 16, 41-54, without its stick band (stick is exact, x_n' =
     v_d): smooth slip segments integrated by diffrax, switches located as events
-    (`simulate_nonsmooth`). No eps: nothing is smoothed. Its observables
-    are those of the smoothed engine, in the same layout; an oscillator is on the
+    (`jaxchain/_engine/exact/stepping.py`). No eps: nothing is smoothed. Its observables
+    are those of the smoothed engine (`Observables`), in the same layout, with its own
+    fields filled in (the switch log, the energy balance); an oscillator is on the
     HALC when it sticks during the window.
 
     **Arguments:**

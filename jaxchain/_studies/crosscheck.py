@@ -23,7 +23,7 @@ from .._engine.engines import AbstractEngine, as_engine
 from .._engine.horizon import AbstractHorizon
 from .._physics.initial import FAMILIES, excited_block
 from .._engine.exact.options import NonsmoothOptions
-from .._engine.exact.solve import run_nonsmooth
+from .._engine.exact.solve import run_exact
 from .._physics.params import chain_or_default, ChainParams, with_parameter
 from .._physics.record import chain_record, check_recordable
 from .._engine.lanes import lane_params, on_devices, run_lanes
@@ -43,7 +43,7 @@ CROSSCHECK_ICS = (("eq8", 1), ("eq8", 2), ("eq8", 5), ("eq8", 20), ("eq10", 2),
                   ("eq10", 20))
 
 
-_reference_run = eqx.filter_jit(run_nonsmooth)
+_reference_run = eqx.filter_jit(run_exact)
 
 
 def _halves(params, v_d, y0, engine: AbstractEngine):
