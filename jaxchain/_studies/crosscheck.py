@@ -74,6 +74,8 @@ def _gather(a, b) -> dict:
 _REFERENCE_KIND = "crosscheck reference"
 _REFERENCE_FIELDS = ("amplitudes", "x_max", "x_min", "n_halc", "status", "stick_fraction",
                      "num_events", "num_steps")
+#: The stored reference's extrema are those of each half (`Observables.x_max_halves`).
+_HALVES = {"x_max": "x_max_halves", "x_min": "x_min_halves"}
 
 
 def _reference_settings(params: ChainParams, y0: np.ndarray,
@@ -126,7 +128,7 @@ class _References:
         p = self.params[i]
         v_d, y0 = jax.device_put((jnp.asarray(p.v_d), jnp.asarray(self.y0[i])), device)
         obs = _reference_run(with_parameter(p, "v_d", v_d), y0, self.options)
-        out = {k: np.asarray(getattr(obs, k)) for k in _REFERENCE_FIELDS}
+        out = {k: np.asarray(getattr(obs, _HALVES.get(k, k))) for k in _REFERENCE_FIELDS}
         wall = time.perf_counter() - start
         if self.folder is not None:
             dims = {0: (), 1: ("osc",), 2: ("half", "osc")}
