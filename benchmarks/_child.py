@@ -66,6 +66,7 @@ def main() -> None:
     import jax
 
     import jaxchain as jc
+    from jaxchain._engine.solver.registry import DEFAULT_SOLVER
 
     jc.configure()  # float64, one CPU device per core, the XLA flags
 
@@ -79,7 +80,7 @@ def main() -> None:
     ic = jc.OutOfPhaseExcitation.eq8(jc.excited_block(args.n_osc, k))
     options = jc.Smoothed(options=jc.SimulationOptions(
         t_end=args.t_end, transient=args.transient)).options  # resolved at the default eps
-    name = args.solver or jc.DEFAULT_SOLVER
+    name = args.solver or DEFAULT_SOLVER
     solver = jc.SOLVERS[name]()
     walls = []
     for _ in range(args.repeats + 1):
@@ -103,7 +104,7 @@ def _fig4(args, jc) -> None:
                               ("controller", args.controller)) if v is not None}
     options = jc.Smoothed(options=jc.SimulationOptions(  # tolerances resolved at eps
         t_end=args.t_end, transient=args.transient, **tols)).options
-    solver = jc.SOLVERS[args.solver or jc.DEFAULT_SOLVER]()
+    solver = jc.SOLVERS[args.solver or DEFAULT_SOLVER]()
     walls = []
     for _ in range(2):
         start = time.perf_counter()

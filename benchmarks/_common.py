@@ -14,6 +14,8 @@ import jax
 import numpy as np
 
 import jaxchain as jc
+from jaxchain._physics.forces import DEFAULT_EPS
+from jaxchain._engine.solver.registry import DEFAULT_SOLVER
 
 jc.configure()  # float64, one CPU device per core, the XLA flags
 
@@ -173,9 +175,9 @@ def machine_info() -> dict:
     for pkg in ("jaxchain", "jax", "jaxlib", "diffrax", "equinox", "numpy", "scipy",
                 "numba"):
         info[pkg] = _version(pkg)
-    info["jaxchain default solver"] = jc.DEFAULT_SOLVER
+    info["jaxchain default solver"] = DEFAULT_SOLVER
     defaults = jc.Smoothed().options  # the tolerances resolved at the default eps
-    info["jaxchain defaults"] = (f"eps = {jc.DEFAULT_EPS:g}, rtol = "
+    info["jaxchain defaults"] = (f"eps = {DEFAULT_EPS:g}, rtol = "
                                  f"{defaults.rtol:g}, atol = {defaults.atol:g}, "
                                  f"sample_dt = {defaults.sample_dt:g}, chunk_length = "
                                  f"{defaults.chunk_length:g}")

@@ -7,6 +7,7 @@ import time
 import numpy as np
 
 import jaxchain as jc
+from jaxchain._engine.solver.registry import DEFAULT_SOLVER
 from jaxchain._engine.lanes import run_lanes
 
 from _common import (N_OSC, PAPER_T_END, PAPER_TRANSIENT, SWEEP_VDS, V_D, Row, Settings, cores,
@@ -103,7 +104,7 @@ def compare_sizes(settings: Settings, start: float) -> tuple[list[Row], dict]:
     t_end, transient = settings.sizes_horizon
     params = jc.ChainParams(n_osc=N_OSC, v_d=V_D)
     options = jc.SimulationOptions(t_end=t_end, transient=transient)
-    solver = jc.SOLVERS[jc.DEFAULT_SOLVER]()
+    solver = jc.SOLVERS[DEFAULT_SOLVER]()
     rng = np.random.default_rng(0)
     results = []
     for size in settings.sizes:

@@ -6,6 +6,7 @@ graph given by its links (the incidence-matrix route) of the same lattice."""
 import numpy as np
 
 import jaxchain as jc
+from jaxchain._engine.solver.registry import DEFAULT_SOLVER
 
 from _common import Row, Settings, fmt_ratio, scene, simulate_once
 
@@ -25,7 +26,7 @@ def compare_graphs(settings: Settings):
     chains = {"ring of 20": ring, "4 x 5 lattice": lattice,
               "4 x 5 as links (incidence matrix)": links,
               "4 x 5, masses, table": loaded}
-    solver = jc.SOLVERS[jc.DEFAULT_SOLVER]()
+    solver = jc.SOLVERS[DEFAULT_SOLVER]()
     per_step = {name: [] for name in chains}
     for name, params in chains.items():  # compile
         ic = jc.OutOfPhaseExcitation.eq8(jc.excited_block(20, 5, params.graph))

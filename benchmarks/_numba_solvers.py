@@ -31,7 +31,7 @@ import math
 import numpy as np
 from numba import njit
 
-from jaxchain import DEFAULT_EPS
+from jaxchain._physics.forces import DEFAULT_EPS
 from jaxchain._engine.solver.rosenbrock import _A, _C, _GAMMA, _M, _M_ERROR
 
 # Bosh3 as in diffrax/_solver/bosh3.py.

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import jaxchain as jc
+from jaxchain._engine.solver.registry import DEFAULT_SOLVER
 
 from _common import BENCH_DIR, Row, Settings, fmt_ratio, fmt_time, progress
 
@@ -133,7 +134,7 @@ def flag_check(settings: Settings, env: dict, start: float) -> tuple[list[Row], 
                      start)
     # For information (not part of the pass/fail): the same for the other solver of
     # comparison 2, once each.
-    other = "bosh3" if jc.DEFAULT_SOLVER != "bosh3" else "ros34pw2"
+    other = "bosh3" if DEFAULT_SOLVER != "bosh3" else "ros34pw2"
     others = {}
     for name, e in (("default", default_env), ("neutral", neutral_env)):
         others[name] = _child(e, *args, "--solver", other)
@@ -148,7 +149,7 @@ def flag_check(settings: Settings, env: dict, start: float) -> tuple[list[Row], 
               fmt_ratio(ratio),
               f"{'OK' if ok else 'FAIL'}: needs >= {FLAG_MIN_RATIO:g}x; in effect: "
               f"`{best['default']['xla_flags']}`; one trajectory as in 1 "
-              f"({jc.DEFAULT_SOLVER}), own processes. `run.py --only 7`")
+              f"({DEFAULT_SOLVER}), own processes. `run.py --only 7`")
     other_ratio = others["neutral"]["us_per_step"] / others["default"]["us_per_step"]
     info = Row(f"7. XLA flag, for information: {other}",
                f"{others['neutral']['us_per_step']:.2f} µs (neutral flag)",

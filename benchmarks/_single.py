@@ -6,11 +6,13 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
+from jaxchain._physics.forces import DEFAULT_EPS
+from jaxchain._engine.solver.registry import DEFAULT_SOLVER
 
 from _common import Row, Settings, fmt_ratio, fmt_time, scene, simulate_once, timed
 
 
-def numpy_model(params: jc.ChainParams, eps: float = jc.DEFAULT_EPS):
+def numpy_model(params: jc.ChainParams, eps: float = DEFAULT_EPS):
     """Eq. (5) on the ring with NumPy, vectorised over the oscillators, written here
     independently of jaxchain, smoothed by tanh(v_rel/eps): (rhs(t, y), jac(t, y))
     for the flat state y = (x_1..x_N, x_1'..x_N')."""
@@ -50,7 +52,7 @@ LSODA_RTOL, LSODA_ATOL = 1e-5, 1e-7
 
 
 def lsoda(params, y0: np.ndarray, options: jc.SimulationOptions,
-          eps: float = jc.DEFAULT_EPS) -> dict:
+          eps: float = DEFAULT_EPS) -> dict:
     """scipy's LSODA on [0, t_end] at `LSODA_RTOL` with the analytic Jacobian and
     dense output, smoothed by `eps`; the amplitudes from the dense output sampled
     every `options.sample_dt` over [transient, t_end], as jaxchain samples."""
@@ -72,7 +74,7 @@ def compare_scipy(settings: Settings) -> tuple[list[Row], dict]:
     1/2 sum A_n^2 (within 2 %): the speed is worth nothing if the answer differs."""
     t_end, transient = settings.single
     params, ic, options = scene(t_end, transient)
-    solver = jc.SOLVERS[jc.DEFAULT_SOLVER]()
+    solver = jc.SOLVERS[DEFAULT_SOLVER]()
     y0 = np.asarray(ic(params)).reshape(-1)
     obs, first = simulate_once(params, ic, solver, options)
     jax_walls, scipy_runs = [], []
@@ -88,11 +90,11 @@ def compare_scipy(settings: Settings) -> tuple[list[Row], dict]:
     rows = [
         Row("1. one trajectory, wall (after compilation)",
             f"{fmt_time(ref['wall'])} (scipy LSODA, {ref['steps']:,} steps)",
-            f"{fmt_time(best)} ({jc.DEFAULT_SOLVER}, {int(obs.num_steps):,} steps)",
+            f"{fmt_time(best)} ({DEFAULT_SOLVER}, {int(obs.num_steps):,} steps)",
             fmt_ratio(ref["wall"] / best),
             f"N = 20, v_d = 1.5, eq. (8) k = 5, {horizon}; jaxchain at rtol "
             f"{options.rtol:g}, atol {options.atol:g}, LSODA at rtol {LSODA_RTOL:g}, atol "
-            f"{LSODA_ATOL:g} (the same E), eps {jc.DEFAULT_EPS:g}. LSODA with a "
+            f"{LSODA_ATOL:g} (the same E), eps {DEFAULT_EPS:g}. LSODA with a "
             f"vectorised NumPy RHS and its analytic Jacobian (without it about 3x "
             f"slower); best of 2 vs best of {len(jax_walls)}; target >= 600x: "
             f"{'met' if ref['wall'] / best >= 600 else 'MISSED'}. `run.py --only 1`"),

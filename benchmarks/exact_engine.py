@@ -51,12 +51,12 @@ def pairs() -> None:
         y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(20, k))
         best = jc.NonsmoothOptions(t_end=3000.0, transient=2000.0, rtol=1e-13, atol=1e-13,
                                    solver="dopri8")
-        ref = np.asarray(jc.simulate_nonsmooth(chain, y0, best).amplitudes)
+        ref = np.asarray(jc.simulate(chain, y0, engine=jc.Exact(best)).amplitudes)
         for solver, rtol in PAIRS:
             options = jc.NonsmoothOptions(t_end=3000.0, transient=2000.0, rtol=rtol,
                                           atol=rtol, solver=solver)
-            _, _, wall = _timed(lambda: jc.simulate_nonsmooth(chain, y0, options))
-            error = np.abs(np.asarray(jc.simulate_nonsmooth(chain, y0, options).amplitudes)
+            _, _, wall = _timed(lambda: jc.simulate(chain, y0, engine=jc.Exact(options)))
+            error = np.abs(np.asarray(jc.simulate(chain, y0, engine=jc.Exact(options)).amplitudes)
                            - ref).max()
             print(f"k = {k}: {solver} at {rtol:g}: error {error:.1e}, wall {wall:.3f} s")
 
@@ -80,8 +80,8 @@ def main(argv=None) -> int:
         ds, cold, warm = runs[name]
         print(f"{name:9s} wall {warm:7.2f} s (first run, with compilation, {cold:.2f} s)")
     options = jc.NonsmoothOptions.reference(t_end=t_end, transient=transient)
-    rows = [jc.simulate_nonsmooth(chain, jc.OutOfPhaseExcitation.eq8(jc.excited_block(20, k)),
-                                  options) for k in range(1, 21)]
+    rows = [jc.simulate(chain, jc.OutOfPhaseExcitation.eq8(jc.excited_block(20, k)),
+                        engine=jc.Exact(options)) for k in range(1, 21)]
     ref = {"n_halc": np.array([int(r.n_halc) for r in rows]),
            "amplitudes": np.stack([np.asarray(r.amplitudes) for r in rows])}
     periodic = np.array([float(r.half_difference) < 1e-6 for r in rows])

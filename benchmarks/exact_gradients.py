@@ -39,6 +39,7 @@ def child(t_end: float, reference: bool) -> dict:
     import jax.numpy as jnp
 
     import jaxchain as jc
+    from jaxchain._engine.exact.solve import nonsmooth_flow
 
     jc.configure()
     n = 20
@@ -46,7 +47,7 @@ def child(t_end: float, reference: bool) -> dict:
         jc.ChainParams(n_osc=n, v_d=1.5)))
 
     def energy(v_d, options):
-        ys, _ = jc.nonsmooth_flow(jc.ChainParams(n_osc=n, v_d=v_d), y0,
+        ys, _ = nonsmooth_flow(jc.ChainParams(n_osc=n, v_d=v_d), y0,
                                   jnp.array([t_end]), options)
         return jnp.sum(ys[0] ** 2)
 

@@ -31,6 +31,9 @@ import jax
 import numpy as np
 
 import jaxchain as jc
+from jaxchain._physics.forces import DEFAULT_EPS
+from jaxchain._engine.solver.registry import DEFAULT_SOLVER
+from jaxchain._physics.model import Model
 from jaxchain._physics.stick import STICK_BAND
 from jaxchain._engine.smoothed import terms
 
@@ -82,9 +85,9 @@ def classify(steps, v_d: float, eps: float) -> dict:
 
 def census(k: int, window: tuple[float, float], controller: dict) -> dict:
     params = jc.ChainParams(v_d=1.5)
-    model = jc.Model(params, jc.DEFAULT_EPS)  # the diffrax args of a smoothed run
+    model = Model(params, DEFAULT_EPS)  # the diffrax args of a smoothed run
     y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(params.n_osc, k))(params)
-    solver = jc.SOLVERS[jc.DEFAULT_SOLVER]()
+    solver = jc.SOLVERS[DEFAULT_SOLVER]()
     field = terms(solver)
     start = diffrax.diffeqsolve(field, solver, 0.0, window[0], None, y0, model,
                                 stepsize_controller=diffrax.PIDController(**controller),
@@ -98,7 +101,7 @@ def census(k: int, window: tuple[float, float], controller: dict) -> dict:
 
 def markdown(results: dict, args) -> str:
     lines = [f"Steps of the Fig. 4 scene (N = 20, v_d = 1.5, eq. (8)) over t in "
-             f"[{args.window[0]:g}, {args.window[1]:g}], {jc.DEFAULT_SOLVER}, rtol "
+             f"[{args.window[0]:g}, {args.window[1]:g}], {DEFAULT_SOLVER}, rtol "
              f"{args.rtol:g}, atol {args.atol:g}, pcoeff {args.pcoeff:g}, icoeff "
              f"{args.icoeff:g}. Accepted / rejected per class; `near switch` is within "
              f"{NEAR} time units of a switch step.", "",

@@ -59,6 +59,7 @@ print(json.dumps(out))
 ENGINE = r"""
 import json, jax, jax.numpy as jnp, numpy as np
 import jaxchain as jc
+from jaxchain._engine.exact.solve import nonsmooth_flow
 jc.configure()
 from jaxchain._engine.exact import stepping
 stepping._term = lambda options: stepping._TERM  # the workaround taken out
@@ -68,7 +69,7 @@ options = jc.NonsmoothOptions.reference(t_end=6.0, transient=0.0, adjoint="rever
 
 def f(xi):
     params = jc.ChainParams(n_osc=4, v_d=1.2, xi=xi)
-    return jnp.sum(W * jc.nonsmooth_flow(params, Y0, jnp.array([6.0]), options)[0][0])
+    return jnp.sum(W * nonsmooth_flow(params, Y0, jnp.array([6.0]), options)[0][0])
 
 print(json.dumps({"gradient in xi": float(jax.jit(jax.grad(f))(0.05))}))
 """

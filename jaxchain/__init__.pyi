@@ -9,33 +9,23 @@ section is a page of the API reference (`docs/api/`)."""
 from ._physics.params import (
     ChainParams as ChainParams, with_parameter as with_parameter,
     with_fields as with_fields, parameter_name as parameter_name,
-    parameter_value as parameter_value, single_oscillator as single_oscillator,
+    single_oscillator as single_oscillator,
     stack_chains as stack_chains,
 )
-from ._physics.chain import (
-    Graph as Graph, BOUNDARIES as BOUNDARIES, LATTICE_BOUNDARIES as LATTICE_BOUNDARIES,
-    GROUND as GROUND,
-)
+from ._physics.chain import Graph as Graph
 from ._physics.mistuning import mistune as mistune, Mistuning as Mistuning
 from ._physics.friction import (
     ExponentialDecay as ExponentialDecay, Stribeck as Stribeck,
     Polynomial as Polynomial, Coulomb as Coulomb, Tabulated as Tabulated,
-    FRICTION_LAWS as FRICTION_LAWS, AbstractFrictionLaw as AbstractFrictionLaw,
+    AbstractFrictionLaw as AbstractFrictionLaw,
 )
 from ._physics.model import (
-    vector_field as vector_field, split_vector_field as split_vector_field,
-    jacobian as jacobian, steady_sliding as steady_sliding,
-    mechanical_energy as mechanical_energy, stick_force as stick_force, Model as Model,
-)
-from ._physics.stick import (
-    sticks as sticks, STICK_BAND as STICK_BAND, min_slip_speed as min_slip_speed,
+    mechanical_energy as mechanical_energy, stick_force as stick_force,
 )
 from ._physics.forces import (
-    DEFAULT_EPS as DEFAULT_EPS, coupling_force as coupling_force,
+    coupling_force as coupling_force,
     stiffness_matrix as stiffness_matrix,
     friction_coefficient as friction_coefficient,
-    smoothed_friction_force as smoothed_friction_force,
-    slip_friction_force as slip_friction_force, static_friction as static_friction,
 )
 
 # --- Initial conditions: eqs. (8) and (10), localized families, a given state ---
@@ -49,14 +39,10 @@ from ._physics.initial import (
 from ._engine.simulate import simulate as simulate, observe as observe
 from ._engine.engines import (
     AbstractEngine as AbstractEngine, Smoothed as Smoothed, Exact as Exact,
-    as_engine as as_engine, ENGINES as ENGINES,
 )
 from ._engine.observables import Observables as Observables
-from ._engine.smoothed import integrate as integrate
 from ._engine.options import SimulationOptions as SimulationOptions
-from ._engine.solver.registry import (
-    SOLVERS as SOLVERS, DEFAULT_SOLVER as DEFAULT_SOLVER, auto_solver as auto_solver,
-)
+from ._engine.solver.registry import SOLVERS as SOLVERS
 from ._engine.observers.extrema import Extrema as Extrema
 from ._engine.observers.energy import Energy as Energy
 from ._engine.observers.series import TimeSeries as TimeSeries
@@ -65,17 +51,7 @@ from ._engine.observers.crossings import (
 )
 from ._engine.observers.lyapunov_exponent import LargestLyapunov as LargestLyapunov
 from ._engine.observers.base import AbstractObserver as AbstractObserver, Chunk as Chunk
-from ._engine.status import (
-    Status as Status, failure_hint as failure_hint, flag_attributes as flag_attributes,
-)
-from ._engine.exact.solve import (
-    simulate_nonsmooth as simulate_nonsmooth,
-    run_nonsmooth as run_nonsmooth,
-    nonsmooth_trajectory as nonsmooth_trajectory,
-    nonsmooth_flow as nonsmooth_flow,
-    nonsmooth_switches as nonsmooth_switches,
-    NonsmoothObservables as NonsmoothObservables,
-)
+from ._engine.status import Status as Status
 from ._engine.exact.options import NonsmoothOptions as NonsmoothOptions
 from ._engine.exact.switching import (
     SWITCH_KINDS as SWITCH_KINDS, saltation_matrix as saltation_matrix,

@@ -30,8 +30,7 @@ def exact(v_d, xi, adjoint="forward"):
     """sum(WEIGHTS * y(T)) on the ring of four, by the exact engine."""
     options = jc.NonsmoothOptions.reference(t_end=T, transient=0.0, adjoint=adjoint,
                                             rtol=TOL, atol=TOL)
-    ys, _ = jc.nonsmooth_flow(jc.ChainParams(n_osc=4, v_d=v_d, xi=xi), Y0,
-                              jnp.array([T]), options)
+    ys = jc.Exact(options).flow(jc.ChainParams(n_osc=4, v_d=v_d, xi=xi), Y0, jnp.array([T]))
     return jnp.sum(WEIGHTS * ys[0])
 
 

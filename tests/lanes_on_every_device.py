@@ -50,7 +50,7 @@ def devices_at_a_barrier() -> list[int]:
 
 def main(out: str) -> None:
     params, y0 = five_lanes()
-    solver = jc.SOLVERS[jc.DEFAULT_SOLVER]()
+    solver = jc.SOLVERS["ros34pw2"]()
     devices = jax.devices()
     compiles = []  # XLA compilations (JAX's events), by the program's name
     jax.monitoring.register_event_time_span_listener(

@@ -82,8 +82,8 @@ CASES = {
                                 "Smoothed.eps"),
     "eps given to the chain": (lambda: jc.ChainParams(eps=1e-3), jc.ValidationError,
                                r"ChainParams.eps: eps is a setting of the smoothed engine"),
-    "eps given to the exact engine": (lambda: jc.simulate(P, Y0, engine=jc.as_engine(
-        "exact", eps=1e-3)), jc.ValidationError, "the exact engine has no eps"),
+    "eps given to the exact engine": (lambda: jc.simulate(P, Y0, engine=jc.Exact().with_parameter(
+        "eps", 1e-3)), jc.ValidationError, "the exact engine has no eps"),
     "mu_st below mu_d": (lambda: jc.ChainParams(mu_st=0.2), jc.ValidationError,
                          "ExponentialDecay.mu_st"),
     "a time series with dt <= 0": (lambda: jc.observe(P, Y0, [jc.TimeSeries(dt=0.0)],
@@ -163,7 +163,7 @@ def test_bad_input_raises_naming_the_argument(case):
 
 
 def test_integer_states_are_taken_as_numbers():
-    obs = jc.simulate(P, np.asarray(jc.steady_sliding(P)).round().astype(int), options=OPTS,
+    obs = jc.simulate(P, np.asarray(jc.Exact().steady_sliding(P)).round().astype(int), options=OPTS,
                       throw=False)
     assert obs.y_initial.dtype == np.float64
 

@@ -169,7 +169,7 @@ def _scipy_hopf_vd(params) -> float:
     from scipy.optimize import brentq
 
     def growth(v):
-        jac = np.asarray(jc.jacobian(jc.with_parameter(params, "v_d", v)))
+        jac = np.asarray(jc.Smoothed().jacobian(jc.with_parameter(params, "v_d", v)))
         return float(np.max(np.linalg.eigvals(jac).real))
 
     return brentq(growth, 0.9, 1.4, xtol=1e-15, rtol=1e-15, maxiter=200)

@@ -11,6 +11,7 @@ import pytest
 from scipy.optimize import brentq
 
 import jaxchain as jc
+from jaxchain._physics.model import split_vector_field  # the IMEX solvers' split
 from helpers import TIGHT, assert_usage_error, assert_within_drift, scipy_stick_slip_cycle, \
     stribeck_mu
 
@@ -111,7 +112,7 @@ def test_the_fourier_route_and_the_jacobian_agree_on_the_ring():
         return values[np.lexsort((values.real.round(8), values.imag))]
 
     fourier = ordered(jc.steady_sliding_eigenvalues(params))
-    dense = ordered(np.linalg.eigvals(np.asarray(jc.jacobian(params))))
+    dense = ordered(np.linalg.eigvals(np.asarray(jc.Smoothed().jacobian(params))))
     assert np.allclose(fourier, dense, atol=1e-10)
 
 
@@ -159,8 +160,8 @@ def test_stribeck_stick_slip_cycle_against_the_exact_switch_model():
                      options=jc.SimulationOptions(t_end=400.0, transient=300.0))
     assert int(obs["n_halc"]) == 1
     assert abs(float(obs["amplitudes"][0]) / amplitude - 1) < 5e-3
-    ref = jc.simulate_nonsmooth(params, y0,
-                                jc.NonsmoothOptions.reference(t_end=400.0, transient=300.0))
+    ref = jc.simulate(params, y0,
+                      engine=jc.Exact(jc.NonsmoothOptions.reference(t_end=400.0, transient=300.0)))
     assert abs(float(ref.amplitudes[0]) / amplitude - 1) < 1e-6
     times = np.asarray(obs["peak_times"])[0]
     measured = np.median(np.diff(times[np.isfinite(times)]))
@@ -181,8 +182,8 @@ def test_energy_balance_of_a_mistuned_open_chain():
 
     def field(t, z, args):
         y, _ = z
-        dy = jc.vector_field(t, y, params, eps)
-        elastic, friction = jc.split_vector_field(t, y, params, eps)
+        dy = jc.Smoothed(eps=eps).field(params, y)
+        elastic, friction = split_vector_field(t, y, params, eps)
         v = y[1]
         return dy, jnp.stack([jnp.sum(friction[1] * v), jnp.sum(2 * params.xi * v**2)])
 

@@ -139,7 +139,7 @@ def test_localized_json_and_files(localized_small):
     ds = xr.load_dataset(out / "localized_vd1.5.nc")
     assert_cf_compliant(out / "localized_vd1.5.nc")
     assert ds["energy"].values[0].tolist() == pytest.approx(res["energy"])
-    assert ds.attrs["eps"] == jc.DEFAULT_EPS and ds.attrs["n_osc"] == 3
+    assert ds.attrs["eps"] == float(jc.Smoothed().eps) and ds.attrs["n_osc"] == 3
     assert (out / "localized_vd1.5.png").stat().st_size > 1000
     amplitudes = np.array(res["amplitudes"])
     np.testing.assert_allclose(res["energy"], 0.5 * np.sum(amplitudes**2, axis=1),
@@ -148,7 +148,7 @@ def test_localized_json_and_files(localized_small):
     reference = jc.NonsmoothOptions.reference(t_end=400.0, transient=200.0)
     for k, n_halc, amplitude in zip(res["n_excited"], res["n_halc"], amplitudes):
         y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, k))(params)
-        exact = jc.simulate_nonsmooth(params, y0, reference)
+        exact = jc.simulate(params, y0, engine=jc.Exact(reference))
         assert n_halc == int(exact.n_halc) == k
         np.testing.assert_allclose(amplitude, np.asarray(exact.amplitudes), rtol=1e-2)
 

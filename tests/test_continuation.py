@@ -135,7 +135,8 @@ def test_every_default_fold_converges_near_the_existence_limit(branch, default_c
     np.testing.assert_allclose(curves.d_hopf, d_hopf, rtol=1e-8)
     # the curve passes through the one-parameter fold, and the derivative along the
     # curve is that of finite differences between its points
-    at = int(np.argmin(np.abs(values - float(jc.parameter_value(single, where)))))
+    value = {"xi": single.xi, "mu_st": single.friction.mu_st}[where]
+    at = int(np.argmin(np.abs(values - float(value))))
     assert abs(fold_vd[at] - float(fold.p)) < 1e-9
     d_fold = np.asarray(curves.d_fold)
     centred = (fold_vd[2:] - fold_vd[:-2]) / (values[2:] - values[:-2])
@@ -221,7 +222,7 @@ def test_boundaries_command_json_and_figures(tmp_path, capsys):
                                    "boundaries.json"}
     assert abs(out["hopf_vd"] - 0.5 * np.log(10)) < 1e-6
     assert abs(out["fold_vd"] - jc.stick_slip_existence_limit()) < 0.01
-    assert out["subcritical"] is True and out["eps"] == jc.DEFAULT_EPS
+    assert out["subcritical"] is True and out["eps"] == float(jc.Smoothed().eps)
     # every point of both curves has a fold, beside the non-smooth limit there
     for curve in (out["xi_curve"], out["ratio_curve"]):
         fold, limit = np.array(curve["fold_vd"]), np.array(curve["existence_limit_nonsmooth"])

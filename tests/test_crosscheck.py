@@ -142,7 +142,7 @@ def test_crosscheck_command_json_and_files(tmp_path, capsys):
     assert (out / "crosscheck.png").stat().st_size > 0
     ds = xr.load_dataset(out / "crosscheck.nc", engine="h5netcdf")
     assert_cf_compliant(out / "crosscheck.nc")
-    assert ds.attrs["reference_rtol"] == 1e-12 and ds.attrs["eps"] == jc.DEFAULT_EPS
+    assert ds.attrs["reference_rtol"] == 1e-12 and ds.attrs["eps"] == float(jc.Smoothed().eps)
     expected, _ = scipy_stick_slip_cycle(jc.ChainParams(n_osc=1, v_d=1.5))
     reference = float(ds["amplitudes_reference"].values[0, 0])
     smoothed = float(ds["amplitudes_smoothed"].values[0, 0])

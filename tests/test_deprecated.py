@@ -59,3 +59,22 @@ def test_the_exact_bistable_range_is_bistable_range_on_the_exact_engine():
     assert found.summary == old
     np.testing.assert_array_equal(found.curves_xi.fold_vd, curves_xi.fold_vd)
     assert abs(found.summary["fold_minus_existence_limit"]) < 1e-8
+
+
+def test_the_old_exact_runs_are_simulate_on_the_exact_engine():
+    """`simulate_nonsmooth` and `run_nonsmooth` warn and give what `simulate` with
+    `engine=Exact(...)` and `Exact(...).run` give, bit for bit, in the one
+    `Observables` type (the switch log among its fields)."""
+    jc.configure()
+    params, y0 = jc.ChainParams(n_osc=1, v_d=1.5), jnp.array([[2.0], [0.0]])
+    options = jc.NonsmoothOptions.reference(t_end=60.0, transient=30.0)
+    new = jc.simulate(params, y0, engine=jc.Exact(options))
+    with pytest.warns(DeprecationWarning, match="simulate_nonsmooth is deprecated"):
+        old = jc.simulate_nonsmooth(params, y0, options)
+    with pytest.warns(DeprecationWarning, match="run_nonsmooth is deprecated"):
+        pure = jc.run_nonsmooth(params, y0, options)
+    assert type(old) is type(new) is jc.Observables
+    for obs in (old, pure):
+        np.testing.assert_array_equal(obs.amplitudes, new.amplitudes)
+        np.testing.assert_array_equal(obs.log_time, new.log_time)
+    assert int(new.num_events) > 0 and "simulate_nonsmooth" not in jc.__all__

@@ -5,6 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import jaxchain as jc
+from jaxchain._physics.forces import smoothed_friction_force
 
 
 @pytest.mark.numerics
@@ -23,12 +24,12 @@ def test_smoothed_force_tends_to_coulomb_law_away_from_zero():
     p, eps = jc.ChainParams(), 1e-3
     v = jnp.array([-2.0, -0.5, 0.5, 2.0])
     coulomb = -jc.friction_coefficient(p, v) * jnp.sign(v)
-    assert np.allclose(jc.smoothed_friction_force(p, v, eps), coulomb, rtol=1e-12)
-    assert float(jc.smoothed_friction_force(p, 0.0, eps)) == 0.0
+    assert np.allclose(smoothed_friction_force(p, v, eps), coulomb, rtol=1e-12)
+    assert float(smoothed_friction_force(p, 0.0, eps)) == 0.0
     # slope at zero is mu_st / eps: the stiffness of the smoothed stick phase
     h = 1e-9
-    slope = (jc.smoothed_friction_force(p, h, eps)
-             - jc.smoothed_friction_force(p, -h, eps)) / (2 * h)
+    slope = (smoothed_friction_force(p, h, eps)
+             - smoothed_friction_force(p, -h, eps)) / (2 * h)
     assert np.isclose(float(slope), -p.friction.mu_st / eps, rtol=1e-5)
 
 
@@ -37,7 +38,7 @@ def test_smoothed_force_tends_to_coulomb_law_away_from_zero():
 @given(v=st.floats(-100, 100), eps=st.floats(1e-5, 1.0))
 def test_smoothed_force_is_odd_and_bounded_by_mu_st(v, eps):
     p = jc.ChainParams()
-    f = float(jc.smoothed_friction_force(p, v, eps))
+    f = float(smoothed_friction_force(p, v, eps))
     assert abs(f) <= p.friction.mu_st
-    assert f == -float(jc.smoothed_friction_force(p, -v, eps))
+    assert f == -float(smoothed_friction_force(p, -v, eps))
     assert f * v <= 0  # friction always opposes the relative motion

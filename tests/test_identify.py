@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 import jaxchain as jc
 from jaxchain._studies.identification.unknowns import unknowns_of
+from jaxchain._engine.exact.solve import nonsmooth_trajectory  # the records' sampler
 from helpers import internal
 
 #: The rig of the tests: eq. (1) with parameters away from the defaults (which are
@@ -61,14 +62,15 @@ def test_the_reference_trajectory_is_the_reference_run():
     jc.configure()
     params = jc.with_parameter(RIG, "v_d", 0.7)
     ts = np.arange(int(round(T_END / DT)) + 1) * DT
-    ys = np.asarray(jc.nonsmooth_trajectory(params, np.zeros((2, 1)), ts))
-    run = jc.simulate_nonsmooth(params, np.zeros((2, 1)), jc.NonsmoothOptions.reference(
-        t_end=T_END, transient=T_END / 2, chunk_length=5.0))
+    ys = np.asarray(jc.Exact(jc.NonsmoothOptions.reference()).flow(
+        params, jnp.zeros((2, 1)), jnp.asarray(ts)))
+    run = jc.simulate(params, np.zeros((2, 1)), engine=jc.Exact(jc.NonsmoothOptions.reference(
+        t_end=T_END, transient=T_END / 2, chunk_length=5.0)))
     np.testing.assert_allclose(ys[-1], np.asarray(run.y_final), atol=1e-8)
     sticking = np.abs(ys[:, 1, 0] - 0.7) < 1e-12
     assert 0.1 < sticking.mean() < 0.9  # stick-slip, with stick phases
     with pytest.raises(ValueError, match="increasing"):
-        jc.nonsmooth_trajectory(params, np.zeros((2, 1)), ts[::-1])
+        nonsmooth_trajectory(params, np.zeros((2, 1)), ts[::-1])
 
 
 @settings(max_examples=40, deadline=None)

@@ -149,10 +149,10 @@ def test_compiled_run_holds_no_callback_custom_call_or_scatter():
 def test_expected_cost_grows_with_the_excited_block_and_is_zero_at_steady_sliding():
     p = jc.ChainParams(n_osc=6)
     v_d = np.array([1.2, 1.5, 1.5, 1.8])
-    y0 = np.stack([np.asarray(jc.steady_sliding(jc.ChainParams(n_osc=6, v_d=v_d[0])))]
+    y0 = np.stack([np.asarray(jc.Exact().steady_sliding(jc.ChainParams(n_osc=6, v_d=v_d[0])))]
                   + [np.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(6, k))(
                       jc.ChainParams(n_osc=6, v_d=v))) for k, v in zip((1, 3), v_d[1:3])]
-                  + [np.asarray(jc.steady_sliding(jc.ChainParams(n_osc=6, v_d=v_d[3])))])
+                  + [np.asarray(jc.Exact().steady_sliding(jc.ChainParams(n_osc=6, v_d=v_d[3])))])
     cost = expected_cost(lane_params(p, 4, v_d=v_d), y0)
     assert cost[0] == 0 and cost[3] == 0 and 0 < cost[1] < cost[2]
 
@@ -192,7 +192,7 @@ def test_memory_and_output_do_not_grow_with_t_end():
     sizes, outputs = [], []
     for t_end in (1500.0, 15000.0):
         options = jc.SimulationOptions(t_end=t_end, transient=t_end * 2 / 3)
-        args = (lane_params(p, 1), y0, jc.Smoothed(jc.SOLVERS[jc.DEFAULT_SOLVER](), options),
+        args = (lane_params(p, 1), y0, jc.Smoothed(jc.SOLVERS["ros34pw2"](), options),
                 (jc.Extrema(),))
         memory = _run_block.lower(*args).compile().compiled.memory_analysis()
         sizes.append(memory.argument_size_in_bytes + memory.output_size_in_bytes
@@ -213,7 +213,7 @@ def test_observers_keep_the_compiled_run_free_of_callbacks_and_scatters():
     observers = (jc.Extrema(), jc.Energy(), jc.PeakTimes(), jc.TimeSeries(dt=1.0),
                  jc.PoincareSection(), jc.LargestLyapunov())
     compiled = _run_block.lower(lane_params(p, 1), y0,
-                                jc.Smoothed(jc.SOLVERS[jc.DEFAULT_SOLVER](), SHORT),
+                                jc.Smoothed(jc.SOLVERS["ros34pw2"](), SHORT),
                                 observers).compile()
     ops = set(re.findall(r" ([a-z][a-z0-9-]*)\(", compiled.compiled.as_text()))
     assert "while" in ops and "tanh" in ops and "sort" in ops

@@ -31,8 +31,9 @@ def test_stick_exit_time_and_oscillator_match_the_stick_force_formula():
     first = int(np.argmax(f))
     t_exit = float((p.friction.mu_st - f[first]) / p.v_d)
     y0 = np.stack([x, np.full(3, p.v_d)])
-    obs = jc.simulate_nonsmooth(
-        p, y0, jc.NonsmoothOptions.reference(t_end=t_exit + 0.1, transient=0.0))
+    obs = jc.simulate(p, y0,
+                      engine=jc.Exact(jc.NonsmoothOptions.reference(t_end=t_exit + 0.1,
+                                                                  transient=0.0)))
     logged = np.asarray(obs.log_osc) >= 0
     assert int(obs.log_osc[logged][0]) == first
     assert jc.SWITCH_KINDS[int(obs.log_kind[logged][0])] == "stick to slip"
@@ -44,8 +45,8 @@ def test_single_oscillator_cycle_matches_scipy():
     """Amplitude and period of the stick-slip cycle at v_d = 1.5 against scipy's
     DOP853 with events, to 1e-8 relative (the acceptance asks 1e-6)."""
     amplitude, period = scipy_stick_slip_cycle(ONE)
-    obs = jc.simulate_nonsmooth(ONE, _stick_exit_state(ONE),
-                                jc.NonsmoothOptions.reference(t_end=200.0, transient=100.0))
+    obs = jc.simulate(ONE, _stick_exit_state(ONE),
+                      engine=jc.Exact(jc.NonsmoothOptions.reference(t_end=200.0, transient=100.0)))
     exits = np.asarray(obs.log_time)[np.asarray(obs.log_kind) == 0]
     assert float(obs.amplitudes[0]) == pytest.approx(amplitude, rel=1e-8)
     assert np.allclose(np.diff(exits), period, rtol=1e-8, atol=0)
@@ -62,8 +63,9 @@ def test_energy_balance_over_a_long_run():
     4 excited, eq. (8) or (10), v_d = 1.3 to 1.7) give 4.9e-10 to 8.9e-10, the single
     oscillator 2.8e-11. The bound, 1e-9, leaves a factor of 2 on this case."""
     p = jc.ChainParams(n_osc=4)
-    obs = jc.simulate_nonsmooth(p, jc.OutOfPhaseExcitation.eq8(jc.excited_block(4, 2)),
-                                jc.NonsmoothOptions.reference(t_end=3000.0, transient=2000.0))
+    obs = jc.simulate(p, jc.OutOfPhaseExcitation.eq8(jc.excited_block(4, 2)),
+                      engine=jc.Exact(jc.NonsmoothOptions.reference(t_end=3000.0,
+                                                                  transient=2000.0)))
     change = jc.mechanical_energy(p, obs.y_final) - jc.mechanical_energy(p, obs.y_initial)
     residual = change - (obs.friction_work - obs.viscous_dissipation)
     assert int(obs.num_events) > 1000  # many switches were crossed
@@ -78,8 +80,8 @@ def test_identical_oscillators_switch_together_like_one():
     p = jc.ChainParams(n_osc=4)
     y0 = jnp.tile(_stick_exit_state(p), (1, 4))
     opt = jc.NonsmoothOptions.reference(t_end=200.0, transient=100.0)
-    ring = jc.simulate_nonsmooth(p, y0, opt)
-    single = jc.simulate_nonsmooth(ONE, _stick_exit_state(ONE), opt)
+    ring = jc.simulate(p, y0, engine=jc.Exact(opt))
+    single = jc.simulate(ONE, _stick_exit_state(ONE), engine=jc.Exact(opt))
     assert np.allclose(ring.amplitudes, single.amplitudes[0], rtol=1e-9)
     assert int(ring.n_halc) == 4
     times = np.asarray(ring.log_time)
@@ -112,12 +114,12 @@ def test_failures_are_a_status_or_an_error():
     # the options of the single oscillator's cycle above: its compiled run
     opt = jc.NonsmoothOptions.reference(t_end=200.0, transient=100.0)
     bad = jnp.full((2, 1), jnp.nan)
-    obs = jc.simulate_nonsmooth(ONE, bad, opt, throw=False)
+    obs = jc.simulate(ONE, bad, engine=jc.Exact(opt), throw=False)
     assert obs.status == jc.Status.non_finite_state and int(obs.n_halc) == -1
     with pytest.raises(RuntimeError, match="non-finite"):
-        jc.simulate_nonsmooth(ONE, bad, opt)
+        jc.simulate(ONE, bad, engine=jc.Exact(opt))
     chatter = jc.NonsmoothOptions.reference(t_end=50.0, transient=0.0, max_events=2)
-    obs = jc.simulate_nonsmooth(ONE, _stick_exit_state(ONE), chatter, throw=False)
+    obs = jc.simulate(ONE, _stick_exit_state(ONE), engine=jc.Exact(chatter), throw=False)
     assert obs.status == jc.Status.event_not_resolved and np.isnan(float(obs.energy))
 
 
@@ -153,7 +155,7 @@ def _cycle(v_d, xi, options):
     engine (eq. (1), started at its stick exit): the amplitude over the window, the
     period between its last two stick-to-slip switches."""
     params = jc.ChainParams(n_osc=1, v_d=v_d, xi=xi)
-    obs = jc.run_nonsmooth(params, _stick_exit_state(params), options)
+    obs = jc.Exact(options).run(params, _stick_exit_state(params))
     exits = jnp.sort(jnp.where(obs.log_kind == 0, obs.log_time, -jnp.inf))
     return jnp.stack([obs.amplitudes[0], exits[-1] - exits[-2]])
 
@@ -226,8 +228,8 @@ def test_a_slip_arc_that_barely_reaches_the_belt_speed_switches_there(tol):
     x0 = brentq(peak_excess, -1.0, -0.75, xtol=1e-14)  # from rest at x0 < 0
     sol = peak_excess(x0, events=True)
     t_cross = float(sol.t_events[0][0])
-    obs = jc.simulate_nonsmooth(p, jnp.array([[x0], [0.0]]), jc.NonsmoothOptions(
-        rtol=tol, atol=tol, t_end=t_cross + 1.0, transient=0.0))
+    obs = jc.simulate(p, jnp.array([[x0], [0.0]]), engine=jc.Exact(jc.NonsmoothOptions(
+        rtol=tol, atol=tol, t_end=t_cross + 1.0, transient=0.0)))
     logged = np.asarray(obs.log_kind) >= 0
     assert logged.any(), "no switch: the slip arc went through v_d unseen"
     # a velocity error e moves a crossing at acceleration a by e / a: the dense

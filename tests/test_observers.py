@@ -12,6 +12,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
+from jaxchain._engine.smoothed import integrate
+from jaxchain._physics.model import Model
 from helpers import reference_rhs
 
 
@@ -26,7 +28,7 @@ def _lorenz_exponent(y0):
     """One jitted run for every start below: traced and compiled once."""
     options = jc.SimulationOptions(t_end=20000.0, transient=50.0, chunk_length=10.0,
                                    rtol=1e-8, atol=1e-8, sample_dt=10.0, max_steps=10**5)
-    return jc.integrate(diffrax.ODETerm(lorenz), diffrax.Tsit5(), y0, None, options,
+    return integrate(diffrax.ODETerm(lorenz), diffrax.Tsit5(), y0, None, options,
                         (jc.LargestLyapunov(),))
 
 
@@ -58,7 +60,7 @@ def test_damped_linear_chain_has_every_exponent_at_minus_xi():
     options = jc.SimulationOptions(t_end=2000.0, transient=100.0, chunk_length=50.0,
                                    rtol=1e-8, atol=1e-10, sample_dt=1.0)
     y0 = jnp.array([[1.0, 0.0, -0.5, 0.2, 0.0], [0.0, 0.3, 0.0, 0.0, -0.1]])
-    (res,), _, _, _ = jax.jit(lambda y: jc.integrate(
+    (res,), _, _, _ = jax.jit(lambda y: integrate(
         diffrax.ODETerm(ring), diffrax.Tsit5(), y, None, options,
         (jc.LargestLyapunov(),)))(y0)
     assert abs(float(res["lyapunov"]) + xi) < float(res["lyapunov_error"]) < 2e-3
@@ -74,7 +76,7 @@ def steady_sliding_runs():
     the energy in one run (one compiled program per solver, for the two tests
     below)."""
     options = jc.SimulationOptions(t_end=1200.0, transient=200.0, chunk_length=50.0)
-    return {solver: jc.observe(SLIDING, jc.steady_sliding(SLIDING),
+    return {solver: jc.observe(SLIDING, jc.Exact().steady_sliding(SLIDING),
                                [jc.LargestLyapunov(), jc.Energy()], jc.SOLVERS[solver](),
                                options)
             for solver in ("ros34pw2", "tsit5")}
@@ -128,7 +130,7 @@ def test_peak_times_of_a_periodic_orbit_are_spaced_by_its_period(stick_slip_orbi
     assert np.max(np.abs(section[:, 1])) < 1e-6  # x' = 0 on the section
     assert np.ptp(section[:, 0]) < 1e-6  # one point
     # shooting's phase condition puts y0 at x' = 0, here a peak (x'' < 0)
-    assert float(jc.vector_field(0.0, orbit.y0, params)[1, 0]) < 0
+    assert float(jc.Smoothed().field(params, orbit.y0)[1, 0]) < 0
     assert abs(section[0, 0] - float(orbit.y0[0, 0])) < 1e-6
 
 
@@ -211,7 +213,7 @@ def test_both_engines_observe_a_prescribed_stream_alike():
     observe_chunk, observe_sample = (eqx.filter_jit(internal("smoothed observation")),
                                      eqx.filter_jit(internal("non-smooth observation")))
     params = jc.ChainParams(n_osc=4, v_d=1.5)
-    model = jc.Model(params, 1e-3)
+    model = Model(params, 1e-3)
     options = jc.SimulationOptions(t_end=100.0, transient=40.0, chunk_length=15.0)
     ts = np.linspace(options.transient, options.t_end, 241)  # mid = 70 among them
     ys = _prescribed_stream(params, ts)
@@ -227,7 +229,7 @@ def test_both_engines_observe_a_prescribed_stream_alike():
         located = observe_sample(located, jnp.asarray([t]), jnp.asarray(y)[None], params,
                                  options)
 
-    zero_eps = jc.Model(params, 1e-300)  # the exact engine's band, v_rel = 0
+    zero_eps = Model(params, 1e-300)  # the exact engine's band, v_rel = 0
     smooth = observer.result(chunked[0], zero_eps, options)
     event = observer.result(located[0], zero_eps, options)
     for name in ("x_max_halves", "x_min_halves", "min_slip_speed", "v_max", "on_halc",

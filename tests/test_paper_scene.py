@@ -66,12 +66,12 @@ def test_a_lone_sliding_oscillator_is_pumped_by_its_in_phase_neighbours():
     assert int(symmetric.n_halc) == 20 and bool(symmetric.on_halc[0])
     assert float(symmetric.amplitudes[19]) == pytest.approx(float(symmetric.amplitudes[1]),
                                                             rel=1e-6)
-    base = jc.steady_sliding(p)[0]
+    base = jc.Exact().steady_sliding(p)[0]
     flip = jnp.where(jnp.arange(1, 21) >= 12, -1.0, 1.0)
     antiphase = jc.simulate(p, y0.at[0].set(base + (y0[0] - base) * flip), options=opts)
     assert int(antiphase.n_halc) == 19 and not bool(antiphase.on_halc[0])
     assert float(antiphase.amplitudes[0]) < 0.2
     reference = jc.NonsmoothOptions.reference(t_end=opts.t_end, transient=opts.transient)
     for smoothed, start in ((symmetric, y0), (antiphase, antiphase.y_initial)):
-        exact = jc.simulate_nonsmooth(p, start, reference)
+        exact = jc.simulate(p, start, engine=jc.Exact(reference))
         assert np.array_equal(exact.on_halc, smoothed.on_halc)

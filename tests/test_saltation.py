@@ -10,6 +10,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
+# the slip force of a given mode (stick and slip as the exact engine holds them)
+from jaxchain._physics.forces import slip_friction_force
 
 #: Two oscillators on a ring whose first switches are one of each kind
 #: (`jc.SWITCH_KINDS`): oscillator 1 sticks at t = 0.633 and breaks away at 1.628,
@@ -25,7 +27,7 @@ def _field(params, y, modes):
     F_slip, with f the force needed to stick (`jc.stick_force`, eq. (5))."""
     x, v = y[0], y[1]
     a = (-jc.stick_force(params, x) - 2 * params.xi * (v - params.v_d)
-         + jc.slip_friction_force(params, v - params.v_d, modes))
+         + slip_friction_force(params, v - params.v_d, modes))
     stick = modes == 0
     return jnp.stack([jnp.where(stick, params.v_d, v), jnp.where(stick, 0.0, a)])
 
@@ -60,7 +62,7 @@ def _modes(params, y):
 
 def _first_switch(kind):
     """Time and oscillator of the pair's first switch of `kind`."""
-    obs = jc.simulate_nonsmooth(PAIR, PAIR_Y0, REFERENCE)
+    obs = jc.simulate(PAIR, PAIR_Y0, engine=jc.Exact(REFERENCE))
     (i,) = np.flatnonzero(np.asarray(obs.log_kind) == kind)[:1]
     return float(obs.log_time[i]), int(obs.log_osc[i])
 
@@ -79,7 +81,7 @@ def test_saltation_matrix_is_the_flow_s_jump_across_each_kind_of_switch(kind):
     perturbed stuck velocity is a slipping oscillator."""
     t_switch, osc = _first_switch(kind)
     d = 0.05
-    (y_a,) = np.asarray(jc.nonsmooth_trajectory(PAIR, PAIR_Y0, [t_switch - d], REFERENCE))
+    (y_a,) = np.asarray(jc.Exact(REFERENCE).flow(PAIR, PAIR_Y0, jnp.array([t_switch - d])))
     before = _modes(PAIR, y_a)
     y_star, phi_before = _smooth_flow(PAIR, y_a, before, d)
     after = before.copy()
@@ -93,7 +95,7 @@ def test_saltation_matrix_is_the_flow_s_jump_across_each_kind_of_switch(kind):
     expected = phi_after @ salt @ phi_before
 
     def flow(y):
-        ys, _ = jc.nonsmooth_flow(PAIR, y, jnp.array([2 * d]), REFERENCE)
+        ys = jc.Exact(REFERENCE).flow(PAIR, y, jnp.array([2 * d]))
         return ys[0].reshape(-1)
 
     free = np.ones(4, bool)
@@ -125,7 +127,7 @@ WEIGHTS = np.array([[1.0, -0.7, 0.4, 0.2], [0.3, 0.5, -0.9, 0.6]])
 def _weighted_final_state(v_d, xi, y0, options):
     """sum(WEIGHTS * y(12)) on the ring of four, by the exact engine."""
     params = jc.ChainParams(n_osc=4, v_d=v_d, xi=xi)
-    ys, _ = jc.nonsmooth_flow(params, y0, jnp.array([12.0]), options)
+    ys = jc.Exact(options).flow(params, y0, jnp.array([12.0]))
     return jnp.sum(WEIGHTS * ys[0])
 
 

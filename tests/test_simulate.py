@@ -10,7 +10,7 @@ from helpers import (SHORT, TIGHT, assert_within_drift, flat, reference_rhs, sci
 
 
 def _near_steady_sliding(p):
-    return jc.steady_sliding(p).at[0].add(0.01)
+    return jc.Exact().steady_sliding(p).at[0].add(0.01)
 
 
 def _growth_rate(p):
@@ -46,7 +46,8 @@ def _dense_amplitude(p, y0, t_end, transient, dt):
     """Half peak-to-peak from a run stored densely (every dt), at tight tolerance."""
     ts = jnp.arange(transient, t_end + dt / 2, dt)
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(jc.vector_field), diffrax.Dopri8(), 0.0, t_end, None, y0, p,
+        diffrax.ODETerm(lambda t, y, p: jc.Smoothed().field(p, y)), diffrax.Dopri8(), 0.0,
+        t_end, None, y0, p,
         saveat=diffrax.SaveAt(ts=ts), max_steps=None,
         stepsize_controller=diffrax.PIDController(rtol=1e-11, atol=1e-13))
     x = np.asarray(sol.ys[:, 0])
@@ -116,7 +117,7 @@ def test_single_oscillator_cycle_converges_to_nonsmooth_stick_slip_cycle():
 
 
 def test_sticks_on_constructed_velocity_signals():
-    """`min_slip_speed` and `sticks` on velocity signals whose closest approach to
+    """The engines' stick criterion (`on_halc`) on velocity signals whose closest approach to
     the belt speed is known: a quasi-static stick phase below and above the belt
     speed (|v_rel| = eps artanh(f / mu_st) for the needed force f rising from 0.25
     to 0.999 mu_st), a small oscillation about x' = 0 (steady sliding), and
@@ -126,14 +127,24 @@ def test_sticks_on_constructed_velocity_signals():
     stick = eps * np.arctanh(np.linspace(0.25, 0.999, t.size))
     signals = np.stack([v_d - stick, v_d + stick, 0.1 * np.sin(t),
                         np.full(t.size, v_d - 2.99 * eps), np.full(t.size, v_d + 3.01 * eps)], 1)
-    speed = jc.min_slip_speed(signals, v_d)
+    # the engines' stick criterion (`on_halc`) on these velocities: the slip speeds
+    # each lie at the band 3 eps of an engine whose eps puts them a relative 1e-12
+    # inside it, and outside it for a 1e-12 smaller eps
+    params = jc.ChainParams(n_osc=5, v_d=v_d)
+    ys = np.stack([np.zeros_like(signals), signals], 1)
     expected = [eps * np.arctanh(0.25)] * 2 + [v_d - 0.1, 2.99 * eps, 3.01 * eps]
-    np.testing.assert_allclose(speed, expected, rtol=1e-12)
-    assert np.asarray(jc.sticks(speed, eps)).tolist() == [True, True, False, True, False]
+    for k, speed in enumerate(expected):
+        inside = jc.Smoothed(eps=speed / 3.0 * (1 + 1e-12)).on_halc(params, ys)
+        outside = jc.Smoothed(eps=speed / 3.0 * (1 - 1e-12)).on_halc(params, ys)
+        assert bool(inside[k]) and not bool(outside[k]), k
+    sticks = jc.Smoothed(eps=eps).on_halc(params, ys)
+    assert np.asarray(sticks).tolist() == [True, True, False, True, False]
     # the band is where tanh(v_rel/eps) leaves sign(v_rel) by more than 0.5 %
-    assert 1 - np.tanh(jc.STICK_BAND) < 5e-3 < 1 - np.tanh(0.9 * jc.STICK_BAND)
-    # the non-smooth limit eps = 0: only an exactly zero slip speed (stick) counts
-    assert np.asarray(jc.sticks(np.array([0.0, 1e-12, np.nan]), 0.0)).tolist() == [
+    assert 1 - np.tanh(3.0) < 5e-3 < 1 - np.tanh(0.9 * 3.0)
+    # the non-smooth limit (the exact engine): only an exactly zero slip speed counts
+    exact = np.array([v_d, v_d + 1e-12, np.nan])
+    ys = np.stack([np.zeros_like(exact), exact])[None]
+    assert np.asarray(jc.Exact().on_halc(jc.ChainParams(n_osc=3, v_d=v_d), ys)).tolist() == [
         True, False, False]
 
 
@@ -191,11 +202,11 @@ def test_n_halc_halves_split_the_window_where_scipy_first_sticks():
     half and 1 over the second. (The perturbation, 1e-4, is well above the
     tolerance rtol |x| = 5e-6; one below it is not resolved and decays.)"""
     p = jc.ChainParams(n_osc=1, v_d=1.0)
-    y0 = np.asarray(jc.steady_sliding(p)) + np.array([[1e-4], [0.0]])
+    y0 = np.asarray(jc.Exact().steady_sliding(p)) + np.array([[1e-4], [0.0]])
     ref = solve_ivp(reference_rhs(p), (0.0, SHORT.t_end), y0.ravel(), method="LSODA",
                     rtol=1e-9, atol=1e-11, dense_output=True)
     ts = np.linspace(SHORT.transient, SHORT.t_end, 60001)
-    first_stick = ts[np.argmax(np.abs(ref.sol(ts)[1] - p.v_d) <= jc.STICK_BAND * jc.DEFAULT_EPS)]
+    first_stick = ts[np.argmax(np.abs(ref.sol(ts)[1] - p.v_d) <= 3.0 * float(jc.Smoothed().eps))]
     middle = 0.5 * (SHORT.transient + SHORT.t_end)
     assert middle + 20 < first_stick < SHORT.t_end - 20
     obs = jc.simulate(p, y0, options=SHORT)

@@ -150,10 +150,9 @@ def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(exact_one_sit
     excited = int(ds.attrs["phase_oscillator"])  # the oscillator of largest amplitude
 
     def stick(v_d):
-        obs = jc.simulate_nonsmooth(jc.with_parameter(RING, "v_d", v_d),
-                                    u[:-1].reshape(2, -1),
-                                    jc.NonsmoothOptions.reference(t_end=600.0,
-                                                                  transient=500.0))
+        obs = jc.simulate(jc.with_parameter(RING, "v_d", v_d), u[:-1].reshape(2, -1),
+                          engine=jc.Exact(jc.NonsmoothOptions.reference(t_end=600.0,
+                                                                  transient=500.0)))
         t, osc, kind = (np.asarray(a) for a in (obs.log_time, obs.log_osc, obs.log_kind))
         t, kind = t[osc == excited], kind[osc == excited]
         phases = [t[i + 1] - t[i] for i in range(t.size - 1)
@@ -467,7 +466,7 @@ def test_snake_command_json_and_bad_options(tmp_path, capsys):
         x = ref.y[:4]
         assert np.allclose(ds["amplitudes"].values[i], 0.5 * (x.max(1) - x.min(1)), rtol=1e-3)
         sticks = (np.min(np.abs(ref.y[4:] - params.v_d), axis=1)
-                  < jc.STICK_BAND * jc.DEFAULT_EPS)
+                  < 3.0 * float(jc.Smoothed().eps))
         assert int(ds["n_halc"].values[i]) == int(sticks.sum()) == 1, i
     assert_usage_error(["snake", "--sites", "0"], "--sites", capsys)
     assert_usage_error(["snake", "--vd", "3"], "--vd", capsys)

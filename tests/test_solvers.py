@@ -16,6 +16,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
+from jaxchain._physics.model import Model
 from helpers import SHORT, flat, reference_rhs, scipy_stick_slip_cycle
 from jaxchain._engine.smoothed import terms
 from jaxchain._physics.model import model_field
@@ -64,7 +65,7 @@ def test_order_three_on_the_smooth_chain_against_dopri8():
     state, over t in [0, 4]: the fixed-step error against Dopri8 at rtol 1e-13
     falls with order 3 (the friction Jacobian is nonlinear, W is frozen per step)."""
     p = jc.ChainParams(n_osc=4)
-    model = jc.Model(p, 0.2)
+    model = Model(p, 0.2)
     y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(4, 2))(p)
     ref = diffrax.diffeqsolve(diffrax.ODETerm(model_field), diffrax.Dopri8(), 0.0, 4.0,
                               None, y0, model, max_steps=None,

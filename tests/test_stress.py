@@ -10,6 +10,9 @@ import pytest
 
 import jaxchain as jc
 from jaxchain._studies.stress.cases import stress_cases
+# "auto" at an eps other than the default has no public route
+from jaxchain._engine.engines import as_engine
+from jaxchain._engine.solver.registry import auto_solver
 from helpers import assert_usage_error, internal, replace_internal, scipy_slip_arc
 
 QUICK = stress_cases(quick=True)
@@ -72,8 +75,8 @@ def test_a_collapsing_step_size_is_its_own_status():
     collapsed = jc.Status.step_size_collapsed
     assert obs.status == collapsed and np.all(np.isnan(obs.amplitudes))
     assert collapsed.message.startswith("step size collapsed")
-    assert "dtmin = 0.05" in jc.failure_hint(collapsed, params, jc.SOLVERS["ros34pw2"](),
-                                             budget, jc.DEFAULT_EPS)
+    assert "dtmin = 0.05" in jc.Smoothed(jc.SOLVERS["ros34pw2"](), budget).failure_hint(
+        collapsed, params)
     with pytest.raises(RuntimeError, match="step_size_collapsed: eps = 0.001"):
         jc.simulate(params, y0, options=budget)
     floor = dataclasses.replace(budget, dtmin=1e-6)
@@ -131,9 +134,9 @@ def test_auto_solver_is_explicit_only_where_the_stick_phase_is_not_stiff():
     options = jc.SimulationOptions(t_end=60.0, transient=30.0)
     params = jc.ChainParams(n_osc=2)
     for eps, name in ((0.1, "tsit5"), (1e-3, "ros34pw2")):
-        assert type(jc.auto_solver(params, eps)) is type(jc.SOLVERS[name]())
-        auto = jc.simulate(params, y0, engine=jc.as_engine("smoothed", "auto", options,
-                                                           params, eps=eps))
+        assert type(auto_solver(params, eps)) is type(jc.SOLVERS[name]())
+        auto = jc.simulate(params, y0, engine=as_engine("smoothed", "auto", options,
+                                                        params, eps=eps))
         named = jc.simulate(params, y0, engine=jc.Smoothed(name, options, eps))
         assert np.array_equal(auto.amplitudes, named.amplitudes)
 

@@ -12,6 +12,7 @@ import scipy.linalg
 import scipy.optimize
 
 import jaxchain as jc
+from jaxchain._physics.model import split_vector_field  # the IMEX solvers' split
 from helpers import assert_usage_error, replace_internal
 
 ETA = 0.3
@@ -55,7 +56,7 @@ def test_lattice_with_masses_has_the_modes_of_the_generalised_eigenproblem():
     params = _unequal_lattice(xi=0.0, friction=jc.Coulomb(mu=0.5))
     k = np.asarray(jc.stiffness_matrix(params))
     omega2 = scipy.linalg.eigh(k, np.diag(np.asarray(params.mass)), eigvals_only=True)
-    values = np.linalg.eigvals(np.asarray(jc.jacobian(params)))
+    values = np.linalg.eigvals(np.asarray(jc.Smoothed().jacobian(params)))
     np.testing.assert_allclose(np.sort(values.imag[values.imag > 0]), np.sqrt(omega2),
                                rtol=1e-10)
     assert np.max(np.abs(values.real)) < 1e-10
@@ -128,10 +129,10 @@ def test_energy_balance_on_a_lattice_with_masses():
 
     def field(t, z, args):
         y, _ = z
-        _, friction = jc.split_vector_field(t, y, params, eps)
+        _, friction = split_vector_field(t, y, params, eps)
         v = y[1]
         power = jnp.sum(params.mass * friction[1] * v)  # the force, not the acceleration
-        return jc.vector_field(t, y, params, eps), jnp.stack([power,
+        return jc.Smoothed(eps=eps).field(params, y), jnp.stack([power,
                                                          jnp.sum(2 * params.xi * v**2)])
 
     y0 = jnp.stack([jnp.linspace(-1.0, 2.0, 6), jnp.zeros(6)])
@@ -379,8 +380,8 @@ def test_the_nonsmooth_reference_with_masses_on_a_lattice_against_the_smoothed_m
     y0 = np.array([[2.0, -1.0], [0.0, 0.0]])
     smoothed = jc.simulate(params, y0, engine=jc.Smoothed(
         options=jc.SimulationOptions(t_end=150.0, transient=100.0), eps=1e-4))
-    reference = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions.reference(t_end=150.0,
-                                                                      transient=100.0))
+    reference = jc.simulate(params, y0, engine=jc.Exact(jc.NonsmoothOptions.reference(t_end=150.0,
+                                                                      transient=100.0)))
     a, b = np.asarray(smoothed.amplitudes), np.asarray(reference.amplitudes)
     assert np.all(b > 0.5)  # both on stick-slip
     np.testing.assert_allclose(a, b, rtol=1e-2)

@@ -39,8 +39,8 @@ def test_tolerances_that_cannot_resolve_the_stick_band_are_refused(tolerance):
     with pytest.raises(ValueError, match=f"SimulationOptions.{tolerance} .*stick band"):
         jc.Smoothed(options=jc.SimulationOptions(**{tolerance: 3e-5}), eps=1e-8)
     with pytest.raises(ValueError, match="stick band"):
-        jc.simulate(jc.ChainParams(n_osc=1), jnp.zeros((2, 1)), engine=jc.as_engine(
-            "smoothed", options=jc.SimulationOptions(**{tolerance: 3e-5}), eps=1e-8))
+        jc.simulate(jc.ChainParams(n_osc=1), jnp.zeros((2, 1)), engine=jc.Smoothed(
+            options=jc.SimulationOptions(**{tolerance: 3e-5}), eps=1e-8))
 
 
 def test_the_command_line_refuses_a_tolerance_that_misses_the_stick_band(tmp_path):
@@ -83,8 +83,8 @@ def test_a_run_whose_energy_balance_fails_is_flagged_on_the_smoothed_engine():
     assert np.isnan(out.energy)
     good = jc.simulate(params, y0, throw=False, engine=jc.Smoothed(
         options=jc.SimulationOptions(t_end=100.0, transient=50.0), eps=1e-2))
-    exact = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions(t_end=100.0,
-                                                                  transient=50.0))
+    exact = jc.simulate(params, y0, engine=jc.Exact(jc.NonsmoothOptions(t_end=100.0,
+                                                                  transient=50.0)))
     assert int(good.status) == jc.Status.ok
     assert float(good.energy) == pytest.approx(float(exact.energy), rel=0.01)
 
@@ -96,10 +96,10 @@ def test_a_run_whose_energy_balance_fails_is_flagged_on_the_exact_engine():
     change of its mechanical energy, computed here independently."""
     params, y0 = jc.ChainParams(n_osc=1), jnp.zeros((2, 1))
     loose = jc.NonsmoothOptions(t_end=100.0, transient=50.0, rtol=0.1, atol=0.1)
-    out = jc.simulate_nonsmooth(params, y0, loose, throw=False)
+    out = jc.simulate(params, y0, engine=jc.Exact(loose), throw=False)
     assert int(out.status) == jc.Status.energy_balance_failed
-    good = jc.simulate_nonsmooth(params, y0, jc.NonsmoothOptions(t_end=100.0,
-                                                                 transient=50.0))
+    good = jc.simulate(params, y0, engine=jc.Exact(jc.NonsmoothOptions(t_end=100.0,
+                                                                 transient=50.0)))
     assert int(good.status) == jc.Status.ok
     x, v = np.asarray(good.y_final)
     change = 0.5 * float(np.sum(v**2 + x**2))  # one oscillator: no coupling, m = k = 1

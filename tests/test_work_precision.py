@@ -21,7 +21,7 @@ def test_numpy_field_for_scipy_matches_the_model():
     p = jc.ChainParams(n_osc=5)
     y = np.random.default_rng(0).normal(size=(2, 5))
     assert np.allclose(wp._numpy_field(p, 1e-2)(0.0, y.reshape(-1)),
-                       flat(jc.vector_field(0.0, y, p, 1e-2)), rtol=1e-13, atol=1e-13)
+                       flat(jc.Smoothed(eps=1e-2).field(p, y)), rtol=1e-13, atol=1e-13)
 
 
 @pytest.mark.study

@@ -12,7 +12,7 @@ from jaxtyping import Array, Bool, Float
 
 from .._engine.compat import checks_as_nan
 from .._engine.exact.options import NonsmoothOptions
-from .._engine.exact.solve import run_nonsmooth
+from .._engine.exact.solve import run_exact
 from .._engine.exact.switching import SWITCH_KINDS, mode_field
 from .._errors import ValidationError
 from .._physics.model import stick_force
@@ -77,7 +77,7 @@ def _tangency(z, args):
 def _return_time(params: ChainParams, options: NonsmoothOptions):
     """The time from the stick exit to the first return to stick (slip to stick) by
     the exact engine, NaN if none within `options.t_end`."""
-    obs = run_nonsmooth(params, stick_exit_state(params), options)
+    obs = run_exact(params, stick_exit_state(params), options)
     returns = jnp.where(obs.log_kind == SWITCH_KINDS.index("slip to stick"), obs.log_time,
                         jnp.inf)
     first = jnp.min(returns)

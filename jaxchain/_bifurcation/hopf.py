@@ -30,7 +30,7 @@ def _require_ring(params: ChainParams, what: str) -> None:
 def check_engine(engine, owner: str = "engine") -> AbstractEngine:
     """`engine` at its settings for orbits (`AbstractEngine.for_orbits`), which are
     the same for every eps: the analyses of steady sliding read the engine's model
-    only (its `steady_sliding_jacobian`), so that a new eps, an array leaf traced
+    only (its `jacobian` at steady sliding), so that a new eps, an array leaf traced
     by `eqx.filter_jit`, does not recompile them, and derivatives with respect to
     it flow.
 
@@ -43,7 +43,7 @@ def check_engine(engine, owner: str = "engine") -> AbstractEngine:
 
 def _fourier_blocks(params: ChainParams, engine: AbstractEngine
                     ) -> Complex[Array, "n_osc 2 2"]:
-    """The Jacobian of eq. (5) at steady sliding (`steady_sliding_jacobian` of the
+    """The Jacobian of eq. (5) at steady sliding (`jacobian` at steady sliding of the
     engine, by `jax.jacfwd`),
     block-diagonalised by the discrete Fourier transform of the ring.
 
@@ -71,7 +71,7 @@ def _fourier_blocks(params: ChainParams, engine: AbstractEngine
     """
     _require_ring(params, "fourier_blocks")
     n = params.n_osc
-    jac = jnp.reshape(engine.steady_sliding_jacobian(params), (2, n, 2, n))
+    jac = jnp.reshape(engine.jacobian(params), (2, n, 2, n))
     k, m = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
     modes = jnp.asarray(np.exp(2j * np.pi * k * m / n) / np.sqrt(n))  # (k, m)
     return jnp.einsum("km,imjl,kl->kij", modes.conj(), jac, modes)
@@ -117,7 +117,7 @@ def steady_sliding_eigenvalues(params: ChainParams, engine: AbstractEngine = Smo
                                ) -> Complex[Array, " 2n_osc"]:
     """The eigenvalues of the Jacobian of eq. (5) at steady sliding, for any chain:
     by the Fourier route (`mode_eigenvalues`) on the homogeneous ring, by
-    `jnp.linalg.eigvals` of the Jacobian (the engine's `steady_sliding_jacobian`,
+    `jnp.linalg.eigvals` of the Jacobian (the engine's `jacobian` at steady sliding,
     by `jax.jacfwd`) otherwise.
 
     **Arguments:**
@@ -143,7 +143,7 @@ def _steady_sliding_eigenvalues(params: ChainParams, engine) -> Complex[Array, "
     if is_homogeneous_ring(params):
         values = jnp.reshape(_mode_eigenvalues(params, engine), (-1,))
     else:
-        values = jnp.linalg.eigvals(engine.steady_sliding_jacobian(params))
+        values = jnp.linalg.eigvals(engine.jacobian(params))
     order = jnp.lexsort((-values.imag, -values.real))
     return values[order]
 
@@ -306,7 +306,7 @@ def critical_mode(params: ChainParams, mode: int = 0, engine: AbstractEngine = S
     real mode shape), from its 2x2 block (`_fourier_blocks`); on any other chain the
     eigenvalue of the Jacobian with the largest real part and positive imaginary
     part (`mode` must be 0). The Jacobian is that of `engine`'s model
-    (`steady_sliding_jacobian`; `Smoothed()` by default, smoothed at its eps).
+    (`jacobian` at steady sliding; `Smoothed()` by default, smoothed at its eps).
 
     **Returns:**
 
@@ -321,7 +321,7 @@ def critical_mode(params: ChainParams, mode: int = 0, engine: AbstractEngine = S
         if mode != 0:
             raise ValidationError(f"mode must be 0 (the leading eigenvalue) on a chain other "
                                   f"than the homogeneous ring, got {mode!r}")
-        a = engine.steady_sliding_jacobian(params)
+        a = engine.jacobian(params)
         values, right = jnp.linalg.eig(a)
         i = jnp.argmax(jnp.where(values.imag > 0, values.real, -jnp.inf))
         left_values, left = jnp.linalg.eig(a.T)
@@ -417,7 +417,7 @@ def hopf_point(params: ChainParams, guess: float = 1.0, *,
         with several Hopf points, such as a Stribeck curve, gives the one Newton's
         method reaches).
     - `engine`: the engine whose model's steady sliding is analysed
-        (`AbstractEngine.steady_sliding_jacobian`): `Smoothed()` (eps = 1e-3) by
+        (`AbstractEngine.jacobian` at steady sliding): `Smoothed()` (eps = 1e-3) by
         default, smoothed at its `Smoothed.eps`, traced: differentiable in it
         (implicitly, as in the other parameters), and a new value does not
         recompile. `Exact()` gives the limit eps -> 0 (the slip law's slope).

@@ -46,7 +46,7 @@ def first_lyapunov_coefficient(params: ChainParams, mode: int = 0, *,
 
     Kuznetsov, *Elements of Applied Bifurcation Theory* (3rd ed., 2004), eq.
     (3.20), with A q = i omega q, A^T p = -i omega p, <p, q> = <q, q> = 1. A is the
-    Jacobian of eq. (5) (`AbstractEngine.steady_sliding_jacobian`), B and C its
+    Jacobian of eq. (5) (`AbstractEngine.jacobian` at steady sliding), B and C its
     second and third derivatives (nested `jax.jvp`), the linear solves by lineax. l1 > 0: subcritical (an
     unstable cycle surrounds stable steady sliding); l1 < 0: supercritical.
 
@@ -89,7 +89,7 @@ def _first_lyapunov_coefficient(params: ChainParams, mode: int, engine
     omega, q, p = critical_mode(params, mode, engine)
 
     y = jnp.reshape(engine.steady_sliding(params), (-1,))
-    a = engine.steady_sliding_jacobian(params).astype(complex)
+    a = engine.jacobian(params).astype(complex)
 
     def solve(matrix, vector):
         # throw=False: a singular system gives NaN either way, and lineax's check

@@ -100,19 +100,18 @@ class AbstractEngine(eqx.Module):
         """The vector field of the engine's model at the state `y` (shape (2, n_osc)):
         the flow's direction, that of the trivial Floquet multiplier."""
 
-    def steady_sliding_jacobian(self, params: ChainParams) -> Float[Array, "2n 2n"]:
-        """The Jacobian of the engine's vector field (`field`) at its steady sliding
-        (`steady_sliding`), by `jax.jacfwd`, ordered (x_1..x_N, x_1'..x_N'): what
-        the stability of steady sliding and its Hopf point are read from
-        (`hopf_point`). The friction law's smoothing enters through the slope of
-        the friction force there; on the exact engine (every oscillator slipping)
-        that of the slip law, the limit eps -> 0 of the smoothed engine's."""
-        y = self.steady_sliding(params)
-
-        def field(z):
-            return jnp.reshape(self.field(params, jnp.reshape(z, y.shape)), (-1,))
-
-        return jax.jacfwd(field)(jnp.reshape(y, (-1,)))
+    def jacobian(self, params: ChainParams, y: State | None = None
+                 ) -> Float[Array, "2n 2n"]:
+        """The Jacobian of the flattened `field` at the state `y` (steady sliding,
+        `steady_sliding`, if None), by `jax.jacfwd`: shape (2 n_osc, 2 n_osc),
+        ordered (x_1..x_N, x_1'..x_N'). At steady sliding it is what the stability
+        of steady sliding and its Hopf point are read from (`hopf_point`): the
+        friction law's smoothing enters through the slope of the friction force
+        there; on the exact engine (every oscillator slipping) that of the slip
+        law, the limit eps -> 0 of the smoothed engine's."""
+        y = self.steady_sliding(params) if y is None else jnp.asarray(y)
+        return jax.jacfwd(lambda z: jnp.reshape(self.field(params, jnp.reshape(z, y.shape)),
+                                                (-1,)))(jnp.reshape(y, (-1,)))
 
     @abc.abstractmethod
     def orbit_samples(self, params: ChainParams, y0: State, period, n_samples: int
@@ -296,8 +295,10 @@ class Smoothed(AbstractEngine):
     def steady_sliding(self, params: ChainParams) -> State:
         return steady_sliding(params, self.eps)
 
-    def steady_sliding_jacobian(self, params: ChainParams) -> Float[Array, "2n 2n"]:
-        return jacobian(params, eps=self.eps)  # one compiled program (`jacobian`)
+    def jacobian(self, params: ChainParams, y: State | None = None
+                 ) -> Float[Array, "2n 2n"]:
+        # one compiled program (`jaxchain._physics.model.jacobian`)
+        return jacobian(params, y, self.eps)
 
     def simulating(self) -> "Smoothed":
         return Smoothed(eps=self.eps)
@@ -340,8 +341,9 @@ class Exact(AbstractEngine):
     """The exact engine: the stick/slip switch model of Leine et al. (1998),
     Nonlinear Dynamics 16, 41-54, without its stick band (stick is exact, x_n' =
     v_d): smooth slip segments integrated by diffrax, switches located as events
-    (`simulate_nonsmooth`). No eps: nothing is smoothed. Its observables
-    are those of the smoothed engine, in the same layout; an oscillator is on the
+    (`jaxchain/_engine/exact/stepping.py`). No eps: nothing is smoothed. Its observables
+    are those of the smoothed engine (`Observables`), in the same layout, with its own
+    fields filled in (the switch log, the energy balance); an oscillator is on the
     HALC when it sticks during the window.
 
     **Arguments:**

@@ -33,6 +33,31 @@ class Observables(eqx.Module):
     - `status`: the `Status` of the run (its integer value; `Status.ok` is
         success), shape ().
 
+    The exact engine's own fields (`Exact`; None from the smoothed engine, and not
+    written by `to_dataset`):
+
+    - `x_max_halves`, `x_min_halves`: extrema of x_n over each half of the window,
+        shape (2, n_osc).
+    - `half_difference`: largest difference between the two halves' extrema, over
+        the oscillators, relative to max(1, max amplitude), shape (). It is at the
+        integration tolerance for a periodic state.
+    - `stick_fraction`: fraction of the window each oscillator spends in stick,
+        shape (n_osc,).
+    - `modes_final`: modes at t_end (+1/-1 slip, 0 stick), shape (n_osc,).
+    - `friction_work`, `viscous_dissipation`: int sum_n F_n x_n' dt and
+        int sum_n 2 xi x_n'^2 dt over [0, t_end], shape (). Their difference equals
+        the change of `mechanical_energy` (the energy balance).
+    - `log_time`, `log_osc`, `log_kind`: the last `NonsmoothOptions.log_size`
+        switches (time, oscillator index from 0, index into `SWITCH_KINDS`), oldest
+        first, shape (log_size,); unused entries have time NaN and oscillator and
+        kind -1.
+    - `num_events`: switch instants of the whole run, shape ().
+
+    With the exact engine, an oscillator is on the HALC when it sticks during the
+    window (`min_slip_speed` = 0: stick is exact, x_n' = v_d); its extrema are
+    taken at turning points located on the dense output, exact to the integration
+    tolerance.
+
     A failed run (status not `Status.ok`) gives no partial answers: amplitudes, energy and the
     extrema are NaN, `on_halc` is False and `n_halc` is -1.
 
@@ -52,7 +77,23 @@ class Observables(eqx.Module):
     y_final: Float[Array, "*batch 2 n_osc"]
     num_steps: Int[Array, "*batch"]
     status: Int[Array, "*batch"]
+    x_max_halves: Float[Array, "*batch 2 n_osc"] | None = None
+    x_min_halves: Float[Array, "*batch 2 n_osc"] | None = None
+    half_difference: Float[Array, "*batch"] | None = None
+    stick_fraction: Float[Array, "*batch n_osc"] | None = None
+    modes_final: Float[Array, "*batch n_osc"] | None = None
+    friction_work: Float[Array, "*batch"] | None = None
+    viscous_dissipation: Float[Array, "*batch"] | None = None
+    log_time: Float[Array, "*batch log"] | None = None
+    log_osc: Int[Array, "*batch log"] | None = None
+    log_kind: Int[Array, "*batch log"] | None = None
+    num_events: Int[Array, "*batch"] | None = None
 
+
+#: The fields of `Observables` that the exact engine alone fills in.
+EXACT_FIELDS = ("x_max_halves", "x_min_halves", "half_difference", "stick_fraction",
+                "modes_final", "friction_work", "viscous_dissipation", "log_time",
+                "log_osc", "log_kind", "num_events")
 
 
 def check_observers(observers: Sequence[AbstractObserver]) -> tuple:

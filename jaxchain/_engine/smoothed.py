@@ -18,7 +18,7 @@ from .status import SMOOTHED_BALANCE_FLOOR, Status, balance_status
 from .._physics.forces import smoothed_friction_force
 from .._physics.friction import concrete
 from .._physics.model import Model, model_field, model_split_field
-from .observables import Observables
+from .observables import EXACT_FIELDS, Observables
 from .observers.base import AbstractObserver, Chunk, no_partial_answers, observe_chunk
 from .observers.extrema import Extrema
 from .options import DEFAULT_ATOL, DEFAULT_RTOL, SimulationOptions
@@ -317,7 +317,7 @@ def run(params: ChainParams, eps, y0: State, solver: diffrax.AbstractSolver,
     active progress bar through a host callback."""
     (extrema,), y_final, steps, status = _integrate_chain(params, eps, y0, solver, options,
                                                           (Extrema(),), progress)
-    kept = {f.name for f in dataclasses.fields(Observables)}
+    kept = {f.name for f in dataclasses.fields(Observables)} - set(EXACT_FIELDS)
     return Observables(**{k: v for k, v in extrema.items() if k in kept},
                        y_initial=y0, y_final=y_final, num_steps=steps, status=status)
 

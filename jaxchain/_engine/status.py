@@ -23,7 +23,7 @@ class Status(enum.IntEnum):
     (`status == Status.ok`). Each member carries its `message`.
 
     - For a trajectory of the smoothed engine (`simulate`, `ensemble`, `sweep`) and
-        of the non-smooth reference (`simulate_nonsmooth`): `ok`,
+        of the non-smooth reference (`Exact`): `ok`,
         `max_steps_reached`, `solver_failed`, `non_finite_state`,
         `step_size_collapsed`, and for the reference `event_not_resolved`; a cell of
         a sweep that has not run yet is `not_run`.

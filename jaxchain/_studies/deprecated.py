@@ -1,6 +1,7 @@
 """The names of the orbit layer that the documentation and notebooks of the previous
 release used, kept for one release as deprecated aliases of the method as a value
-(`Shooting` on either engine): each works as before and warns once where it is
+(`Shooting` on either engine) and of the engine as a value (`simulate` with
+`engine=Exact(...)`, `Exact.run`): each works as before and warns once where it is
 called. They are not public names (`jaxchain.__all__`); `jaxchain.__getattr__`
 finds them."""
 
@@ -13,6 +14,7 @@ from .._bifurcation.shooting import Shooting, pack
 from .._engine.engines import Exact, Smoothed
 from .._engine.exact.options import NonsmoothOptions
 from .._engine.options import SimulationOptions
+from .._engine.simulate import simulate
 from .._physics.forces import DEFAULT_EPS
 
 
@@ -93,7 +95,24 @@ def exact_bistable_range(params=None, *, xi_values=None, ratio_values=None):
                          if ratio_values is None else ratio_values)
 
 
+def simulate_nonsmooth(params, y0, options: NonsmoothOptions | None = None, *,
+                       throw: bool = True, progress: bool = False):
+    """Deprecated: `simulate(params, y0, engine=Exact(NonsmoothOptions.reference()))`;
+    returns its `Observables` (the exact engine's fields filled in)."""
+    _warn("simulate_nonsmooth", "jaxchain.simulate(params, y0, engine=jaxchain.Exact("
+          "jaxchain.NonsmoothOptions.reference()))")
+    options = NonsmoothOptions.reference() if options is None else options
+    return simulate(params, y0, engine=Exact(options), throw=throw, progress=progress)
+
+
+def run_nonsmooth(params, y0, options: NonsmoothOptions, progress: bool = False):
+    """Deprecated: `Exact(options).run(params, y0)`, pure and traceable."""
+    _warn("run_nonsmooth", "jaxchain.Exact(options).run(params, y0)")
+    return Exact(options).run(params, y0, progress)
+
+
 #: The deprecated names, for `jaxchain.__getattr__`.
 DEPRECATED = {f.__name__: f for f in (ShootingOptions, ExactShooting, exact_periodic_orbit,
                                       exact_cycle_problem, limit_cycle_problem,
-                                      floquet_multipliers, exact_bistable_range)}
+                                      floquet_multipliers, exact_bistable_range,
+                                      simulate_nonsmooth, run_nonsmooth)}

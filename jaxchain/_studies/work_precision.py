@@ -17,10 +17,10 @@ import numpy as np
 from .._engine.checks import real_array
 from .._physics.initial import OutOfPhaseExcitation, excited_block
 from .._engine.exact.options import NonsmoothOptions
-from .._engine.exact.solve import simulate_nonsmooth
+from .._engine.simulate import simulate
 from .._engine.solver.controller import CONTROLLERS
 from .._engine.options import SimulationOptions
-from .._engine.engines import Smoothed
+from .._engine.engines import Exact, Smoothed
 from .._physics.model import vector_field
 from .._physics.params import ChainParams
 from .._engine.status import Status
@@ -123,10 +123,10 @@ def reference(scene: Scene, rtol: float = REFERENCE_RTOL, timed: bool = False
     otherwise the time includes compilation)."""
     p, y0 = scene.params(), scene.y0()
     observe, short = _reference_options(scene, rtol)
-    obs, wall = _timed(lambda: simulate_nonsmooth(p, y0, observe))
+    obs, wall = _timed(lambda: simulate(p, y0, engine=Exact(observe)))
     if timed:
-        obs, wall = _timed(lambda: simulate_nonsmooth(p, y0, observe))
-    end = simulate_nonsmooth(p, y0, short)
+        obs, wall = _timed(lambda: simulate(p, y0, engine=Exact(observe)))
+    end = simulate(p, y0, engine=Exact(short))
     return Reference(np.asarray(obs.amplitudes), float(obs.energy),
                      np.asarray(end.y_final)), wall
 

@@ -16,7 +16,7 @@ from .._physics.initial import AbstractInitialCondition, OutOfPhaseExcitation
 from .._engine.engines import AbstractEngine
 from .._physics.params import ChainParams
 from .._physics.record import chain_record
-from .._engine.observables import Observables
+from .._engine.observables import EXACT_FIELDS, Observables
 from .._engine.status import flag_attributes
 from .._setup import VERSION
 from .._physics.stick import STICK_BAND
@@ -98,6 +98,8 @@ def observables_variables(obs: Observables, lead: tuple[str, ...]) -> dict:
                 "y_final": ("component", "osc")}
     out = {}
     for f in dataclasses.fields(obs):
+        if f.name in EXACT_FIELDS:  # the exact engine's own: not in the stores
+            continue
         value = np.asarray(getattr(obs, f.name))
         dims = lead + trailing.get(f.name, ("osc",) if value.ndim > len(lead) else ())
         attrs = {"long_name": LONG_NAMES[f.name]} if f.name in LONG_NAMES else {}

@@ -15,8 +15,8 @@ REFERENCE_TOLERANCES = {"solver": "tsit5", "rtol": 1e-12, "atol": 1e-12}
 
 
 class NonsmoothOptions(AbstractHorizon):
-    """Horizon, tolerances and bookkeeping of a run of the exact engine (`Exact`,
-    `simulate_nonsmooth`): the horizon of `AbstractHorizon` with the event-driven
+    """Horizon, tolerances and bookkeeping of a run of the exact engine (`Exact`):
+    the horizon of `AbstractHorizon` with the event-driven
     run's tolerances and budgets. The defaults are the exact engine's, chosen by
     work-precision on the Fig. 4 scene: as fast as the smoothed engine at its
     defaults, its amplitudes within a few 1e-6 of the reference on periodic
@@ -46,7 +46,7 @@ class NonsmoothOptions(AbstractHorizon):
     - `switch_tol`: at a switch, every oscillator whose guard (relative velocity or
         stick margin mu_st - |f|) lies within `switch_tol` of zero
         switches at that instant. This is how simultaneous and near-simultaneous
-        switches are handled; see `simulate_nonsmooth`.
+        switches are handled; see `Exact`.
     - `chunk_length`: the run advances in chunks of about this length (one
         progress tick each); every chunk end is a step end.
     - `max_steps`: step budget of one chunk.

@@ -7,7 +7,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Float
 
 from ..._physics.custom_types import State
 from ..._physics.initial import AbstractInitialCondition, GivenState
@@ -15,77 +15,10 @@ from ..._physics.params import ChainParams
 from ..compat import checks_as_nan
 from ..observers.base import no_partial_answers
 from ..observables import Observables
-from ..progress import progress_bar
 from ..status import Status, balance_status
 from ..._errors import ValidationError
 from .options import NonsmoothOptions
 from .stepping import OBSERVERS, Carry, chunk, initial_carry, observe_samples, observers_args
-
-
-class NonsmoothObservables(eqx.Module):
-    """What one run of the non-smooth reference observes over [transient, t_end].
-    Batched runs give every field the leading batch axes.
-
-    **Fields:**
-
-    - `amplitudes`: half of peak-to-peak of each x_n, shape (n_osc,). Extrema are
-        taken at turning points located on the dense output, so they are exact to
-        the integration tolerance, with no sampling error.
-    - `energy`: E = 1/2 sum_n A_n^2, eq. (9) of the paper, shape ().
-    - `on_halc`: whether each oscillator is on the HALC: it sticks during the
-        window, `min_slip_speed` = 0 (`sticks` with eps = 0), shape (n_osc,).
-    - `n_halc`: number of oscillators on the HALC, shape ().
-    - `min_slip_speed`: smallest |x_n' - v_d| over the located samples of the
-        window (turning points, switches and chunk ends): exactly 0 for an oscillator that sticks
-        (x_n' = v_d in stick); about the event tolerance at a slip reversal (v_rel
-        passing through 0 without stick), which is therefore no stick; otherwise an
-        upper bound of the true minimum, shape (n_osc,).
-    - `stick_fraction`: fraction of the window each oscillator spends in stick,
-        shape (n_osc,).
-    - `x_max`, `x_min`: extrema of x_n over each half of the window, shape
-        (2, n_osc).
-    - `half_difference`: largest difference between the two halves' extrema, over
-        the oscillators, relative to max(1, max amplitude), shape (). It is at the
-        integration tolerance for a periodic state.
-    - `y_initial`, `y_final`: state at t = 0 and at t_end, shape (2, n_osc).
-    - `modes_final`: modes at t_end (+1/-1 slip, 0 stick), shape (n_osc,).
-    - `friction_work`, `viscous_dissipation`: int sum_n F_n x_n' dt and
-        int sum_n 2 xi x_n'^2 dt over [0, t_end], shape (). Their difference equals
-        the change of `mechanical_energy`.(the energy balance).
-    - `log_time`, `log_osc`, `log_kind`: the last `log_size` switches (time,
-        oscillator index from 0, index into `SWITCH_KINDS`), oldest first, shape
-        (log_size,); unused entries have time NaN and oscillator and kind -1.
-    - `num_events`, `num_steps`: switch instants and integration steps (accepted
-        or rejected) of the whole run, shape ().
-    - `status`: the `Status` of the run (its integer value; `Status.ok` is
-        success, `Status.event_not_resolved` its own failure), shape ().
-
-    The window's observables are those of the smoothed engine's `Extrema`, fed
-    the state at every turning point, switch and chunk end (`observe_samples`). A failed
-    run gives NaN observables and `n_halc` = -1. All quantities are
-    dimensionless (eqs. (4)-(6)).
-    """
-
-    amplitudes: Float[Array, "*batch n_osc"]
-    energy: Float[Array, "*batch"]
-    on_halc: Bool[Array, "*batch n_osc"]
-    n_halc: Int[Array, "*batch"]
-    min_slip_speed: Float[Array, "*batch n_osc"]
-    stick_fraction: Float[Array, "*batch n_osc"]
-    x_max: Float[Array, "*batch 2 n_osc"]
-    x_min: Float[Array, "*batch 2 n_osc"]
-    half_difference: Float[Array, "*batch"]
-    y_initial: Float[Array, "*batch 2 n_osc"]
-    y_final: Float[Array, "*batch 2 n_osc"]
-    modes_final: Float[Array, "*batch n_osc"]
-    friction_work: Float[Array, "*batch"]
-    viscous_dissipation: Float[Array, "*batch"]
-    log_time: Float[Array, "*batch log"]
-    log_osc: Int[Array, "*batch log"]
-    log_kind: Int[Array, "*batch log"]
-    num_events: Int[Array, "*batch"]
-    num_steps: Int[Array, "*batch"]
-    status: Int[Array, "*batch"]
 
 
 def _run(params: ChainParams, y0: State, options: NonsmoothOptions,
@@ -121,18 +54,6 @@ def _run(params: ChainParams, y0: State, options: NonsmoothOptions,
     return extrema, c
 
 
-def run_exact(params: ChainParams, y0: State, options: NonsmoothOptions,
-              progress: bool = False) -> Observables:
-    """Pure, traceable run of the exact engine for one trajectory, in the layout of
-    the smoothed engine (`Observables`): the engine value `Exact` runs it, and
-    `run_lanes` maps it over lanes. An oscillator is on the HALC when it sticks
-    during the window (`min_slip_speed` = 0: no eps)."""
-    extrema, c = _run(params, y0, options, progress)
-    kept = {f.name for f in dataclasses.fields(Observables)}
-    return Observables(**{k: v for k, v in extrema.items() if k in kept},
-                       y_initial=y0, y_final=c.y, num_steps=c.steps, status=c.status)
-
-
 def _switch_log(c: Carry, size: int):
     """The last `size` switches (time, oscillator, kind), oldest first, from the
     run's ring buffer of the last `size` switch instants (`Carry.log_time`, and
@@ -151,11 +72,15 @@ def _switch_log(c: Carry, size: int):
             jnp.full(size, -1).at[slot].set(kind, mode="drop"))
 
 
-def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
-                  progress: bool = False) -> NonsmoothObservables:
-    """The pure, traceable core of `simulate_nonsmooth` for one trajectory: no
+def run_exact(params: ChainParams, y0: State, options: NonsmoothOptions,
+              progress: bool = False) -> Observables:
+    """Pure, traceable run of the exact engine for one trajectory (`Exact.run`): no
     checks and no exceptions (a failure is in `status`), to differentiate or to
-    vmap over a batch.
+    map over lanes (`run_lanes`). Its `Observables` are those of the smoothed
+    engine, in the same layout, with the exact engine's own fields filled in (the
+    switch log, the energy balance, the stick fractions, the halves' extrema). An
+    oscillator is on the HALC when it sticks during the window (`min_slip_speed`
+    = 0: no eps).
 
     Differentiable through every switch with respect to `params` and `y0`: each
     switch time by the implicit function theorem on its guard, each extremum as x
@@ -178,7 +103,7 @@ def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
 
     **Returns:**
 
-    `NonsmoothObservables`, per-oscillator fields of shape (n_osc,).
+    `Observables`, per-oscillator fields of shape (n_osc,).
     """
     size = options.log_size
     extrema, c = _run(params, y0, options, progress)
@@ -190,79 +115,13 @@ def run_nonsmooth(params: ChainParams, y0: State, options: NonsmoothOptions,
     window = options.t_end - options.transient
     stick_fraction = jnp.where(ok, c.stick_time / window, jnp.nan)
     log_time, log_osc, log_kind = _switch_log(c, size)
-    return NonsmoothObservables(
-        amplitudes=extrema["amplitudes"], energy=extrema["energy"],
-        on_halc=extrema["on_halc"], n_halc=extrema["n_halc"],
-        min_slip_speed=extrema["min_slip_speed"], stick_fraction=stick_fraction,
-        x_max=x_max, x_min=x_min, half_difference=half_difference, y_initial=y0,
-        y_final=c.y, modes_final=c.modes, friction_work=c.work[0],
-        viscous_dissipation=c.work[1], log_time=log_time,
-        log_osc=log_osc, log_kind=log_kind, num_events=c.events,
-        num_steps=c.steps, status=c.status,
-    )
-
-
-_run_jit = eqx.filter_jit(run_nonsmooth)
-
-
-def simulate_nonsmooth(params: ChainParams, y0: AbstractInitialCondition | State,
-                       options: NonsmoothOptions = NonsmoothOptions.reference(), *,
-                       throw: bool = True, progress: bool = False
-                       ) -> NonsmoothObservables:
-    """Integrate eq. (5) of the paper with the non-smooth friction law of eqs.
-    (1)-(2), event-driven, and return the observables.
-
-    Each oscillator is in slip (eq. (5) with F = -mu(|v_rel|) sign(v_rel)) or in
-    stick (x_n' = v_d while the force it needs, `stick_force`, stays below mu_st in
-    magnitude). Stick ends when |f_n| reaches mu_st; slip ends when v_rel reaches
-    zero, and the oscillator then sticks if |f_n| < mu_st and otherwise reverses
-    slip direction. This is the switch model of Leine et al. (1998), Nonlinear
-    Dynamics 16, 41-54, without its stick band: stick is exact.
-
-    The run advances one adaptive Runge-Kutta step at a time (diffrax's solver and
-    PID controller, `options.solver` at `options.rtol`), never restarting at a
-    switch: each switch is located on the dense output of the step in which the
-    smallest guard falls through zero, by Chandrupatla's bracketed method (to
-    `options.root_tol`), and the turning points of the oscillators (the extrema
-    from which the amplitudes are taken) are read from the dense output between
-    switches (`jaxchain/_engine/exact/stepping.py`). The states at the turning
-    points, the switches and the chunk ends of the window go to the observers of
-    the smoothed engine (`Extrema`, `observe_chunk`), so both engines compute
-    their amplitudes, extrema and HALC alike. Several oscillators that switch at
-    the same instant (within `options.switch_tol` on their guards) switch
-    together: the force needed to stick depends on displacements only, so each
-    decision is independent of the others.
-
-    Its default options are the reference's (`NonsmoothOptions.reference`: Tsit5
-    at rtol = atol = 1e-12); `engine="exact"` runs the same engine at the exact
-    engine's defaults (`NonsmoothOptions()`).
-
-    **Arguments:**
-
-    - `params`: the chain parameters.
-    - `y0`: an initial condition or a state of shape (2, n_osc).
-    - `options`: `NonsmoothOptions`.
-    - `throw`: raise on failure (default) or return the status.
-    - `progress`: show a tqdm bar, one tick per chunk.
-
-    **Returns:**
-
-    `NonsmoothObservables`, per-oscillator fields of shape (n_osc,).
-
-    **Raises:**
-
-    `ValidationError` for a state of the wrong shape; `RuntimeError` with advice when the
-    run fails and `throw=True`.
-    """
-    if not isinstance(y0, AbstractInitialCondition):
-        y0 = GivenState(y0)
-    y = y0(params)
-    with progress_bar(options.n_chunks(halves=True), "non-smooth reference", progress):
-        obs = _run_jit(params, y, options, progress)
-    status = Status(int(obs.status))
-    if throw and status is not Status.ok:
-        raise RuntimeError(f"{status}: {status.message}")
-    return obs
+    kept = {f.name for f in dataclasses.fields(Observables)}
+    return Observables(
+        **{k: v for k, v in extrema.items() if k in kept}, y_initial=y0, y_final=c.y,
+        num_steps=c.steps, status=c.status, half_difference=half_difference,
+        stick_fraction=stick_fraction,
+        modes_final=c.modes, friction_work=c.work[0], viscous_dissipation=c.work[1],
+        log_time=log_time, log_osc=log_osc, log_kind=log_kind, num_events=c.events)
 
 
 @checks_as_nan
@@ -315,7 +174,8 @@ def _flow(params: ChainParams, y0: State, ts, options: NonsmoothOptions):
 @eqx.filter_jit
 def nonsmooth_switches(params: ChainParams, y0: State, t_end, options: NonsmoothOptions):
     """The switches of the exact switch model from the state `y0` at t = 0 to
-    `t_end` (traced: one program for every horizon), as `run_nonsmooth` logs them.
+    `t_end` (traced: one program for every horizon), as `run_exact` logs them
+    (`Observables.log_time`).
     Pure and traceable, like `nonsmooth_flow`.
 
     **Arguments:**
@@ -341,7 +201,7 @@ def nonsmooth_trajectory(params: ChainParams, y0: AbstractInitialCondition | Sta
                          ts: Float[Array, " m"],
                          options: NonsmoothOptions = NonsmoothOptions.reference()
                          ) -> Float[Array, "m 2 n_osc"]:
-    """The state of the non-smooth reference (`simulate_nonsmooth`) at the times
+    """The state of the non-smooth reference (the exact engine) at the times
     `ts`: the exact switch model, integrated event by event from t = 0 to each
     sample in turn, so that every sample is exact to the integration tolerance
     (no interpolation across a switch). This is the reference from which the

@@ -108,7 +108,7 @@ def observe_chunk(observers, states: tuple, chunk: Chunk, args: PyTree,
                   options: AbstractHorizon) -> tuple:
     """The observers' states after `chunk`: the one route by which both engines,
     the smoothed (`integrate`, a chunk of dense samples) and the non-smooth
-    reference (`run_nonsmooth`, one sample per located event), observe a run."""
+    reference (`Exact.run`, one sample per located event), observe a run."""
     return tuple(o.update(s, chunk, args, options) for o, s in zip(observers, states))
 
 
