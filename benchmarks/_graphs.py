@@ -6,6 +6,7 @@ graph given by its links (the incidence-matrix route) of the same lattice."""
 import numpy as np
 
 import jaxchain as jc
+from jaxchain._physics.params import with_fields
 from jaxchain._engine.solver.registry import DEFAULT_SOLVER
 
 from _common import Row, Settings, fmt_ratio, scene, simulate_once
@@ -17,12 +18,12 @@ def compare_graphs(settings: Settings):
     # the horizon of the ensembles (3000 in the quick run): on the single runs' 300
     # the fixed cost of a call is a fifth of the wall time and hides the step's
     ring, _, options = scene(*settings.ensemble)
-    lattice = jc.with_fields(ring, graph=jc.Graph.lattice(4, 5, "free"))
+    lattice = with_fields(ring, graph=jc.Graph.lattice(4, 5, "free"))
     v = np.linspace(0.0, 5.0, 101)
     law = ring.friction
     table = jc.Tabulated(v=v, mu=np.asarray(law(v)))
-    loaded = jc.with_fields(lattice, mass=np.linspace(0.8, 1.2, 20), friction=table)
-    links = jc.with_fields(ring, graph=jc.Graph.from_links(20, lattice.graph.links))
+    loaded = with_fields(lattice, mass=np.linspace(0.8, 1.2, 20), friction=table)
+    links = with_fields(ring, graph=jc.Graph.from_links(20, lattice.graph.links))
     chains = {"ring of 20": ring, "4 x 5 lattice": lattice,
               "4 x 5 as links (incidence matrix)": links,
               "4 x 5, masses, table": loaded}

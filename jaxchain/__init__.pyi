@@ -8,7 +8,7 @@ section is a page of the API reference (`docs/api/`)."""
 # --- The chain and friction laws: parameters, topology, mistuning, eq. (5) ---
 from ._physics.params import (
     ChainParams as ChainParams, with_parameter as with_parameter,
-    with_fields as with_fields, parameter_name as parameter_name,
+    parameter_name as parameter_name,
     single_oscillator as single_oscillator,
     stack_chains as stack_chains,
 )
@@ -96,10 +96,7 @@ from ._bifurcation.periodic_orbit import (
     periodic_orbit as periodic_orbit, cycle_problem as cycle_problem,
 )
 from ._bifurcation.shooting import Shooting as Shooting
-from ._bifurcation.deflation import (
-    distinct_orbits as distinct_orbits, deflation as deflation,
-    chain_symmetries as chain_symmetries,
-)
+from ._bifurcation.deflation import distinct_orbits as distinct_orbits
 from ._bifurcation.branch_switching import switch_branch as switch_branch
 from ._bifurcation.grazing import (
     stick_slip_grazing as stick_slip_grazing, grazing_curve as grazing_curve,
@@ -109,7 +106,6 @@ from ._bifurcation.sliding import (
     locate_sliding as locate_sliding, SlidingPoint as SlidingPoint,
     sliding_curve as sliding_curve,
 )
-from ._bifurcation.past_sliding import past_sliding_start as past_sliding_start
 from ._bifurcation.continuation import (
     continuation as continuation, ContinuationProblem as ContinuationProblem,
     PseudoArclength as PseudoArclength, ContinuationOptions as ContinuationOptions,

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
+from jaxchain._bifurcation.deflation import chain_symmetries
 # building blocks of `switch_branch` and of the snake's switching, tested on their own
 from jaxchain._bifurcation.branch_switching import (critical_directions,
                                                      switch_by_deflation,
@@ -361,7 +362,7 @@ def test_the_snake_switches_along_the_axes_of_the_orbit_s_symmetry():
                                "z": jnp.zeros(8).at[6].set(1.0).at[7].set(1.0)})
     starts = internal("snake switch along axes")(problem, branch, point, jc.PseudoArclength())
     assert len(starts) == 2
-    perms = np.asarray(jc.chain_symmetries(ring))
+    perms = np.asarray(chain_symmetries(ring))
     for new, direction in starts:
         x = np.asarray(new.u0[:3])
         assert np.max(np.abs(residual(new.u0, new.params))) < 1e-9

@@ -12,6 +12,7 @@ import xarray as xr
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
+from jaxchain._bifurcation.deflation import chain_symmetries, deflation
 
 from helpers import internal, reference_rhs, replace_internal
 
@@ -53,7 +54,7 @@ def scipy_return(u) -> float:
 def copies_distance(a, b) -> float:
     """The deflation distance of orbit b from orbit a and its symmetric copies."""
     problem = jc.cycle_problem(_orbit(a), SHOOTING)
-    return float(jc.deflation(problem, [a]).distances(b)[0])
+    return float(deflation(problem, [a]).distances(b)[0])
 
 
 def _orbit(u):
@@ -115,13 +116,13 @@ def test_the_distance_from_an_orbit_is_to_the_nearest_point_of_its_copies(simula
     and far from both; its gradient against central differences."""
     one = packed(simulated[1].y0, simulated[1].period)
     problem = jc.cycle_problem(simulated[1], SHOOTING)
-    operator = jc.deflation(problem, [one], n_samples=64)
+    operator = deflation(problem, [one], n_samples=64)
     samples = np.reshape(np.asarray(operator.curves[0]), (64, 2, 3))
 
     def written_out(u):
         y = np.asarray(u[:-1])
         best = np.inf
-        for perm in np.asarray(jc.chain_symmetries(RING)):
+        for perm in np.asarray(chain_symmetries(RING)):
             a = np.reshape(samples[:, :, perm], (64, 6))
             edge = np.roll(a, -1, axis=0) - a
             t = np.clip(np.sum((y - a) * edge, -1) / np.sum(edge**2, -1), 0.0, 1.0)
@@ -143,9 +144,9 @@ def test_the_distance_from_an_orbit_is_to_the_nearest_point_of_its_copies(simula
 def test_symmetries_of_the_ring_and_bad_arguments(simulated):
     """The dihedral group on the homogeneous ring (2N distinct permutations), the
     identity alone on a free line; clear errors for bad arguments."""
-    perms = np.asarray(jc.chain_symmetries(jc.ChainParams(n_osc=5)))
+    perms = np.asarray(chain_symmetries(jc.ChainParams(n_osc=5)))
     assert perms.shape == (10, 5) and {tuple(sorted(p)) for p in perms} == {tuple(range(5))}
-    assert np.asarray(jc.chain_symmetries(jc.ChainParams(n_osc=5, boundary="free"))).shape \
+    assert np.asarray(chain_symmetries(jc.ChainParams(n_osc=5, boundary="free"))).shape \
         == (1, 5)
     problem = jc.cycle_problem(simulated[1], SHOOTING)
     with pytest.raises(ValueError, match="count"):
@@ -153,7 +154,7 @@ def test_symmetries_of_the_ring_and_bad_arguments(simulated):
     with pytest.raises(ValueError, match="capacity"):
         jc.distinct_orbits(problem, problem.u0, count=2, capacity=0)
     with pytest.raises(ValueError, match="n_samples"):
-        jc.deflation(problem, n_samples=4)
+        deflation(problem, n_samples=4)
     with pytest.raises(ValueError, match="deflate"):
         jc.localized_branches(RING, (1,), deflate=-1)
 

@@ -74,8 +74,6 @@ def test_sliding_location_needs_exact_orbits_with_a_stick_phase():
     problem = jc.ContinuationProblem(residual=lambda u, p: u, u0=jnp.zeros(3), params=ONE)
     with pytest.raises(ValueError, match="cycle_problem"):
         jc.locate_sliding(problem, jnp.zeros(4))
-    with pytest.raises(ValueError, match="cycle_problem"):
-        jc.past_sliding_start(problem, jnp.zeros(4))
     with pytest.raises(ValueError, match="held"):
         jc.NonsmoothOptions(held=(-1,))
     with pytest.raises(ValueError, match="period"):
@@ -183,29 +181,51 @@ def test_exact_cycles_continued_in_v_d_are_the_scipy_cycles_up_to_the_existence_
 
 
 @pytest.fixture(scope="module")
-def through_the_limit(guess):
-    """The continuation of the exact cycle in v_d from 1.5 towards 0.05 beyond the
-    existence limit (`continuation`), where the branch ends (its corrector fails) at
-    a sliding point, and on through it from the branch's last orbits
-    (`past_sliding_start`, the last of them first): its two pieces, each (problem,
-    branch, bifurcations)."""
+def followed_past_the_limit(guess):
+    """The exact cycle followed in v_d from 1.5 towards 0.05 beyond the existence
+    limit (`follow_branch`, one way): the branch ends (its corrector fails) at a
+    sliding point, and goes on through it from the branch's last orbits onto the
+    cycle without stick (`past_sliding_start`), down to the Hopf point, where it is
+    cut."""
     x_max, (_, period) = guess
     orbit = jc.periodic_orbit(ONE, (jnp.array([[x_max], [0.0]]), period), EXACT)
     limit = jc.stick_slip_existence_limit(ONE)
     options = jc.ContinuationOptions(ds=0.05, ds_max=0.1, p_min=1.0, p_max=limit + 0.05,
                                      max_points=30)
-    algorithm, problem = jc.PseudoArclength(), jc.cycle_problem(orbit, EXACT)
-    branch = jc.continuation(problem, algorithm, options)
-    bifs = jc.locate_bifurcations(problem, branch, algorithm)
-    ok = np.asarray(branch.converged)
-    assert branch.stop.name == "newton_failed"
+    return jc.follow_branch(orbit, EXACT, options, directions=(1,))
+
+
+@pytest.fixture(scope="module")
+def through_the_limit(followed_past_the_limit):
+    """The two continuations of `followed_past_the_limit`, each (problem, branch,
+    bifurcations): up to the sliding point, and on past it."""
+    return list(followed_past_the_limit.pieces)
+
+
+@pytest.mark.numerics
+def test_the_followed_branch_ends_at_a_sliding_point_and_is_cut_at_the_hopf_point(
+        followed_past_the_limit, through_the_limit):
+    """`follow_branch` goes through the sliding point where the stick-slip
+    continuation's corrector fails (the first piece stops `newton_failed` with a
+    sliding point among its last two orbits), onto a second piece, and cuts the
+    branch at the Hopf point (stop "hopf"): its bifurcations are the sliding point at
+    the closed-form existence limit and the Hopf point at its closed form (both to
+    1e-6), in the order of the branch, and every kept point lies between them or
+    before the sliding point."""
+    followed = followed_past_the_limit
+    (_, first, bifs), _ = through_the_limit
+    ok = np.asarray(first.converged)
+    assert first.stop.name == "newton_failed"
     assert [b for b in bifs if b.kind == "sliding" and b.after >= int(ok.sum()) - 2]
-    last = [jnp.append(u, p) for u, p in zip(branch.u[ok][-3:], branch.p[ok][-3:])]
-    start = next(s for z in last[::-1]
-                 for s in [jc.past_sliding_start(problem, z, algorithm)] if s is not None)
-    new, tangent = start
-    past = jc.continuation(new, algorithm, options, tangent=tangent)
-    return [(problem, branch, bifs), (new, past, jc.locate_bifurcations(new, past, algorithm))]
+    assert followed.stops == {"end": "hopf"}
+    kinds = [b.kind for b in followed.bifurcations]
+    assert kinds[-1] == "Hopf" and "sliding" in kinds
+    sliding = next(b for b in followed.bifurcations if b.kind == "sliding")
+    hopf = followed.bifurcations[-1]
+    limit = float(jc.stick_slip_existence_limit(ONE))
+    closed_form = float(jc.hopf_vd_analytic(ONE))
+    assert abs(sliding.p - limit) < 1e-6 and abs(hopf.p - closed_form) < 1e-6
+    assert followed.p.max() < limit and followed.p.min() > closed_form
 
 
 @pytest.fixture(scope="module")

@@ -29,8 +29,10 @@ EXACT = jc.Shooting(jc.Exact().for_orbits())
 @pytest.fixture(scope="module")
 def ring8(tmp_path_factory):
     out = tmp_path_factory.mktemp("ring8")
+    # two worker processes: the branches are the same (each is the same computation),
+    # and the study run's other tests leave a core idle for much of this one
     argv = ["snake", "--engine", "exact", "--n-osc", str(N), "--sites", "all",
-            "--deflate", "1", "--out", str(out), "--json", "--no-progress"]
+            "--deflate", "1", "--workers", "2", "--out", str(out), "--json", "--no-progress"]
     assert jc.main(argv) == 0
     doc = json.loads((out / "snake.json").read_text())
     return doc, {b["label"]: b for b in doc["branches"]}, out / "snake"
