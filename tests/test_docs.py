@@ -321,7 +321,7 @@ def _layer_order(paths) -> list[str]:
 
 
 def _module_path(dotted: str) -> str:
-    """`jaxchain._engine.engines` as the file that holds it."""
+    """A dotted module name (the engines' module, say) as the file that holds it."""
     path = ROOT / dotted.replace(".", "/")
     return (path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
             ).relative_to(ROOT).as_posix()

@@ -199,7 +199,7 @@ def test_a_fit_at_another_eps_runs_the_compiled_program_of_the_first(clean_recor
             warnings.simplefilter("ignore")
             result = jc.identify(clean_records[1:2], RIG, fit=("xi",),
                                  options=jc.IdentifyOptions(engine=engine, weights=(1.0,)))
-        assert result.converged and result.eps == eps
+        assert result.converged and float(result.engine.eps) == eps
         return result.values[0] / TRUE["xi"] - 1
 
     first = xi_error(1e-4)

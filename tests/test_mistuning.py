@@ -12,7 +12,6 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from jaxchain._studies.mistuning.summary import _halc_correlation as halc_correlation, envelope_decay
 
 from helpers import assert_usage_error, scipy_stick_slip_cycle
 
@@ -173,35 +172,71 @@ def test_resume_after_a_lost_chain_gives_the_same_study(study, tmp_path, capsys)
     assert again == first
 
 
-def test_envelope_decay_recovers_an_exponential_profile():
-    n, kappa = 20, 1.7
-    m = np.minimum(np.arange(n), n - np.arange(n))
-    profile = np.roll(2.0 * np.exp(-kappa * m), 7)
-    assert abs(envelope_decay(profile[None], np.array([1]))[0] - kappa) < 1e-12
-    assert np.isnan(envelope_decay(profile[None], np.array([2]))[0])
+@pytest.mark.study
+def test_envelope_decay_is_the_least_squares_decay_of_the_single_site_state(study):
+    """The study's `envelope_decay`: kappa of log A(m) = c - kappa m by least squares
+    over m = 1, 2, 3 cells on both sides of the largest amplitude (the sides
+    averaged), from the staircase's k = 1 state at v_d = 1.5; NaN where that run
+    did not end with one oscillator on the HALC."""
+    ds = xr.load_dataset(study / "mistuning.nc", engine="h5netcdf")
+    amplitudes = ds["staircase_amplitudes"].sel(v_d=1.5, k=1).values  # (sigma, draw, osc)
+    n_halc = ds["staircase_n_halc"].sel(v_d=1.5, k=1).values
+    m = np.array([1.0, 2.0, 3.0])
+    found = 0
+    for index in np.ndindex(n_halc.shape):
+        a, kappa = amplitudes[index], float(ds["envelope_decay"].values[index])
+        if n_halc[index] != 1 or not np.all(np.isfinite(a)):
+            assert np.isnan(kappa)
+            continue
+        s, n = int(np.argmax(a)), a.size
+        log_a = 0.5 * (np.log(a[(s - m.astype(int)) % n]) + np.log(a[(s + m.astype(int)) % n]))
+        slope = np.sum((m - m.mean()) * (log_a - log_a.mean())) / np.sum((m - m.mean()) ** 2)
+        assert kappa == pytest.approx(-slope, rel=1e-10, abs=1e-12)
+        found += 1
+    assert found > 0
+
+
+def _synthetic_study(dev, on, n_halc) -> xr.Dataset:
+    """A `mistuning_study` dataset holding the random starts `on`, `n_halc` of the
+    chains of deviations `dev` (sigma 0 and 2, one belt speed), everything else
+    empty: what `study_summary` reads."""
+    n_sigma, n_draws, n = dev.shape
+    nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
+    stair = ("sigma", "draw", "v_d", "k")
+    return xr.Dataset(
+        {"deviations": (("sigma", "draw", "osc"), dev),
+         "basin_on_halc": (("sigma", "draw", "v_d", "sample", "osc"), on),
+         "basin_n_halc": (("sigma", "draw", "v_d", "sample"), n_halc),
+         "basin_status": (("sigma", "draw", "v_d", "sample"), np.zeros_like(n_halc)),
+         "staircase_n_halc": (stair, np.full((n_sigma, n_draws, 1, n), -1)),
+         "staircase_status": (stair, np.full((n_sigma, n_draws, 1, n),
+                                             int(jc.Status.not_run))),
+         **{name: (("sigma", "draw"), nan(n_sigma, n_draws))
+            for name in ("hopf_vd", "upper_edge", "fold_vd", "fold_site", "envelope_decay")},
+         "site_edge": (("sigma", "draw", "osc"), nan(n_sigma, n_draws, n)),
+         "state_gamma": ("sigma", nan(n_sigma)), "state_gamma_error": ("sigma", nan(n_sigma))},
+        coords={"sigma": [0.0, 2.0], "v_d": [1.5], "k": np.arange(1, n + 1)},
+        attrs={"eta_c": 0.01, "state_period": np.nan, "state_omega2": np.nan,
+               "sliding_damping": np.nan, "state_damped_decay": np.nan,
+               "edge_resolution": np.nan, "n_draws": n_draws, "n_samples": on.shape[3],
+               "t_end": 1.0, "transient": 0.5})
 
 
 def test_halc_correlation_sees_which_oscillators_vibrate():
     """Synthetic study: the oscillators with delta_n > 0 are on the HALC. The
-    correlation is positive, and their mean deviation is that of the positive
-    half of the draws."""
+    correlation (`study_summary`'s `halc_deviation_correlation`) is positive, and
+    their mean deviation is that of the positive half of the draws."""
     rng = np.random.default_rng(0)
     dev = 0.02 * rng.standard_normal((2, 3, 6))
     dev[0] = np.nan
     on = np.broadcast_to((dev > 0)[:, :, None, None, :], (2, 3, 1, 4, 6))
     n_halc = on.sum(-1)
-    ds = xr.Dataset({"deviations": (("sigma", "draw", "osc"), dev),
-                     "basin_on_halc": (("sigma", "draw", "v_d", "sample", "osc"), on),
-                     "basin_n_halc": (("sigma", "draw", "v_d", "sample"), n_halc),
-                     "basin_status": (("sigma", "draw", "v_d", "sample"),
-                                      np.zeros_like(n_halc))},
-                    coords={"sigma": [0.0, 2.0], "v_d": [1.5]}, attrs={"eta_c": 0.01})
-    out = halc_correlation(ds)
-    assert np.isnan(out["correlation"][0, 0])
-    assert out["correlation"][1, 0] > 0.5
+    rows = jc.study_summary(_synthetic_study(dev, on, n_halc))["sigmas"]
+    assert np.isnan(rows[0]["halc_deviation_correlation"][0])
+    assert rows[1]["halc_deviation_correlation"][0] > 0.5
     keep = (n_halc[1, :, 0, 0] > 0) & (n_halc[1, :, 0, 0] < 6)
     expected = dev[1][keep][dev[1][keep] > 0].mean() / 0.02
-    assert abs(out["mean_deviation_on_halc"][1, 0] - expected) < 1e-12
+    assert abs(rows[1]["mean_deviation_on_halc_over_sigma"][0] - expected) < 1e-12
 
 
 def test_bad_options(tmp_path, capsys):

@@ -9,7 +9,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 
@@ -26,26 +25,18 @@ SCRIPT = next((p for p in (Path(sys.executable).parent / "jaxchain", shutil.whic
 #: The file beside the lock that names its holder.
 HOLDER = ".jaxchain-lock.json"
 
-#: A process that holds the lock of the folder argv[1], as a command does, says
-#: "held", and lets it go after argv[2] seconds (or never, until killed).
-_HOLD = textwrap.dedent("""
-    import sys, time
-    from pathlib import Path
-    from jaxchain._cli.folder_lock import lock_folder, release_folder
-
-    folder = Path(sys.argv[1])
-    folder.mkdir(parents=True, exist_ok=True)
-    lock_folder(folder, "jaxchain sweep --out held-by-the-test")
-    print("held", flush=True)
-    time.sleep(float(sys.argv[2]))
-    release_folder(folder)
-""")
+#: A command that holds its folder while it runs (a localized run at v_d = 1.2, its
+#: results beside those of `TINY`), as a user starts it.
+_HOLD = ["import sys, jaxchain; sys.exit(jaxchain.main(sys.argv[1:]))", "localized",
+         "--n-osc", "2", "--vd", "1.2", "--transient", "10", "--no-progress"]
 
 
-def _holder(folder: Path, seconds: float = 600.0) -> subprocess.Popen:
-    proc = subprocess.Popen([sys.executable, "-c", _HOLD, str(folder), str(seconds)],
-                            stdout=subprocess.PIPE, text=True)
-    assert proc.stdout.readline().strip() == "held"
+def _holder(folder: Path, t_end: float = 1e5) -> subprocess.Popen:
+    """A command into `folder` of horizon `t_end`, once it holds the folder's lock."""
+    proc = subprocess.Popen([sys.executable, "-c", *_HOLD, "--t-end", f"{t_end:g}",
+                             "--out", str(folder)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    _wait_for(folder / HOLDER, proc)
     return proc
 
 
@@ -91,7 +82,7 @@ def test_the_lock_of_a_killed_command_blocks_nothing(tmp_path, capsys):
     try:
         assert jc.main([*TINY, "--out", str(out)]) == 2
         err = _one_line_error(capsys)
-        assert f"pid {holder.pid}" in err and "held-by-the-test" in err, err
+        assert f"pid {holder.pid} (jaxchain localized --out {out}" in err, err
     finally:
         os.kill(holder.pid, signal.SIGKILL)
         holder.wait()
@@ -102,10 +93,11 @@ def test_the_lock_of_a_killed_command_blocks_nothing(tmp_path, capsys):
 
 def test_wait_waits_for_the_holder_to_end(tmp_path, capsys):
     out = tmp_path / "out"
-    holder = _holder(out, seconds=3.0)
+    holder = _holder(out, t_end=300.0)
     try:
         assert jc.main([*TINY, "--out", str(out), "--wait"]) == 0
-        assert holder.poll() is not None, "ran while the folder was held"
+        # the holder writes its results before it lets the folder go
+        assert (out / "localized_vd1.2.nc").exists(), "ran while the folder was held"
     finally:
         holder.kill()
     err = capsys.readouterr().err

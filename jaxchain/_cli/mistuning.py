@@ -17,7 +17,7 @@ from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
                      add_scheduler_option, add_solver_options, add_vd_option, cluster_client,
                      comma_list, positive_float, positive_int, report, show_progress,
-                     simulation_options, smoothed_only)
+                     simulation_options, smoothed_only, engine_of)
 
 HELP = "random mistuning against the localized states (Anderson meets friction)"
 DESCRIPTION = """\
@@ -125,10 +125,11 @@ def run(args) -> None:
     with cluster_client(args) as client:
         study = mistuning_study(
             params, args.sigmas, args.draws, v_d=args.vd, n_samples=args.samples,
-            key=args.sample_seed, n_folds=args.folds, solver=args.solver,
+            key=args.sample_seed, n_folds=args.folds,
+            engine=engine_of(args, simulation_options(args), params),
             options=simulation_options(args),
             edge_options=SimulationOptions(t_end=args.edge_t_end,
-                                           transient=0.8 * args.edge_t_end), eps=args.eps,
+                                           transient=0.8 * args.edge_t_end),
             out=args.out, resume=args.resume or outputs.again,
             overwrite=args.overwrite, client=client,
             progress=show_progress(args))
@@ -182,7 +183,8 @@ def _run_design(args) -> None:
     params = chain_params(args, args.period, v_d=1.5)
     outputs = Outputs(args, data=["design.json"], figures=["design"])
     start = time.perf_counter()
-    result = design_study(params, budget=args.budget, chain_n_osc=args.n_osc, eps=args.eps,
+    result = design_study(params, budget=args.budget, chain_n_osc=args.n_osc,
+                          engine=engine_of(args, simulation_options(args), params),
                           progress=show_progress(args))
     result |= {"wall_time_s": time.perf_counter() - start, "chain": chain_record(params)}
     outputs.figure(plot_mistuning_design(result), "design")

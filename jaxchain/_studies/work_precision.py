@@ -285,7 +285,7 @@ def _row_settings(scene: Scene, method: str, eps: float, rtol: float, *,
 
 def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
                    solvers: Iterable[str] = WP_SOLVERS, rtols: Iterable[float] = WP_RTOLS,
-                   eps: Iterable[float] = WP_EPS, *, scipy: bool = True,
+                   eps_values: Iterable[float] = WP_EPS, *, scipy: bool = True,
                    reference_points: bool = True, max_steps: int = 100_000,
                    scipy_budget_s: float = 60.0, progress: Callable = lambda msg: None
                    ) -> list[dict]:
@@ -317,7 +317,9 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
     - `solvers`: names in `SOLVERS`, each optionally followed by "/" and a
         step-size controller of `CONTROLLERS` ("ros34pw2/diffrax"); without one,
         the default controller.
-    - `rtols`, `eps`: the grid; atol = rtol / 100.
+    - `rtols`, `eps_values`: the grid; atol = rtol / 100. `eps_values` are the
+        smoothing velocities of the smoothed engine (`Smoothed.eps`) that the study
+        compares: its axis, not a setting of one run.
     - `scipy`, `reference_points`: include the outside points.
     - `max_steps`: step budget per chunk of 250 time units.
     - `scipy_budget_s`: wall-time budget of one scipy run.
@@ -331,14 +333,14 @@ def work_precision(path: Path, scenes: Iterable[str] = tuple(SCENES),
     **Raises:**
 
     Before the CSV is opened or anything runs: `ValidationError` naming the argument
-    for no scene or solver, an unknown scene or solver, an empty `rtols` or `eps`,
-    an rtol outside (0, 1), an eps that is not a finite number > 0, a `max_steps`
-    that is not an integer >= 1 or a `scipy_budget_s` that is not a finite number
-    > 0; `TypeError` for a grid that is not a list of real numbers, a `path` that
+    for no scene or solver, an unknown scene or solver, an empty `rtols` or
+    `eps_values`, an rtol outside (0, 1), an eps that is not a finite number > 0, a
+    `max_steps` that is not an integer >= 1 or a `scipy_budget_s` that is not a
+    finite number > 0; `TypeError` for a grid that is not a list of real numbers, a `path` that
     is not a path or a `progress` that cannot be called.
     """
-    scenes, solvers, rtols, eps = _check(path, scenes, solvers, rtols, eps, max_steps,
-                                         scipy_budget_s, progress)
+    scenes, solvers, rtols, eps = _check(path, scenes, solvers, rtols, eps_values,
+                                         max_steps, scipy_budget_s, progress)
     rows: list[dict] = []
     with CsvStore(path, COLUMNS) as store:
         for scene_name in scenes:
@@ -370,7 +372,7 @@ def _check(path, scenes, solvers, rtols, eps, max_steps, scipy_budget_s, progres
                                   f"followed by /CONTROLLER with CONTROLLER one of "
                                   f"{sorted(CONTROLLERS)}, got {name!r}")
     rtols = _grid(rtols, "rtols", 1.0, "numbers in (0, 1)")
-    eps = _grid(eps, "eps", math.inf, "finite numbers > 0")
+    eps = _grid(eps, "eps_values", math.inf, "finite numbers > 0")
     check_count("max_steps", max_steps)
     if isinstance(scipy_budget_s, bool) \
             or not isinstance(scipy_budget_s, (int, float, np.integer, np.floating)) \
@@ -398,7 +400,7 @@ def _names(names, what: str) -> list:
 
 
 def _grid(values, name: str, below: float, accepted: str) -> list:
-    """The values of one axis of the grid (`rtols` or `eps`), as given.
+    """The values of one axis of the grid (`rtols` or `eps_values`), as given.
 
     **Raises:**
 

@@ -304,10 +304,8 @@ class Identification:
 
     - `chain`: the fitted chain (`ChainParams`: physics only, no smoothing).
     - `engine`: the fitted model, the engine value (`IdentifyOptions.engine`):
-        `Smoothed` with its eps, or `Exact`.
-    - `eps`: the smoothing velocity of the fitted smoothed model (the engine's
-        eps), dimensionless: the values are those of the smoothed model at this
-        eps; None for the exact engine.
+        `Smoothed` with its eps (the values are those of the smoothed model at
+        that eps), or `Exact`.
     - `labels`: the fitted parameters (a vector parameter gets one label per
         entry), shape (P,).
     - `values`, `standard_errors`: their values and standard errors, shape (P,).
@@ -337,7 +335,6 @@ class Identification:
 
     chain: ChainParams
     engine: AbstractEngine
-    eps: float | None
     labels: tuple
     values: np.ndarray
     standard_errors: np.ndarray
@@ -370,8 +367,8 @@ class Identification:
         **Arguments:** `quantity`: a function of a `ChainParams` returning a scalar
         or an array, differentiable by `jax.jacfwd` (a Hopf point, an existence
         limit, mu on a grid of speeds). The chain holds no eps: a quantity of the
-        smoothed model gives its eps itself (`eps` of this result for the fitted
-        model's).
+        smoothed model gives its eps itself (`engine.eps` of this result for the
+        fitted model's).
 
         **Returns:** (value, standard error), arrays of the quantity's shape."""
         value, g = _value_and_jacobian(quantity, self.unknowns, self.base,
@@ -387,7 +384,7 @@ class Identification:
                               for label, v, s in zip(self.labels, self.values,
                                                      self.standard_errors)},
                "correlation": self.correlation.tolist(), "engine": self.engine.name,
-               "eps": self.eps,
+               "eps": self.engine.attributes().get("eps"),
                "sigma": self.sigma,
                "rss": self.rss, "n_data": self.n_data, "n_free": self.n_free,
                "aic": self.aic, "bic": self.bic, "converged": self.converged,
@@ -609,7 +606,7 @@ def _result(problem: _Problem, records, chain, answer: _Answer, noise, converged
         off_se = np.concatenate([[0.0], np.sqrt(np.maximum(np.diag(cov_u)[cov_u.shape[0] - k:],
                                                            0.0))])
     return Identification(
-        chain=fitted, engine=options.engine, eps=options.engine.attributes().get("eps"),
+        chain=fitted, engine=options.engine,
         labels=problem.unknowns.labels,
         values=values, standard_errors=se,
         covariance=cov, correlation=corr, offsets=off, offset_errors=off_se,

@@ -8,12 +8,10 @@ import numpy as np
 
 from ..._physics.chain import require_line
 from ..._bifurcation.periodic_orbit import cycle_method, periodic_orbit
-from ..._engine.engines import Smoothed, as_engine
+from ..._engine.engines import AbstractEngine, Smoothed, as_engine
 from ..._engine.options import SimulationOptions
-from ..._physics.forces import DEFAULT_EPS
 from ..._physics.params import chain_or_default, ChainParams, with_fields, with_parameter
 from ..._engine.simulate import simulate
-from ..._engine.solver.registry import DEFAULT_SOLVER, SOLVERS
 from .pattern_design import design_problems, intentional_mistuning, pattern_folds
 from .edges import upper_edges
 from ..._engine.status import Status
@@ -112,7 +110,7 @@ def _ring_like(params: ChainParams, n_osc: int, stiffness) -> ChainParams:
 
 def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
                  n_random: int = 8, steps: int = 15, chain_n_osc: int = 20,
-                 eps=DEFAULT_EPS, progress: bool = True) -> dict:
+                 engine: AbstractEngine = Smoothed(), progress: bool = True) -> dict:
     """Intentional mistuning by gradient (`intentional_mistuning`) on a ring of
     `params.n_osc` (one period of the pattern), against the alternating A-B
     pattern and `n_random` random draws of the same budget:
@@ -125,9 +123,9 @@ def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
     - the patterns tiled on a ring of `chain_n_osc` and their upper edges by
       simulation (`upper_edges`), with random draws of that ring's length.
 
-    Every fold, orbit and simulation is of the model smoothed at `eps` (the
-    smoothing velocity of tanh(v_rel/eps), a finite number > 0, shape (),
-    dimensionless; the smoothed engine's `Smoothed.eps`, `DEFAULT_EPS` by default).
+    Every fold, orbit and simulation is of the model of `engine`, a smoothed
+    engine (`Smoothed()` by default: eq. (5) smoothed at eps = 1e-3; the upper
+    edges are simulated by it, the folds' orbits by its flow made `for_orbits`).
 
     **Returns:**
 
@@ -135,21 +133,23 @@ def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
 
     **Raises:**
 
-    As `intentional_mistuning`.
+    As `intentional_mistuning`; `ValidationError` for an engine that does not
+    smooth (the exact one: the folds are checked by simulations of the smoothed
+    model).
     """
     params = chain_or_default(params, n_osc=4)
     require_line(params, "the mistuning design")
-    eps = as_engine("smoothed", eps=eps).eps
+    engine = as_engine(engine).as_smoothed("the design study")
     n = params.n_osc
-    start = design_problems(params, budget, eps=eps)
+    start = design_problems(params, budget, engine=engine)
     problem, solutions, homogeneous = start
-    out = {"budget": budget, "n_osc": n, "eps": float(eps), "homogeneous_fold": homogeneous,
+    out = {"budget": budget, "n_osc": n, "eps": float(engine.eps), "homogeneous_fold": homogeneous,
            "designs": {}}
     tiled = {"homogeneous": np.zeros(chain_n_osc)}
     for name, sense, zero_mean in (("lower", "lower", True), ("retune", "lower", False),
                                    ("raise", "raise", True)):
         d = intentional_mistuning(params, budget=budget, sense=sense, zero_mean=zero_mean,
-                                  steps=steps, start=start, eps=eps, progress=progress)
+                                  steps=steps, start=start, engine=engine, progress=progress)
         site = int(np.argmax(np.asarray(d.folds)))
         pattern = np.asarray(d.pattern)
         out["designs"][name] = {
@@ -175,8 +175,7 @@ def design_study(params: ChainParams | None = None, *, budget: float = 0.05,
     names = list(tiled) + [f"random {i}" for i in range(n_random)]
     patterns = list(tiled.values()) + list(_random_patterns(chain_n_osc, budget, n_random, 1))
     chains = [_ring_like(params, chain_n_osc, 1.0 + p) for p in patterns]
-    edges = upper_edges(chains, SOLVERS[DEFAULT_SOLVER](), steps=8, eps=eps,
-                        progress=progress)
+    edges = upper_edges(chains, engine=engine, steps=8, progress=progress)
     out["chain_edges"] = {"n_osc": chain_n_osc, "resolution": edges.attrs["resolution"],
                           "edge": {k: float(np.nanmax(e)) for k, e in
                                    zip(names, edges["edge"].values)}}

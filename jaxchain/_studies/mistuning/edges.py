@@ -18,10 +18,10 @@ from ..._bifurcation.continuation import ContinuationOptions, PseudoArclength, c
 from ..._bifurcation.fold import FoldPoint, fold_point
 from ..._bifurcation.periodic_orbit import cycle_problem, periodic_orbit
 from ..._bifurcation.shooting import Shooting
-from ..._engine.engines import as_engine
+from ..._engine.engines import AbstractEngine, Smoothed
+from ..._engine.horizon import AbstractHorizon
 from ..._engine.lanes import run_lanes
 from ..._engine.options import SimulationOptions
-from ..._physics.forces import DEFAULT_EPS
 from ..._physics.initial import OutOfPhaseExcitation, initial_states
 from ..._physics.params import ChainParams, stack_chains, with_parameter
 from ..snake.starts import _turning_point
@@ -53,25 +53,24 @@ def _site_excitation(n_osc: int, sites) -> OutOfPhaseExcitation:
                                 velocity=jnp.zeros(sites.size), base_sign=-1.0)
 
 
-def _vibrates(chains, v, solver, options, eps, bar) -> np.ndarray:
+def _vibrates(chains, v, engine: AbstractEngine, bar) -> np.ndarray:
     """Whether the single-site state of each (chain, site) lane still has an
     oscillator on the HALC at t_end, at belt speeds v of shape (n_chains, n_osc),
-    by the smoothed engine at `eps`."""
+    by `engine`."""
     n_chains, n_osc = v.shape
     lanes = stack_chains([with_parameter(c, "v_d", float(v[i, j]))
                           for i, c in enumerate(chains) for j in range(n_osc)])
     y0 = initial_states(lanes, _site_excitation(n_osc, np.tile(np.arange(n_osc), n_chains)))
     out = run_lanes(lanes, np.asarray(y0),
-                    engine=as_engine("smoothed", solver, options, lanes, eps=eps),
-                    progress=bar)
+                    engine=engine, progress=bar)
     status = np.asarray(out.status).reshape(n_chains, n_osc)
     n_halc = np.asarray(out.n_halc).reshape(n_chains, n_osc)
     return np.where(status == Status.ok, n_halc > 0, np.nan)
 
 
-def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: float = 1.9,
-                steps: int = 7, options: SimulationOptions = EDGE_OPTIONS,
-                eps=DEFAULT_EPS, store: str | Path | None = None,
+def upper_edges(chains: list[ChainParams], *, engine: AbstractEngine = Smoothed(),
+                low: float = 1.7, high: float = 1.9, steps: int = 7,
+                options: AbstractHorizon = EDGE_OPTIONS, store: str | Path | None = None,
                 progress: bool = True) -> xr.Dataset:
     """For each chain and each oscillator n, the largest belt speed at which the
     single-site localized state at n (eq. (8), k = 1) survives direct simulation:
@@ -84,12 +83,13 @@ def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: fl
     **Arguments:**
 
     - `chains`: the chains (one n_osc), each at any v_d.
-    - `solver`: a diffrax solver.
+    - `engine`: the engine of the simulations (`Smoothed()` by default: eq. (5)
+        smoothed at its eps, by its solver and tolerances).
     - `low`, `high`: the bracket of belt speeds; a lane that does not vibrate at
         `low`, or still vibrates at `high`, gets NaN.
     - `steps`: bisection steps after the ends: resolution (high - low) / 2^steps.
-    - `options`: `SimulationOptions` of each simulation.
-    - `eps`: the smoothed engine's smoothing velocity (`Smoothed.eps`), > 0.
+    - `options`: the horizon of each simulation (t_end, transient, chunk_length:
+        `EDGE_OPTIONS` by default); the engine's other settings are kept.
     - `store`: a netCDF file holding the bracket after each step, from which a
         run of the same settings continues.
     - `progress`: a tqdm bar over the simulations.
@@ -102,18 +102,18 @@ def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: fl
 
     **Raises:**
 
-    `ValidationError` unless 0 < low < high, steps >= 1 and eps > 0.
+    `ValidationError` unless 0 < low < high and steps >= 1.
     """
     import xarray as xr
 
     if not 0 < low < high:
         raise ValidationError(f"low, high: need 0 < low < high, got {low!r}, {high!r}")
     check_count("steps", steps, 1)
-    eps = float(as_engine("smoothed", eps=eps).eps)
+    engine = engine.with_horizon(options)
     n_chains, n_osc = len(chains), chains[0].n_osc
     settings = dict(chains=[{f.name: getattr(c, f.name) for f in dataclasses.fields(c)
                               if f.name != "v_d"} for c in chains],
-                    solver=solver, eps=eps, low=low, high=high, steps=steps, options=options)
+                    engine=engine, low=low, high=high, steps=steps)
     state = read_dataset(Path(store), KIND, **settings) if store is not None else None
     if state is None:
         lo = np.full((n_chains, n_osc), float(low))
@@ -127,12 +127,12 @@ def upper_edges(chains: list[ChainParams], solver, *, low: float = 1.7, high: fl
               desc="upper edges", unit="simulation", disable=not progress) as bar:
         for step in range(done, steps + 2):
             if step == 0:
-                valid &= _vibrates(chains, lo, solver, options, eps, bar) == 1
+                valid &= _vibrates(chains, lo, engine, bar) == 1
             elif step == 1:
-                valid &= _vibrates(chains, hi, solver, options, eps, bar) == 0
+                valid &= _vibrates(chains, hi, engine, bar) == 0
             else:
                 mid = 0.5 * (lo + hi)
-                alive = _vibrates(chains, mid, solver, options, eps, bar)
+                alive = _vibrates(chains, mid, engine, bar)
                 lo = np.where(alive == 1, mid, lo)
                 hi = np.where(alive == 0, mid, hi)
                 valid &= np.isfinite(alive)
@@ -158,12 +158,12 @@ FOLD_CONTINUATION = ContinuationOptions(ds=0.01, ds_max=0.05, p_max=2.2, max_poi
 def localized_orbit(params: ChainParams, site: int, *,
                     options: SimulationOptions = SimulationOptions(t_end=3000.0,
                                                                    transient=2500.0),
-                    eps=DEFAULT_EPS):
+                    engine: AbstractEngine = Smoothed()):
     """The periodic single-site localized state at oscillator `site` (0-based) at
-    `params.v_d`, refined by shooting (Levenberg-Marquardt) from a simulation of
-    eq. (8) with that oscillator excited, both of the model smoothed at `eps` (the
-    smoothing velocity of tanh(v_rel/eps), a finite number > 0, dimensionless;
-    the smoothed engine's `Smoothed.eps`, `DEFAULT_EPS` by default).
+    `params.v_d`, refined by shooting from a simulation of eq. (8) with that
+    oscillator excited, both of `engine`'s model: the simulation by `engine` over
+    the horizon of `options`, the shooting on its flow made `for_orbits`
+    (`Shooting.from_simulations`: Levenberg-Marquardt on the smoothed model).
 
     **Returns:**
 
@@ -172,10 +172,6 @@ def localized_orbit(params: ChainParams, site: int, *,
     orbit's chain has one stiffness per oscillator, shape (n_osc,), also where
     `params` gives one for all (the programs of a ring of its size are then those
     of each of its mistuned draws).
-
-    **Raises:**
-
-    `ValidationError` for eps <= 0.
     """
     from ..._engine.simulate import simulate
 
@@ -183,7 +179,7 @@ def localized_orbit(params: ChainParams, site: int, *,
         # one stiffness per oscillator, as a mistuned ring has them: the programs of
         # the homogeneous ring are then those of every mistuned ring of its size
         params = with_parameter(params, "stiffness", jnp.full(params.n_osc, params.stiffness))
-    engine = as_engine("smoothed", None, options, params, eps=eps)
+    engine = engine.with_horizon(options)
     # shooting from the simulation (Levenberg-Marquardt), on the oscillator's phase
     method = Shooting.from_simulations(engine, phase_oscillator=int(site))
     mask = np.arange(params.n_osc) == site
@@ -201,25 +197,21 @@ def localized_orbit(params: ChainParams, site: int, *,
 
 def localized_fold(params: ChainParams, site: int, *,
                    continuation_options: ContinuationOptions = FOLD_CONTINUATION,
-                   eps=DEFAULT_EPS) -> tuple[FoldPoint | None, object]:
+                   engine: AbstractEngine = Smoothed()) -> tuple[FoldPoint | None, object]:
     """The fold of limit cycles that ends the single-site localized state at
     oscillator `site` upwards in v_d: its orbit at `params.v_d` (`localized_orbit`),
     pseudo-arclength continuation upwards to the first fold, then Newton's method on
     the Moore-Spence extended system (`fold_point`) from the point where the fold
     was detected, or else from one of its neighbours on the branch. Everything is
-    of the model smoothed at `eps` (as `localized_orbit` takes it; `DEFAULT_EPS` by
-    default), which the problem carries.
+    of `engine`'s model (`Smoothed()` by default: eq. (5) smoothed at eps = 1e-3),
+    as `localized_orbit` takes it, which the problem carries.
 
     **Returns:**
 
     (`FoldPoint`, the limit cycles' `ContinuationProblem`), or (None, None) when
     the state is not periodic at `params.v_d` or no fold is met.
-
-    **Raises:**
-
-    `ValidationError` for eps <= 0.
     """
-    orbit, opts = localized_orbit(params, site, eps=eps)
+    orbit, opts = localized_orbit(params, site, engine=engine)
     if orbit is None:
         return None, None
     problem = cycle_problem(orbit, opts)

@@ -15,7 +15,7 @@ from jaxtyping import Array, Float
 from ..._engine.compat import checks_as_nan
 from ..._bifurcation.fold import solve_fold
 from ..._bifurcation.periodic_orbit import cycle_method
-from ..._physics.forces import DEFAULT_EPS
+from ..._engine.engines import AbstractEngine, Smoothed
 from ..._physics.initial import excited_block
 from ..._physics.params import chain_or_default, ChainParams
 from .edges import localized_fold
@@ -171,7 +171,7 @@ def pattern_folds(problem, solutions, theta_from, theta_to, budget, zero_mean):
 def intentional_mistuning(params: ChainParams | None = None, *, budget: float = 0.05,
                           sense: str = "lower", zero_mean: bool = True, steps: int = 15,
                           learning_rate: float = 0.2, temperature: float = 2e-3,
-                          seed: int = 0, start=None, eps=DEFAULT_EPS,
+                          seed: int = 0, start=None, engine: AbstractEngine = Smoothed(),
                           progress: bool = True) -> MistuningDesign:
     """A stiffness mistuning pattern of period n_osc, |delta_n| <= `budget`, that
     lowers (or raises) the highest fold of the single-site localized states
@@ -199,11 +199,9 @@ def intentional_mistuning(params: ChainParams | None = None, *, budget: float = 
     - `temperature`: t of the smooth maximum (belt-speed units).
     - `seed`: the small random start of theta, off the symmetric point.
     - `start`: the output of `design_problems(params, budget)`, to reuse it (its
-        problem carries its own eps).
-    - `eps`: the smoothing velocity of tanh(v_rel/eps) of the folds, a finite
-        number > 0, shape (), dimensionless (a fraction of x_0 omega_n); the
-        smoothed engine's (`Smoothed.eps`), `DEFAULT_EPS` by default. Used where
-        `start` is None (`design_problems`).
+        problem carries its own engine).
+    - `engine`: the engine of the folds' orbits (`Smoothed()` by default: eq. (5)
+        smoothed at eps = 1e-3). Used where `start` is None (`design_problems`).
     - `progress`: print each iteration.
 
     **Returns:**
@@ -214,12 +212,12 @@ def intentional_mistuning(params: ChainParams | None = None, *, budget: float = 
 
     `ValidationError` for a chain that is not a homogeneous ring of at least 2, a bad
     budget or sense, a negative or non-integer `steps` or `seed`, a `learning_rate`
-    or `temperature` that is not > 0, or eps <= 0; `RuntimeError` when a fold cannot
+    or `temperature` that is not > 0; `RuntimeError` when a fold cannot
     be followed.
     """
     params, sign = _check_design(params, sense, steps, learning_rate, temperature, seed)
     best, history, homogeneous = _run_design(params, start, sign, budget, zero_mean, steps,
-                                             learning_rate, temperature, seed, eps, progress)
+                                             learning_rate, temperature, seed, engine, progress)
     return _design(best, history, homogeneous, budget, zero_mean, sense)
 
 
@@ -239,7 +237,7 @@ def _check_design(params: ChainParams | None, sense: str, steps, learning_rate,
 
 
 def _run_design(params: ChainParams, start, sign: float, budget, zero_mean, steps,
-                learning_rate, temperature, seed, eps, progress) -> tuple[tuple, list, float]:
+                learning_rate, temperature, seed, engine, progress) -> tuple[tuple, list, float]:
     """The fold problems (`start`, or `design_problems`), then Adam's iterations of
     `intentional_mistuning` from a small random theta: the folds followed to each new
     pattern (`pattern_folds`), a step they cannot follow halved. Returns the best
@@ -247,7 +245,7 @@ def _run_design(params: ChainParams, start, sign: float, budget, zero_mean, step
     maximum, highest fold) and the homogeneous ring's fold.
 
     **Raises:** `RuntimeError` when the folds cannot be followed."""
-    problem, solutions, homogeneous = start or design_problems(params, budget, eps=eps)
+    problem, solutions, homogeneous = start or design_problems(params, budget, engine=engine)
     period = params.n_osc
     theta = jnp.asarray(0.05 * np.random.default_rng(seed).standard_normal(period))
     folds, grads, solutions, ok = pattern_folds(problem, solutions, jnp.zeros(period), theta,
@@ -296,17 +294,18 @@ def _design(best: tuple, history: list, homogeneous: float, budget, zero_mean,
                            solutions=jnp.stack(solutions), sense=sense)
 
 
-def design_problems(params: ChainParams, budget: float, *, eps=DEFAULT_EPS):
+def design_problems(params: ChainParams, budget: float, *,
+                    engine: AbstractEngine = Smoothed()):
     """The fold problem of the single-site state at the ring's centre oscillator
-    (`localized_fold`, smoothed at `eps`: a finite number > 0, dimensionless,
-    `DEFAULT_EPS` by default), and a starting solution for the state at each
+    (`localized_fold`, of `engine`'s model: `Smoothed()` by default), and a
+    starting solution for the state at each
     oscillator (on the homogeneous ring they are one state): (problem, solutions,
     the homogeneous fold).
 
     **Raises:**
 
     `ValidationError` for a chain that is not a homogeneous ring of at least 2, a
-    budget outside (0, 1) or eps <= 0; `RuntimeError` when no fold is found.
+    budget outside (0, 1); `RuntimeError` when no fold is found.
     """
     n = params.n_osc
     if params.boundary != "ring" or n < 2 or np.ndim(params.stiffness) \
@@ -318,7 +317,7 @@ def design_problems(params: ChainParams, budget: float, *, eps=DEFAULT_EPS):
     centre = int(np.flatnonzero(excited_block(n, 1, "ring"))[0])
     # (`localized_orbit` gives the ring one stiffness per oscillator, as the patterns
     # give it: the fold's programs are those of every mistuned ring of its size)
-    fold, problem = localized_fold(params, centre, eps=eps)
+    fold, problem = localized_fold(params, centre, engine=engine)
     if fold is None:
         raise RuntimeError("no fold of the single-site state was found from "
                            f"v_d = {float(params.v_d):g}")

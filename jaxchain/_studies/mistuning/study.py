@@ -18,20 +18,19 @@ from ..._physics.record import check_recordable
 from ..basin.basin import _key, _key_data
 from ..basin.sampling import Box, sample_states
 from ..._bifurcation.hopf import hopf_point
-from ..._engine.engines import Smoothed, as_engine
+from ..._engine.engines import AbstractEngine, Smoothed, as_engine
 from ..._engine.checks import check_options, check_params, check_run
+from ..._engine.horizon import AbstractHorizon
 from ..._engine.options import SimulationOptions
 from ..._engine.status import Status
 from ..._physics.initial import GivenState, excited_block, localized_family
 from ..._analysis.localization import damped_decay, localization_factor, passband_frequency
-from ..._physics.forces import DEFAULT_EPS
-from ..._physics.model import jacobian, steady_sliding
+from ..._physics.model import jacobian
 from ..._physics.mistuning import mistune
 from ..._physics.params import (
     chain_or_default, ChainParams, single_oscillator, with_fields, with_parameter,
 )
 from ..._sweeps.datasets import run_attributes, save_dataset
-from ..._engine.solver.registry import DEFAULT_SOLVER
 from ..._sweeps.result_store import CsvStore, settings_key
 from ..._sweeps.sweep import sweep
 from .edges import EDGE_OPTIONS, localized_fold, localized_orbit, upper_edges
@@ -74,9 +73,9 @@ def study_chains(params: ChainParams, sigmas, n_draws: int) -> list[tuple[int, i
 
 def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
                     n_draws: int = 8, *, v_d=STUDY_VD, n_samples: int = 8, box: Box = Box(),
-                    key=0, n_folds: int = 1, solver=DEFAULT_SOLVER,
-                    options: SimulationOptions = STUDY_OPTIONS,
-                    edge_options: SimulationOptions = EDGE_OPTIONS, eps=DEFAULT_EPS,
+                    key=0, n_folds: int = 1, engine: AbstractEngine = Smoothed(),
+                    options: AbstractHorizon = STUDY_OPTIONS,
+                    edge_options: AbstractHorizon = EDGE_OPTIONS,
                     out: str | Path | None = None,
                     resume: bool = False, overwrite: bool = False, client=None,
                     progress: bool = True) -> xr.Dataset:
@@ -106,12 +105,13 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
     - `n_samples`: random initial states per chain and belt speed (>= 0).
     - `box`, `key`: the `Box` of random initial states and the seed or key.
     - `n_folds`: draws per sigma whose upper edge is refined by shooting (>= 0).
-    - `solver`, `options`: as for `simulate`; `STUDY_OPTIONS` by default.
-    - `edge_options`: `SimulationOptions` of the bisection (`EDGE_OPTIONS`).
-    - `eps`: the smoothing velocity of tanh(v_rel/eps), a finite number > 0,
-        shape (), dimensionless (a fraction of x_0 omega_n): that of the smoothed
-        engine of every run (`Smoothed.eps`), of the Hopf points and of shooting;
-        `DEFAULT_EPS` by default. Recorded in the attributes (`eps`).
+    - `engine`: the smoothed engine (`Smoothed()` by default: eps = 1e-3, Ros34PW2
+        at tolerances that follow eps) of every run, whose eps is also that of the
+        Hopf points and of shooting; recorded in the attributes (`eps`, `solver`,
+        `rtol`, `atol`).
+    - `options`: the horizon of each run (t_end, transient, chunk_length;
+        `STUDY_OPTIONS` by default), the engine's other settings kept.
+    - `edge_options`: the horizon of the bisection (`EDGE_OPTIONS`).
     - `out`: a folder for the stores (chains/*.zarr, edges.nc, folds.csv) and
         mistuning.nc; None keeps everything in memory.
     - `resume`: continue the stores in `out`; `overwrite`: start them again.
@@ -139,30 +139,31 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
 
     **Raises:**
 
-    `ValidationError` for a bad count, sigma, belt speed or eps, and as `sweep`.
+    `ValidationError` for a bad count, sigma or belt speed, for an engine that
+    does not smooth (the exact one: the study's Hopf points and damping are those
+    of the smoothed model), and as `sweep`.
     """
-    params, sigmas, v, solver, options, edge_options, key, out, eps = _check_study(
-        params, sigmas, n_draws, v_d, n_samples, n_folds, key, solver, options,
-        edge_options, out, resume, overwrite, eps)
-    run = _run_study(params, sigmas, n_draws, v, n_samples, box, key, n_folds, solver,
-                     options, edge_options, eps, out, resume, overwrite, client, progress)
-    study = _assemble_study(params, sigmas, n_draws, v, n_samples, box, key, solver,
-                            options, eps, run)
+    params, sigmas, v, engine, edge_options, key, out = _check_study(
+        params, sigmas, n_draws, v_d, n_samples, n_folds, key, engine, options,
+        edge_options, out, resume, overwrite)
+    run = _run_study(params, sigmas, n_draws, v, n_samples, box, key, n_folds, engine,
+                     edge_options, out, resume, overwrite, client, progress)
+    study = _assemble_study(params, sigmas, n_draws, v, n_samples, box, key, engine, run)
     if out is not None:
         save_dataset(study, out / "mistuning.nc")
     return study
 
 
-def _check_study(params, sigmas, n_draws, v_d, n_samples, n_folds, key, solver, options,
-                 edge_options, out, resume, overwrite, eps):
-    """Every argument of `mistuning_study` checked once: (params, sigmas, v_d, solver,
-    options, edge_options, key, out, eps), the chain the default ring where None,
-    sigmas an array, the key a PRNG key, out a `Path` or None and eps the smoothed
-    engine's (its solver "auto" resolved at it)."""
+def _check_study(params, sigmas, n_draws, v_d, n_samples, n_folds, key, engine, options,
+                 edge_options, out, resume, overwrite):
+    """Every argument of `mistuning_study` checked once: (params, sigmas, v_d,
+    engine, edge_options, key, out), the chain the default ring where None, sigmas
+    an array, the engine the smoothed one over the horizon of `options`, the key a
+    PRNG key and out a `Path` or None."""
     params = check_params(chain_or_default(params))
-    engine = as_engine("smoothed", solver, None, params, eps=eps)
-    params, solver, options, v = check_run(params, engine.solver, options, v_d)
-    eps = engine.eps
+    engine = as_engine(engine).as_smoothed("the mistuning study")
+    params, _, options, v = check_run(params, engine.solver, options, v_d)
+    engine = engine.with_horizon(options)
     require_line(params, "the mistuning study")
     check_recordable(params)
     sigmas = np.atleast_1d(np.asarray(sigmas, dtype=float))
@@ -176,11 +177,11 @@ def _check_study(params, sigmas, n_draws, v_d, n_samples, n_folds, key, solver, 
         raise ValidationError("resume and overwrite exclude each other")
     edge_options = check_options(edge_options)
     out = Path(out) if out is not None else None
-    return params, sigmas, v, solver, options, edge_options, _key(key), out, eps
+    return params, sigmas, v, engine, edge_options, _key(key), out
 
 
-def _run_study(params, sigmas, n_draws, v, n_samples, box, key, n_folds, solver, options,
-               edge_options, eps, out, resume, overwrite, client, progress) -> dict:
+def _run_study(params, sigmas, n_draws, v, n_samples, box, key, n_folds, engine,
+               edge_options, out, resume, overwrite, client, progress) -> dict:
     """The computations of `mistuning_study`, as NumPy arrays and numbers by name:
     the sweeps of every chain (`_run_sweeps`), the Hopf points, upper edges and
     folds (`_run_edges`), and the single-site state's linear localization
@@ -191,11 +192,11 @@ def _run_study(params, sigmas, n_draws, v, n_samples, box, key, n_folds, solver,
     ics = {"eq8": localized_family(n, "eq8", params.graph)}
     if samples is not None:
         ics["random"] = GivenState(samples)
-    run = _run_sweeps(chains, n, sigmas, n_draws, v, n_samples, ics, solver, options, eps,
-                      out, resume, overwrite, client, progress)
-    run |= _run_edges(chains, sigmas, n_draws, n, n_folds, solver, edge_options, eps, out,
+    run = _run_sweeps(chains, n, sigmas, n_draws, v, n_samples, ics, engine, out, resume,
+                      overwrite, client, progress)
+    run |= _run_edges(chains, sigmas, n_draws, n, n_folds, engine, edge_options, out,
                       progress)
-    run |= _run_state(params, sigmas, eps)
+    run |= _run_state(params, sigmas, engine)
     k_index = int(np.argmin(np.abs(v - 1.5)))
     run["envelope_decay"] = envelope_decay(run["staircase_amplitudes"][:, :, k_index, 0],
                                            run["staircase_n_halc"][:, :, k_index, 0],
@@ -203,8 +204,8 @@ def _run_study(params, sigmas, n_draws, v, n_samples, box, key, n_folds, solver,
     return run
 
 
-def _run_sweeps(chains, n, sigmas, n_draws, v, n_samples, ics, solver, options, eps, out,
-                resume, overwrite, client, progress) -> dict:
+def _run_sweeps(chains, n, sigmas, n_draws, v, n_samples, ics, engine, out, resume,
+                overwrite, client, progress) -> dict:
     """One `sweep` per chain (each its own store under out/chains, on the cluster of
     `client` all at once): the staircase's and the random states' results by
     (sigma, draw), and the deviations of each chain."""
@@ -220,7 +221,7 @@ def _run_sweeps(chains, n, sigmas, n_draws, v, n_samples, ics, solver, options, 
     def chain_sweep(i, d, chain):
         store = out / "chains" / f"sigma{sigmas[i]:g}_draw{d}.zarr" if out else None
         exists = store is not None and store.exists()
-        return sweep(chain, v, ics, engine=Smoothed(solver, options, eps),
+        return sweep(chain, v, ics, engine=engine,
                      batch_size=v.size * (n + n_samples),
                      store=store, resume=resume and exists, overwrite=overwrite and exists,
                      client=client, progress=False).load()
@@ -245,13 +246,15 @@ def _run_sweeps(chains, n, sigmas, n_draws, v, n_samples, ics, solver, options, 
     return data | {"deviations": deviations}
 
 
-def _run_edges(chains, sigmas, n_draws, n, n_folds, solver, edge_options, eps, out,
+def _run_edges(chains, sigmas, n_draws, n, n_folds, engine, edge_options, out,
                progress) -> dict:
     """The upper edge of the single-site state at each oscillator of every chain
     (`upper_edges`), their highest, the Hopf point of each chain, and the folds by
-    shooting of the first `n_folds` draws (`_folds`), all smoothed at `eps`."""
-    edges = upper_edges([c for *_, c in chains], solver, options=edge_options, eps=eps,
+    shooting of the first `n_folds` draws (`_folds`), all of the smoothed `engine`'s
+    model."""
+    edges = upper_edges([c for *_, c in chains], engine=engine, options=edge_options,
                         store=out / "edges.nc" if out else None, progress=progress)
+    eps = engine.eps
     site_edge = np.full((sigmas.size, n_draws, n), np.nan)
     hopf = np.full((sigmas.size, n_draws), np.nan)
     for c, (i, d, chain) in enumerate(chains):
@@ -260,22 +263,23 @@ def _run_edges(chains, sigmas, n_draws, n, n_folds, solver, edge_options, eps, o
     with np.errstate(invalid="ignore"):
         upper = np.where(np.all(np.isnan(site_edge), -1), np.nan,
                          np.nanmax(np.where(np.isnan(site_edge), -np.inf, site_edge), -1))
-    fold, fold_site = _folds(chains, site_edge, n_folds, eps, out, progress)
+    fold, fold_site = _folds(chains, site_edge, n_folds, engine, out, progress)
     return {"site_edge": site_edge, "hopf_vd": hopf, "upper_edge": upper, "fold_vd": fold,
             "fold_site": fold_site, "edge_resolution": edges.attrs["resolution"]}
 
 
-def _run_state(params: ChainParams, sigmas, eps) -> dict:
+def _run_state(params: ChainParams, sigmas, engine: Smoothed) -> dict:
     """The single-site state of the homogeneous chain at v_d = 1.5 (its period and
-    the damping about sliding at its site, smoothed at `eps`), and the linear
+    the damping about sliding at its site, of the smoothed `engine`'s model), and the linear
     chain's localization factor for each sigma at the band centre, at theta = pi/3
     (`THETAS`) and at the state's frequency."""
     centre = int(np.flatnonzero(excited_block(params.n_osc, 1, params.graph))[0])
-    orbit, _ = localized_orbit(with_parameter(params, "v_d", 1.5), centre, eps=eps)
+    orbit, _ = localized_orbit(with_parameter(params, "v_d", 1.5), centre,
+                               engine=engine.simulating())
     period = float(orbit.period) if orbit is not None else math.nan
     omega2 = (2 * math.pi / period) ** 2
     eta_c = float(params.eta_c)
-    damping = _sliding_damping(with_parameter(params, "v_d", 1.5), centre, eps)
+    damping = _sliding_damping(with_parameter(params, "v_d", 1.5), centre, engine)
     gamma = np.zeros((sigmas.size, len(THETAS)))
     gamma_err = np.zeros_like(gamma)
     state_gamma, state_err = np.zeros(sigmas.size), np.zeros(sigmas.size)
@@ -293,7 +297,7 @@ def _run_state(params: ChainParams, sigmas, eps) -> dict:
             "state_damped_decay": float(damped_decay(eta_c, omega2, damping))}
 
 
-def _assemble_study(params, sigmas, n_draws, v, n_samples, box, key, solver, options, eps,
+def _assemble_study(params, sigmas, n_draws, v, n_samples, box, key, engine,
                     run: dict) -> xr.Dataset:
     """The dataset of `mistuning_study` from the arrays of `_run_study`."""
     import xarray as xr
@@ -316,7 +320,7 @@ def _assemble_study(params, sigmas, n_draws, v, n_samples, box, key, solver, opt
         coords={"sigma": sigmas, "draw": np.arange(n_draws), "v_d": v,
                 "k": np.arange(1, n + 1), "osc": np.arange(1, n + 1),
                 "sample": np.arange(n_samples), "theta": np.array(THETAS)},
-        attrs=run_attributes(params, Smoothed(solver, options, eps), "eq8,random", "v_d") | {
+        attrs=run_attributes(params, engine, "eq8,random", "v_d") | {
                "n_draws": int(n_draws),
                "n_samples": int(n_samples), "key": _key_data(key), "box_x": list(box.x),
                "box_v": list(box.v), "state_period": run["state_period"],
@@ -327,8 +331,10 @@ def _assemble_study(params, sigmas, n_draws, v, n_samples, box, key, solver, opt
                "sigma_units": "sigma / eta_c"})
 
 
-def _folds(chains, site_edge, n_folds, eps, out, progress) -> tuple[np.ndarray, np.ndarray]:
-    """The fold by shooting (smoothed at `eps`) of the single-site state at the
+def _folds(chains, site_edge, n_folds, engine: Smoothed, out, progress
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """The fold by shooting (of the smoothed `engine`'s model, at its default
+    settings for simulations) of the single-site state at the
     oscillator of the highest simulated edge, for the first `n_folds` draws of each
     sigma; stored row by row in folds.csv."""
     shape = site_edge.shape[:2]
@@ -343,12 +349,12 @@ def _folds(chains, site_edge, n_folds, eps, out, progress) -> tuple[np.ndarray, 
             start = with_parameter(chain, "v_d", 1.5)
 
             def compute(start=start, j=j):
-                point, _ = localized_fold(start, j, eps=eps)
+                point, _ = localized_fold(start, j, engine=engine.simulating())
                 return {"fold_vd": float(point.p) if point is not None else math.nan,
                         "site": j}
 
             row = {"key": settings_key("mistuning fold", chain=start, site=j,
-                                       eps=float(eps))}
+                                       eps=float(engine.eps))}
             row = store.fetch(row, compute) if store else row | compute()
             fold[i, d], site[i, d] = float(row["fold_vd"]), int(row["site"])
     finally:
@@ -357,10 +363,10 @@ def _folds(chains, site_edge, n_folds, eps, out, progress) -> tuple[np.ndarray, 
     return fold, site
 
 
-def _sliding_damping(params: ChainParams, site: int, eps) -> float:
+def _sliding_damping(params: ChainParams, site: int, engine: Smoothed) -> float:
     """c = 2 xi + mu'(v_d) (times the load) of oscillator `site` about steady
     sliding: minus the velocity entry of its Jacobian (eq. (5) linearized, smoothed
-    at `eps`)."""
+    at the `engine`'s eps)."""
     single = single_oscillator(params, site)
-    y = np.asarray(steady_sliding(single, eps)).reshape(2, 1)
-    return -float(np.asarray(jacobian(single, y, eps)).reshape(2, 2)[1, 1])
+    y = np.asarray(engine.steady_sliding(single)).reshape(2, 1)
+    return -float(np.asarray(jacobian(single, y, engine.eps)).reshape(2, 2)[1, 1])
