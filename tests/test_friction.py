@@ -5,7 +5,23 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import jaxchain as jc
-from jaxchain._physics.forces import smoothed_friction_force
+
+
+def smoothed_friction_force(p, v_rel, eps):
+    """The smoothed engine's friction force at each relative velocity of `v_rel`, read
+    off its vector field (`jc.Smoothed(eps=eps).field`): one oscillator of `p`'s
+    friction law and load with xi = 0, at x = 0, whose acceleration is then the
+    friction force alone. The belt and the oscillator's speed are chosen so that
+    x' - v_d is `v_rel` exactly: v_d = |v_rel| (1 at 0) and x' = v_d + v_rel, which
+    is 0 or 2 v_rel, and 2 v_rel - v_rel is exact."""
+    forces = []
+    for v in np.ravel(np.asarray(v_rel, dtype=float)):
+        v_d = abs(v) if v != 0 else 1.0
+        one = jc.ChainParams(n_osc=1, xi=0.0, v_d=v_d, friction=p.friction, load=p.load)
+        y = jnp.array([[0.0], [v_d + v]])
+        assert float(y[1, 0]) - v_d == v  # the relative velocity asked for, exactly
+        forces.append(jc.Smoothed(eps=eps).field(one, y)[1, 0])
+    return jnp.reshape(jnp.stack(forces), np.shape(v_rel))
 
 
 @pytest.mark.numerics

@@ -10,8 +10,6 @@ import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
-# the slip force of a given mode (stick and slip as the exact engine holds them)
-from jaxchain._physics.forces import slip_friction_force
 
 #: Two oscillators on a ring whose first switches are one of each kind
 #: (`jc.SWITCH_KINDS`): oscillator 1 sticks at t = 0.633 and breaks away at 1.628,
@@ -21,13 +19,22 @@ PAIR_Y0 = np.array([[3.0, -0.5], [1.0, 0.3]])
 REFERENCE = jc.NonsmoothOptions.reference(t_end=8.0, transient=0.0, log_size=32)
 
 
+def _slip_force(params, v_rel, modes):
+    """The friction force of eq. (2) in slip of direction s = `modes` (+1 or -1),
+    -(P_n/P) mu(s v_rel) s, with the law's mu of the slip speed
+    (`AbstractFrictionLaw.of_slip_speed`): the sign is the mode's, not that of
+    v_rel, so that the force stays smooth within a phase, as the exact engine
+    holds it."""
+    return -(params.load * params.friction.of_slip_speed(modes * v_rel)) * modes
+
+
 def _field(params, y, modes):
     """The chain's vector field with fixed modes, written here from the public force
     functions: stick x' = v_d, x'' = 0; slip x'' = -f(x) - 2 xi (x' - v_d) +
     F_slip, with f the force needed to stick (`jc.stick_force`, eq. (5))."""
     x, v = y[0], y[1]
     a = (-jc.stick_force(params, x) - 2 * params.xi * (v - params.v_d)
-         + slip_friction_force(params, v - params.v_d, modes))
+         + _slip_force(params, v - params.v_d, modes))
     stick = modes == 0
     return jnp.stack([jnp.where(stick, params.v_d, v), jnp.where(stick, 0.0, a)])
 

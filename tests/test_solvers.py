@@ -1,27 +1,33 @@
-"""The solver and step-size controller of jaxchain: ROS34PW2 with a diagonal W (its
-order, and its limit as eps -> 0), and the PI controller (`PIController`: its rules
-against the formulas of its docstring, its solutions against scipy and against
-diffrax's controller).
+"""The solver, the step-size controller and the tangent of the smoothed engine:
+ROS34PW2 with a diagonal W (its order, and its limit as eps -> 0), the PI
+controller (`PIController`: its rules against the formulas of its docstring, its
+solutions against scipy and against diffrax's controller), and the largest
+Lyapunov exponent of Lorenz-63 (a published one).
 
-These are internal units, imported from jaxchain's private modules: the solver's
-class, the terms of eq. (5) it integrates (`terms`) and the controllers
-(`CONTROLLERS`, `PIController`)."""
+ROS34PW2 is public (`jc.SOLVERS["ros34pw2"]`, a diffrax solver), and the split of
+eq. (5) it integrates is written here. Two subjects are internal units, with no
+public route: the controller's rules, one call of `adapt_step_size` at a time
+(`PIController`, which a run builds from `SimulationOptions.controller` and never
+hands out), and Benettin's tangent on a system that is no chain (`integrate`, the
+smoothed engine's integrator of any diffrax term: the public `observe` integrates
+eq. (5) only)."""
 
 import dataclasses
 
 import diffrax
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
-from jaxchain._physics.model import Model
 from helpers import SHORT, flat, reference_rhs, scipy_stick_slip_cycle
-from jaxchain._engine.smoothed import terms
-from jaxchain._physics.model import model_field
+from jaxchain._engine.smoothed import integrate
 from jaxchain._engine.solver.controller import CONTROLLERS, PIController
-from jaxchain._engine.solver.rosenbrock import Ros34PW2
+
+#: ROS34PW2 (Rang & Angermann 2005), the smoothed engine's default solver.
+Ros34PW2 = jc.SOLVERS["ros34pw2"]
 
 
 def _fixed_steps(split, y0, t1, n_steps, args=None, most=640):
@@ -65,16 +71,26 @@ def test_order_three_on_the_smooth_chain_against_dopri8():
     state, over t in [0, 4]: the fixed-step error against Dopri8 at rtol 1e-13
     falls with order 3 (the friction Jacobian is nonlinear, W is frozen per step)."""
     p = jc.ChainParams(n_osc=4)
-    model = Model(p, 0.2)
+    engine = jc.Smoothed(eps=0.2)
     y0 = jc.OutOfPhaseExcitation.eq8(jc.excited_block(4, 2))(p)
-    ref = diffrax.diffeqsolve(diffrax.ODETerm(model_field), diffrax.Dopri8(), 0.0, 4.0,
-                              None, y0, model, max_steps=None,
+    ref = diffrax.diffeqsolve(diffrax.ODETerm(lambda t, y, a: engine.field(p, y)),
+                              diffrax.Dopri8(), 0.0, 4.0, None, y0, max_steps=None,
                               stepsize_controller=diffrax.PIDController(rtol=1e-13,
                                                                          atol=1e-15))
-    split = terms(Ros34PW2())
+
+    def friction(t, y, a):
+        """The stiff part, as the engine splits eq. (5): (0, F(x' - v_d)) with the
+        smoothed force of eq. (1), -mu(|v_rel|) tanh(v_rel/eps), written here."""
+        law, v_rel = p.friction, y[1] - p.v_d
+        mu = law.mu_d + (law.mu_st - law.mu_d) * jnp.exp(-jnp.abs(v_rel) / law.v0)
+        return jnp.stack([jnp.zeros_like(v_rel), -mu * jnp.tanh(v_rel / engine.eps)])
+
+    split = diffrax.MultiTerm(
+        diffrax.ODETerm(lambda t, y, a: engine.field(p, y) - friction(t, y, a)),
+        diffrax.ODETerm(friction))
     errors = []
     for n in (80, 160, 320, 640):
-        sol = _fixed_steps(split, y0, 4.0, n, model)
+        sol = _fixed_steps(split, y0, 4.0, n)
         errors.append(float(jnp.max(jnp.abs(sol.ys[-1] - ref.ys[-1]))))
     assert np.all(np.abs(_orders(errors) - 3) < 0.3), (errors, _orders(errors))
 
@@ -103,7 +119,7 @@ def test_converges_to_the_nonsmooth_stick_slip_cycle_as_eps_shrinks():
         rtol = min(DEFAULT_RTOL, eps / 10)
         options = _short(rtol, rtol / 100)
         obs = jc.simulate(p, jc.OutOfPhaseExcitation.eq8([True]),
-                          engine=jc.Smoothed(Ros34PW2(), options, eps))
+                          engine=jc.Smoothed("ros34pw2", options, eps))
         assert int(obs.n_halc) == 1
         errors.append(abs(float(obs.amplitudes[0]) / reference - 1))
     assert np.all(np.diff(errors) < 0), errors
@@ -120,7 +136,7 @@ def test_steps_are_not_bound_by_stiffness():
     p, eps = jc.ChainParams(n_osc=1), 1e-5
     ic = jc.OutOfPhaseExcitation.eq8([True])
     options = _short(DEFAULT_RTOL, DEFAULT_ATOL)  # ROS34PW2's program of the test above
-    rosw = jc.simulate(p, ic, engine=jc.Smoothed(Ros34PW2(), options, eps))
+    rosw = jc.simulate(p, ic, engine=jc.Smoothed("ros34pw2", options, eps))
     bosh = jc.simulate(p, ic, engine=jc.Smoothed(diffrax.Bosh3(), options, eps),
                        throw=False)
     assert int(rosw.n_halc) == 1
@@ -212,3 +228,34 @@ def test_both_controllers_give_the_same_localized_state():
     assert int(runs[0].n_halc) == int(runs[1].n_halc) == 2
     assert np.allclose(runs[0].amplitudes, runs[1].amplitudes, rtol=1e-2,
                        atol=1e-2 * float(np.max(runs[1].amplitudes)))
+
+
+def lorenz(t, y, args):
+    sigma, rho, beta = 10.0, 28.0, 8.0 / 3.0
+    return jnp.stack([sigma * (y[1] - y[0]), y[0] * (rho - y[2]) - y[1],
+                      y[0] * y[1] - beta * y[2]])
+
+
+@jax.jit
+def _lorenz_exponent(y0):
+    """One jitted run for every start below: traced and compiled once."""
+    options = jc.SimulationOptions(t_end=20000.0, transient=50.0, chunk_length=10.0,
+                                   rtol=1e-8, atol=1e-8, sample_dt=10.0, max_steps=10**5)
+    return integrate(diffrax.ODETerm(lorenz), diffrax.Tsit5(), y0, None, options,
+                        (jc.LargestLyapunov(),))
+
+
+@pytest.mark.numerics
+@pytest.mark.parametrize("shift", [0.0, 1e-3, -2e-3])
+def test_lorenz_largest_exponent_is_0_9056_within_its_stated_error(shift):
+    """Lorenz-63 at sigma = 10, rho = 28, beta = 8/3: 0.9056 (Sprott, Chaos and Time
+    Series Analysis, 2003), by `jc.LargestLyapunov` on the smoothed engine's
+    integrator. The start is perturbed: the trajectory is chaotic, so
+    each start (and each CPU) gives another finite-time estimate."""
+    (res,), _, _, status = _lorenz_exponent(jnp.array([1.0 + shift, 1.0, 1.0]))
+    assert status == jc.Status.ok
+    error = float(res["lyapunov_error"])
+    assert 0 < error < 0.03
+    assert abs(float(res["lyapunov"]) - 0.9056) < error
+    history = np.asarray(res["lyapunov_history"])
+    assert abs(history[-1] - float(res["lyapunov"])) < 1e-12  # the running estimate ends there
