@@ -104,7 +104,7 @@ def _fig4(args, jc) -> None:
                               ("controller", args.controller)) if v is not None}
     options = jc.Smoothed(options=jc.SimulationOptions(  # tolerances resolved at eps
         t_end=args.t_end, transient=args.transient, **tols)).options
-    solver = jc.SOLVERS[args.solver or DEFAULT_SOLVER]()
+    solver = jc.SOLVERS[args.solver]() if args.solver else jc.Smoothed().solver
     walls = []
     for _ in range(2):
         start = time.perf_counter()

@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 import jaxchain as jc
 from helpers import SHORT, TIGHT, assert_within_drift
 from lanes_on_every_device import FIELDS
-from jaxchain import DEFAULT_SOLVER, SOLVERS, lane_params, run_lanes
+from jaxchain import lane_params, run_lanes
 from jaxchain._engine.lanes import _run_block, block_size, expected_cost, _lane_order, on_devices
 
 HERE = Path(__file__).parent
@@ -67,7 +67,7 @@ def test_run_lanes_with_padding_equals_runs_done_one_at_a_time():
     v_d = np.array([1.3, 1.5, 1.7])
     y0 = np.stack([jc.OutOfPhaseExcitation.eq8([True, k > 0])(jc.ChainParams(n_osc=2, v_d=v))
                    for k, v in enumerate(v_d)])
-    obs = run_lanes(lane_params(p, 3, v_d=v_d), y0, SOLVERS[DEFAULT_SOLVER](), TIGHT)
+    obs = run_lanes(lane_params(p, 3, v_d=v_d), y0, jc.Smoothed().solver, TIGHT)
     assert obs.amplitudes.shape == (3, 2)
     assert np.all(obs.n_halc >= 1)  # every lane sticks: the stick phases are compared
     for i, v in enumerate(v_d):
@@ -121,7 +121,7 @@ def test_given_costs_only_order_the_lanes():
     v_d = np.array([1.3, 1.5, 1.7])
     y0 = np.stack([jc.OutOfPhaseExcitation.eq8([True, k > 0])(jc.ChainParams(n_osc=2, v_d=v))
                    for k, v in enumerate(v_d)])
-    lanes, solver = lane_params(p, 3, v_d=v_d), SOLVERS[DEFAULT_SOLVER]()
+    lanes, solver = lane_params(p, 3, v_d=v_d), jc.Smoothed().solver
     default = run_lanes(lanes, y0, solver, TIGHT)
     reordered = run_lanes(lanes, y0, solver, TIGHT, costs=[1.0, 3.0, 2.0])
     for field in ("amplitudes", "y_final", "num_steps", "n_halc"):
@@ -137,13 +137,13 @@ def test_compiled_run_holds_no_callback_custom_call_or_scatter():
     loop into one kernel."""
     p = jc.ChainParams(n_osc=3)
     y0 = np.asarray(jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1))(p))[None]
-    for name in (DEFAULT_SOLVER, "bosh3"):
+    for solver in (jc.Smoothed().solver, jc.SOLVERS["bosh3"]()):  # the default, and another
         compiled = _run_block.lower(lane_params(p, 1), y0,
-                                    jc.Smoothed(SOLVERS[name](), TIGHT)).compile()
+                                    jc.Smoothed(solver, TIGHT)).compile()
         ops = set(re.findall(r" ([a-z][a-z0-9-]*)\(", compiled.compiled.as_text()))
         assert "while" in ops and "tanh" in ops  # the step loop is there
         # a host callback is a custom call on the CPU
-        assert not ops & {"custom-call", "scatter", "send", "recv", "infeed", "outfeed"}, name
+        assert not ops & {"custom-call", "scatter", "send", "recv", "infeed", "outfeed"}, type(solver).__name__
 
 
 def test_expected_cost_grows_with_the_excited_block_and_is_zero_at_steady_sliding():

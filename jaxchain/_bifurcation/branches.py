@@ -413,7 +413,7 @@ def _switch_along_axes(problem, branch: Branch, point: BifurcationPoint,
     branch point with a double multiplier +1. Empty for an orbit with no
     symmetry. The symmetry acts on the unknowns (x, x', T) of shooting."""
     z = np.asarray(point.z)
-    y = np.asarray(cycle_method(problem).orbit(jnp.asarray(z[:-1]))[0])
+    y = z[:-2].reshape(2, -1)  # z = (x, x', T, v_d)
     # its symmetry holds to Newton's tolerance (1e-9): 1e-6 keeps it, and separates
     # patterns that differ by their sites' amplitudes
     perms = isotropy(problem.params, y, atol=1e-6)

@@ -254,12 +254,11 @@ def _run_edges(chains, sigmas, n_draws, n, n_folds, engine, edge_options, out,
     model."""
     edges = upper_edges([c for *_, c in chains], engine=engine, options=edge_options,
                         store=out / "edges.nc" if out else None, progress=progress)
-    eps = engine.eps
     site_edge = np.full((sigmas.size, n_draws, n), np.nan)
     hopf = np.full((sigmas.size, n_draws), np.nan)
     for c, (i, d, chain) in enumerate(chains):
         site_edge[i, d] = edges["edge"].values[c]
-        hopf[i, d] = float(np.max(hopf_point(chain, engine=Smoothed(eps=eps)).v_d))
+        hopf[i, d] = float(np.max(hopf_point(chain, engine=engine).v_d))
     with np.errstate(invalid="ignore"):
         upper = np.where(np.all(np.isnan(site_edge), -1), np.nan,
                          np.nanmax(np.where(np.isnan(site_edge), -np.inf, site_edge), -1))
