@@ -14,9 +14,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._engine.progress import tqdm
-from ..._bifurcation.continuation import ContinuationOptions, PseudoArclength, continuation
+from ..._bifurcation.branches import follow_branch
+from ..._bifurcation.continuation import ContinuationOptions
 from ..._bifurcation.fold import FoldPoint, fold_point
-from ..._bifurcation.periodic_orbit import cycle_problem, periodic_orbit
+from ..._bifurcation.periodic_orbit import periodic_orbit
 from ..._bifurcation.shooting import Shooting
 from ..._engine.engines import AbstractEngine, Smoothed
 from ..._engine.horizon import AbstractHorizon
@@ -68,6 +69,17 @@ def _vibrates(chains, v, engine: AbstractEngine, bar) -> np.ndarray:
     return np.where(status == Status.ok, n_halc > 0, np.nan)
 
 
+def _bracket(store, settings: dict, low: float, high: float, shape: tuple) -> tuple:
+    """(lo, hi, valid, steps done) of the bisection of `upper_edges`: read from
+    `store` where it holds a run of the same settings, else the whole bracket."""
+    state = read_dataset(Path(store), KIND, **settings) if store is not None else None
+    if state is None:
+        return (np.full(shape, float(low)), np.full(shape, float(high)),
+                np.ones(shape, dtype=bool), 0)
+    return (state["edge_low"].values, state["edge_high"].values,
+            state["valid"].values.astype(bool), int(state.attrs["steps_done"]))
+
+
 def upper_edges(chains: list[ChainParams], *, engine: AbstractEngine = Smoothed(),
                 low: float = 1.7, high: float = 1.9, steps: int = 7,
                 options: AbstractHorizon = EDGE_OPTIONS, store: str | Path | None = None,
@@ -114,15 +126,7 @@ def upper_edges(chains: list[ChainParams], *, engine: AbstractEngine = Smoothed(
     settings = dict(chains=[{f.name: getattr(c, f.name) for f in dataclasses.fields(c)
                               if f.name != "v_d"} for c in chains],
                     engine=engine, low=low, high=high, steps=steps)
-    state = read_dataset(Path(store), KIND, **settings) if store is not None else None
-    if state is None:
-        lo = np.full((n_chains, n_osc), float(low))
-        hi = np.full((n_chains, n_osc), float(high))
-        valid = np.ones((n_chains, n_osc), dtype=bool)
-        done = 0
-    else:
-        lo, hi = state["edge_low"].values, state["edge_high"].values
-        valid, done = state["valid"].values.astype(bool), int(state.attrs["steps_done"])
+    lo, hi, valid, done = _bracket(store, settings, low, high, (n_chains, n_osc))
     with tqdm(total=(steps + 2) * n_chains * n_osc, initial=done * n_chains * n_osc,
               desc="upper edges", unit="simulation", disable=not progress) as bar:
         for step in range(done, steps + 2):
@@ -200,7 +204,7 @@ def localized_fold(params: ChainParams, site: int, *,
                    engine: AbstractEngine = Smoothed()) -> tuple[FoldPoint | None, object]:
     """The fold of limit cycles that ends the single-site localized state at
     oscillator `site` upwards in v_d: its orbit at `params.v_d` (`localized_orbit`),
-    pseudo-arclength continuation upwards to the first fold, then Newton's method on
+    its branch followed upwards (`follow_branch`) to the first fold, then Newton's method on
     the Moore-Spence extended system (`fold_point`) from the point where the fold
     was detected, or else from one of its neighbours on the branch. Everything is
     of `engine`'s model (`Smoothed()` by default: eq. (5) smoothed at eps = 1e-3),
@@ -214,8 +218,9 @@ def localized_fold(params: ChainParams, site: int, *,
     orbit, opts = localized_orbit(params, site, engine=engine)
     if orbit is None:
         return None, None
-    problem = cycle_problem(orbit, opts)
-    branch = continuation(problem, PseudoArclength(), continuation_options)
+    followed = follow_branch(orbit, opts, continuation_options,
+                             directions=(continuation_options.direction,))
+    (problem, branch, _), *_ = followed.pieces
     if not branch.folds:
         return None, None
     good = np.flatnonzero(np.asarray(branch.converged))

@@ -139,9 +139,8 @@ def mistuning_study(params: ChainParams | None = None, sigmas=STUDY_SIGMAS,
 
     **Raises:**
 
-    `ValidationError` for a bad count, sigma or belt speed, for an engine that
-    does not smooth (the exact one: the study's Hopf points and damping are those
-    of the smoothed model), and as `sweep`.
+    `ValidationError` for a bad count, sigma or belt speed, an engine that does not
+    smooth (its Hopf points and damping are the smoothed model's), and as `sweep`.
     """
     params, sigmas, v, engine, edge_options, key, out = _check_study(
         params, sigmas, n_draws, v_d, n_samples, n_folds, key, engine, options,
