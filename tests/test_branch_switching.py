@@ -170,19 +170,19 @@ def test_a_switch_that_fails_is_reported_with_its_branch_point(branch_point, mon
     def fails(*args, **kwargs):
         raise RuntimeError("switching did not converge")
 
-    monkeypatch.setattr("jaxchain._studies.snake.branch.switch_branch", fails)
+    monkeypatch.setattr("jaxchain._bifurcation.branches.switch_branch", fails)
     switched = internal("snake switched branch")
-    orbits = internal("snake orbits")(SHOOTING)
-    args = (orbits, problem, branch, point, jc.ContinuationOptions(max_points=2),
+    args = (SHOOTING, problem, branch, point, jc.ContinuationOptions(max_points=2),
             jc.PseudoArclength())
     # deflation beside the branch point finds the other branch instead
-    rescued = switched(*args, k=2, progress=False)
-    assert rescued and all(ds.attrs["switched_from_vd"] == float(point.p) for ds in rescued)
-    monkeypatch.setattr("jaxchain._studies.snake.branch.switch_by_deflation", lambda *a, **k: [])
-    assert switched(*args, k=2, progress=False) == [{
-        "v_d": float(point.p),
-        "reason": "switching did not converge; deflation beside it found no other orbit, "
-                  "nor a step along an axis of its symmetry"}]
+    rescued = switched(*args, progress=False)
+    assert rescued and all(b.switched_from == float(point.p) for b in rescued)
+    monkeypatch.setattr("jaxchain._bifurcation.branches.switch_by_deflation",
+                        lambda *a, **k: [])
+    (failure,) = switched(*args, progress=False)
+    assert failure.p == float(point.p) and failure.reason == (
+        "switching did not converge; deflation beside it found no other orbit, "
+        "nor a step along an axis of its symmetry")
 
 
 def _pitchfork(symmetric: bool):

@@ -117,12 +117,19 @@ def localized_branches(params: ChainParams | None = None, sites=None, *,
 
 
 @dataclasses.dataclass(frozen=True)
+class NoBranch:
+    """A start whose branch could not be followed, and why."""
+
+    reason: str
+
+
+@dataclasses.dataclass(frozen=True)
 class FoundBranches:
     """What the snake found, in the order of its starts.
 
     **Fields:** `datasets` (label -> the stored form of a branch,
     `branch_dataset`); `starts` (start -> its simulation's n_HALC and energy);
-    `failed` (start -> why it has no periodic orbit or no branch); `repeated` (the
+    `failed` (start -> `NoBranch`: why it has no periodic orbit or no branch); `repeated` (the
     deflated orbits that lie on a branch already followed, from starts without a
     branch of their own; those of the others are their branch's attribute
     `deflated_repeats`)."""
@@ -179,7 +186,7 @@ def _find_branches(orbits, params: ChainParams, sites: tuple, continuation_optio
             continue
         known += _stored_orbits(stored, float(params.v_d))
         if stored.no_branch is not None:  # a start without a branch of its own
-            failed[k], starts[k] = stored.no_branch, stored.simulation
+            failed[k], starts[k] = NoBranch(stored.no_branch), stored.simulation
             repeated += stored.repeats
         datasets |= stored.branches
     before = FoundBranches(datasets, starts, failed, repeated)
@@ -223,10 +230,10 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
         # a start whose simulated state is not periodic keeps its reason, and the
         # orbits that deflation finds from its eq. (8) state are followed still
         if orbit is None:
-            failed[k] = reason
+            failed[k] = NoBranch(reason)
         mine = {} if orbit is None else _labelled(own, orbit, mask, jobs[k].result())
         if isinstance(mine, NoBranch):
-            starts[k], failed[k], mine = sim, mine.reason, {}
+            starts[k], failed[k], mine = sim, mine, {}
         followed, repeats, j = {}, [], 0
         for i, (o, m, _) in enumerate(deflated.get(k, [])):
             if o is None:  # shooting from deflation's solution did not converge
@@ -240,7 +247,7 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
             label = f"{own} deflated {j}"
             branches = _labelled(label, o, mask, jobs[k, i].result())
             if isinstance(branches, NoBranch):
-                starts[label], failed[label] = sim, branches.reason
+                starts[label], failed[label] = sim, branches
                 continue
             store.write(k, branches, deflated=j)
             followed |= branches
@@ -255,16 +262,9 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
             store.write(k, mine)
         else:
             repeated += repeats
-            store.write_no_branch(k, failed[k], sim, j, repeats, gave)
+            store.write_no_branch(k, failed[k].reason, sim, j, repeats, gave)
         datasets |= mine | followed
     return FoundBranches(datasets, starts, failed, repeated)
-
-
-@dataclasses.dataclass(frozen=True)
-class NoBranch:
-    """A start whose branch could not be followed, and why."""
-
-    reason: str
 
 
 def _follow_start(start, phase_oscillator: int, mask, *, orbits, continuation_options,

@@ -117,7 +117,7 @@ def _branches_summary(datasets: dict, starts: dict, failed: dict, repeated: list
     repeated = repeated + [r for ds in datasets.values()
                            for r in json.loads(ds.attrs.get("deflated_repeats", "[]"))]
     summary = {"branches": branches,
-               "not_periodic": [{"excited": k, "reason": r, "simulation": starts[k]}
+               "not_periodic": [{"excited": k, "reason": r.reason, "simulation": starts[k]}
                                 for k, r in failed.items()],
                "deflated_on_followed": repeated,
                "sites_connections": _sites_connections(datasets, links, n_osc)}
