@@ -100,24 +100,22 @@ def test_notebook_runs_small_and_shows_its_figures(name, tmp_path, monkeypatch):
             f"no figure shown by the cell:\n{cell.source}"
 
 
-#: A notebook cell that imports every module of jaxchain and shows a bar (the one
-#: every bar of jaxchain is, reached through tests/helpers.py), recording the
-#: warnings: tqdm.auto's notebook bar warns (TqdmWarning, with the path of its
-#: file) in a kernel without ipywidgets, once, when a module imports it.
-BAR_CELL = f"""\
-import importlib, pkgutil, sys, warnings
+#: A notebook cell that imports every module of jaxchain and runs a simulation with
+#: its bar (`progress=True`: three chunks), recording the warnings: tqdm.auto's
+#: notebook bar warns (TqdmWarning, with the path of its file) in a kernel without
+#: ipywidgets, once, when a module imports it.
+BAR_CELL = """\
+import importlib, pkgutil, warnings
 from tqdm import TqdmWarning
 with warnings.catch_warnings(record=True) as caught:
     warnings.simplefilter("always")
     import jaxchain as jc
+    jc.configure()
     for module in pkgutil.walk_packages(jc.__path__, "jaxchain."):
         importlib.import_module(module.name)
-    sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})
-    from helpers import internal
-    progress_bar = internal("progress bar")
-    with progress_bar(3, "a bar in a notebook", True) as bar:
-        bar.update(3)
-        bar.refresh()
+    options = jc.SimulationOptions(t_end=3.0, transient=1.0, chunk_length=1.0)
+    jc.simulate(jc.ChainParams(n_osc=1), jc.OutOfPhaseExcitation.eq8([True]),
+                options=options, progress=True)
 print("TqdmWarnings:", [str(w.message) for w in caught if issubclass(w.category, TqdmWarning)])
 """
 
@@ -131,5 +129,6 @@ def test_progress_bars_in_a_notebook_are_text_without_a_warning(tmp_path):
     assert "TqdmWarnings: []" in printed, printed
     assert [o.output_type for o in outputs if o.output_type != "stream"] == [], "a widget"
     bar = "".join(o.text for o in outputs if o.output_type == "stream" and o.name == "stderr")
-    assert "a bar in a notebook: 100%|" in bar and "| 3/3 [" in bar  # tqdm's text bar
+    # tqdm's text bar, drawn when the run starts (it is cleared when it ends)
+    assert "simulate:   0%|" in bar and "| 0/3 [" in bar and "chunk/s]" in bar, bar
     assert "TqdmWarning" not in bar

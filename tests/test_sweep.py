@@ -11,10 +11,9 @@ import pytest
 import xarray as xr
 
 import jaxchain as jc
-from jaxchain._analysis.fronts import front_ranges
 from helpers import (JAXCHAIN, SHORT, SWEEP_BATCH as BATCH, SWEEP_RESULTS, assert_cf_compliant,
-                     batch_writes, batches_done, held, hold_env, internal, kill, release,
-                     replace_internal, small_sweep, sweep_cli)
+                     batch_writes, batches_done, held, hold_env, kill, release, small_sweep,
+                     sweep_cli)
 
 #: The grid of the kill-and-resume tests: 2 belt speeds x eq. (8) with k = 1..3 on
 #: a ring of 3, in 3 batches of 2 (`small_sweep`).
@@ -128,19 +127,24 @@ def _assert_cf_store(store, copy) -> None:
     assert_cf_compliant(copy)
 
 
-def test_sweeping_eta_c_through_a_lens_equals_separate_runs(monkeypatch):
+def test_sweeping_eta_c_through_a_lens_equals_separate_runs(tmp_path):
     """eta_c swept by `where=lambda p: p.eta_c` equals one ensemble per value (the
     same compiled run per trajectory: equal to the last bit). The engine never gets
-    more trajectories than a batch."""
+    more trajectories than a batch: each batch the store receives holds at most
+    batch_size of them."""
     sizes = []
-    run_lanes = internal("sweep batch")
-    replace_internal(monkeypatch, "sweep batch",
-                     lambda p, y0, *a, **k: sizes.append(len(y0)) or run_lanes(p, y0, *a, **k))
+
+    def record(write, sweep_store, index, start, batch):
+        sizes.append(batch.sizes["trajectory"])
+        write(sweep_store, index, start, batch)
+
     params, ics = jc.ChainParams(n_osc=3, v_d=1.5), jc.localized_family(3)
     eta_c = [0.0, 0.01, 0.2]
-    ds = jc.sweep(params, eta_c, ics, options=SHORT, where=lambda p: p.eta_c,
-                  batch_size=4, progress=False)
+    with batch_writes(record):
+        ds = jc.sweep(params, eta_c, ics, options=SHORT, where=lambda p: p.eta_c,
+                      batch_size=4, store=tmp_path / "eta_c.zarr", progress=False)
     assert max(sizes) <= 4 and sum(sizes) == 9
+    assert ds.attrs["batch_size"] == 4 and ds.attrs["batches_total"] == len(sizes) == 3
     assert ds["n_halc"].dims == ("eta_c", "ic") and ds.attrs["swept"] == "eta_c"
     for value in eta_c:
         one = jc.ensemble(jc.with_parameter(params, "eta_c", value), [1.5], ics,
@@ -171,33 +175,77 @@ def test_sweeping_the_engine_s_eps_equals_separate_runs():
     assert not np.array_equal(ds["num_steps"].values[0], ds["num_steps"].values[1])
 
 
-def _synthetic(n_halc, halves, excited, status=None):
+def _synthetic(n_halc, halves, excited, status=None, v_d=(1.0, 1.5)):
     n_halc = np.asarray(n_halc)
     return xr.Dataset(
         {"n_halc": (("v_d", "ic"), n_halc),
          "n_halc_halves": (("v_d", "ic", "half"), np.asarray(halves)),
-         "status": (("v_d", "ic"), np.zeros_like(n_halc) if status is None else status)},
-        coords={"v_d": [1.0, 1.5], "n_excited": ("ic", excited)})
+         "status": (("v_d", "ic"), np.zeros_like(n_halc) if status is None else status),
+         "energy": (("v_d", "ic"), 0.1 * n_halc),
+         "amplitudes": (("v_d", "ic", "osc"), np.zeros((*n_halc.shape, 5)))},
+        coords={"v_d": list(v_d), "n_excited": ("ic", excited)})
+
+
+#: The colours of the fronts in the bifurcation diagram: red where stick-slip
+#: invades, blue where it recedes (`plot_bifurcation_diagram`).
+FRONT_COLOURS = {1: "tab:red", -1: "tab:blue"}
+
+
+def _drawn_fronts(ds) -> dict:
+    """What `jc.plot_bifurcation_diagram` draws of the fronts of each kind: the
+    values it shades (the cell of each value, halfway to its neighbours) and where
+    its dashed lines bounding the ranges of fronts stand."""
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import same_color
+
+    fig = jc.plot_bifurcation_diagram(ds)
+    try:
+        ax = fig.axes[0]
+        values = np.sort(np.asarray(ds["v_d"], dtype=float))
+        drawn = {}
+        for sign, colour in FRONT_COLOURS.items():
+            centres = [p.get_bbox().x0 + 0.5 * p.get_bbox().width for p in ax.patches
+                       if same_color(p.get_facecolor()[:3], colour)]
+            shaded = sorted(float(values[np.argmin(np.abs(values - c))]) for c in centres)
+            lines = sorted(round(float(line.get_xdata()[0]), 12) for line in ax.lines
+                           if line.get_linestyle() == "--" and same_color(line.get_color(),
+                                                                          colour))
+            drawn[sign] = (shaded, lines)
+        return drawn
+    finally:
+        plt.close(fig)
 
 
 def test_fronts_follow_their_definition():
     """Invading: more on the HALC in the second half, or more than excited;
     receding: fewer; a failed run and an initial condition without n_excited
-    (-1) flag nothing beyond the halves."""
+    (-1) flag nothing beyond the halves. The diagram shades both values for
+    invading fronts, one range over the whole grid (no dashed bound), and 1.5 alone
+    for receding ones, bounded halfway to 1.0."""
     ds = _synthetic(n_halc=[[3, 1, 2, 2], [5, 2, 4, 2]],
                     halves=[[[2, 3], [1, 1], [2, 2], [2, 2]],
                             [[5, 5], [2, 1], [4, 4], [2, 2]]],
                     excited=[2, 1, 2, -1], status=[[0, 0, 0, 0], [0, 0, 3, 0]])
     front = jc.propagating_fronts(ds).values
     assert front.tolist() == [[1, 0, 0, 0], [1, -1, 0, 0]]
-    assert front_ranges([1.0, 1.5], (front != 0).any(1)) == [(1.0, 1.5)]
+    drawn = _drawn_fronts(ds.assign(front=(("v_d", "ic"), front)))
+    assert drawn == {1: ([1.0, 1.5], []), -1: ([1.5], [1.25])}
 
 
 def test_front_ranges_are_runs_of_consecutive_values():
-    values = np.array([1.2, 1.0, 1.1, 1.3, 1.4, 1.5])
+    """The ranges of fronts that the diagram bounds by dashed lines are the runs of
+    consecutive values (sorted) with a front, each bounded halfway to the nearest
+    value without one, and not beyond the ends of the grid."""
+    values = [1.2, 1.0, 1.1, 1.3, 1.4, 1.5]
     flags = np.array([False, True, True, False, True, True])
-    assert front_ranges(values, flags) == [(1.0, 1.1), (1.4, 1.5)]
-    assert front_ranges(values, np.zeros(6, bool)) == []
+    n = len(values)
+    front = np.where(flags, 1, 0)[:, None]  # invading where flagged, one ic
+    ds = _synthetic(n_halc=np.ones((n, 1), int), halves=np.ones((n, 1, 2), int),
+                    excited=[1], v_d=values).assign(front=(("v_d", "ic"), front))
+    # the runs (1.0, 1.1) and (1.4, 1.5): bounded at 1.15 and 1.35 only
+    assert _drawn_fronts(ds) == {1: ([1.0, 1.1, 1.4, 1.5], [1.15, 1.35]), -1: ([], [])}
+    none = ds.assign(front=(("v_d", "ic"), np.zeros((n, 1), int)))
+    assert _drawn_fronts(none) == {1: ([], []), -1: ([], [])}
 
 
 def test_bad_input_names_the_argument(tmp_path):
