@@ -1,13 +1,13 @@
 """Run by `test_lanes.py` in a fresh process, where `jaxchain.configure()` chooses
 the CPU device count (one per core; the test processes use one, `conftest.py`): the work
 queue over every device, and the lanes of `FIVE_LANES` on one device, on two, and
-vmapped. Writes `<out>.npz` with the device and core counts, the devices that
-`on_devices` used, the compilations of the queue's program for one device and
-then for two, and every field of the three runs."""
+vmapped. Writes `<out>.npz` with the device and core counts, the compilations of
+the queue's program for one device and then for two, and every field of the three
+runs. Public names only: `test_lanes.py` checks the internal dealing of tasks to
+devices in a fresh process of its own."""
 
 import os
 import sys
-import threading
 
 import jax
 import numpy as np
@@ -16,9 +16,7 @@ import jaxchain as jc
 
 jc.configure()  # as a user's first call: one device per core, float64, the XLA flags
 
-from helpers import TIGHT, internal  # noqa: E402
-
-on_devices = internal("tasks on devices")
+from helpers import TIGHT  # noqa: E402
 
 FIELDS = ("amplitudes", "energy", "n_halc", "y_final", "num_steps", "status")
 
@@ -29,23 +27,6 @@ def five_lanes():
     y0 = np.stack([jc.OutOfPhaseExcitation.eq8(jc.excited_block(3, 1 + k % 3))(
         jc.ChainParams(n_osc=3, v_d=v)) for k, v in enumerate(v_d)])
     return jc.lane_params(jc.ChainParams(n_osc=3), v_d.size, v_d=v_d), y0
-
-
-def devices_at_a_barrier() -> list[int]:
-    """The ids of the devices that ran the 7 tasks of `on_devices`: the first tasks
-    meet at a barrier, which opens only if every device runs one of them at once."""
-    n_dev = len(jax.devices())
-    barrier = threading.Barrier(n_dev, timeout=30)
-    seen = []
-
-    def task(i, device):
-        if i < n_dev:
-            barrier.wait()
-        seen.append(device.id)
-        return int(jax.device_put(np.int64(i) ** 2, device))
-
-    assert on_devices(task, 7, "squares") == [i**2 for i in range(7)]
-    return sorted(set(seen))
 
 
 def main(out: str) -> None:
@@ -62,7 +43,7 @@ def main(out: str) -> None:
     two_compiles = sum("run_block" in name for name in compiles[before:])
     runs["vmap"] = jc.run_lanes(params, y0, solver, TIGHT, schedule="vmap", devices=devices[:2])
     np.savez(out, n_devices=len(jax.devices("cpu")), cores=len(os.sched_getaffinity(0)),
-             used=devices_at_a_barrier(), two_compiles=two_compiles,
+             two_compiles=two_compiles,
              one_compiles=sum("run_block" in name for name in compiles[:before]),
              **{f"{run}_{f}": np.asarray(getattr(obs, f)) for run, obs in runs.items()
                 for f in FIELDS})

@@ -1,7 +1,8 @@
 """Identification against the event-driven non-smooth reference: records made by the
 exact switch model (a different code path from the smoothed fit) with known
-parameters, refitted; the fit's Jacobian against finite differences; the choice
-between friction laws; the parametrisation that keeps a law valid."""
+parameters, refitted; the Jacobian of a fit's residual through the engines' flow
+against finite differences; the choice between friction laws; the names a fit
+refuses."""
 
 import contextlib
 import json
@@ -12,13 +13,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 import jaxchain as jc
-from jaxchain._studies.identification.unknowns import unknowns_of
-from jaxchain._engine.exact.solve import nonsmooth_trajectory  # the records' sampler
-from helpers import internal
 
 #: The rig of the tests: eq. (1) with parameters away from the defaults (which are
 #: the fit's starting values where the records say nothing), one oscillator.
@@ -55,44 +51,32 @@ def _fit(records, **kw):
 
 @pytest.mark.numerics
 def test_the_reference_trajectory_is_the_reference_run():
-    """Sampled event by event, the reference's state at t_end is that of
-    `simulate_nonsmooth` (another program, both at rtol 1e-12: agreement to 1e-8),
-    and in stick the oscillator moves with the belt exactly. The samples of the
-    records (`T_END`, `DT`), so that the sampled run is the records' program."""
+    """Sampled event by event, the records' state at t_end (`reference_record`, with
+    its velocities) is that of `simulate` on the exact engine (another program,
+    both at rtol 1e-12: agreement to 1e-8), and in stick the oscillator moves with
+    the belt exactly. The samples of the records (`T_END`, `DT`), so that the
+    sampled run is the records' program. A record of no sample interval is
+    refused."""
     jc.configure()
     params = jc.with_parameter(RIG, "v_d", 0.7)
-    ts = np.arange(int(round(T_END / DT)) + 1) * DT
-    ys = np.asarray(jc.Exact(jc.NonsmoothOptions.reference()).flow(
-        params, jnp.zeros((2, 1)), jnp.asarray(ts)))
+    rec = jc.reference_record(RIG, 0.7, T_END, DT, velocities=True)
+    np.testing.assert_allclose(rec.t, np.arange(int(round(T_END / DT)) + 1) * DT)
     run = jc.simulate(params, np.zeros((2, 1)), engine=jc.Exact(jc.NonsmoothOptions.reference(
         t_end=T_END, transient=T_END / 2, chunk_length=5.0)))
-    np.testing.assert_allclose(ys[-1], np.asarray(run.y_final), atol=1e-8)
-    sticking = np.abs(ys[:, 1, 0] - 0.7) < 1e-12
+    np.testing.assert_allclose([rec.x[-1], rec.v[-1]], np.asarray(run.y_final), atol=1e-8)
+    sticking = np.abs(rec.v[:, 0] - 0.7) < 1e-12
     assert 0.1 < sticking.mean() < 0.9  # stick-slip, with stick phases
-    with pytest.raises(ValueError, match="increasing"):
-        nonsmooth_trajectory(params, np.zeros((2, 1)), ts[::-1])
+    for dt in (-DT, 0.0, 2 * T_END):
+        with pytest.raises(jc.ValidationError, match="dt and t_end"):
+            jc.reference_record(RIG, 0.7, T_END, dt)
 
 
-@settings(max_examples=40, deadline=None)
-@given(theta=st.lists(st.floats(-8.0, 3.0), min_size=4, max_size=4))
-def test_every_unknown_gives_a_valid_law_and_back(theta):
-    """For any unknowns, mu_st > mu_d > 0, v0 > 0 and xi > 0 (by the
-    parametrisation, not by clipping), and the unknowns come back from the law."""
-    jc.configure()
-    unknowns = unknowns_of(RIG, ("mu_st", "mu_d", "v0", "xi"))
-    params = unknowns.params(RIG, jnp.asarray(theta))
-    law = params.friction
-    assert float(law.mu_st) > float(law.mu_d) > 0 and float(law.v0) > 0
-    assert float(params.xi) > 0
-    np.testing.assert_allclose(unknowns.theta(params), theta, rtol=1e-9, atol=1e-9)
-
-
-def test_bad_fit_names_are_refused():
-    jc.configure()
-    for fit, says in [((), "at least one"), (("v_d",), "cannot be fitted"),
+def test_bad_fit_names_are_refused(clean_records):
+    """`identify` refuses a name it cannot fit before it integrates anything."""
+    for fit, says in [(("v_d",), "cannot be fitted"), (("eps",), "cannot be fitted"),
                       (("mu_s",), "unknown parameter"), (("xi", "xi"), "twice")]:
         with pytest.raises(jc.ValidationError, match=says):
-            unknowns_of(RIG, fit)
+            jc.identify(clean_records, jc.ChainParams(n_osc=1), fit)
 
 
 #: The engines of the Jacobian's test, at tight tolerances (rtol 1e-10, atol 1e-12; the
@@ -103,12 +87,30 @@ TIGHT = {"smoothed": jc.Smoothed(options=jc.SimulationOptions(rtol=1e-10, atol=1
                                                max_steps=jc.SimulationOptions().max_steps))}
 
 
+def _law(theta):
+    """The chain of `RIG` at belt speed 0.7 from the unknowns theta of a fit, in the
+    parametrisation `identify` documents: mu_d = exp(theta_1), mu_st = mu_d +
+    exp(theta_0), v0 = exp(theta_2), xi = exp(theta_3) (written here, not taken from
+    jaxchain)."""
+    mu_d = jnp.exp(theta[1])
+    params = jc.with_parameter(RIG, "v_d", 0.7)
+    for name, value in [("mu_d", mu_d), ("mu_st", mu_d + jnp.exp(theta[0])),
+                        ("v0", jnp.exp(theta[2])), ("xi", jnp.exp(theta[3]))]:
+        params = jc.with_parameter(params, name, value)
+    return params
+
+
 @pytest.mark.numerics
 @pytest.mark.parametrize("engine", ["smoothed", "exact"])
-def test_the_jacobian_of_the_misfit_is_that_of_finite_differences(clean_records, engine):
-    """Forward-mode through the integration against central differences of the same
-    residual, on one record of two windows at tight tolerances (rtol 1e-10, atol
-    1e-12): the differences' truncation (h^2) and the integration's noise
+def test_the_jacobian_of_the_misfit_is_that_of_finite_differences(engine):
+    """Forward-mode through the integration (`AbstractEngine.flow`, what a fit
+    integrates in each window) against central differences of the same residual:
+    a fit's, written here from the engine's public flow, on one record (belt speed
+    0.7, `T_END`, `DT`) cut as `identify` cuts it into two windows of 10, its
+    unknowns the four parameters in the fit's parametrisation (`_law`) and the two
+    windows' initial states; the residual the displacements at the samples and
+    three times the jump between the windows. At tight tolerances (rtol 1e-10,
+    atol 1e-12): the differences' truncation (h^2) and the integration's noise
     (atol / h) are both below 1e-5 with h = 1e-4, so they agree to 1e-4 of the
     Jacobian's largest entry, and an error in a single entry would show. The
     smoothed model through diffrax; the exact switch model through its events
@@ -116,18 +118,31 @@ def test_the_jacobian_of_the_misfit_is_that_of_finite_differences(clean_records,
     and slip switch of the windows' stick phases), where a switch missed by the
     derivative would be off by the jump of the vector field there, of order one."""
     jc.configure()
-    options = jc.IdentifyOptions(engine=TIGHT[engine])
-    problem, u0 = internal("identification problem")(
-        clean_records[1:2], jc.ChainParams(n_osc=1), ("mu_st", "mu_d", "v0", "xi"),
-        None, True, options)
-    weighting = (jnp.ones((1, 2, 1)), jnp.asarray(3.0))
-    residual = jax.jit(lambda u: problem.residual(u, weighting))
+    engine = TIGHT[engine]
+    rec = jc.reference_record(RIG, 0.7, T_END, DT, velocities=True)
+    first, second = np.array_split(np.arange(rec.t.size), 2)  # identify's two windows
+    # each window's samples from its start and the next window's start; the second,
+    # one sample shorter, padded with its last time (one program for both windows)
+    times = jnp.asarray([np.append(rec.t[first], rec.t[second[0]]),
+                         np.append(rec.t[second], [rec.t[-1]] * 2) - rec.t[second[0]]])
+    truth = np.log([TRUE["mu_st"] - TRUE["mu_d"], TRUE["mu_d"], TRUE["v0"], TRUE["xi"]])
+    states = [[rec.x[w[0], 0], rec.v[w[0], 0]] for w in (first, second)]
+
+    @jax.jit
+    def residual(u):
+        ys = jax.vmap(engine.flow, in_axes=(None, 0, 0))(
+            _law(u[:4]), jnp.reshape(u[4:], (2, 2, 1)), times)
+        jump = ys[0, -1, :, 0] - u[6:8]
+        return jnp.concatenate([ys[0, :-1, 0, 0], ys[1, :second.size, 0, 0], 3.0 * jump])
+
+    u0 = jnp.asarray(np.concatenate([truth, np.ravel(states)]))
     u = u0 + 0.01 * jnp.sin(jnp.arange(u0.size))  # off the data, every entry in play
     exact = np.asarray(jax.jacfwd(residual)(u))
     h = 1e-4
     columns = [(residual(u + h * e) - residual(u - h * e)) / (2 * h)
                for e in np.eye(u.size)]
     approx = np.stack([np.asarray(c) for c in columns], axis=1)
+    assert exact.shape == (rec.t.size + 2, 8) and np.all(np.isfinite(exact))
     assert np.abs(exact).max() > 1.0
     np.testing.assert_allclose(exact, approx, rtol=0, atol=1e-4 * np.abs(exact).max())
 
@@ -217,7 +232,7 @@ def test_the_exact_engine_fits_exact_records_without_the_smoothing_bias(clean_re
     --engine exact` on the records as CSV files: no smoothing bias is left, so the
     parameters come back to 1e-6 relative (the smoothed fit's bias is 1e-3 at eps =
     1e-5, below), and the result says which model it fitted. At the tolerances of
-    the Jacobian's test above, so that the fit runs that test's program."""
+    the Jacobian's test above."""
     files = [str(jc.write_record(r, tmp_path / f"rig_{i}.csv"))
              for i, r in enumerate(clean_records)]
     capsys.readouterr()

@@ -40,6 +40,40 @@ def every_device(tmp_path_factory):
     return dict(np.load(out))
 
 
+#: Run in a fresh process by `devices_at_a_barrier`, where `jaxchain.configure()`
+#: chooses the device count: the ids of the devices that ran the 7 tasks of
+#: `on_devices`, whose first tasks meet at a barrier that opens only if every
+#: device runs one of them at once; then the device count.
+_BARRIER = """
+import sys, threading
+import jax, numpy as np
+import jaxchain as jc
+jc.configure()
+from jaxchain._engine.lanes import on_devices
+n_dev = len(jax.devices())
+barrier, seen = threading.Barrier(n_dev, timeout=30), []
+def task(i, device):
+    if i < n_dev:
+        barrier.wait()
+    seen.append(device.id)
+    return int(jax.device_put(np.int64(i) ** 2, device))
+assert on_devices(task, 7, "squares") == [i**2 for i in range(7)]
+print(sorted(set(seen)), len(jax.devices("cpu")))
+"""
+
+
+@pytest.fixture(scope="module")
+def devices_at_a_barrier():
+    """(the devices that ran `on_devices`' tasks, the device count) in a fresh
+    process with the library's own device count (`_BARRIER`)."""
+    env = {k: v for k, v in os.environ.items() if k != "JAX_NUM_CPU_DEVICES"}
+    run = subprocess.run([sys.executable, "-c", _BARRIER], cwd=HERE, capture_output=True,
+                         text=True, timeout=120, env=env)
+    assert run.returncode == 0, run.stderr
+    used, n_devices = run.stdout.strip().splitlines()[-1].rsplit(" ", 1)
+    return [int(d) for d in used.strip("[]").split(",")], int(n_devices)
+
+
 def test_one_cpu_device_per_core(every_device):
     """`jaxchain.configure()` asks JAX for one CPU device per usable core (nothing
     in that process's environment sets the count)."""
@@ -165,10 +199,11 @@ def test_block_size_keeps_every_device_busy(n_lanes, n_devices):
     assert size >= 1 and n_blocks >= min(n_lanes, 16 * n_devices)
 
 
-def test_on_devices_keeps_order_and_uses_every_device(every_device):
-    """In the fresh process, the first tasks met at a barrier that opens only if
+def test_on_devices_keeps_order_and_uses_every_device(devices_at_a_barrier):
+    """In a fresh process, the first tasks met at a barrier that opens only if
     every device runs one of them at the same time, and every device ran a task."""
-    assert every_device["used"].tolist() == list(range(every_device["n_devices"]))
+    used, n_devices = devices_at_a_barrier
+    assert used == list(range(n_devices))
 
 
 def test_on_devices_raises_the_first_error():
