@@ -9,31 +9,31 @@ import numpy as np
 import pytest
 
 import jaxchain as jc
-from jaxchain._studies.stress.cases import stress_cases
-# "auto" at an eps other than the default has no public route
-from jaxchain._engine.engines import as_engine
-from jaxchain._engine.solver.registry import auto_solver
-from helpers import assert_usage_error, internal, replace_internal, scipy_slip_arc
+from helpers import assert_usage_error, scipy_slip_arc
 
-QUICK = stress_cases(quick=True)
+#: The reduced matrix of `jaxchain stress --quick` (its --help and docs/stress.md),
+#: in order: one thing varied at a time, to the edges of the model.
+QUICK = [("eps", 1e-1), ("eps", 1e-5), ("n_osc", 1), ("v_d", 1e-3), ("v_d", 1.1513),
+         ("v_d", 10.0), ("eta_c", 100.0), ("xi", 0.0), ("xi", 1.0), ("mu_st/mu_d", 1.0),
+         ("v0", 1e-3), ("ics", "steady sliding"), ("ics", "x ± 1e3"), ("ics", "x' ± 50")]
 
 
 @pytest.mark.numerics
 @pytest.mark.study
-def test_quick_matrix_verifies_every_case_on_the_default_solver(tmp_path, capsys,
-                                                                monkeypatch):
+def test_quick_matrix_verifies_every_case_on_the_default_solver(tmp_path, capsys):
     """`jaxchain stress --quick` on the default path: every case of the reduced
     matrix, the edges of the model included (eps = 1e-5, v_d = 1e-3, eta_c = 100,
     xi = 0, x ± 1e3), is verified by its physics checks. A case that fails, even
     with a specific status, is a regression of the default solver. A second run
-    with the same --out reads every row back and runs no case."""
+    with the same --out reads every row back and runs no case: the store only
+    appends the rows it computes, so its CSV is left as it was."""
     argv = ["stress", "--quick", "--solver", "ros34pw2", "--out", str(tmp_path), "--json",
             "--no-progress"]
     assert jc.main(argv) == 0
     out = json.loads(capsys.readouterr().out)
     assert set(out["outputs"]) == {"stress.csv", "stress.md"}
     cases = out["cases"]
-    assert [(c["what"], c["value"]) for c in cases] == [(c.what, c.value) for c in QUICK]
+    assert [(c["what"], c["value"]) for c in cases] == QUICK
     assert set(cases[0]) == {"what", "value", "solver", "outcome", "status", "check", "hint"}
     for case in cases:
         assert case["outcome"] == "verified" and case["status"] == "ok", case
@@ -45,23 +45,31 @@ def test_quick_matrix_verifies_every_case_on_the_default_solver(tmp_path, capsys
     assert "Hopf point" in by["v_d", 1.1513]["check"]
     assert "stays at steady sliding" in by["ics", "steady sliding"]["check"]
     assert (tmp_path / "stress.md").read_text().count("| eps |") == sum(
-        c.what == "eps" for c in QUICK)
-    # Resumed: the same rows, read back, and no case run again.
-    def no_case(*args, **kwargs):
-        raise AssertionError("a stored row should have been read back")
-    replace_internal(monkeypatch, "stress case", no_case)
+        what == "eps" for what, _ in QUICK)
+    # Resumed: the same rows, read back, and no case run again (a case run would
+    # append its row, with its own wall time, to the CSV).
+    stored = tmp_path / "stress.csv"
+    written, mtime = stored.read_bytes(), stored.stat().st_mtime_ns
     assert jc.main([*argv, "--resume"]) == 0
     again = json.loads(capsys.readouterr().out)
     assert again["cases"] == cases and again["defects"] == 0
+    assert stored.read_bytes() == written and stored.stat().st_mtime_ns == mtime
 
 
-def test_an_explicit_solver_at_tiny_eps_fails_with_a_specific_hint():
+def test_an_explicit_solver_at_tiny_eps_fails_with_a_specific_hint(tmp_path, capsys):
     """Tsit5 with a step budget far below mu_st/eps fails with max_steps, and the hint
-    names the stiffness and the solver that copes."""
-    options = dataclasses.replace(QUICK[0].options, max_steps=2000)
-    row, = jc.stress([internal("stress case of the matrix")("eps", 1e-6, options)], ["tsit5"])
+    names the stiffness and the solver that copes: `jaxchain stress --quick --what
+    eps` (eps = 1e-1 and 1e-5) with 2000 steps per chunk. A failure with a specific
+    status is an outcome, not a defect: the command succeeds."""
+    assert jc.main(["stress", "--quick", "--what", "eps", "--solver", "tsit5",
+                    "--max-steps", "2000", "--out", str(tmp_path), "--json",
+                    "--no-progress"]) == 0
+    cases = json.loads(capsys.readouterr().out)["cases"]
+    assert [(c["what"], c["value"], c["solver"]) for c in cases] == [
+        ("eps", 1e-1, "tsit5"), ("eps", 1e-5, "tsit5")]
+    row = cases[1]
     assert row["outcome"] == "failed" and row["status"] == jc.Status.max_steps_reached.name
-    assert "eps = 1e-06 makes the stick phase stiff" in row["hint"]
+    assert "eps = 1e-05 makes the stick phase stiff" in row["hint"]
     assert "solver='ros34pw2'" in row["hint"]
 
 
@@ -123,16 +131,22 @@ def test_existence_limit_with_steep_friction():
         assert (arc.status == 1) == returns, d  # status 1: it came back to the belt
 
 
-def test_auto_solver_is_explicit_only_where_the_stick_phase_is_not_stiff():
-    y0 = jc.OutOfPhaseExcitation.eq8([True, False])
-    options = jc.SimulationOptions(t_end=60.0, transient=30.0)
-    params = jc.ChainParams(n_osc=2)
+def test_auto_solver_is_explicit_only_where_the_stick_phase_is_not_stiff(tmp_path, capsys):
+    """`--solver auto` at `--eps` takes Tsit5 where mu_st/eps <= 100 (eps = 0.1) and
+    ROS34PW2 where the stick phase is stiff (eps = 1e-3): the engine its --json
+    reports, and amplitudes equal to those of the solver named."""
+    def localized(solver, eps):
+        out = tmp_path / f"{solver}-{eps:g}"
+        assert jc.main(["localized", "--n-osc", "2", "--t-end", "60", "--transient", "30",
+                        "--solver", solver, "--eps", str(eps), "--json", "--no-progress",
+                        "--out", str(out)]) == 0
+        return json.loads(capsys.readouterr().out)
+
     for eps, name in ((0.1, "tsit5"), (1e-3, "ros34pw2")):
-        assert type(auto_solver(params, eps)) is type(jc.SOLVERS[name]())
-        auto = jc.simulate(params, y0, engine=as_engine("smoothed", "auto", options,
-                                                        params, eps=eps))
-        named = jc.simulate(params, y0, engine=jc.Smoothed(name, options, eps))
-        assert np.array_equal(auto.amplitudes, named.amplitudes)
+        auto, named = localized("auto", eps), localized(name, eps)
+        assert auto["solver"] == type(jc.SOLVERS[name]()).__name__ == named["solver"]
+        assert auto["eps"] == eps
+        assert np.array_equal(auto["runs"][0]["amplitudes"], named["runs"][0]["amplitudes"])
 
 
 @pytest.mark.parametrize("argv, says", [
