@@ -287,14 +287,8 @@ EXAMPLE_RECORD = str(Path(__file__).resolve().parent.parent / "examples" / "reco
 
 #: Functions of jaxchain's internals that tests replace or call, by what they do:
 #: (module, name). A resumed study must read back instead of computing again.
-_COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_reference_run"),
-             "stress case": ("jaxchain._studies.stress.run", "run_case"),
-             "work-precision reference": ("jaxchain._studies.work_precision", "reference"),
-             "sweep batch": ("jaxchain._sweeps.sweep", "run_lanes"),
+_COMPUTES = {"sweep batch": ("jaxchain._sweeps.sweep", "run_lanes"),
              # building blocks of public studies, tested on their own
-             "stress case of the matrix": ("jaxchain._studies.stress.cases", "make_case"),
-             "stress energy balance": ("jaxchain._studies.stress.physics_checks", "balance_run"),
-             "linear decay rate": ("jaxchain._studies.stress.physics_checks", "linear_rate"),
              "snake start orbits": ("jaxchain._studies.snake.starts", "start_orbits"),
              "snake starts": ("jaxchain._studies.snake.run", "_start_orbits"),
              "snake starts at speeds": ("jaxchain._studies.snake.starts", "_shoot_starts"),
@@ -304,19 +298,9 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "snake deflation": ("jaxchain._studies.snake.deflated", "distinct_orbits"),
              "snake sites connections": ("jaxchain._studies.snake.summary", "_sites_connections"),
              "snake branch": ("jaxchain._studies.snake.run", "follow_branch"),
-             "snake through sliding": ("jaxchain._bifurcation.branches", "_through_sliding"),
-             "snake pieces": ("jaxchain._bifurcation.branches", "_joined_pieces"),
              "snake switched branch": ("jaxchain._bifurcation.branches", "_switched_branches"),
              "snake switch along axes": ("jaxchain._bifurcation.branches", "_switch_along_axes"),
              "snake orbits": ("jaxchain._studies.snake.orbits", "snake_orbits"),
-             "mistuning design problems": ("jaxchain._studies.mistuning.pattern_design",
-                                           "design_problems"),
-             "pattern folds": ("jaxchain._studies.mistuning.pattern_design", "pattern_folds"),
-             "tasks on devices": ("jaxchain._engine.lanes", "on_devices"),
-             "smoothed observation": ("jaxchain._engine.observers.base", "observe_chunk"),
-             "non-smooth observation": ("jaxchain._engine.exact.stepping", "observe_samples"),
-             "identification problem": ("jaxchain._studies.identification.fit", "_problem"),
-             "ensemble lanes": ("jaxchain._sweeps.ensemble", "run_lanes"),
              # jitted entry points, whose traces a test counts (test_compile_once.py)
              "simulation program": ("jaxchain._engine.simulate", "_run_jit"),
              "Jacobian program": ("jaxchain._physics.model", "_jacobian"),
@@ -326,13 +310,7 @@ _COMPUTES = {"crosscheck reference": ("jaxchain._studies.crosscheck", "_referenc
              "continuation tangent": ("jaxchain._bifurcation.continuation", "_tangent"),
              "continuation records": ("jaxchain._bifurcation.continuation", "describe_point"),
              "shooting records": ("jaxchain._bifurcation.periodic_orbit", "describe_point"),
-             "slip arc peak": ("jaxchain._bifurcation.existence", "_peak"),
-             # the progress bar every bar of jaxchain is (test_examples.py)
-             "progress bar": ("jaxchain._engine.progress", "progress_bar"),
-             "command-line parser": ("jaxchain._cli.main", "build_parser"),
-             "commands": ("jaxchain._cli.main", "COMMANDS"),
-             "belt speeds": ("jaxchain._cli.common", "belt_speeds"),
-             "one belt speed": ("jaxchain._cli.common", "one_belt_speed")}
+             "slip arc peak": ("jaxchain._bifurcation.existence", "_peak")}
 
 
 def internal_module(what: str):
