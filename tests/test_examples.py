@@ -28,7 +28,7 @@ SMALL = {
         ("N_OSC = 3\nV_D = 1.5\nT_END = 400.0\nTRANSIENT = 200.0", "E / n_HALC"),
     "02_bifurcation_sweep.ipynb":
         ("N_OSC = 4\nVD_START, VD_STOP, N_VD = 1.0, 2.0, 3\nT_END = 400.0\n"
-         "TRANSIENT = 200.0\nBATCH_SIZE = 5", "fronts at v_d in"),
+         "TRANSIENT = 200.0\nBATCH_SIZE = 5", "fronts at v_d ="),
     "03_dynamics_of_localized_states.ipynb":
         ("N_OSC = 8\nT_END = 600.0\nTRANSIENT = 400.0\nCHUNK = 50.0\nT_SERIES = 100.0",
          "the two signals agree on"),
