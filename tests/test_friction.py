@@ -51,7 +51,10 @@ def test_smoothed_force_tends_to_coulomb_law_away_from_zero():
 
 @pytest.mark.numerics
 @settings(max_examples=50, deadline=None)
-@given(v=st.floats(-100, 100), eps=st.floats(1e-5, 1.0))
+# Subnormal speeds are left out: XLA's CPU kernels treat subnormal inputs as zero
+# (denormals-are-zero) on some processors, so the helper's exact relative velocity
+# x' - v_d would not be the one asked for (CI drew v = 1.1e-308 and got 2.2e-308).
+@given(v=st.floats(-100, 100, allow_subnormal=False), eps=st.floats(1e-5, 1.0))
 def test_smoothed_force_is_odd_and_bounded_by_mu_st(v, eps):
     p = jc.ChainParams()
     f = float(smoothed_friction_force(p, v, eps))
