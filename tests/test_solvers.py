@@ -1,21 +1,15 @@
-"""The solver, the step-size controller and the tangent of the smoothed engine:
-ROS34PW2 with a diagonal W (its order, and its limit as eps -> 0), the PI
-controller (`PIController`: its rules against the formulas of its docstring, its
-solutions against scipy and against diffrax's controller), and the largest
-Lyapunov exponent of Lorenz-63 (a published one).
+"""The solver of the smoothed engine: ROS34PW2 with a diagonal W (its order, and its
+limit as eps -> 0), and its solutions under each step-size controller against scipy
+and against each other.
 
 ROS34PW2 is public (`jc.SOLVERS["ros34pw2"]`, a diffrax solver), and the split of
-eq. (5) it integrates is written here. Two subjects are internal units, with no
-public route: the controller's rules, one call of `adapt_step_size` at a time
-(`PIController`, which a run builds from `SimulationOptions.controller` and never
-hands out), and Benettin's tangent on a system that is no chain (`integrate`, the
-smoothed engine's integrator of any diffrax term: the public `observe` integrates
-eq. (5) only)."""
+eq. (5) it integrates is written here. The controller's rules one call at a time and
+the integrator on a system that is no chain have no public route: they are in
+test_engine_internals.py."""
 
 import dataclasses
 
 import diffrax
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -23,11 +17,12 @@ from scipy.integrate import solve_ivp
 
 import jaxchain as jc
 from helpers import SHORT, flat, reference_rhs, scipy_stick_slip_cycle
-from jaxchain._engine.smoothed import integrate
-from jaxchain._engine.solver.controller import CONTROLLERS, PIController
 
 #: ROS34PW2 (Rang & Angermann 2005), the smoothed engine's default solver.
 Ros34PW2 = jc.SOLVERS["ros34pw2"]
+
+#: The step-size controllers that `SimulationOptions.controller` names (its docstring).
+CONTROLLERS = ("pi", "diffrax")
 
 
 def _fixed_steps(split, y0, t1, n_steps, args=None, most=640):
@@ -144,63 +139,8 @@ def test_steps_are_not_bound_by_stiffness():
             or int(bosh.num_steps) > 10 * int(rosw.num_steps))
 
 
-RTOL, ATOL = 1e-4, 1e-6
-
-
-def _adapt(controller, state, dt, err, y=1.0):
-    """One call of adapt_step_size on a scalar state y with a scaled error `err`."""
-    y0 = jnp.array([y])
-    y_error = jnp.array([err * (ATOL + RTOL * y)])
-    return controller.adapt_step_size(0.0, dt, y0, y0, None, y_error, 3, state)
-
-
-def _state(prev_err=1.0):
-    return ((jnp.asarray(1.0 / prev_err), jnp.asarray(1.0), False), jnp.asarray(0.0),
-            jnp.asarray(0.0))
-
-
 @pytest.mark.numerics
-def test_accepted_step_follows_the_pi_rule_and_may_shrink():
-    c = PIController(rtol=RTOL, atol=ATOL)
-    keep, t0, t1, _, state, _ = _adapt(c, _state(prev_err=0.5), 0.1, 0.95)
-    expected = 0.1 * 0.9 * 0.95 ** (-(0.5 + 0.2) / 3) * 0.5 ** (0.2 / 3)
-    assert bool(keep) and float(t0) == 0.1
-    assert np.isclose(float(t1 - t0), expected, rtol=1e-12)
-    assert float(t1 - t0) < 0.1  # diffrax's controller would keep 0.1
-    _, _, t1_diffrax, _, _, _ = diffrax.PIDController(rtol=RTOL, atol=ATOL).adapt_step_size(
-        0.0, 0.1, jnp.array([1.0]), jnp.array([1.0]), None,
-        jnp.array([0.95 * (ATOL + RTOL)]), 3, (jnp.asarray(1.0), jnp.asarray(1.0), False))
-    assert float(t1_diffrax) - 0.1 == pytest.approx(0.1)
-
-
-@pytest.mark.numerics
-def test_second_rejection_uses_the_observed_order():
-    c = PIController(rtol=RTOL, atol=ATOL)
-    keep, t0, t1, _, state, _ = _adapt(c, _state(), 0.05, 2.65)
-    assert not bool(keep) and float(t0) == 0.0
-    first = float(t1)  # the asymptotic order 3: 0.9 * 2.65^(-1/3)
-    assert np.isclose(first, 0.05 * 0.9 * 2.65 ** (-1 / 3), rtol=1e-12)
-    keep, t0, t1, _, state, _ = _adapt(c, state, first, 2.37)
-    q = np.log(2.65 / 2.37) / np.log(0.05 / first)
-    assert q < 0.5  # the error hardly fell: the order is clipped to min_order
-    assert not bool(keep)
-    factor = max(c.factormin, 0.9 * 2.37 ** (-1 / 0.5))  # clipped to [factormin, safety]
-    assert np.isclose(float(t1), first * factor, rtol=1e-12)
-    assert float(t1) < first * 0.9 * 2.37 ** (-1 / 3)  # smaller than order 3 would take
-    # an accepted step clears the rejection memory
-    keep, t0, t1, _, state, _ = _adapt(c, state, float(t1), 0.5)
-    assert bool(keep) and float(state[1]) == 0.0 and float(state[2]) == 0.0
-
-
-@pytest.mark.numerics
-def test_rejection_with_a_nan_error_shrinks_by_factormin():
-    c = PIController(rtol=RTOL, atol=ATOL)
-    keep, _, t1, _, _, _ = _adapt(c, _state(), 0.1, np.nan)
-    assert not bool(keep) and np.isclose(float(t1), 0.1 * c.factormin)
-
-
-@pytest.mark.numerics
-@pytest.mark.parametrize("controller", list(CONTROLLERS))
+@pytest.mark.parametrize("controller", CONTROLLERS)
 def test_solution_matches_scipy_within_the_tolerance(controller):
     """Three oscillators through stick-slip switches, t in [0, 60]: the final state
     against scipy's DOP853 at rtol 1e-12, within a bound set by rtol = 1e-7 (the
@@ -228,34 +168,3 @@ def test_both_controllers_give_the_same_localized_state():
     assert int(runs[0].n_halc) == int(runs[1].n_halc) == 2
     assert np.allclose(runs[0].amplitudes, runs[1].amplitudes, rtol=1e-2,
                        atol=1e-2 * float(np.max(runs[1].amplitudes)))
-
-
-def lorenz(t, y, args):
-    sigma, rho, beta = 10.0, 28.0, 8.0 / 3.0
-    return jnp.stack([sigma * (y[1] - y[0]), y[0] * (rho - y[2]) - y[1],
-                      y[0] * y[1] - beta * y[2]])
-
-
-@jax.jit
-def _lorenz_exponent(y0):
-    """One jitted run for every start below: traced and compiled once."""
-    options = jc.SimulationOptions(t_end=20000.0, transient=50.0, chunk_length=10.0,
-                                   rtol=1e-8, atol=1e-8, sample_dt=10.0, max_steps=10**5)
-    return integrate(diffrax.ODETerm(lorenz), diffrax.Tsit5(), y0, None, options,
-                        (jc.LargestLyapunov(),))
-
-
-@pytest.mark.numerics
-@pytest.mark.parametrize("shift", [0.0, 1e-3, -2e-3])
-def test_lorenz_largest_exponent_is_0_9056_within_its_stated_error(shift):
-    """Lorenz-63 at sigma = 10, rho = 28, beta = 8/3: 0.9056 (Sprott, Chaos and Time
-    Series Analysis, 2003), by `jc.LargestLyapunov` on the smoothed engine's
-    integrator. The start is perturbed: the trajectory is chaotic, so
-    each start (and each CPU) gives another finite-time estimate."""
-    (res,), _, _, status = _lorenz_exponent(jnp.array([1.0 + shift, 1.0, 1.0]))
-    assert status == jc.Status.ok
-    error = float(res["lyapunov_error"])
-    assert 0 < error < 0.03
-    assert abs(float(res["lyapunov"]) - 0.9056) < error
-    history = np.asarray(res["lyapunov_history"])
-    assert abs(history[-1] - float(res["lyapunov"])) < 1e-12  # the running estimate ends there
