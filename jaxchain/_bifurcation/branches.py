@@ -31,11 +31,14 @@ stops or goes astray, each named by what it does and where it comes from:
 
 The result is a `FollowedBranch`: typed arrays over the branch's converged points,
 its located bifurcations, how each end stopped and the branches switched onto.
+With `store`, it is written to a file when done and read back by a later call with
+equal settings (`branch_file.py`).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import jax.numpy as jnp
 import numpy as np
@@ -177,7 +180,8 @@ def follow_branch(orbit: PeriodicOrbit, method: AbstractOrbitMethod,
                   options: ContinuationOptions,
                   algorithm: PseudoArclength = PseudoArclength(), *,
                   directions: tuple[int, ...] = (-1, 1), switch: bool = False,
-                  progress: bool = False) -> FollowedBranch:
+                  store: str | Path | None = None, progress: bool = False
+                  ) -> FollowedBranch:
     """The branch of periodic orbits through `orbit`, continued over the belt
     speed v_d each way of `directions`, on past sliding
     points, cut at a Hopf point, where it closes on itself (an isola; the other way
@@ -200,6 +204,11 @@ def follow_branch(orbit: PeriodicOrbit, method: AbstractOrbitMethod,
     - `directions`: (-1, 1) for both ways (the points then run from low to high
         along the branch), (1,) or (-1,) for one.
     - `switch`: follow the branches through its branch points.
+    - `store`: a netCDF file: the branch is written there when it is done (and each
+        branch switched onto beside it, `<stem>_switched<j>.nc`), under the key of
+        every argument above, the start's orbit and chain included; a later call
+        with equal arguments reads it back instead of computing it (resume). A
+        branch read back has no `pieces`.
     - `progress`: progress bars.
 
     **Returns:** `FollowedBranch` (`stops` {"low", "high"} for both ways, {"end"}
@@ -208,6 +217,23 @@ def follow_branch(orbit: PeriodicOrbit, method: AbstractOrbitMethod,
     **Raises:** what `continuation` raises (`ValidationError` for bad options);
     `RuntimeError` where a continuation cannot start.
     """
+    if store is None:
+        return _followed(orbit, method, options, algorithm, directions, switch, progress)
+    from .branch_file import read_followed, write_followed  # it builds on this module
+
+    key = {"params": orbit.params, "start": [orbit.y0, orbit.period], "method": method,
+           "options": options, "algorithm": algorithm, "directions": list(directions),
+           "switch": bool(switch), "sliding_passes": SLIDING_PASSES}
+    followed = read_followed(store, **key)
+    if followed is None:
+        followed = _followed(orbit, method, options, algorithm, directions, switch, progress)
+        write_followed(store, followed, **key)
+    return followed
+
+
+def _followed(orbit: PeriodicOrbit, method: AbstractOrbitMethod, options, algorithm,
+              directions: tuple, switch: bool, progress: bool) -> FollowedBranch:
+    """`follow_branch` without its store."""
     problem = cycle_problem(orbit, method)
     halves, switched = [], []
     for direction in directions:

@@ -1,9 +1,9 @@
 """The snake: energy of every continued branch of localized periodic states against
 the belt speed, over the points of the Fig. 3(b) sweep."""
 
-import json
-
 import numpy as np
+
+from .._bifurcation.branch_file import stored_branch
 
 from .canvas import single_axes
 from .bifurcation import _segments
@@ -58,9 +58,9 @@ def plot_snake(datasets: dict, sweep=None, title: str = "", ax=None):
                 ax.plot([], [], "-" if stable else "--", color="k",
                         lw=1.8 if stable else 1.0, label=style)
                 seen.add(style)
-        for b in json.loads(ds.attrs["bifurcations"]):
-            kind = b["type"]
-            ax.plot(b["v_d"], b["energy"], _MARKERS.get(kind, "x"), mfc="none", mec="k",
+        for b in stored_branch(ds).bifurcations:
+            kind = b.kind
+            ax.plot(b.p, b.energy, _MARKERS.get(kind, "x"), mfc="none", mec="k",
                     ms=7, label=kind if kind not in seen else None, zorder=5)
             seen.add(kind)
     if several:

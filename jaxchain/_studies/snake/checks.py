@@ -3,7 +3,6 @@ Floquet multipliers, and direct simulation at the ends of each stable range."""
 
 from __future__ import annotations
 
-import json
 from typing import TYPE_CHECKING
 
 import jax.numpy as jnp
@@ -15,6 +14,7 @@ from ..._engine.progress import tqdm
 from ..._engine.simulate import simulate
 from ..._physics.initial import GivenState
 from ..._physics.params import ChainParams, with_parameter
+from ..._bifurcation.branch_file import bifurcation_records, stored_branch
 from .starts import _downward_crossings
 
 if TYPE_CHECKING:  # heavy: imported where they are used
@@ -28,7 +28,7 @@ def stable_ranges(branch: xr.Dataset) -> list[dict]:
     (None at the end of the branch)."""
     stable = branch["stable"].values
     v = branch["v_d"].values
-    bifs = json.loads(branch.attrs["bifurcations"])
+    bifs = bifurcation_records(stored_branch(branch))
     out = []
     i = 0
     while i < stable.size:

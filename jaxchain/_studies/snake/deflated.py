@@ -13,7 +13,7 @@ from ..._bifurcation.deflation import distinct_orbits
 from ..._bifurcation.shooting import pack, unpack
 from ..._physics.initial import OutOfPhaseExcitation
 from ..._physics.params import ChainParams
-from .branch import stored_branch
+from ..._bifurcation.branch_file import stored_branch
 from .starts import _turning_point, start_mask
 from .store import StoredStart
 

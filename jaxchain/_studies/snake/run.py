@@ -5,7 +5,6 @@ checked."""
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +31,7 @@ from .starts import (
     check_starts,
     start_mask,
 )
-from .store import BranchStore, deflation_known
+from .store import BranchStore, deflation_known, repeats_attribute
 from .summary import _branches_summary
 
 
@@ -256,7 +255,7 @@ def _take_branches(orbits, params: ChainParams, found: dict, deflated: dict, job
                 else [pack(orbit.y0, orbit.period)])
         gave += [u for _, _, u in deflated.get(k, [])]
         if own in mine:  # stored last: its attributes count the deflated branches
-            mine[own] = mine[own].assign_attrs(deflated=j, deflated_repeats=json.dumps(repeats),
+            mine[own] = mine[own].assign_attrs(deflated=j, **repeats_attribute(repeats),
                                                start_symmetric=int(bool(sim.get("symmetric"))),
                                                **deflation_known(gave))
             store.write(k, mine)
@@ -293,7 +292,7 @@ def _labelled(label: str, start, mask, followed: FollowedBranch | NoBranch) -> d
     switched = [branch_dataset(sw, k) for sw in followed.switched]
     first = ds.assign_attrs(start_vd=float(start.params.v_d), start_energy=float(start.energy),
                             start_n_halc=int(start.n_halc), switched=len(switched), deflated=0,
-                            deflated_repeats="[]")
+                            **repeats_attribute([]))
     branches = [first] + [sw.assign_attrs(start_vd=sw.attrs["switched_from_vd"],
                                           start_energy=float(sw["energy"].values[0]),
                                           start_n_halc=int(sw["n_halc"].values[0]))

@@ -63,7 +63,7 @@ class BranchStore:
         del branches[label]
         return StoredStart(branches, record.attrs["no_branch"],
                            json.loads(record.attrs["simulation"]),
-                           tuple(json.loads(record.attrs["deflated_repeats"])), known)
+                           tuple(deflated_repeats(record)), known)
 
     def write(self, k, branches: dict, deflated: int = 0) -> None:
         """Write a start's branch (`deflated` 0) or its `deflated`-th deflated
@@ -86,7 +86,7 @@ class BranchStore:
 
         self.write(k, {_start_label(k): xr.Dataset(attrs={
             "no_branch": why, "simulation": json.dumps(simulation), "switched": 0,
-            "deflated": deflated, "deflated_repeats": json.dumps(repeats),
+            "deflated": deflated, **repeats_attribute(repeats),
             **deflation_known(known)})})
 
     def _read(self, path: Path, k, label: str) -> dict | None:
@@ -107,6 +107,18 @@ class BranchStore:
                 return None
             out |= deflated
         return out
+
+
+def repeats_attribute(repeats: list) -> dict:
+    """The attribute that keeps a start's deflated orbits that lay on a branch
+    already followed (records of start, energy, n_halc and the branch `on`)."""
+    return {"deflated_repeats": json.dumps(repeats)}
+
+
+def deflated_repeats(ds) -> list:
+    """The records that `repeats_attribute` kept on the stored branch `ds` ([] for a
+    branch without them: a switched or deflated one)."""
+    return json.loads(ds.attrs.get("deflated_repeats", "[]"))
 
 
 def deflation_known(known: list) -> dict:

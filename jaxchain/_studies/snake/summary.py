@@ -3,9 +3,11 @@ n + 1 sites on the HALC connect, and the summary of a run."""
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
+
+from ..._bifurcation.branch_file import (bifurcation_records, failed_switch_records,
+                                          stored_branch)
+from .store import deflated_repeats
 
 
 def _connections(branches: dict, tol: float = 1e-3) -> dict:
@@ -17,7 +19,7 @@ def _connections(branches: dict, tol: float = 1e-3) -> dict:
     out = {k: [] for k in branches}
     keys = list(branches)
     for a in keys:
-        hopf = any(b["type"] == "Hopf" for b in json.loads(branches[a].attrs["bifurcations"]))
+        hopf = any(b.kind == "Hopf" for b in stored_branch(branches[a]).bifurcations)
         if hopf or float(branches[a]["energy"].min()) < 1e-4:
             out[a].append("steady sliding")
         for b in keys:
@@ -92,7 +94,7 @@ def _branches_summary(datasets: dict, starts: dict, failed: dict, repeated: list
     links = {label: list(dict.fromkeys(met)) for label, met in links.items()}
     branches = []
     for label, ds in datasets.items():
-        ranges = checks[label]["ranges"]
+        ranges, followed = checks[label]["ranges"], stored_branch(ds)
         entry = {"label": label, "excited": int(ds.attrs["excited"]),
                  "start_sites": [int(i) for i in np.atleast_1d(ds.attrs.get(
                      "start_sites", []))],
@@ -100,22 +102,21 @@ def _branches_summary(datasets: dict, starts: dict, failed: dict, repeated: list
                            if ds["stable"].values.any() else None),
                  "stable_ranges": [r["v_d"] for r in ranges],
                  "stable_range_ends": [r["ends"] for r in ranges],
-                 "bifurcations": json.loads(ds.attrs["bifurcations"]),
+                 "bifurcations": bifurcation_records(followed),
                  "connects_to": links[label],
                  "v_d_computed": [float(ds["v_d"].min()), float(ds["v_d"].max())],
                  "points": int(ds.sizes["point"]),
-                 "stop": json.loads(ds.attrs["stop"]),
+                 "stop": followed.stops,
                  "start": {"v_d": ds.attrs["start_vd"], "energy": ds.attrs["start_energy"],
                            "n_halc": ds.attrs["start_n_halc"],
                            "symmetric": bool(ds.attrs.get("start_symmetric", 0))},
                  "switched_from_vd": ds.attrs.get("switched_from_vd"),
-                 "failed_switches": json.loads(ds.attrs.get("failed_switches", "[]")),
+                 "failed_switches": failed_switch_records(followed),
                  "largest_trivial_multiplier_error": float(
                      ds["trivial_multiplier_error"].max())}
         entry |= {k: v for k, v in checks[label].items() if k != "ranges"}
         branches.append(entry)
-    repeated = repeated + [r for ds in datasets.values()
-                           for r in json.loads(ds.attrs.get("deflated_repeats", "[]"))]
+    repeated = repeated + [r for ds in datasets.values() for r in deflated_repeats(ds)]
     summary = {"branches": branches,
                "not_periodic": [{"excited": k, "reason": r.reason, "simulation": starts[k]}
                                 for k, r in failed.items()],
