@@ -96,6 +96,7 @@ from ._bifurcation.periodic_orbit import (
     periodic_orbit as periodic_orbit, cycle_problem as cycle_problem,
 )
 from ._bifurcation.shooting import Shooting as Shooting
+from ._bifurcation.harmonic_balance import HarmonicBalance as HarmonicBalance
 from ._bifurcation.deflation import distinct_orbits as distinct_orbits
 from ._bifurcation.branch_switching import switch_branch as switch_branch
 from ._bifurcation.grazing import (

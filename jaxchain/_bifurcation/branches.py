@@ -483,8 +483,9 @@ def passes_through(method, params: ChainParams, orbit, branch: FollowedBranch,
         y, period = method.orbit(jnp.asarray(u[i] + w * (u[i + 1] - u[i])))
         shot = periodic_orbit(params, (y, period), method, throw=False)
         found = np.append(np.sort(np.asarray(shot.amplitudes)), float(shot.period))
-        same = images or np.max(np.abs(np.asarray(method.pack(shot.y0, shot.period))
-                                       - np.asarray(method.pack(orbit.y0, orbit.period)))) < tol
+        same = images or np.max(np.abs(np.append(np.ravel(shot.y0), float(shot.period))
+                                       - np.append(np.ravel(orbit.y0), float(orbit.period)))
+                                ) < tol
         if bool(shot.converged) and np.max(np.abs(found - signature)) < tol and same:
             return int(i)
     return None

@@ -144,15 +144,30 @@ def orbit_record(params: ChainParams, y0: State, period, ys: Float[Array, "m 2 n
         residual=residual, converged=jnp.asarray(converged))
 
 
+def phased_guess(method, params: ChainParams, y0) -> State:
+    """The guess's state `y0` checked against the chain, with the velocity of the
+    method's phase oscillator set to 0 (the phase condition x_n'(0) = 0).
+
+    **Raises:** `ValidationError` for a state of the wrong shape or a phase
+    oscillator outside the chain."""
+    y0 = jnp.asarray(y0, dtype=float)
+    if y0.shape != (2, params.n_osc):
+        raise ValidationError(f"y0 must have shape (2, {params.n_osc}), got {y0.shape}")
+    if method.phase_oscillator >= params.n_osc:
+        raise ValidationError(f"{type(method).__name__}.phase_oscillator must be < n_osc = "
+                              f"{params.n_osc}, got {method.phase_oscillator}")
+    return y0.at[1, method.phase_oscillator].set(0.0)
+
+
 class AbstractOrbitMethod(eqx.Module):
     """A way of computing periodic orbits of eq. (5): unknowns u that hold one orbit,
     a residual that vanishes on it, and the orbit's description. `periodic_orbit`
     solves for one, `cycle_problem` follows its branch with `continuation`; neither
     asks which method it has.
 
-    A subclass implements `unknowns`, `pack`, `orbit`, `residual`, `describe` and
-    `samples`, and may
-    replace `solve` (Newton's method by optimistix on `residual` by default).
+    A subclass implements `unknowns`, `orbit`, `residual`, `describe` and `samples`,
+    and `pack` where a state and a period determine its unknowns (else `start`), and
+    may replace `solve` (Newton's method by optimistix on `residual` by default).
     `Shooting` is the first."""
 
     newton_tol: eqx.AbstractVar[float]
@@ -163,10 +178,17 @@ class AbstractOrbitMethod(eqx.Module):
         """The method's unknowns of a guess: a state on the orbit (shape (2, n_osc))
         and its period. Raises `ValidationError` for a guess it cannot take."""
 
-    @abc.abstractmethod
     def pack(self, y0: State, period) -> Float[Array, " n"]:
         """The unknowns of the orbit through y0 with its period, as they are (a
-        converged orbit's; traceable)."""
+        converged orbit's; traceable), where a state and a period determine them.
+        Raises `ValidationError` where they do not."""
+        raise ValidationError(f"{type(self).__name__} cannot take its unknowns from a "
+                              "state and a period alone")
+
+    def start(self, orbit: PeriodicOrbit) -> Float[Array, " n"]:
+        """The unknowns of the converged `orbit`, to continue from (`cycle_problem`):
+        `pack(orbit.y0, orbit.period)` by default."""
+        return self.pack(orbit.y0, orbit.period)
 
     @abc.abstractmethod
     def orbit(self, u: Float[Array, " n"]) -> tuple[State, Float[Array, ""]]:

@@ -119,7 +119,7 @@ def cycle_problem(orbit: PeriodicOrbit, method: AbstractOrbitMethod | None = Non
     """
     method = _checked(method)
     return ContinuationProblem(
-        residual=CycleResidual(method), u0=method.pack(orbit.y0, orbit.period),
+        residual=CycleResidual(method), u0=method.start(orbit),
         params=orbit.params, where=where, describe=DescribeOrbit(method))
 
 

@@ -128,13 +128,7 @@ class Shooting(AbstractOrbitMethod):
 
         **Raises:** `ValidationError` for a guess of the wrong shape or a phase
         oscillator outside the chain."""
-        y0 = jnp.asarray(y0, dtype=float)
-        if y0.shape != (2, params.n_osc):
-            raise ValidationError(f"y0 must have shape (2, {params.n_osc}), got {y0.shape}")
-        if self.phase_oscillator >= params.n_osc:
-            raise ValidationError(f"Shooting.phase_oscillator must be < n_osc = "
-                                  f"{params.n_osc}, got {self.phase_oscillator}")
-        return self.pack(y0.at[1, self.phase_oscillator].set(0.0), period)
+        return self.pack(phased_guess(self, params, y0), period)
 
     def pack(self, y0: State, period) -> Float[Array, " 2n+1"]:
         return pack(y0, period)

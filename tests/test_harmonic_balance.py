@@ -1,0 +1,94 @@
+"""Harmonic balance (`HarmonicBalance`, the alternating frequency-time scheme)
+against shooting on the same smoothed model, a second solver: the single
+oscillator's stick-slip cycle at v_d 1.5 (eps 1e-2), its Floquet multipliers by
+Hill's method and by one monodromy integration, and its branch from the fold down
+to the Hopf point, whose v_d is known in closed form."""
+
+import numpy as np
+import pytest
+
+import jaxchain as jc
+
+PARAMS = jc.ChainParams(n_osc=1, v_d=1.5)
+EPS = 1e-2
+SHOOTING = jc.Shooting(jc.Smoothed(eps=EPS).for_orbits())
+
+
+@pytest.fixture(scope="module")
+def shot():
+    """The stick-slip cycle by shooting."""
+    guess = (jc.Exact().steady_sliding(PARAMS) + 1.0, 6.3)
+    return jc.periodic_orbit(PARAMS, guess, SHOOTING)
+
+
+@pytest.mark.numerics
+def test_the_stick_slip_cycle_converges_to_shooting_s_as_harmonics_grow(shot):
+    """From shooting's orbit as the guess: amplitude and period errors fall as H
+    doubles (16, 32, 64: the velocity's kink at the stick phase makes the
+    coefficients fall slowly), to below 1e-5 relative at H = 64, where the orbit
+    sticks as shooting's does."""
+    errors = []
+    for h in (16, 32, 64):
+        orbit = jc.periodic_orbit(PARAMS, shot, jc.HarmonicBalance(eps=EPS, harmonics=h))
+        errors.append(max(abs(float(orbit.amplitudes[0] / shot.amplitudes[0]) - 1),
+                          abs(float(orbit.period / shot.period) - 1)))
+    assert errors[0] > errors[1] > errors[2] and errors[2] < 1e-5, errors
+    assert int(orbit.n_halc) == int(shot.n_halc) == 1
+
+
+@pytest.mark.numerics
+@pytest.mark.parametrize("floquet", ["hill", "monodromy"])
+def test_floquet_multipliers_agree_with_shooting_s(shot, floquet):
+    """At H = 64 both ways of computing the multipliers give shooting's: the trivial
+    one 1 to 1e-5 (the series' own error at H = 64, the test above: a trajectory
+    integrated from its start leaves it by that much over a period) and the other
+    (the stick phase loses the velocity perturbation) 0 to 1e-6; det M by
+    Liouville's formula on the series within 5 % of shooting's (about 4e-12: the
+    integral of the field's divergence, -26.3, to 0.05)."""
+    orbit = jc.periodic_orbit(PARAMS, shot, jc.HarmonicBalance(eps=EPS, harmonics=64,
+                                                               floquet=floquet))
+    m = np.asarray(orbit.multipliers)
+    assert abs(m[int(orbit.trivial)] - 1) < 1e-5
+    assert np.max(np.abs(np.delete(m, int(orbit.trivial)))) < 1e-6
+    assert np.max(np.abs(np.asarray(shot.multipliers)[1:])) < 1e-6
+    assert abs(np.log(float(orbit.monodromy_determinant))
+               - np.log(float(shot.monodromy_determinant))) < 0.05
+
+
+@pytest.mark.numerics
+def test_the_branch_from_the_fold_to_the_hopf_point(shot):
+    """`follow_branch` with harmonic balance, from the cycle at v_d 1.5 up through
+    the fold and down to steady sliding: the fold where shooting's driver finds it
+    (to 1e-6), the Hopf point where the eigenvalues of steady sliding cross (`hopf_vd`,
+    no orbit involved; to 1e-6), the branch cut there as shooting's is."""
+    options = jc.ContinuationOptions(ds=0.05, ds_max=0.2, p_min=1.0, p_max=3.0,
+                                     max_points=200)
+    hb = jc.HarmonicBalance(eps=EPS, harmonics=64)
+    followed = {name: jc.follow_branch(shot, method, options)
+                for name, method in (("hb", hb), ("shooting", SHOOTING))}
+    folds = {name: [b.p for b in f.bifurcations if b.kind == "fold"]
+             for name, f in followed.items()}
+    assert len(folds["hb"]) == len(folds["shooting"]) == 1
+    assert abs(folds["hb"][0] - folds["shooting"][0]) < 1e-6
+    (hopf,) = [b.p for b in followed["hb"].bifurcations if b.kind == "Hopf"]
+    assert abs(hopf - float(jc.hopf_vd(PARAMS, engine=jc.Smoothed(eps=EPS)))) < 1e-6
+    assert followed["hb"].stops["high"] == followed["shooting"].stops["high"] == "hopf"
+
+
+@pytest.mark.parametrize("fields, says", [
+    ({"harmonics": 0}, "harmonics"), ({"harmonics": 8, "time_samples": 16}, "time_samples"),
+    ({"floquet": "fourier"}, "floquet"), ({"eps": 0.0}, "eps"),
+    ({"newton_tol": 0.0}, "newton_tol"), ({"phase_oscillator": -1}, "phase_oscillator")])
+def test_bad_settings_are_refused_by_name(fields, says):
+    with pytest.raises(jc.ValidationError, match=says):
+        jc.HarmonicBalance(**fields)
+
+
+def test_a_guess_of_the_wrong_shape_and_a_state_without_its_series_are_refused():
+    """The unknowns are Fourier coefficients: a state and a period alone do not give
+    them (`pack` refuses in one line), and a guess must have the chain's shape."""
+    method = jc.HarmonicBalance(harmonics=4)
+    with pytest.raises(jc.ValidationError, match="state and a period"):
+        method.pack(np.zeros((2, 1)), 6.3)
+    with pytest.raises(jc.ValidationError, match="shape"):
+        jc.periodic_orbit(PARAMS, (np.zeros((2, 3)), 6.3), method)
