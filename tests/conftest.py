@@ -41,6 +41,53 @@ import jaxchain  # noqa: E402
 
 jaxchain.configure()  # float64 and the XLA flags, as a user's first call
 
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from helpers import (  # noqa: E402
+    RING_OF_THREE,
+    RING_OF_TWO,
+    SETTLED,
+    SHOOTING_OF_THREE,
+    SHOOTING_OF_TWO,
+    snake_start,
+)
+
+
+# --- Systems that several test files share, each computed once a process ---------
+
+
+@pytest.fixture(scope="session")
+def branch_point():
+    """The ring of two's two-site state simulated from eq. (8), continued up in v_d
+    to its first branch point: (its problem, its branch, the branch point), for
+    test_branch_switching.py and test_snake.py."""
+    # eq. (8) with both sites excited reaches the two-site state at the ring's v_d
+    orbit, phase = snake_start(RING_OF_TWO, 2, options=SETTLED)
+    y0 = np.asarray(orbit.y0)
+    if phase != SHOOTING_OF_TWO.phase_oscillator:  # the copy with the oscillators swapped,
+        y0 = y0[:, ::-1]                          # the ring's symmetry: phase on the first
+    orbit = jaxchain.periodic_orbit(RING_OF_TWO, (y0, float(orbit.period)), SHOOTING_OF_TWO)
+    assert abs(float(orbit.amplitudes[0] - orbit.amplitudes[1])) < 1e-6  # symmetric
+    problem = jaxchain.cycle_problem(orbit, SHOOTING_OF_TWO)
+    branch = jaxchain.continuation(problem, options=jaxchain.ContinuationOptions(
+        ds=0.02, ds_max=0.1, p_min=1.0, p_max=2.0, max_points=12))
+    points = [b for b in jaxchain.locate_bifurcations(problem, branch) if b.kind == "branch point"]
+    assert points and abs(points[0].multiplier - 1) < 1e-4
+    return problem, branch, points[0]
+
+
+@pytest.fixture(scope="session")
+def ring_of_three_states():
+    """The states that simulation reaches on the ring of three at v_d 1.5 from eq.
+    (8) with k = 1 and 2 excited, refined by shooting: {k: PeriodicOrbit}, for
+    test_deflation.py and test_snake.py."""
+    states = {k: snake_start(RING_OF_THREE, k, options=SETTLED) for k in (1, 2)}
+    # both with the phase condition of the tests' shooting (their oscillator of
+    # largest amplitude): a problem built from either starts at a solution
+    assert all(phase == SHOOTING_OF_THREE.phase_oscillator for _, phase in states.values())
+    return {k: orbit for k, (orbit, _) in states.items()}
+
 
 #: Seconds after which the pytest-xdist controller prints the stack of each of its
 #: threads, and again each time as long: a whole pass takes about 12 minutes, so

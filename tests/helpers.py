@@ -153,6 +153,121 @@ def scipy_stick_slip_cycle(params: jc.ChainParams, mu=None) -> tuple[float, floa
     return amplitude, period
 
 
+#: The simulations of the starts on the rings of two and three (`snake_start`):
+#: their states settle within 1500 time units.
+SETTLED = jc.SimulationOptions(t_end=2000.0, transient=1500.0)
+
+#: The ring of two of the branch-switching tests: at v_d 1.5 its symmetric two-site
+#: state (both oscillators on the HALC, equal amplitudes), which meets a
+#: symmetry-breaking branch point above it (`branch_point`, tests/conftest.py).
+RING_OF_TWO = jc.ChainParams(n_osc=2, v_d=1.5)
+#: Shooting on the ring of two, the phase condition on its first oscillator.
+SHOOTING_OF_TWO = jc.Shooting(root_finder="levenberg-marquardt", phase_oscillator=0)
+
+#: The ring of three of the deflation tests: at v_d 1.5 simulation from eq. (8)
+#: with one and with two excited ends on two different stable states
+#: (`ring_of_three_states`, tests/conftest.py).
+RING_OF_THREE = jc.ChainParams(n_osc=3, v_d=1.5)
+#: Shooting on the ring of three, the phase condition on its middle oscillator (eq.
+#: (8)'s excited one, the oscillator of largest amplitude of both states).
+SHOOTING_OF_THREE = jc.Shooting(root_finder="levenberg-marquardt", phase_oscillator=1)
+#: The symmetries of the (homogeneous) ring of three, written out: every permutation
+#: of its oscillators, the rotations and the reflections (the dihedral group D_3).
+RING_OF_THREE_SYMMETRIES = [(0, 1, 2), (1, 2, 0), (2, 0, 1), (0, 2, 1), (2, 1, 0), (1, 0, 2)]
+
+
+def snake_start(params: jc.ChainParams, k: int, method=None,
+                options: jc.SimulationOptions = SETTLED):
+    """The periodic orbit that the snake starts its branch k from, through public
+    names: eq. (8) with k excited simulated over `options` at `params.v_d`, shot from
+    a turning point of its oscillator of largest amplitude (`jc.localized_branches`
+    with `method`, no switching and no check by simulation, its branch only two
+    points either way and its window v_d -+ 0.05, inside which the snake tries no
+    other belt speed), then that orbit (the branch's point at its `start_vd`) shot
+    again alone (`jc.periodic_orbit`, `method` or the snake's default
+    `Shooting.from_simulations(Smoothed())`, with the branch's phase oscillator).
+
+    Returns (the `PeriodicOrbit`, its phase oscillator); fails where the start
+    gave no branch."""
+    v_d = float(params.v_d)
+    found = jc.localized_branches(
+        params, (k,), method=method, start_options=options, switch=False,
+        simulation_check=False, continuation_options=jc.ContinuationOptions(
+            ds=0.02, max_points=2, p_min=v_d - 0.05, p_max=v_d + 0.05))
+    assert f"k={k}" in found["datasets"], found["summary"]["not_periodic"]
+    ds = found["datasets"][f"k={k}"]
+    phase = int(ds.attrs["phase_oscillator"])
+    (start,) = np.flatnonzero(ds["v_d"].values == ds.attrs["start_vd"])
+    u = ds["u"].values[start]
+    method = jc.Shooting.from_simulations(jc.Smoothed()) if method is None else method
+    orbit = jc.periodic_orbit(params, (u[:-1].reshape(2, -1), float(u[-1])),
+                              method.with_phase_oscillator(phase))
+    return orbit, phase
+
+
+def packed(y0, period) -> jnp.ndarray:
+    """Shooting unknowns (x_1..x_N, x_1'..x_N', T)."""
+    return jnp.concatenate([jnp.ravel(jnp.asarray(y0)), jnp.atleast_1d(period)])
+
+
+def scipy_return(u, params: jc.ChainParams = RING_OF_THREE) -> float:
+    """max |y(T) - y(0)| of the orbit u = (y0, T) integrated by scipy's DOP853 on eq.
+    (5) written out independently (`reference_rhs`), on the ring of three by
+    default."""
+    y0, period = np.asarray(u[:-1]), float(u[-1])
+    sol = solve_ivp(reference_rhs(params), (0.0, period), y0, method="DOP853", rtol=1e-11,
+                    atol=1e-12)
+    return float(np.max(np.abs(sol.y[:, -1] - y0)))
+
+
+def copies_distance(a, b, samples: int = 4096) -> float:
+    """The distance of orbit b from orbit a and its symmetric copies on the ring of
+    three at v_d 1.5 (`RING_OF_THREE`), each orbit u = (y0, T) with y0 = (x, x'),
+    written out independently of jaxchain: orbit a integrated over its period by
+    scipy's DOP853 on eq. (5) (`reference_rhs`, rtol 1e-11); for each symmetry of
+    `RING_OF_THREE_SYMMETRIES` (permuting the oscillators of every state of a), the
+    distance d from b's state to the closest point of that copy (over `samples`
+    equal steps of the period, then `minimize_scalar` within a step either side of
+    the closest), combined with the periods' difference as
+    sqrt(d^2 + (T_b - T_a)^2); the least over the symmetries."""
+    from scipy.optimize import minimize_scalar
+
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    period, y = float(a[-1]), b[:-1].reshape(2, 3)
+    flow = solve_ivp(reference_rhs(RING_OF_THREE), (0.0, period), a[:-1], method="DOP853",
+                     rtol=1e-11, atol=1e-12, dense_output=True).sol
+
+    def state(t):  # a's state at t, one period repeating
+        return flow(np.mod(t, period)).reshape(2, 3, *np.shape(t))
+
+    ts, step = np.linspace(0.0, period, samples, endpoint=False), period / samples
+    grid, best = state(ts), np.inf
+    for perm in RING_OF_THREE_SYMMETRIES:
+        perm = list(perm)
+        d2 = np.sum((grid[:, perm] - y[:, :, None]) ** 2, axis=(0, 1))
+        t = ts[int(np.argmin(d2))]
+        near = minimize_scalar(lambda s, perm=perm: np.sum((state(s)[:, perm] - y) ** 2),
+                               bounds=(t - step, t + step), method="bounded",
+                               options={"xatol": 1e-12})
+        best = min(best, float(np.min(d2)), float(near.fun))
+    return float(np.sqrt(best + (float(b[-1]) - period) ** 2))
+
+
+def start_residual(problem) -> float:
+    """max |G| of a continuation problem at its start (u0 and its parameter)."""
+    z = np.concatenate([np.asarray(problem.u0), [float(problem.value())]])
+    return float(np.max(np.abs(np.asarray(problem(z)))))
+
+
+def switched_on_ring_of_two(problem, branch, point, step):
+    """`jc.switch_branch` at a branch point of the ring of two's branch (`branch_point`),
+    `step` off it, and the branch switched onto continued from there: (its problem, its
+    `Branch`; v_d in [1, 2], 8 points, steps up to 0.05)."""
+    new, tangent = jc.switch_branch(problem, branch, point, step=step)
+    return new, jc.continuation(new, options=jc.ContinuationOptions(
+        ds=step, ds_max=0.05, p_min=1.0, p_max=2.0, max_points=8), tangent=tangent)
+
+
 def assert_usage_error(argv: list[str], says: str, capsys) -> None:
     """`jaxchain ARGV` exits with status 2 and one line on stderr naming `says`."""
     with pytest.raises(SystemExit) as exc:

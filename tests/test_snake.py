@@ -1,9 +1,18 @@
 """The snake on a small ring: shooting from simulated chain states, Floquet
 multipliers against their closed-form estimate, stable ends against direct simulation,
-the stored branches read back, and the command line."""
+the stored branches read back, and the command line.
+
+Its subject is also the snake's and its branch driver's internals: the starts, the
+store and the summary, and (at the end of the file) the branch driver's switching and
+deflation steps (`critical_directions`, `symmetric_directions`, `switch_by_deflation`,
+the switching with its fallbacks, the steps along a symmetry's axes, the deflation
+operator and the ring's symmetries) and the snake's orchestration of them (a failed
+branch or switch, deflated orbits from a start without one, or on a branch already
+followed, resuming), provoked or spied on through its private functions."""
 
 import json
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -11,9 +20,16 @@ import xarray as xr
 from scipy.integrate import solve_ivp
 
 import jaxchain as jc
+from jaxchain._bifurcation.deflation import chain_symmetries, deflation
+# building blocks of `switch_branch` and of the snake's switching, tested on their own
+from jaxchain._bifurcation.branch_switching import (critical_directions,
+                                                     switch_by_deflation,
+                                                     symmetric_directions)
 
-from helpers import (assert_usage_error, internal, internal_module, reference_rhs,
-                     replace_internal)
+from helpers import (RING_OF_THREE, RING_OF_TWO, SETTLED, SHOOTING_OF_THREE,
+                     SHOOTING_OF_TWO, assert_usage_error, copies_distance, internal,
+                     internal_module, packed, reference_rhs, replace_internal,
+                     scipy_return, start_residual, switched_on_ring_of_two)
 
 RING = jc.ChainParams(n_osc=4, v_d=1.5)
 #: Shooting on the exact stick/slip model: Newton's method through every switch (the
@@ -505,3 +521,435 @@ def test_the_default_snakes_keep_the_previous_releases_store_key():
     # previous method's key
     damped = jc.Shooting(jc.Smoothed().for_orbits(), damped_steps=120)
     assert "method" in orbits(damped, jc.Smoothed()).settings()
+
+
+# --- The branch driver's switching and deflation steps and the snake's orchestration:
+# private subjects, tested on their own. Branch switching on the ring of two at its
+# symmetric two-site state's branch point (`branch_point`, tests/conftest.py) and on
+# analytic branch points; deflation on the ring of three at v_d 1.5
+# (`ring_of_three_states`, tests/conftest.py). Their public behaviour:
+# test_branch_switching.py and test_deflation.py.
+
+
+@pytest.mark.study
+def test_the_snake_switches_branches_at_its_branch_points(branch_point, tmp_path,
+                                                          monkeypatch):
+    """`localized_branches` (switch=True, the default) follows the other branch at
+    the two-site state's branch point: a branch labelled as switched, starting at the
+    branch point that `locate_bifurcations` finds here, with unequal amplitudes,
+    connected to its parent both ways; stored and read back whole. The start is
+    eq. (8) with both sites excited (with one, the two-site state it reaches has
+    not its pattern, and the snake looks for one site at other belt speeds)."""
+    _, _, point = branch_point
+    kwargs = dict(continuation_options=jc.ContinuationOptions(
+        ds=0.02, ds_max=0.1, p_min=1.0, p_max=1.85, max_points=12),
+        start_options=jc.SimulationOptions(t_end=2000.0, transient=1500.0),
+        simulation_check=False, out=tmp_path)
+    found = jc.localized_branches(RING_OF_TWO, (2,), **kwargs)
+    labels = [b["label"] for b in found["summary"]["branches"]]
+    assert labels == ["k=2", "k=2 switched 1"]
+    parent, switched = found["summary"]["branches"]
+    assert abs(switched["switched_from_vd"] - float(point.p)) < 1e-6
+    assert switched["connects_to"] == ["k=2"] and "k=2 switched 1" in parent["connects_to"]
+    amplitudes = found["datasets"]["k=2 switched 1"]["amplitudes"].values
+    assert np.all(np.abs(amplitudes[:, 0] - amplitudes[:, 1]) > 1e-5)
+    def refuse(*args, **kwargs):
+        raise AssertionError("a stored branch was computed again")
+
+    replace_internal(monkeypatch, "snake starts", refuse)
+    again = jc.localized_branches(RING_OF_TWO, (2,), **kwargs)  # read back, not recomputed
+    assert list(again["datasets"]) == labels
+    assert np.array_equal(again["datasets"]["k=2 switched 1"]["u"].values,
+                          found["datasets"]["k=2 switched 1"]["u"].values)
+
+
+@pytest.mark.study
+def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch, tmp_path):
+    """The first start's continuation raises (as it did where the start's phase
+    condition was not the problem's): that start is reported with the reason, the
+    other start's branch is computed. Both are stored: a second run reads them back,
+    the failed start's reason and simulation with them, and computes nothing."""
+    follow = internal("snake branch")
+    calls = []
+
+    def first_fails(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 1:
+            raise ValueError("problem.u0 is not a solution")
+        return follow(*args, **kwargs)
+
+    replace_internal(monkeypatch, "snake branch", first_fails)
+    # k = 2 first: the branch that is computed is then k = 1's, on the shooting
+    # options (its phase oscillator) whose programs the tests above compiled.
+    kwargs = dict(continuation_options=jc.ContinuationOptions(ds=0.02, max_points=2),
+                  start_options=jc.SimulationOptions(t_end=2000.0, transient=1500.0),
+                  simulation_check=False, switch=False, out=tmp_path)
+    found = jc.localized_branches(RING_OF_TWO, (2, 1), **kwargs)
+    assert [b["label"] for b in found["summary"]["branches"]] == ["k=1"]
+    (flagged,) = found["summary"]["not_periodic"]
+    assert flagged["excited"] == 2 and "continuation failed" in flagged["reason"]
+
+    def computes(*args, **kwargs):
+        raise AssertionError("the stored starts are read back")
+
+    replace_internal(monkeypatch, "snake starts", computes)
+    again = jc.localized_branches(RING_OF_TWO, (2, 1), **kwargs)
+    assert again["summary"]["not_periodic"] == found["summary"]["not_periodic"]
+    assert list(again["datasets"]) == ["k=1"]
+
+
+@pytest.mark.study
+def test_a_switch_that_fails_is_reported_with_its_branch_point(branch_point, monkeypatch):
+    """Where the step onto the other branch does not converge (`switch_branch` raises
+    RuntimeError), the snake follows the orbits that deflation finds beside the
+    branch point; where that finds none either, it keeps the branch point's v_d and
+    the reason, for the followed branch's `failed_switches`, instead of dropping it
+    silently."""
+    problem, branch, point = branch_point
+
+    def fails(*args, **kwargs):
+        raise RuntimeError("switching did not converge")
+
+    monkeypatch.setattr("jaxchain._bifurcation.branches.switch_branch", fails)
+    switched = internal("snake switched branch")
+    args = (SHOOTING_OF_TWO, problem, branch, point, jc.ContinuationOptions(max_points=2),
+            jc.PseudoArclength())
+    # deflation beside the branch point finds the other branch instead
+    rescued = switched(*args, progress=False)
+    assert rescued and all(b.switched_from == float(point.p) for b in rescued)
+    monkeypatch.setattr("jaxchain._bifurcation.branches.switch_by_deflation",
+                        lambda *a, **k: [])
+    (failure,) = switched(*args, progress=False)
+    assert failure.p == float(point.p) and failure.reason == (
+        "switching did not converge; deflation beside it found no other orbit, "
+        "nor a step along an axis of its symmetry")
+
+
+def _pitchfork(symmetric: bool):
+    """u = (a, b, c): the trivial branch a = b = 0, c = v_d meets a branch point at
+    v_d = 1. With `symmetric`, G is equivariant under the rotations of the (a, b)
+    plane (O(2)), so both a and b are critical there; else only a is."""
+    def residual(u, p):
+        a, b, c = u
+        r2 = a**2 + b**2 if symmetric else a**2
+        return jnp.stack([(p.v_d - 1) * a - a * r2,
+                          (p.v_d - 1) * b - b * r2 if symmetric else b, c - p.v_d])
+    return jc.ContinuationProblem(residual=residual, u0=jnp.array([0.0, 0.0, 1.0]),
+                                  params=jc.ChainParams(n_osc=1, v_d=1.0))
+
+
+@pytest.mark.parametrize("symmetric, critical", [(False, [[1, 0, 0, 0]]),
+                                                 (True, [[1, 0, 0, 0], [0, 1, 0, 0]])])
+def test_critical_directions_are_the_kernel_less_the_branch(symmetric, critical):
+    """At the analytic branch point the kernel of [G_u, G_p] is the branch's tangent
+    (0, 0, 1, 1)/sqrt 2 and the critical plane of (a, b) (O(2)-symmetric) or the
+    line of a (no symmetry): `critical_directions` is an orthonormal basis of the
+    latter, whatever the sign of the tangent given."""
+    problem = _pitchfork(symmetric)
+    z = jnp.array([0.0, 0.0, 1.0, 1.0])
+    for sign in (1, -1):
+        got = critical_directions(problem, z, sign * jnp.array([0.0, 0.0, 1.0, 1.0]))
+        assert got.shape == (len(critical), 4)
+        np.testing.assert_allclose(got @ got.T, np.eye(len(critical)), atol=1e-12)
+        projector = np.asarray(critical, dtype=float)
+        np.testing.assert_allclose(got @ projector.T @ projector, got, atol=1e-12)
+
+
+@pytest.mark.study
+@pytest.mark.numerics
+def test_deflation_beside_the_branch_point_finds_keller_s_switched_orbit(branch_point):
+    """`switch_by_deflation` (the followed orbit deflated at v_d = v_b -+ 0.002,
+    shooting from it moved along the critical direction) finds the orbit that
+    Keller's step and continuation reach at v_b - 0.002 (another route: the
+    corrector along the kernel direction, then pseudo-arclength steps and shooting
+    at that v_d), up to the swap of the two oscillators, to shooting's tolerance;
+    the direction it returns points from the branch point to the orbit."""
+    problem, branch, point = branch_point
+    p = float(point.p) - 0.002
+    found = switch_by_deflation(problem, branch, point, offset=0.002)
+    below = [(new, t) for new, t in found if abs(float(new.value()) - p) < 1e-12]
+    assert below
+    new, tangent = below[0]
+    assert start_residual(new) < 1e-6 and float(tangent[-1]) < 0
+    _, switched = switched_on_ring_of_two(problem, branch, point, 0.01)
+    ok = np.asarray(switched.converged)
+    u = np.asarray(switched.u)[ok][np.argmin(np.abs(np.asarray(switched.p)[ok] - p))]
+    keller = jc.periodic_orbit(jc.with_parameter(RING_OF_TWO, "v_d", p),
+                               (u[:-1].reshape(2, -1), float(u[-1])), SHOOTING_OF_TWO)
+    deflated = jc.periodic_orbit(jc.with_parameter(RING_OF_TWO, "v_d", p),
+                                 (np.asarray(new.u0[:-1]).reshape(2, -1), float(new.u0[-1])),
+                                 SHOOTING_OF_TWO)
+    assert abs(float(deflated.period - keller.period)) < 1e-7
+    # amplitudes from 4096 samples a period (Shooting.n_samples): the sampled
+    # extremes of one orbit started at another phase (the swapped copy starts at the
+    # other oscillator's turning point) differ by up to |x''| dt^2 / 8, below 1e-6
+    np.testing.assert_allclose(np.sort(np.asarray(deflated.amplitudes)),
+                               np.sort(np.asarray(keller.amplitudes)), atol=2e-6)
+    assert abs(float(keller.amplitudes[0] - keller.amplitudes[1])) > 1e-4
+
+
+def _s3_problem():
+    """u in R^3, G_i = (v_d - 1) u_i + sum_j u_j + u_i^2 - u_i^3: equivariant under
+    every permutation of (u_1, u_2, u_3) (S_3, the dihedral group of the triangle).
+    The trivial branch u = 0 meets a branch point at v_d = 1 whose critical
+    directions are the plane sum u = 0 (S_3's two-dimensional irreducible
+    representation; the symmetric direction's eigenvalue there is 3)."""
+    def residual(u, p):
+        return (p.v_d - 1) * u + jnp.sum(u) + u**2 - u**3
+    return jc.ContinuationProblem(residual=residual, u0=jnp.zeros(3),
+                                  params=jc.ChainParams(n_osc=1, v_d=1.0))
+
+
+def test_the_axes_of_a_symmetric_branch_point_are_the_lines_its_reflections_fix():
+    """At the S_3-symmetric branch point the critical plane sum u = 0 holds three
+    lines fixed by a transposition, (1, 1, -2) and its permutations, which the
+    rotations map onto each other: `symmetric_directions` keeps one, whichever
+    symmetry comes first, fixed by its transposition and normalised; Keller's step
+    along it, to either side, lands on a branch that keeps that symmetry (two
+    equal components), the same solution as the reduced two-unknown system
+    solved by scipy at that v_d; the rotations alone fix no line."""
+    from scipy.optimize import fsolve
+
+    problem, z, tangent = _s3_problem(), jnp.array([0.0, 0.0, 0.0, 1.0]), jnp.eye(4)[3]
+    perms = [[0, 1, 2], [1, 2, 0], [2, 0, 1], [1, 0, 2], [0, 2, 1], [2, 1, 0]]
+    actions = [p + [3] for p in perms]
+    axes = symmetric_directions(problem, z, tangent, actions)
+    assert axes.shape == (1, 4)
+    np.testing.assert_allclose(axes[0], np.array([-1.0, -1.0, 2.0, 0.0]) / np.sqrt(6),
+                               atol=1e-12)
+    assert symmetric_directions(problem, z, tangent, actions[:3]).shape == (0, 4)
+    with pytest.raises(ValueError, match="permutations"):
+        symmetric_directions(problem, z, tangent, [[0, 1, 1, 3]])
+    branch = type("Branch", (), {"converged": np.ones(1, bool), "tangent": tangent[None]})
+    point = type("Point", (), {"kind": "branch point", "z": z, "after": 0, "p": 1.0})
+    for side in (1, -1):
+        new, direction = jc.switch_branch(problem, branch, point, step=0.05, side=side,
+                                          direction=axes[0])
+        u, p = np.asarray(new.u0), float(new.value())
+        assert abs(u[0] - u[1]) < 1e-10 and abs(u[0] - u[2]) > 1e-3
+        np.testing.assert_allclose(direction, side * axes[0], atol=1e-15)
+
+        def reduced(ac, p=p):
+            a, c = ac
+            s = 2 * a + c
+            return [(p - 1) * a + s + a**2 - a**3, (p - 1) * c + s + c**2 - c**3]
+        np.testing.assert_allclose(fsolve(reduced, u[[0, 2]], xtol=1e-13), u[[0, 2]],
+                                   atol=1e-9)
+        assert np.max(np.abs(problem.residual(jnp.asarray(u), new.params))) < 1e-9
+
+
+def test_the_snake_switches_along_the_axes_of_the_orbit_s_symmetry():
+    """The S_3 branch point above written as a ring of three's shooting unknowns
+    (x, x', T) with v_d the parameter: x as u above, x' = 0, T = 1. The snake's
+    step along the axes (`_switch_along_axes`: the isotropy of the state at the
+    point, `chain_symmetries` of the ring of three, every permutation) lands,
+    to both sides, on states that one transposition fixes and no rotation does,
+    each a zero of G; a point whose state has no symmetry gives none."""
+    def residual(u, p):
+        x, v, t = u[:3], u[3:6], u[6]
+        return jnp.concatenate([(p.v_d - 1) * x + jnp.sum(x) + x**2 - x**3, v,
+                                jnp.atleast_1d(t - 1)])
+    ring = jc.ChainParams(n_osc=3, v_d=1.0)
+    problem = jc.ContinuationProblem(residual=residual, u0=jnp.zeros(7).at[6].set(1.0),
+                                     params=ring)
+    tangent = jnp.eye(8)[7]
+    branch = type("Branch", (), {"converged": np.ones(1, bool), "tangent": tangent[None]})
+    point = type("Point", (), {"kind": "branch point", "after": 0, "p": 1.0,
+                               "z": jnp.zeros(8).at[6].set(1.0).at[7].set(1.0)})
+    starts = internal("snake switch along axes")(problem, branch, point, jc.PseudoArclength())
+    assert len(starts) == 2
+    perms = np.asarray(chain_symmetries(ring))
+    for new, direction in starts:
+        x = np.asarray(new.u0[:3])
+        assert np.max(np.abs(residual(new.u0, new.params))) < 1e-9
+        fixed = [p for p in perms if np.allclose(x[p], x, atol=1e-10)]
+        assert len(fixed) == 2 and np.ptp(x) > 1e-3  # the identity and a transposition
+        assert abs(float(direction[-1])) < 1e-12  # the axis is orthogonal to the branch
+    asymmetric = type("Point", (), {**vars(point), "z": point.z.at[:3].set([0.1, 0.2, 0.3])})
+    assert internal("snake switch along axes")(problem, branch, asymmetric,
+                                               jc.PseudoArclength()) == []
+
+
+def test_the_distance_from_an_orbit_is_to_the_nearest_point_of_its_copies(
+        ring_of_three_states):
+    """`Deflation.distances` against the distance written out here: the closed
+    polyline through the orbit's samples, each of its six copies built explicitly
+    (y[:, perm]), every segment; the state near a copy of the orbit, near the orbit
+    and far from both; its gradient against central differences."""
+    simulated = ring_of_three_states  # the ring of three's states
+    one = packed(simulated[1].y0, simulated[1].period)
+    problem = jc.cycle_problem(simulated[1], SHOOTING_OF_THREE)
+    operator = deflation(problem, [one], n_samples=64)
+    samples = np.reshape(np.asarray(operator.curves[0]), (64, 2, 3))
+
+    def written_out(u):
+        y = np.asarray(u[:-1])
+        best = np.inf
+        for perm in np.asarray(chain_symmetries(RING_OF_THREE)):
+            a = np.reshape(samples[:, :, perm], (64, 6))
+            edge = np.roll(a, -1, axis=0) - a
+            t = np.clip(np.sum((y - a) * edge, -1) / np.sum(edge**2, -1), 0.0, 1.0)
+            best = min(best, np.min(np.sum((y - a - t[:, None] * edge) ** 2, -1)))
+        return np.sqrt(best + (float(u[-1]) - float(one[-1])) ** 2)
+
+    rng = np.random.default_rng(3)
+    copy = jnp.concatenate([jnp.ravel(jnp.asarray(samples[17])[:, ::-1]), one[-1:] + 0.01])
+    for u in (copy + 1e-4 * rng.standard_normal(7), one + 0.05 * rng.standard_normal(7),
+              one + 2.0 * rng.standard_normal(7)):
+        d = float(operator.distances(u)[0])
+        assert abs(d - written_out(u)) < 1e-12 * max(d, 1.0)
+        v, h = rng.standard_normal(7), 1e-6
+        central = (written_out(u + h * v) - written_out(u - h * v)) / (2 * h)
+        slope = float(jax.jvp(lambda w: operator.distances(w)[0], (u,), (jnp.asarray(v),))[1])
+        assert abs(slope - central) < 1e-6 * max(abs(central), 1.0)
+
+
+def test_symmetries_of_the_ring_and_the_deflation_operator_s_bad_arguments(
+        ring_of_three_states):
+    """The dihedral group on the homogeneous ring (2N distinct permutations), the
+    identity alone on a free line; a clear error for bad arguments of the deflation
+    operator (those of `distinct_orbits` and `localized_branches`, test_deflation.py)."""
+    perms = np.asarray(chain_symmetries(jc.ChainParams(n_osc=5)))
+    assert perms.shape == (10, 5) and {tuple(sorted(p)) for p in perms} == {tuple(range(5))}
+    assert np.asarray(chain_symmetries(jc.ChainParams(n_osc=5, boundary="free"))).shape \
+        == (1, 5)
+    problem = jc.cycle_problem(ring_of_three_states[1], SHOOTING_OF_THREE)
+    with pytest.raises(ValueError, match="n_samples"):
+        deflation(problem, n_samples=4)
+
+
+@pytest.mark.study
+def test_a_start_that_is_not_periodic_is_deflated_from_its_eq8_state(tmp_path,
+                                                                      monkeypatch):
+    """A start whose simulated state is not periodic (here the one-site start, its
+    orbit withheld) keeps its reason, and deflation still searches from its eq. (8)
+    state (with the two-site start's orbit deflated, the problem borrowed from it):
+    the orbit found is followed as "k=1 deflated 1". It is a periodic orbit for
+    scipy, with one oscillator on the HALC, and no symmetric copy of the other
+    branches' orbits."""
+    starts = internal("snake starts")
+
+    def one_site_not_periodic(*args, **kwargs):
+        found = starts(*args, **kwargs)
+        _, sim, _ = found[1]
+        found[1] = (None, sim, "shooting did not converge: the simulated state is not "
+                    "periodic")
+        return found
+
+    replace_internal(monkeypatch, "snake starts", one_site_not_periodic)
+    found = jc.localized_branches(
+        RING_OF_THREE, (2, 1), continuation_options=jc.ContinuationOptions(
+            ds=0.02, ds_max=0.05, p_min=1.45, p_max=1.55, max_points=3),
+        start_options=SETTLED, simulation_check=False, deflate=1, out=tmp_path)
+    labels = list(found["datasets"])
+    assert "k=1 deflated 1" in labels and "k=1" not in labels and labels[0] == "k=2"
+    assert [n["excited"] for n in found["summary"]["not_periodic"]] == [1]
+    at = {}
+    for label in labels:
+        ds = found["datasets"][label]
+        i = int(np.argmin(np.abs(ds["v_d"].values - 1.5)))
+        at[label] = (ds["u"].values[i], int(ds["n_halc"].values[i]))
+    u, n_halc = at.pop("k=1 deflated 1")
+    assert scipy_return(u) < 1e-6 and n_halc == 1
+    assert all(copies_distance(other, u) > 1e-2 for other, _ in at.values())
+
+
+@pytest.mark.study
+def test_a_deflated_orbit_on_a_branch_already_followed_is_reported_not_followed(
+        tmp_path, monkeypatch, ring_of_three_states):
+    """Deflation's orbits replaced by two known ones: the two-site state rotated by
+    one oscillator (a symmetric copy: on the start's own branch) and the one-site
+    state (another branch). The copy is reported on "k=2" and not followed; the
+    one-site state is followed as "k=2 deflated 1", one oscillator on the HALC at
+    the start's v_d. A third solution of deflation, from which shooting did not
+    converge, is neither. Read back, the report is the same, and a run resumed
+    with a further start deflates from it every orbit the first run's deflation
+    knew: the start's own orbit and the three solutions, to the last bit."""
+    simulated = ring_of_three_states  # the ring of three's states
+    two = simulated[2]
+    rotated = jnp.roll(jnp.asarray(two.y0), 1, axis=1)
+    phase = int(np.argmax(np.roll(np.asarray(two.amplitudes), 1)))
+    copy = jc.periodic_orbit(RING_OF_THREE, (rotated, float(two.period)),
+                             SHOOTING_OF_THREE.with_phase_oscillator(phase))
+    assert bool(copy.converged)
+    one = (simulated[1], int(np.argmax(np.asarray(simulated[1].amplitudes))))
+    # deflation's solutions stand apart from the shot orbits (phase conditions differ)
+    given = [(o, m, jnp.append(jnp.ravel(o.y0), o.period) + 1e-3)
+             for o, m in [(copy, phase), one]]
+    given.append((None, 0, given[0][2] + 0.5))
+    replace_internal(monkeypatch, "snake deflated orbits",
+                     lambda orbits, params, found, count, stored: {2: given})
+    kwargs = dict(continuation_options=jc.ContinuationOptions(
+        ds=0.02, ds_max=0.05, p_min=1.45, p_max=1.55, max_points=3),
+        start_options=SETTLED, simulation_check=False, deflate=2, out=tmp_path)
+    found = jc.localized_branches(RING_OF_THREE, (2,), **kwargs)
+    assert list(found["datasets"]) == ["k=2", "k=2 deflated 1"]
+    (repeat,) = found["summary"]["deflated_on_followed"]
+    assert repeat["start"] == "k=2" and repeat["on"] == "k=2" and repeat["n_halc"] == 2
+    ds = found["datasets"]["k=2 deflated 1"]
+    assert int(ds["n_halc"].values[int(np.argmin(np.abs(ds["v_d"].values - 1.5)))]) == 1
+
+    def computes(*args, **kwargs):
+        raise AssertionError("the stored branches are read back")
+
+    replace_internal(monkeypatch, "snake starts", computes)
+    again = jc.localized_branches(RING_OF_THREE, (2,), **kwargs)
+    assert list(again["datasets"]) == ["k=2", "k=2 deflated 1"]
+    assert again["summary"]["deflated_on_followed"] == [repeat]
+    # resumed with the one-site start: its deflation (replaced by a spy) is given the
+    # orbits the first run's deflation knew, read back from the stored records
+    seen = []
+    replace_internal(monkeypatch, "snake starts",
+                     lambda *args: {1: (None, {}, "not periodic (replaced)")})
+    replace_internal(monkeypatch, "snake deflated orbits",
+                     lambda orbits, params, found, count, stored: seen.append(stored) or {})
+    jc.localized_branches(RING_OF_THREE, (2, 1), **kwargs)
+    ((own, *deflated),) = seen
+    assert all(np.array_equal(a, u) for a, (_, _, u) in zip(deflated, given, strict=True))
+    start = found["datasets"]["k=2"]  # its first point: its start orbit, corrected again
+    i = int(np.argmin(np.abs(start["v_d"].values - 1.5)))
+    np.testing.assert_allclose(own, start["u"].values[i], rtol=0,
+                               atol=10 * jc.Shooting().newton_tol)
+
+
+@pytest.mark.study
+@pytest.mark.numerics
+def test_a_resumed_run_deflates_the_orbits_of_the_starts_it_read_back(tmp_path,
+                                                                       monkeypatch):
+    """`localized_branches(deflate=1)` from the two- and the one-site start, then again
+    with the one-site start's files removed, as after a run stopped once its first
+    start was stored: deflation from the one-site start has every orbit deflated
+    that it had in the whole run (the two-site start's own and the orbit deflation
+    found from it, read back from the two-site start's record, to the last bit),
+    and the resumed run ends with the whole run's branches."""
+    real, seen = internal("snake deflation"), []
+
+    def spy(problem, start, known, **kwargs):
+        seen.append([np.asarray(u) for u in known])
+        return real(problem, start, known, **kwargs)
+
+    replace_internal(monkeypatch, "snake deflation", spy)
+    kwargs = dict(continuation_options=jc.ContinuationOptions(
+        ds=0.02, ds_max=0.05, p_min=1.45, p_max=1.55, max_points=3),
+        start_options=SETTLED, simulation_check=False, deflate=1, out=tmp_path)
+    whole = jc.localized_branches(RING_OF_THREE, (2, 1), **kwargs)
+    whole_known = seen[-1]
+    seen.clear()
+    for path in tmp_path.glob("branch_k1*.nc"):
+        path.unlink()
+    resumed = jc.localized_branches(RING_OF_THREE, (2, 1), **kwargs)
+    (known,) = seen  # deflation from the one-site start alone
+    assert len(known) == len(whole_known) == 3
+    # the same orbits: the one-site start's own is shot again in the resumed run
+    # (Newton's tolerance 1e-9)
+    assert all(min(copies_distance(u, v) for v in known) < 1e-6 for u in whole_known)
+    # the two read back (the two-site start's own orbit and deflation's solution from
+    # it) are the whole run's to the last bit
+    assert sum(any(np.array_equal(u, v) for v in known) for u in whole_known) >= 2
+    assert list(resumed["datasets"]) == list(whole["datasets"])
+    # orbits of one residual, each to Newton's tolerance (1e-9, shooting and the
+    # continuation's corrector alike) from its root
+    tol = 10 * jc.Shooting().newton_tol
+    for label, ds in whole["datasets"].items():
+        np.testing.assert_allclose(resumed["datasets"][label]["u"].values, ds["u"].values,
+                                   rtol=0, atol=tol, err_msg=label)
