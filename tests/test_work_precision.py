@@ -8,7 +8,6 @@ import io
 import json
 import shutil
 
-import numpy as np
 import pytest
 
 import jaxchain as jc

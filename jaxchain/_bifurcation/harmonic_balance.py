@@ -38,7 +38,8 @@ from .._physics.custom_types import State
 from .._physics.forces import DEFAULT_EPS
 from .._physics.friction import as_parameter
 from .._physics.params import ChainParams
-from .orbit_method import AbstractOrbitMethod, PeriodicOrbit, deflated_multipliers, orbit_record
+from .orbit_method import (AbstractOrbitMethod, PeriodicOrbit, deflated_multipliers,
+                           orbit_record, phased_guess)
 
 #: How Floquet multipliers are computed: Hill's method, or one monodromy integration.
 FLOQUET = ("hill", "monodromy")

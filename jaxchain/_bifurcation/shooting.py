@@ -16,7 +16,7 @@ from .._errors import ValidationError
 from .._physics.custom_types import State
 from .._physics.params import ChainParams
 from .orbit_method import (AbstractOrbitMethod, PeriodicOrbit, deflated_multipliers,
-                           orbit_record)
+                           orbit_record, phased_guess)
 
 #: The root finders of `Shooting`.
 ROOT_FINDERS = ("newton", "levenberg-marquardt")
