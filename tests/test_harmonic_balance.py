@@ -55,6 +55,7 @@ def test_floquet_multipliers_agree_with_shooting_s(shot, floquet):
                - np.log(float(shot.monodromy_determinant))) < 0.05
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 def test_the_branch_from_the_fold_to_the_hopf_point(shot):
     """`follow_branch` with harmonic balance, from the cycle at v_d 1.5 up through
