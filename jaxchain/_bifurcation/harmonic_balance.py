@@ -25,6 +25,8 @@ on the harmonic 0 are the Floquet exponents, and mu = exp(lambda T).
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -277,7 +279,7 @@ class HarmonicBalance(AbstractOrbitMethod):
                             residual <= 1e3 * self.newton_tol)
 
     def with_phase_oscillator(self, n: int) -> HarmonicBalance:
-        return eqx.tree_at(lambda m: m.phase_oscillator, self, n)
+        return dataclasses.replace(self, phase_oscillator=n)
 
 
 def _real_basis(h: int, d: int) -> np.ndarray:
