@@ -23,6 +23,7 @@ def shot():
 
 
 @pytest.mark.numerics
+@pytest.mark.slow
 def test_the_stick_slip_cycle_converges_to_shooting_s_as_harmonics_grow(shot):
     """From shooting's orbit as the guess: amplitude and period errors fall as H
     doubles (16, 32, 64: the velocity's kink at the stick phase makes the
@@ -58,6 +59,7 @@ def test_floquet_multipliers_agree_with_shooting_s(shot, floquet):
 
 @pytest.mark.study
 @pytest.mark.numerics
+@pytest.mark.slow
 def test_the_branch_from_the_fold_to_the_hopf_point(shot):
     """`follow_branch` with harmonic balance, from the cycle at v_d 1.5 up through
     the fold and down to steady sliding: the fold where shooting's driver finds it
