@@ -91,7 +91,7 @@ def write_followed(path: Path, branch: FollowedBranch, **key) -> None:
     branch's file last, so that a branch read back has all its switched ones."""
     path = Path(path)
     for j, sw in enumerate(branch.switched, start=1):
-        write_dataset(followed_dataset(sw), switched_path(path, j), KIND, switched=j, **key)
+        write_dataset(followed_dataset(sw), _switched_path(path, j), KIND, switched=j, **key)
     write_dataset(followed_dataset(branch, switched=len(branch.switched)), path, KIND,
                   switched=0, **key)
 
@@ -103,7 +103,7 @@ def read_followed(path: Path, **key) -> FollowedBranch | None:
     first = read_dataset(Path(path), KIND, switched=0, **key)
     if first is None:
         return None
-    switched = [read_dataset(switched_path(path, j), KIND, switched=j, **key)
+    switched = [read_dataset(_switched_path(path, j), KIND, switched=j, **key)
                 for j in range(1, int(first.attrs["switched"]) + 1)]
     if any(ds is None for ds in switched):
         return None
@@ -111,7 +111,7 @@ def read_followed(path: Path, **key) -> FollowedBranch | None:
                                switched=tuple(stored_branch(ds) for ds in switched))
 
 
-def switched_path(path: Path, j: int) -> Path:
+def _switched_path(path: Path, j: int) -> Path:
     """The file of the j-th branch switched onto from the branch stored at `path`."""
     path = Path(path)
     return path.with_name(f"{path.stem}_switched{j}.nc")
