@@ -5,7 +5,7 @@ first use (`lazy_loader.attach_stub`, SPEC 1 of the Scientific Python community)
 They are grouped by what a user does, in the order of the documentation; each
 section is a page of the API reference (`docs/api/`)."""
 
-# --- The chain and friction laws: parameters, topology, mistuning, eq. (5) ---
+# --- The chain and friction laws: parameters, topology, forcing, mistuning, eq. (5) ---
 from ._physics.params import (
     ChainParams as ChainParams, with_parameter as with_parameter,
     parameter_name as parameter_name,
@@ -13,6 +13,7 @@ from ._physics.params import (
     stack_chains as stack_chains,
 )
 from ._physics.chain import Graph as Graph
+from ._physics.forcing import Forcing as Forcing
 from ._physics.mistuning import mistune as mistune, Mistuning as Mistuning
 from ._physics.friction import (
     ExponentialDecay as ExponentialDecay, Stribeck as Stribeck,

@@ -239,7 +239,12 @@ def test_per_oscillator_arrays_are_never_read_as_lanes():
     (lambda: jc.ChainParams(friction=jc.Stribeck(mu_s=0.2)), "Stribeck.mu_s"),
     (lambda: jc.ChainParams(n_osc=4, friction=jc.Stribeck(v_s=np.ones(3))), "Stribeck.v_s"),
     (lambda: jc.Polynomial(c1=-2.0), "Polynomial coefficients"),
-    (lambda: jc.Coulomb(0.0), "Coulomb.mu"),
+    (lambda: jc.Coulomb(-0.1), "Coulomb.mu"),
+    (lambda: jc.ChainParams(v_d=0.0), "ChainParams.v_d"),
+    (lambda: jc.ChainParams(n_osc=3, forcing=jc.Forcing(1.0, 1.0, phase=np.ones(2))),
+     "Forcing.phase"),
+    (lambda: jc.Forcing(amplitude=-1.0, frequency=1.0), "Forcing.amplitude"),
+    (lambda: jc.Forcing(amplitude=1.0, frequency=0.0), "Forcing.frequency"),
     (lambda: jc.ChainParams(friction=jc.Coulomb(), mu_st=2.0), "not both"),
     (lambda: jc.mistune(jc.ChainParams(), -0.1, 0), "Mistuning.sigma"),
 ])

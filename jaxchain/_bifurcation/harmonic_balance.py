@@ -13,7 +13,8 @@ the model's acceleration there (its friction law smoothed, tanh(v_rel/eps), eq. 
 with eq. (7)), and back by the FFT; M >= 4H + 1 keeps the products that the Hill
 matrix needs free of aliasing. A phase condition x_n'(0) = 0 (as `Shooting`'s) fixes
 the orbit's phase. Newton's method by optimistix, the Jacobian by forward-mode
-differentiation (`jax.jacfwd`).
+differentiation (`jax.jacfwd`), damped by backtracking where a full step does
+not lower the residual.
 
 Floquet multipliers from one monodromy integration over the period started on the
 orbit, or by Hill's method (Lazarus and Thomas, C. R. Mecanique 338 (2010)
@@ -31,17 +32,19 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Complex, Float, Int
+from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
 from .._checks import check_count, check_positive, is_count
+from .._engine.compat import checks_as_nan
 from .._engine.engines import Smoothed
 from .._errors import ValidationError
 from .._physics.custom_types import State
 from .._physics.forces import DEFAULT_EPS
 from .._physics.friction import as_parameter
 from .._physics.params import ChainParams
-from .orbit_method import (AbstractOrbitMethod, PeriodicOrbit, deflated_multipliers,
-                           orbit_record, phased_guess)
+from .orbit_method import (AbstractOrbitMethod, PeriodicOrbit, closing_condition,
+                           damped_newton, deflated_multipliers, flow_direction, guess_period, orbit_record,
+                           phased_guess)
 
 #: How Floquet multipliers are computed: Hill's method, or one monodromy integration.
 FLOQUET = ("hill", "monodromy")
@@ -68,8 +71,8 @@ class HarmonicBalance(AbstractOrbitMethod):
         method: an eigenvalue problem of size 2 n_osc (2H + 1), whose cost grows as
         its cube; on the single oscillator at H = 64 it costs 40 times the
         integration and needs H = 64 where the orbit needs 32).
-    - `newton_tol`, `newton_steps`: Newton's tolerance (optimistix, rtol = atol)
-        and iteration budget.
+    - `newton_tol`, `newton_steps`: the tolerance (optimistix, rtol = atol) and the
+        iteration budget of Newton's method damped by backtracking (`solve`).
     - `n_samples`: samples of one period from which amplitudes and stick are read.
     - `phase_oscillator`: the oscillator n of the phase condition x_n'(0) = 0.
 
@@ -134,13 +137,23 @@ class HarmonicBalance(AbstractOrbitMethod):
 
         **Raises:** `ValidationError` for a guess of the wrong shape or a phase
         oscillator outside the chain."""
-        return self._projected(params, phased_guess(self, params, y0), period)
+        return self._projected(params, phased_guess(self, params, y0),
+                               guess_period(params, period))
 
     def start(self, orbit: PeriodicOrbit) -> Float[Array, " n"]:
         """The unknowns of the converged `orbit` (of any method): projected from its
         state and period (`unknowns`), then solved by Newton's method."""
         u, _ = self.solve(orbit.params, self.unknowns(orbit.params, orbit.y0, orbit.period))
         return u
+
+    def solve(self, params: ChainParams, u0: Float[Array, " n"]
+              ) -> tuple[Float[Array, " n"], Bool[Array, ""]]:
+        """Newton's method damped by backtracking (`damped_newton`): full steps near
+        the orbit, short ones from a guess far from it (a forced response from rest
+        at resonance, where the friction force's jumps make full steps overshoot).
+        Traceable (`jax.vmap` over chains), differentiable by the implicit function
+        theorem."""
+        return _solve(self, params, u0)
 
     def orbit(self, u: Float[Array, " n"]) -> tuple[State, Float[Array, ""]]:
         coefficients, period = self._split(u)
@@ -188,17 +201,20 @@ class HarmonicBalance(AbstractOrbitMethod):
 
     def residual(self, u: Float[Array, " n"], params: ChainParams) -> Float[Array, " n"]:
         """The harmonics of x'' minus the model's acceleration (the alternating
-        frequency-time scheme), shape (2H + 1) n_osc, and the phase condition
-        sum_k k b_kn (x_n'(0) / omega, n the phase oscillator)."""
+        frequency-time scheme; a forcing's at the samples' times), shape
+        (2H + 1) n_osc, and the phase condition sum_k k b_kn (x_n'(0) / omega, n the
+        phase oscillator; for a forced chain the force's period,
+        `closing_condition`)."""
         coefficients, period = self._split(u)
         omega = 2 * jnp.pi / period
         x, dx, ddx = self._series(coefficients, 2)
         ys = jnp.stack([x, omega * dx], axis=1)
-        accel = jax.vmap(lambda y: self.engine.field(params, y)[1])(ys)
+        ts = period * jnp.arange(self.time_samples) / self.time_samples
+        accel = jax.vmap(lambda y, t: self.engine.field(params, y, t)[1])(ys, ts)
         balance = self._projection(omega**2 * ddx - accel)
         h, n = self.harmonics, self.phase_oscillator
         phase = jnp.sum(jnp.arange(1, h + 1) * coefficients[h + 1:, n])
-        return jnp.concatenate([jnp.ravel(balance), phase[None]])
+        return jnp.concatenate([jnp.ravel(balance), closing_condition(params, phase, period)])
 
     # --- the orbit described ---
 
@@ -264,7 +280,7 @@ class HarmonicBalance(AbstractOrbitMethod):
                     ) -> tuple[Complex[Array, " 2n"], Int[Array, ""]]:
         y0, _ = self.orbit(u)
         return deflated_multipliers(self.monodromy(params, u),
-                                    jnp.ravel(self.engine.field(params, y0)))
+                                    flow_direction(self.engine, params, y0))
 
     def describe(self, u: Float[Array, " n"], params: ChainParams) -> PeriodicOrbit:
         coefficients, period = self._split(u)
@@ -274,12 +290,18 @@ class HarmonicBalance(AbstractOrbitMethod):
         trace = jnp.trace(self._jacobians(params, u), axis1=1, axis2=2)
         residual = jnp.max(jnp.abs(self.residual(u, params)))
         return orbit_record(params, y0, period, ys, self.engine.on_halc(params, ys),
-                            self.monodromy(params, u), self.engine.field(params, y0),
+                            self.monodromy(params, u), flow_direction(self.engine, params, y0),
                             self.newton_tol, period * jnp.mean(trace), residual,
                             residual <= 1e3 * self.newton_tol)
 
     def with_phase_oscillator(self, n: int) -> HarmonicBalance:
         return dataclasses.replace(self, phase_oscillator=n)
+
+
+@checks_as_nan
+@eqx.filter_jit
+def _solve(method: HarmonicBalance, params: ChainParams, u0):
+    return damped_newton(method, params, u0, method.newton_steps)
 
 
 def _real_basis(h: int, d: int) -> np.ndarray:

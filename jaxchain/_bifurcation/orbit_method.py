@@ -86,11 +86,12 @@ def critical_multiplier(multipliers: Complex[Array, "... 2n"], trivial: Array
     return jnp.take_along_axis(multipliers, index[..., None], axis=-1)[..., 0]
 
 
-def deflated_multipliers(m: Float[Array, "2n 2n"], direction: Float[Array, " 2n"]
+def deflated_multipliers(m: Float[Array, "2n 2n"], direction: Float[Array, " 2n"] | None
                          ) -> tuple[Complex[Array, " 2n"], Array]:
     """The eigenvalues of a monodromy matrix `m` by decreasing modulus, the trivial one
     (of the flow direction `direction`, the vector field at the orbit's start)
-    deflated: (multipliers, index of the trivial one).
+    deflated: (multipliers, index of the trivial one). A forced orbit has no
+    trivial multiplier (`direction` None): its index is then 2 n_osc, past the end.
 
     The flow direction f is an eigenvector of M with multiplier 1 on an exact orbit.
     In an orthonormal basis [f/|f|, V] (Householder QR of f), M is block upper
@@ -100,6 +101,9 @@ def deflated_multipliers(m: Float[Array, "2n 2n"], direction: Float[Array, " 2n"
     multiplier near 1 (a weakly damped quiet oscillator, a slowly drifting phase
     between sites) can then be taken for the trivial one (Seydel, *Practical
     Bifurcation and Stability Analysis*, 3rd ed., Sect. 7.4; Wielandt deflation)."""
+    if direction is None:
+        values = jnp.linalg.eigvals(m)
+        return values[jnp.argsort(-jnp.abs(values))], jnp.asarray(values.size)
     direction = direction / jnp.linalg.norm(direction)
     basis, _ = jnp.linalg.qr(direction[:, None], mode="complete")
     rest = basis[:, 1:]
@@ -129,9 +133,11 @@ def orbit_record(params: ChainParams, y0: State, period, ys: Float[Array, "m 2 n
     pieces a method computes: samples `ys` of the period, which oscillators stick
     there, its monodromy `m` with the flow direction at y0 and the flow's `rtol`,
     the logarithm of det M (or NaN), its residual's max-norm and whether the solve
-    converged (traceable)."""
-    multipliers, trivial = deflated_multipliers(m, jnp.reshape(direction, (-1,)))
-    resolution = multiplier_resolution(m, multipliers[trivial], rtol)
+    converged (traceable). `direction` is `flow_direction`'s: None for a forced
+    orbit, which has no trivial multiplier."""
+    multipliers, trivial = deflated_multipliers(m, direction)
+    resolution = multiplier_resolution(
+        m, 1.0 if direction is None else multipliers[trivial], rtol)
     amplitudes = 0.5 * (ys[:, 0].max(0) - ys[:, 0].min(0))
     others = jnp.where(jnp.arange(multipliers.size) == trivial, 0.0, jnp.abs(multipliers))
     return PeriodicOrbit(
@@ -144,9 +150,37 @@ def orbit_record(params: ChainParams, y0: State, period, ys: Float[Array, "m 2 n
         residual=residual, converged=jnp.asarray(converged))
 
 
+def flow_direction(engine, params: ChainParams, y0: State) -> Float[Array, " 2n"] | None:
+    """The vector field at the orbit's start, flattened: the eigenvector of the
+    trivial Floquet multiplier of an autonomous chain; None for a forced chain
+    (`ChainParams.forcing`), whose orbits have none."""
+    if params.forcing is not None:
+        return None
+    return jnp.reshape(engine.field(params, y0), (-1,))
+
+
+def closing_condition(params: ChainParams, phase: Float[Array, ""], period
+                      ) -> Float[Array, " 1"]:
+    """The last equation of every method's residual, shape (1,): the phase condition
+    (`phase`, x_n'(0) of the method's phase oscillator or a multiple of it) for an
+    autonomous chain, whose orbits can start anywhere on themselves; for a forced
+    chain, whose time origin is the force's, the period of the force:
+    T - 2 pi / Omega."""
+    if params.forcing is None:
+        return jnp.reshape(phase, (1,))
+    return jnp.reshape(period - params.forcing.period, (1,))
+
+
+def guess_period(params: ChainParams, period):
+    """The period of a guess: `period` for an autonomous chain, the force's 2 pi /
+    Omega for a forced one (whose orbits have that period)."""
+    return period if params.forcing is None else params.forcing.period
+
+
 def phased_guess(method, params: ChainParams, y0) -> State:
     """The guess's state `y0` checked against the chain, with the velocity of the
-    method's phase oscillator set to 0 (the phase condition x_n'(0) = 0).
+    method's phase oscillator set to 0 (the phase condition x_n'(0) = 0) on an
+    autonomous chain (a forced one's start is fixed by the force's phase).
 
     **Raises:** `ValidationError` for a state of the wrong shape or a phase
     oscillator outside the chain."""
@@ -156,6 +190,8 @@ def phased_guess(method, params: ChainParams, y0) -> State:
     if method.phase_oscillator >= params.n_osc:
         raise ValidationError(f"{type(method).__name__}.phase_oscillator must be < n_osc = "
                               f"{params.n_osc}, got {method.phase_oscillator}")
+    if params.forcing is not None:
+        return y0
     return y0.at[1, method.phase_oscillator].set(0.0)
 
 
@@ -228,6 +264,23 @@ class AbstractOrbitMethod(eqx.Module):
         tolerances divided by `factor`). Raises `ValidationError` where the method
         has no accuracy to change."""
         raise ValidationError(f"{type(self).__name__} has no accuracy to refine")
+
+
+def damped_newton(method: AbstractOrbitMethod, params: ChainParams, u0, max_steps: int):
+    """(The unknowns; whether it converged) by Newton steps on `method.residual`
+    (optimistix's Gauss-Newton with the Newton descent: the same linear solve on a
+    square system) shortened by backtracking until the squared residual decreases
+    enough (Armijo; Dennis and Schnabel, *Numerical Methods for Unconstrained
+    Optimization and Nonlinear Equations* (1996), Sect. 6.3): full Newton steps near
+    the root, short ones where a full step would leave its neighbourhood.
+    Traceable; differentiable by the implicit function theorem."""
+    tol = method.newton_tol
+    solver = eqx.tree_at(lambda s: s.search,
+                         optx.GaussNewton(rtol=tol, atol=tol, norm=optx.max_norm),
+                         optx.BacktrackingArmijo())
+    sol = optx.least_squares(lambda u, p: method.residual(u, p), solver, u0, params,
+                             max_steps=max_steps, throw=False)
+    return sol.value, sol.result == optx.RESULTS.successful
 
 
 @checks_as_nan

@@ -15,8 +15,9 @@ from .._engine.engines import AbstractEngine, Smoothed
 from .._errors import ValidationError
 from .._physics.custom_types import State
 from .._physics.params import ChainParams
-from .orbit_method import (AbstractOrbitMethod, PeriodicOrbit, deflated_multipliers,
-                           orbit_record, phased_guess)
+from .orbit_method import (AbstractOrbitMethod, PeriodicOrbit, closing_condition,
+                           damped_newton, deflated_multipliers, flow_direction, guess_period, orbit_record,
+                           phased_guess)
 
 #: The root finders of `Shooting`.
 ROOT_FINDERS = ("newton", "levenberg-marquardt")
@@ -128,7 +129,7 @@ class Shooting(AbstractOrbitMethod):
 
         **Raises:** `ValidationError` for a guess of the wrong shape or a phase
         oscillator outside the chain."""
-        return self.pack(phased_guess(self, params, y0), period)
+        return self.pack(phased_guess(self, params, y0), guess_period(params, period))
 
     def pack(self, y0: State, period) -> Float[Array, " 2n+1"]:
         return pack(y0, period)
@@ -137,11 +138,12 @@ class Shooting(AbstractOrbitMethod):
         return unpack(u)
 
     def residual(self, u: Float[Array, " 2n+1"], params: ChainParams) -> Float[Array, " 2n+1"]:
-        """phi_T(y0) - y0 and the phase condition x_n'(0), shape (2 n_osc + 1,)."""
+        """phi_T(y0) - y0 and the phase condition x_n'(0) (for a forced chain the
+        force's period, `closing_condition`), shape (2 n_osc + 1,)."""
         y0, period = self.orbit(u)
         y1 = self.engine.flow(params, y0, period)
-        n = self.phase_oscillator
-        return jnp.concatenate([jnp.reshape(y1 - y0, (-1,)), y0[1, n:n + 1]])
+        return jnp.concatenate([jnp.reshape(y1 - y0, (-1,)), closing_condition(
+            params, y0[1, self.phase_oscillator], period)])
 
     def monodromy(self, params: ChainParams, y0: State, period) -> Float[Array, "2n 2n"]:
         """The monodromy matrix d phi_T(y0) / d y0, by forward-mode differentiation
@@ -154,14 +156,15 @@ class Shooting(AbstractOrbitMethod):
     def multipliers(self, params: ChainParams, u):
         y0, period = self.orbit(u)
         return deflated_multipliers(self.monodromy(params, y0, period),
-                                    jnp.reshape(self.engine.field(params, y0), (-1,)))
+                                    flow_direction(self.engine, params, y0))
 
     def describe(self, u: Float[Array, " 2n+1"], params: ChainParams) -> PeriodicOrbit:
         y0, period = self.orbit(u)
         ys, log_det = self.engine.orbit_samples(params, y0, period, self.n_samples)
         residual = jnp.max(jnp.abs(self.residual(u, params)))
         return orbit_record(params, y0, period, ys, self.engine.on_halc(params, ys),
-                            self.monodromy(params, y0, period), self.engine.field(params, y0),
+                            self.monodromy(params, y0, period),
+                            flow_direction(self.engine, params, y0),
                             self.engine.options.rtol, log_det, residual,
                             residual <= 1e3 * self.newton_tol)
 
@@ -206,13 +209,5 @@ def _root(method: Shooting, params, u0):
 @checks_as_nan
 @eqx.filter_jit
 def _damped_root(method: Shooting, params, u0):
-    """Newton steps (optimistix's Gauss-Newton with the Newton descent: the same
-    linear solve on a square system) shortened by backtracking until the squared
-    residual decreases enough (Armijo)."""
-    tol = method.newton_tol
-    solver = eqx.tree_at(lambda s: s.search,
-                         optx.GaussNewton(rtol=tol, atol=tol, norm=optx.max_norm),
-                         optx.BacktrackingArmijo())
-    sol = optx.least_squares(lambda u, p: method.residual(u, p), solver, u0, params,
-                             max_steps=method.damped_steps, throw=False)
-    return sol.value, sol.result == optx.RESULTS.successful
+    """`damped_newton` within the method's damped-step budget."""
+    return damped_newton(method, params, u0, method.damped_steps)

@@ -96,9 +96,10 @@ class AbstractEngine(eqx.Module):
         (`steady_sliding`), shape (2, n_osc)."""
 
     @abc.abstractmethod
-    def field(self, params: ChainParams, y: State) -> State:
-        """The vector field of the engine's model at the state `y` (shape (2, n_osc)):
-        the flow's direction, that of the trivial Floquet multiplier."""
+    def field(self, params: ChainParams, y: State, t=0.0) -> State:
+        """The vector field of the engine's model at the state `y` (shape (2, n_osc))
+        and the time `t` (read only by a forcing, `ChainParams.forcing`): the flow's
+        direction, that of the trivial Floquet multiplier of an autonomous chain."""
 
     def jacobian(self, params: ChainParams, y: State | None = None
                  ) -> Float[Array, "2n 2n"]:
@@ -289,8 +290,8 @@ class Smoothed(AbstractEngine):
             return self._flow(params, y0, t, diffrax.SaveAt(t1=True))[-1]
         return self._flow(params, y0, t[-1], diffrax.SaveAt(ts=t))
 
-    def field(self, params: ChainParams, y: State) -> State:
-        return vector_field(0.0, y, params, self.eps)
+    def field(self, params: ChainParams, y: State, t=0.0) -> State:
+        return vector_field(t, y, params, self.eps)
 
     def steady_sliding(self, params: ChainParams) -> State:
         return steady_sliding(params, self.eps)
@@ -364,7 +365,7 @@ class Exact(AbstractEngine):
                             f"{type(self.options).__name__}")
 
     def run(self, params: ChainParams, y0: State, progress: bool = False) -> Observables:
-        return run_exact(params, y0, self.options, progress)
+        return run_exact(_autonomous(params), y0, self.options, progress)
 
     def n_chunks(self) -> int:
         return self.options.n_chunks(halves=True)  # the window's halves are chunked apart
@@ -380,12 +381,13 @@ class Exact(AbstractEngine):
     orbit_root_finder: ClassVar[str] = "newton"
 
     def flow(self, params: ChainParams, y0: State, t) -> Array:
-        ys, status = nonsmooth_flow(params, y0, jnp.atleast_1d(t), self.options)
+        ys, status = nonsmooth_flow(_autonomous(params), y0, jnp.atleast_1d(t), self.options)
         ys = jnp.where(status == Status.ok, ys, jnp.nan)
         return ys[-1] if np.ndim(t) == 0 else ys
 
-    def field(self, params: ChainParams, y: State) -> State:
-        return mode_field(0.0, (y, None), (params, initial_modes(params, y)))[0]
+    def field(self, params: ChainParams, y: State, t=0.0) -> State:
+        params = _autonomous(params)
+        return mode_field(t, (y, None), (params, initial_modes(params, y)))[0]
 
     def steady_sliding(self, params: ChainParams) -> State:
         return steady_sliding(params)
@@ -396,7 +398,7 @@ class Exact(AbstractEngine):
         return Exact()
 
     def stick_phases(self, params: ChainParams, y0: State, period):
-        return stick_phases(params, y0, period, self.options)
+        return stick_phases(_autonomous(params), y0, period, self.options)
 
     def holding(self, oscillators: tuple[int, ...]) -> "Exact":
         return Exact(dataclasses.replace(self.options, held=tuple(oscillators)))
@@ -433,6 +435,18 @@ class Exact(AbstractEngine):
         raise ValidationError(f"engine: {what} integrates the smoothed model; the "
                               f"{self.name} engine has no eps to smooth it with: give "
                               "engine='smoothed' or a jaxchain.Smoothed")
+
+
+def _autonomous(params: ChainParams) -> ChainParams:
+    """`params`, checked to carry no forcing: the exact engine's switch conditions
+    (`jaxchain/_engine/exact/switching.py`) are those of the autonomous eq. (5).
+
+    **Raises:** `ValidationError` for a forced chain."""
+    if params.forcing is not None:
+        raise ValidationError("forcing: the exact engine does not yet take a forced chain "
+                              "(its stick/slip switches are those of the autonomous eq. (5)); "
+                              "give a jaxchain.Smoothed engine")
+    return params
 
 
 #: The engines by name, each with its defaults.

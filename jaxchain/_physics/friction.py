@@ -306,12 +306,14 @@ class Polynomial(AbstractFrictionLaw):
 
 
 class Coulomb(AbstractFrictionLaw):
-    """Constant friction, mu(v_rel) = mu (> 0). Steady sliding is then stable for
-    any xi > 0 (no falling characteristic).
+    """Constant friction, mu(v_rel) = mu (>= 0): Coulomb's law. Steady sliding is then
+    stable for any xi > 0 (no falling characteristic). mu = 0 switches friction
+    off (the linear chain, against which a forced chain's friction damping is
+    measured).
 
     **Raises:**
 
-    `ValidationError` for a non-finite or non-positive mu.
+    `ValidationError` for a non-finite or negative mu.
     """
 
     mu: ArrayLike = eqx.field(converter=as_parameter, default=0.5)
@@ -321,7 +323,7 @@ class Coulomb(AbstractFrictionLaw):
 
     @classmethod
     def rules(cls):
-        return {"mu": (_positive, "> 0")}
+        return {"mu": (_non_negative, ">= 0")}
 
     def __call__(self, v_rel):
         return self.mu + 0.0 * jnp.abs(v_rel)

@@ -44,16 +44,19 @@ def vector_field(t, y: State | Float[Array, " 2n"], params: ChainParams,
     """Right-hand side of eq. (5) of the paper, with the smoothed friction force of
     `smoothed_friction_force` and the coupling of `coupling_force`:
 
-        m_n x_n'' = -2 xi_n x_n' - k_n x_n - (coupling)_n + (P_n/P) F(x_n' - v_d),
+        m_n x_n'' = -2 xi_n x_n' - k_n x_n - (coupling)_n + (P_n/P) F(x_n' - v_d)
+                    + f_n(t),
 
-    (m_n = 1 unless `params.mass` is given); on the paper's ring (coupling)_n =
+    (m_n = 1 unless `params.mass` is given; f_n the harmonic force of
+    `params.forcing`, 0 without one); on the paper's ring (coupling)_n =
     eta_c (2 x_n - x_{n+1} - x_{n-1}), k_n = 1 and P_n = P. For n_osc = 1 on the
     ring the coupling term vanishes (the oscillator is its own neighbour), which
     gives the single mass-on-moving-belt oscillator of Fig. 3(a).
 
     **Arguments:**
 
-    - `t`: time (unused; the system is autonomous), dimensionless (eq. 4).
+    - `t`: time, dimensionless (eq. 4); read only by a forcing (the paper's chain
+        is autonomous).
     - `y`: state of shape (2, n_osc), rows (x, x'), or the same flattened to
         (2 n_osc,).
     - `params`: the chain parameters.
@@ -98,6 +101,8 @@ def split_vector_field(t, y: State | Float[Array, " 2n"], params: ChainParams,
     x, v = jnp.reshape(y, (2, n))
     acceleration = -2 * params.xi * v - params.stiffness * x - coupling_force(params, x)
     force = smoothed_friction_force(params, v - params.v_d, eps)
+    if params.forcing is not None:
+        acceleration = acceleration + params.forcing.force(t)
     if params.mass is not None:
         acceleration, force = acceleration / params.mass, force / params.mass
     elastic = jnp.stack([v, acceleration])

@@ -11,6 +11,7 @@ import numpy as np
 from jaxtyping import ArrayLike
 
 from .chain import Graph, as_graph
+from .forcing import Forcing
 from .mistuning import Mistuning
 from .scales import Scales
 from .friction import AbstractFrictionLaw, ExponentialDecay, as_parameter, check_values
@@ -59,8 +60,8 @@ class ChainParams(eqx.Module):
     - `eta_c`: coupling stiffness k_c/k (>= 0), shape () or (n_links,), one value
         per link of the graph, in its order (n_links = N on the ring, N - 1 on a
         free line, N + 1 on a fixed one, see `BOUNDARIES` and `Graph`).
-    - `v_d`: belt speed (> 0; a belt moving the other way is the mirror image
-        x -> -x), shape ().
+    - `v_d`: belt speed (> 0, or >= 0 with a `forcing`; a belt moving the other
+        way is the mirror image x -> -x), shape ().
     - `stiffness`: ground stiffness k_n/k = 1 + delta_n (> 0), shape () or (n_osc,).
     - `load`: normal load P_n/P, which scales oscillator n's friction force (> 0),
         shape () or (n_osc,).
@@ -78,6 +79,9 @@ class ChainParams(eqx.Module):
         (recorded in results; `to_physical` converts back), or None (static).
     - `mistuning`: the `Mistuning` record that drew `stiffness` (see `mistune`),
         or None (static).
+    - `forcing`: a harmonic force on the oscillators (`Forcing`), or None (the
+        paper's autonomous chain). With a forcing, v_d may be 0: a friction damper
+        whose contact does not move.
     - `mu_st`, `mu_d`, `v0`: shorthand for `friction=ExponentialDecay(mu_st, mu_d,
         v0)`, eq. (1) (not stored; read them as `params.friction.mu_st`).
 
@@ -96,7 +100,8 @@ class ChainParams(eqx.Module):
 
     `ValidationError` naming the field for eps (the smoothed engine's now), a
     non-finite value, n_osc < 1, xi < 0,
-    eta_c < 0, v_d <= 0, stiffness <= 0, load <= 0, mass <= 0, a field of
+    eta_c < 0, v_d <= 0 (v_d < 0 with a forcing), stiffness <= 0, load <= 0,
+    mass <= 0, a field of
     the wrong shape, an unknown boundary, both `graph` and `boundary`, a graph of
     another n_osc, a friction law that is not an
     `AbstractFrictionLaw`, both `friction` and `mu_st`/`mu_d`/`v0`, or a
@@ -113,6 +118,7 @@ class ChainParams(eqx.Module):
     load: ArrayLike = eqx.field(converter=as_parameter)
     mass: ArrayLike | None = eqx.field(converter=_optional_parameter)
     friction: AbstractFrictionLaw
+    forcing: Forcing | None
     graph: Graph = eqx.field(static=True)
     mistuning: Mistuning | None = eqx.field(static=True)
     scales: Scales | None = eqx.field(static=True)
@@ -121,7 +127,8 @@ class ChainParams(eqx.Module):
                  stiffness=1.0, load=1.0, friction: AbstractFrictionLaw | None = None,
                  boundary: str = _ABSENT, mistuning: Mistuning | None = None, *,
                  mass=None, graph: Graph | None = None, scales: Scales | None = None,
-                 mu_st=_ABSENT, mu_d=_ABSENT, v0=_ABSENT, eps=_ABSENT):
+                 forcing: Forcing | None = None, mu_st=_ABSENT, mu_d=_ABSENT, v0=_ABSENT,
+                 eps=_ABSENT):
         check_float64()  # before the converters make arrays of the wrong precision
         if eps is not _ABSENT:
             raise ValidationError(EPS_MOVED)
@@ -156,6 +163,7 @@ class ChainParams(eqx.Module):
         self.load = load
         self.mass = mass
         self.friction = friction
+        self.forcing = forcing
         self.graph = graph
         self.mistuning = mistuning
         self.scales = scales
@@ -171,6 +179,9 @@ class ChainParams(eqx.Module):
             raise ValidationError(f"ChainParams.friction must be a friction law (jaxchain."
                                   f"ExponentialDecay, Stribeck, Polynomial, Coulomb or another "
                                   f"AbstractFrictionLaw), got {type(self.friction).__name__}")
+        if self.forcing is not None and not isinstance(self.forcing, Forcing):
+            raise ValidationError(f"ChainParams.forcing must be a jaxchain.Forcing or None, "
+                                  f"got {type(self.forcing).__name__}")
         if self.mistuning is not None and not isinstance(self.mistuning, Mistuning):
             raise ValidationError(f"ChainParams.mistuning must be a jaxchain.Mistuning or None, "
                                   f"got {type(self.mistuning).__name__}")
@@ -179,7 +190,8 @@ class ChainParams(eqx.Module):
         names = ("xi", "eta_c", "v_d", "stiffness", "load", "mass")
         check_values("ChainParams", {name: getattr(self, name) for name in names
                                      if getattr(self, name) is not None},
-                     {"xi": non_negative, "eta_c": non_negative, "v_d": positive,
+                     {"xi": non_negative, "eta_c": non_negative,
+                      "v_d": positive if self.forcing is None else non_negative,
                       "stiffness": positive, "load": positive,
                       "mass": positive})
         self._check_shapes()
@@ -201,6 +213,10 @@ class ChainParams(eqx.Module):
             shape = np.shape(getattr(self, name))
             if shape not in shapes:
                 raise ValidationError(_shape_message(f"ChainParams.{name}", shape, shapes))
+        for name in ("amplitude", "phase") if self.forcing is not None else ():
+            shape = np.shape(getattr(self.forcing, name))
+            if shape not in ((), (n,)):
+                raise ValidationError(_shape_message(f"Forcing.{name}", shape, ((), (n,))))
         for name in self.friction.parameter_names():
             if name in self.friction.table_names():
                 continue  # the law checks its own table
@@ -232,8 +248,8 @@ def _shape_message(name, shape, shapes) -> str:
 
 def single_oscillator(params: ChainParams, index: int = 0) -> ChainParams:
     """Oscillator `index` of the chain on its own: n_osc = 1 on the ring (no
-    coupling), with that oscillator's xi, stiffness, load and friction law, the
-    chain's v_d. The single oscillator of Fig. 3(a) for the paper's ring.
+    coupling), with that oscillator's xi, stiffness, load, friction law and force,
+    the chain's v_d. The single oscillator of Fig. 3(a) for the paper's ring.
     Traceable in the parameters' values (`jax.jacfwd` through it).
 
     **Raises:**
@@ -251,23 +267,32 @@ def single_oscillator(params: ChainParams, index: int = 0) -> ChainParams:
     law = eqx.tree_at(lambda f: [getattr(f, n) for n in law.parameter_names()], law,
                       [getattr(law, n) if n in tables else pick(getattr(law, n))
                        for n in law.parameter_names()])
+    forcing = params.forcing
+    if forcing is not None:
+        forcing = Forcing(amplitude=pick(forcing.amplitude), frequency=forcing.frequency,
+                          phase=pick(forcing.phase))
     return ChainParams(n_osc=1, xi=pick(params.xi), eta_c=params.eta_c if np.ndim(
         params.eta_c) == 0 else 0.0, v_d=params.v_d,
         stiffness=pick(params.stiffness), load=pick(params.load), friction=law,
-        mass=None if params.mass is None else pick(params.mass))
+        mass=None if params.mass is None else pick(params.mass), forcing=forcing)
 
 
 def _chain_fields() -> list[str]:
     return [f.name for f in dataclasses.fields(ChainParams)
-            if f.name not in ("n_osc", "friction", "graph", "mistuning", "scales")]
+            if f.name not in ("n_osc", "friction", "forcing", "graph", "mistuning", "scales")]
+
+#: The names of a `Forcing`'s fields among the parameters (`parameter_names`).
+FORCING_NAMES = ("forcing.amplitude", "forcing.frequency", "forcing.phase")
 
 
 def parameter_names(params: ChainParams | None = None) -> list[str]:
     """The names `with_parameter` and the sweeps take: the array fields of
-    `ChainParams` and those of its friction law (`mu_st`, `mu_d`, `v0` for eq. (1)).
+    `ChainParams`, those of its friction law (`mu_st`, `mu_d`, `v0` for eq. (1)) and,
+    for a forced chain, those of its `Forcing` ("forcing.frequency", ...).
     """
     law = ExponentialDecay if params is None else type(params.friction)
-    return _chain_fields() + list(law.parameter_names())
+    forced = params is not None and params.forcing is not None
+    return _chain_fields() + list(law.parameter_names()) + list(FORCING_NAMES if forced else ())
 
 
 class _Field(eqx.Module):
@@ -280,6 +305,8 @@ class _Field(eqx.Module):
     def __call__(self, params):
         if self.name in _chain_fields():
             return getattr(params, self.name)
+        if self.name in FORCING_NAMES:
+            return getattr(params.forcing, self.name.removeprefix("forcing."))
         return getattr(params.friction, self.name)
 
 
@@ -396,12 +423,13 @@ def with_parameter(params: ChainParams, where: Callable | str, value) -> ChainPa
     `ValidationError` naming the field for a bad value or shape, or for an unknown name.
     """
     changed = eqx.tree_at(parameter_lens(where, params), params, value)
-    return with_fields(changed, friction=revalidated(changed.friction))
+    return with_fields(changed, friction=revalidated(changed.friction),
+                       forcing=None if changed.forcing is None else revalidated(changed.forcing))
 
 
-def revalidated(law: AbstractFrictionLaw) -> AbstractFrictionLaw:
-    """The law built again from its fields (static ones included), so that its
-    checks run on values set by `eqx.tree_at`."""
+def revalidated(law: eqx.Module) -> eqx.Module:
+    """The law (or forcing) built again from its fields (static ones included), so
+    that its checks run on values set by `eqx.tree_at`."""
     return type(law)(**{f.name: getattr(law, f.name) for f in dataclasses.fields(law)})
 
 

@@ -6,15 +6,21 @@ import dataclasses
 import numpy as np
 
 from .chain import Graph
+from .forcing import Forcing
 from .mistuning import Mistuning
 from .scales import Scales
 from .friction import FRICTION_LAWS
 from .params import EPS_MOVED, ChainParams, _chain_fields
 from .._errors import ValidationError
 
+#: The keys of a forcing (`Forcing`) in a record; a chain file may give
+#: `force_engine_order` r instead of `force_phase` (`Forcing.engine_order`).
+FORCE_KEYS = ("force_amplitude", "force_frequency", "force_phase")
+
 #: Keys of a record besides the array fields and the law's parameters.
 _META = ("n_osc", "boundary", "lattice", "links", "friction", "mistuning_sigma",
-         "mistuning_seed") + tuple(Scales.of(1.0, 1.0, 1.0).record())
+         "mistuning_seed") + FORCE_KEYS + ("force_engine_order",) + tuple(
+             Scales.of(1.0, 1.0, 1.0).record())
 
 
 def _plain(value):
@@ -77,8 +83,9 @@ def chain_record(params: ChainParams) -> dict:
     (`boundary`, with `lattice` or `links`), `friction` (the law's name in
     `FRICTION_LAWS`), each array field of `ChainParams` (`mass` only when given) and
     each field of the law by name (a number, or a list of one value per oscillator
-    or link, or a table), and `mistuning_sigma`, `mistuning_seed` when the stiffness
-    was drawn by `mistune`.
+    or link, or a table), `mistuning_sigma`, `mistuning_seed` when the stiffness
+    was drawn by `mistune`, and `force_amplitude`, `force_frequency`, `force_phase`
+    for a forced chain (`Forcing`).
     `chain_from_record` rebuilds the chain from it.
 
     **Raises:**
@@ -92,6 +99,9 @@ def chain_record(params: ChainParams) -> dict:
     out |= {name: _plain(getattr(params, name)) for name in _chain_fields()
             if getattr(params, name) is not None}
     out |= {name: _plain(getattr(params.friction, name)) for name in _law_names(law)}
+    if params.forcing is not None:
+        out |= {key: _plain(getattr(params.forcing, key.removeprefix("force_")))
+                for key in FORCE_KEYS}
     if params.mistuning is not None:
         out |= {"mistuning_sigma": float(params.mistuning.sigma),
                 "mistuning_seed": int(params.mistuning.seed)}
@@ -158,6 +168,7 @@ def chain_from_record(record: dict, base: ChainParams | None = None) -> ChainPar
         law_values = {}
     law_values |= {name: record.pop(name) for name in names if name in record}
     sigma, seed = record.pop("mistuning_sigma", None), record.pop("mistuning_seed", None)
+    forcing = _forcing_from_record(record, record.get("n_osc", base.n_osc), base.forcing)
     scales = Scales.from_record(record)
     for key in Scales.of(1.0, 1.0, 1.0).record():
         record.pop(key, None)
@@ -186,7 +197,30 @@ def chain_from_record(record: dict, base: ChainParams | None = None) -> ChainPar
         fields |= {"stiffness": drawn, "mistuning": mistuning}
     if scales is not None:
         fields["scales"] = scales
-    return ChainParams(**fields, friction=law(**law_values))
+    return ChainParams(**fields, friction=law(**law_values), forcing=forcing)
+
+
+def _forcing_from_record(record: dict, n_osc: int, base: Forcing | None) -> Forcing | None:
+    """The `Forcing` of a record's `force_*` keys, popped from it (`base`, the
+    chain's own, where it has none): amplitude and frequency, with `force_phase` or
+    `force_engine_order` (r: phase 2 pi r n / N).
+
+    **Raises:** `ValidationError` for a forcing without its amplitude or frequency,
+    both a phase and an engine order, or a bad value (naming the field)."""
+    given = {k: record.pop(k) for k in FORCE_KEYS + ("force_engine_order",) if k in record}
+    if not given:
+        return base
+    missing = [k for k in FORCE_KEYS[:2] if k not in given]
+    if missing:
+        raise ValidationError(f"{missing[0]} is missing: a forcing takes force_amplitude and "
+                              "force_frequency (with force_phase or force_engine_order)")
+    if "force_engine_order" in given:
+        if "force_phase" in given:
+            raise ValidationError("give force_phase or force_engine_order, not both")
+        return Forcing.engine_order(int(n_osc), given["force_engine_order"],
+                                    given["force_amplitude"], given["force_frequency"])
+    return Forcing(amplitude=given["force_amplitude"], frequency=given["force_frequency"],
+                   phase=given.get("force_phase", 0.0))
 
 
 def _read_chain_file(path) -> dict:

@@ -1,0 +1,137 @@
+"""A forced chain (`Forcing`): harmonic balance and shooting against the analytic
+forced response of the linear chain (friction off), and harmonic balance against
+an independent event-driven solution of the forced oscillator with Coulomb
+friction (Den Hartog's setting, Trans. ASME 53 (1931): continuous motion, no
+stops), built here from scipy."""
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.linalg import expm
+from scipy.optimize import brentq
+
+import jaxchain as jc
+
+N = 5
+OMEGA = 1.05
+
+
+@pytest.fixture(scope="module")
+def linear_ring():
+    """A mistuned ring of five without friction (Coulomb mu = 0), standing still
+    (v_d = 0), under an engine-order-2 travelling wave; its analytic response
+    X = (K - Omega^2 + i Omega C)^-1 F e^{i phase} and its monodromy matrix
+    exp(A T), A = [[0, I], [-K, -C]]."""
+    forcing = jc.Forcing.engine_order(N, 2, 0.1, OMEGA)
+    params = jc.mistune(jc.ChainParams(n_osc=N, xi=0.02, eta_c=0.05, v_d=0.0,
+                                       friction=jc.Coulomb(0.0), forcing=forcing), 0.05, 3)
+    k = np.asarray(jc.stiffness_matrix(params))
+    c = 2 * 0.02 * np.eye(N)
+    x = np.linalg.solve(k - OMEGA**2 * np.eye(N) + 1j * OMEGA * c,
+                        0.1 * np.exp(1j * np.asarray(forcing.phase)))
+    y0 = np.stack([x.real, (1j * OMEGA * x).real])
+    a = np.block([[np.zeros((N, N)), np.eye(N)], [-k, -c]])
+    multipliers = np.linalg.eigvals(expm(a * 2 * np.pi / OMEGA))
+    return params, y0, np.abs(x), multipliers
+
+
+def _set_distance(a, b):
+    """The largest distance from a value of either set to the nearest of the other
+    (the sets of multipliers, in whatever order)."""
+    d = np.abs(np.asarray(a)[:, None] - np.asarray(b)[None, :])
+    return max(d.min(0).max(), d.min(1).max())
+
+
+@pytest.mark.numerics
+def test_harmonic_balance_gives_the_linear_response_exactly_with_one_harmonic(linear_ring):
+    """H = 1 holds the linear chain's response exactly: the start state to 1e-12
+    from rest as the guess, the period the force's, and the Floquet multipliers
+    (none trivial: the chain is forced) those of exp(A T) to 1e-8."""
+    params, y0, amplitudes, multipliers = linear_ring
+    orbit = jc.periodic_orbit(params, (np.zeros((2, N)), 6.0),
+                              jc.HarmonicBalance(harmonics=1))
+    assert np.max(np.abs(np.asarray(orbit.y0) - y0)) < 1e-12
+    assert abs(float(orbit.period) - 2 * np.pi / OMEGA) < 1e-12
+    assert int(orbit.trivial) == 2 * N  # past the end: no trivial multiplier
+    assert _set_distance(orbit.multipliers, multipliers) < 1e-8
+    assert bool(orbit.stable)
+
+
+@pytest.mark.numerics
+def test_shooting_on_the_forced_smoothed_engine_gives_the_linear_response(linear_ring):
+    """Shooting integrates the forced field from t = 0: its orbit is the analytic
+    response to 1e-8 (the flow's tolerances 1e-10, 1e-12), its multipliers exp(A T)'s
+    to 1e-7."""
+    params, y0, amplitudes, multipliers = linear_ring
+    orbit = jc.periodic_orbit(params, (np.zeros((2, N)), 6.0), jc.Shooting())
+    assert np.max(np.abs(np.asarray(orbit.y0) - y0)) < 1e-8
+    assert np.max(np.abs(np.asarray(orbit.amplitudes) - amplitudes)) < 1e-6
+    assert _set_distance(orbit.multipliers, multipliers) < 1e-7
+
+
+# --- the forced oscillator with Coulomb friction ---
+
+XI, MU, FORCE = 0.05, 0.3, 1.0
+
+
+def _half_period(t0, x0, omega):
+    """The exact motion from the turning point (x0 > 0, x' = 0) at t0 over half a
+    period, sliding backwards: x'' + 2 xi x' + x = F cos(Omega t) + mu."""
+    def field(t, y):
+        return [y[1], -2 * XI * y[1] - y[0] + FORCE * np.cos(omega * t) + MU]
+    return solve_ivp(field, (t0, t0 + np.pi / omega), [x0, 0.0], rtol=1e-12, atol=1e-13,
+                     dense_output=True)
+
+
+def coulomb_response(omega):
+    """The amplitude of the symmetric steady motion without stops, x(t + T/2) =
+    -x(t), found as Den Hartog's: the turning point (t0, x0) from which half a
+    period ends at (-x0, 0). x0 is affine in the end position for a fixed t0; t0 is
+    the root of the end velocity. Returns (x0, whether the turning point is a stop:
+    |F cos(Omega t0) - x0| <= mu)."""
+    def x0_of(t0):
+        a, b = (_half_period(t0, x, omega).y[0, -1] + x for x in (1.0, 2.0))
+        return 1.0 - a / (b - a)
+
+    def end_velocity(t0):
+        return _half_period(t0, x0_of(t0), omega).y[1, -1]
+
+    ts = np.linspace(0.0, 2 * np.pi / omega, 41)
+    vs = [end_velocity(t) for t in ts]
+    for i in range(40):
+        if np.sign(vs[i]) != np.sign(vs[i + 1]) and x0_of(ts[i]) > 0:
+            t0 = brentq(end_velocity, ts[i], ts[i + 1], xtol=1e-13)
+            x0 = x0_of(t0)
+            motion = _half_period(t0, x0, omega)
+            v = motion.sol(np.linspace(t0, t0 + np.pi / omega, 2001))[1]
+            if x0 > 0 and np.all(v[1:-1] < 0):
+                return x0, abs(FORCE * np.cos(omega * t0) - x0) <= MU
+    raise AssertionError(f"no symmetric motion found at Omega = {omega}")
+
+
+@pytest.mark.numerics
+def test_forced_coulomb_oscillator_against_the_exact_motion_without_stops():
+    """The friction damper (v_d = 0, mu_st = mu_d: `Coulomb`) through resonance:
+    harmonic balance at H = 64 (4096 time samples, eps 1e-4) within 1.5e-3 relative
+    of the exact amplitude, where the motion has no stops. The friction force jumps
+    where the velocity has a kink, so the error falls only as 1/H: H = 128 halves it
+    (to within 20 %)."""
+    errors = {}
+    for omega in (0.6, 1.0, 1.5):
+        exact, stops = coulomb_response(omega)
+        assert not stops
+        params = jc.ChainParams(n_osc=1, xi=XI, v_d=0.0, friction=jc.Coulomb(MU),
+                                forcing=jc.Forcing(FORCE, omega))
+        for h in (64, 128) if omega == 1.5 else (64,):
+            method = jc.HarmonicBalance(eps=1e-4, harmonics=h, time_samples=64 * h)
+            # the period guess is the force's, whatever is given
+            orbit = jc.periodic_orbit(params, (np.zeros((2, 1)), 1.0), method)
+            errors[omega, h] = abs(float(orbit.amplitudes[0]) / exact - 1)
+    assert max(e for (_, h), e in errors.items() if h == 64) < 1.5e-3, errors
+    assert 0.4 < errors[1.5, 128] / errors[1.5, 64] < 0.6, errors
+
+
+def test_the_exact_engine_refuses_a_forced_chain():
+    params = jc.ChainParams(n_osc=2, v_d=0.5, forcing=jc.Forcing(0.1, 1.0))
+    with pytest.raises(ValueError, match="forcing: the exact engine"):
+        jc.Exact().flow(params, np.zeros((2, 2)), 1.0)
