@@ -242,7 +242,7 @@ def test_the_task_index_names_public_names_and_existing_commands(capsys):
         assert exc.value.code == status, command
     capsys.readouterr()
     sections = TASKS.split("\n## ")[1:]
-    assert len(sections) == 20
+    assert len(sections) == 21
     assert all("```python" in s or "```bash" in s for s in sections)
 
 

@@ -135,3 +135,50 @@ def test_the_exact_engine_refuses_a_forced_chain():
     params = jc.ChainParams(n_osc=2, v_d=0.5, forcing=jc.Forcing(0.1, 1.0))
     with pytest.raises(ValueError, match="forcing: the exact engine"):
         jc.Exact().flow(params, np.zeros((2, 2)), 1.0)
+
+
+# --- the command line ---
+
+
+def test_the_response_command_draws_the_linear_resonance_curve(tmp_path):
+    """`jaxchain response` on the linear oscillator (friction off, H = 1): every
+    point's amplitude is the analytic F / sqrt((1 - Omega^2)^2 + (2 xi Omega)^2) to
+    1e-6 (the amplitude is read as the largest of 4096 samples of the period:
+    1 - cos(pi / 4096) = 3e-7), the curve is stable, without folds, and it peaks
+    at the resonance sqrt(1 - 2 xi^2) to within its step."""
+    import xarray as xr
+
+    out = tmp_path / "out"
+    assert jc.main(["response", "--force", "0.1,0.8", "--friction", "coulomb:mu=0",
+                    "--to", "1.2", "--harmonics", "1", "--out", str(out), "--json",
+                    "--no-progress"]) == 0
+    with xr.open_dataset(out / "response.nc") as ds:
+        omega, amplitude = ds["frequency"].values, ds["max_amplitude"].values
+        exact = 0.1 / np.sqrt((1 - omega**2) ** 2 + (2 * 0.05 * omega) ** 2)
+        np.testing.assert_allclose(amplitude, exact, rtol=1e-6)
+        assert bool(ds["stable"].all()) and np.size(ds.attrs["fold_frequencies"]) == 0
+        assert omega[0] == 0.8 and omega[-1] >= 1.2 and ds.attrs["friction"] == "coulomb"
+        peak = int(np.argmax(amplitude))
+        assert omega[peak - 1] < np.sqrt(1 - 2 * 0.05**2) < omega[peak + 1]
+    assert (out / "response.png").exists() and (out / "response.json").exists()
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["response", "--to", "1.2"], "--force: give the force"),
+    (["response", "--force", "0.1,0.8"], "--to: give the other end"),
+    (["response", "--force", "0.1"], "--force: expected A,OMEGA"),
+    (["response", "--force=-0.1,0.8", "--to", "1"], "Forcing.amplitude"),
+])
+def test_bad_response_options_exit_2_in_one_line(argv, says, capsys, tmp_path):
+    from helpers import assert_usage_error
+
+    assert_usage_error(argv + ["--out", str(tmp_path)], says, capsys)
+
+
+def test_a_forced_chain_file_is_refused_by_a_command_without_forcing(capsys, tmp_path):
+    from helpers import assert_usage_error
+
+    chain = tmp_path / "forced.toml"
+    chain.write_text("n_osc = 2\nforce_amplitude = 0.1\nforce_frequency = 1.0\n")
+    assert_usage_error(["localized", "--chain", str(chain), "--out", str(tmp_path / "o")],
+                       "taken by jaxchain response only", capsys)

@@ -49,12 +49,14 @@ COMMANDS = [command for command in ALL_COMMANDS if command != "server"]
 ARGV = {"localized": ["localized"], "sweep": ["sweep"], "figure": ["figure", "4"],
         "crosscheck": ["crosscheck"], "work-precision": ["work-precision"],
         "boundaries": ["boundaries"], "stress": ["stress"], "basin": ["basin"],
-        "snake": ["snake"], "mistuning": ["mistuning"], "identify": ["identify", EXAMPLE_RECORD]}
+        "snake": ["snake"], "mistuning": ["mistuning"], "identify": ["identify", EXAMPLE_RECORD],
+        "response": ["response", "--force", "0.1,0.8", "--to", "1.2"]}
 FIRST_OUTPUT = {"localized": "localized_vd1.5.nc", "sweep": "sweep.zarr",
                 "figure": "figure4.nc", "crosscheck": "crosscheck.nc",
                 "work-precision": "work_precision.csv", "boundaries": "boundaries.json",
                 "stress": "stress.csv", "basin": "basin.nc", "snake": "snake.json",
-                "mistuning": "mistuning.json", "identify": "identified_chain.toml"}
+                "mistuning": "mistuning.json", "identify": "identified_chain.toml",
+                "response": "response.nc"}
 
 #: The --vd grammar's metavar, of the commands that run a list of belt speeds and of
 #: those that start from one.
@@ -65,6 +67,13 @@ VD_REFUSED = {"1:2:0": "NUM must be >= 1, got '1:2:0'",
               "fast": "expected V, a list V1,V2,... or START:STOP:NUM, got 'fast'",
               "1.5,-1": "belt speeds must be finite and > 0, got '1.5,-1'",
               ",": "expected at least one belt speed, got ','"}
+#: The commands whose belt may stand still (a forced chain's friction damper): the
+#: same grammar, 0 allowed; a negative speed is refused with these words instead.
+AT_REST = {"response": "belt speeds must be finite and >= 0 (0: the belt at rest), got "
+                       "'1.5,-1'"}
+#: The commands that integrate only at their orbit method's own tolerances
+#: (`for_orbits`), and so take no solver options.
+ORBITS_ONLY = ("response",)
 
 
 def _usage_error(argv: list[str], capsys) -> str:
@@ -78,7 +87,7 @@ def _usage_error(argv: list[str], capsys) -> str:
 
 def test_every_command_is_covered():
     assert set(ARGV) == set(FIRST_OUTPUT) == set(COMMANDS)
-    assert "server" in ALL_COMMANDS and len(COMMANDS) == 11
+    assert "server" in ALL_COMMANDS and len(COMMANDS) == 12
 
 
 @pytest.mark.parametrize("command", COMMANDS)
@@ -92,6 +101,8 @@ def test_vd_has_one_grammar(command, capsys):
     one = VD_ONE in usage
     assert one or VD_LIST in usage, usage
     for value, says in VD_REFUSED.items():
+        if value == "1.5,-1" and command in AT_REST:
+            says = AT_REST[command]
         line = _usage_error([*ARGV[command], "--vd", value], capsys)
         assert "--vd" in line and says in line, line
     list_line = _usage_error([*ARGV[command], "--vd", "1:2:3"], capsys) if one else None
@@ -114,8 +125,12 @@ def test_vd_forms_give_the_belt_speeds_run(vd, speeds, tmp_path, capsys):
 
 @pytest.mark.parametrize("command", COMMANDS)
 def test_solver_options_are_accepted_with_the_library_defaults(command, tmp_path, capsys):
-    """--solver and --rtol parse in every command (it goes on to refuse the existing
-    result, not the options), and --help shows the library's defaults."""
+    """--solver and --rtol parse in every command that simulates (it goes on to
+    refuse the existing result, not the options), and --help shows the library's
+    defaults; a command of orbits only refuses them."""
+    if command in ORBITS_ONLY:
+        assert "--solver" not in _help([command])
+        return
     (tmp_path / FIRST_OUTPUT[command]).write_text("an earlier result")
     argv = [*ARGV[command], "--solver", "ros34pw2", "--rtol", "3e-5", "--out", str(tmp_path),
             "--no-progress"]

@@ -1,17 +1,19 @@
 """The chain options every command takes: --boundary, --friction, --mistuning,
---mistuning-seed and --chain, and the `ChainParams` they give."""
+--mistuning-seed and --chain (and --force where the command takes a forced chain),
+and the `ChainParams` they give."""
 
 import argparse
 from pathlib import Path
 
 from .._physics.chain import BOUNDARIES, Graph
+from .._physics.forcing import Forcing
 from .._physics.friction import FRICTION_LAWS, Tabulated
 from .._physics.mistuning import mistune
 from .._physics.params import ChainParams
 from .._errors import ValidationError
 from .._physics.record import chain_from_file
 from .._engine.options import SimulationOptions
-from .common import UsageError, check_footprint
+from .common import UsageError, check_footprint, non_negative_float
 
 CHAIN_HELP = """\
 The chain: --boundary ring (eq. (5) of the paper, the default), free (an open line)
@@ -29,14 +31,18 @@ file of chain settings, which override the options above (the schema is in the
 documentation, "Chain files"): n_osc, boundary, lattice = [ROWS, COLS] or links =
 [[i, j], ...], xi, eta_c (one value per link), stiffness, load, mass (one value per
 oscillator), friction = "NAME" with the law's parameters or friction = "table" with
-table = "FILE.csv", mistuning_sigma, mistuning_seed, and units = "SI" for a chain in
-kg, N/m, N s/m, N and m/s."""
+table = "FILE.csv", mistuning_sigma, mistuning_seed, force_amplitude,
+force_frequency with force_phase (one value or one per oscillator) or
+force_engine_order (where the command takes a forced chain), and units = "SI" for a
+chain in kg, N/m, N s/m, N and m/s."""
 
 
-def add_chain_options(g, mistuning: bool = True) -> None:
+def add_chain_options(g, mistuning: bool = True, forcing: bool = False) -> None:
     """--boundary, --friction, --mistuning, --mistuning-seed and --chain, in the
     argument group (or parser) `g`; without --mistuning and --mistuning-seed where
-    the command draws the mistuning itself (mistuning)."""
+    the command draws the mistuning itself (mistuning); with --force where the
+    command takes a forced chain (`forcing`; the other commands refuse a chain file
+    with a force)."""
     g.add_argument("--boundary", choices=BOUNDARIES, default="ring",
                    help="ring (eq. (5), default), free or fixed ends (of each direction "
                         "of a lattice)")
@@ -47,11 +53,17 @@ def add_chain_options(g, mistuning: bool = True) -> None:
                    help=f"friction law, one of {', '.join(FRICTION_LAWS)} with its "
                         "parameters (default eq. (1) of the paper, exponential)")
     if mistuning:
-        g.add_argument("--mistuning", type=_non_negative, default=None, metavar="SIGMA",
+        g.add_argument("--mistuning", type=non_negative_float, default=None, metavar="SIGMA",
                        help="standard deviation of random stiffness mistuning delta_n "
                             "(default none)")
         g.add_argument("--mistuning-seed", type=int, default=0, metavar="S",
                        help="seed of the JAX PRNG key of the mistuning draw (default 0)")
+    if forcing:
+        g.add_argument("--force", type=_force, default=None, metavar="A,OMEGA[,R]",
+                       help="a harmonic force A cos(OMEGA t + 2 pi R n / N) on each "
+                            "oscillator n: amplitude A (in units of the normal load), "
+                            "frequency OMEGA (in units of omega_n) and engine order R "
+                            "(default 0: in phase), the bladed disk's travelling wave")
     g.add_argument("--chain", type=Path, default=None, metavar="FILE",
                    help="TOML file of chain settings (per-oscillator arrays included); "
                         "see the chain paragraph of --help")
@@ -69,14 +81,19 @@ def _lattice_size(text: str) -> tuple[int, int]:
     return size
 
 
-def _non_negative(text: str) -> float:
+def _force(text: str) -> tuple[float, float, int]:
+    """(amplitude, frequency, engine order) of --force A,OMEGA[,R]."""
+    parts = text.split(",")
     try:
-        value = float(text)
+        if len(parts) not in (2, 3):
+            raise ValueError
+        amplitude, frequency = float(parts[0]), float(parts[1])
+        order = int(parts[2]) if len(parts) == 3 else 0
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not (0 <= value < float("inf")):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
-    return value
+        raise argparse.ArgumentTypeError(f"expected A,OMEGA or A,OMEGA,R (amplitude, "
+                                         f"frequency, integer engine order), got "
+                                         f"{text!r}") from None
+    return amplitude, frequency, order
 
 
 def _parse_friction(text: str | None):
@@ -137,6 +154,14 @@ def chain_params(args, n_osc: int, **fields) -> ChainParams:
         check_footprint(n_lattice, f"--lattice {lattice[0]}x{lattice[1]} ({n_lattice} "
                         f"oscillators)", horizon)
         topology = {"graph": Graph.lattice(*lattice, args.boundary)}
+    force = getattr(args, "force", None)
+    if force is not None:
+        n_osc_given = n_osc if lattice is None else lattice[0] * lattice[1]
+        try:
+            fields["forcing"] = (Forcing(force[0], force[1]) if force[2] == 0 else
+                                 Forcing.engine_order(n_osc_given, force[2], force[0], force[1]))
+        except ValidationError as err:
+            raise UsageError(f"--force: {err}") from None
     base = ChainParams(**topology, friction=_parse_friction(args.friction), **fields)
     params = base
     if args.chain is not None:
@@ -148,6 +173,9 @@ def chain_params(args, n_osc: int, **fields) -> ChainParams:
             raise UsageError(f"--chain {err}") from None
         check_footprint(params.n_osc, f"--chain {args.chain} ({params.n_osc} oscillators)",
                         horizon)
+    if params.forcing is not None and not hasattr(args, "force"):
+        raise UsageError(f"--chain {args.chain}: a forced chain (force_amplitude, ...) is "
+                         "taken by jaxchain response only")
     if getattr(args, "mistuning", None) is not None:
         params = mistune(params, args.mistuning, args.mistuning_seed)
     return params

@@ -69,6 +69,17 @@ def positive_float(text: str) -> float:
     return value
 
 
+def non_negative_float(text: str) -> float:
+    """An argparse type: a finite number >= 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not (0 <= value < float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
+    return value
+
+
 def tolerance(text: str) -> float:
     """An argparse type: a tolerance, a number in (0, 1)."""
     value = positive_float(text)
@@ -98,10 +109,11 @@ def comma_list(kind):
     return parse
 
 
-def belt_speeds(text: str) -> list[float]:
+def belt_speeds(text: str, at_rest: bool = False) -> list[float]:
     """An argparse type, the one grammar of --vd: a belt speed V, a comma-separated
     list V1,V2,..., or START:STOP:NUM (NUM equally spaced values from START to
-    STOP, both included); each finite and > 0, dimensionless."""
+    STOP, both included); each finite and > 0 (>= 0 `at_rest`, where the command
+    takes a belt standing still), dimensionless."""
     try:
         if ":" in text:
             start, stop, num = text.split(":")
@@ -116,19 +128,27 @@ def belt_speeds(text: str) -> list[float]:
             f"expected V, a list V1,V2,... or START:STOP:NUM, got {text!r}") from None
     if not values:
         raise argparse.ArgumentTypeError(f"expected at least one belt speed, got {text!r}")
-    if not all(np.isfinite(v) and v > 0 for v in values):
-        raise argparse.ArgumentTypeError(f"belt speeds must be finite and > 0, got {text!r}")
+    if not all(np.isfinite(v) and (v >= 0 if at_rest else v > 0) for v in values):
+        bound = ">= 0 (0: the belt at rest)" if at_rest else "> 0"
+        raise argparse.ArgumentTypeError(f"belt speeds must be finite and {bound}, got "
+                                         f"{text!r}")
     return values
 
 
-def one_belt_speed(text: str) -> float:
+def one_belt_speed(text: str, at_rest: bool = False) -> float:
     """An argparse type: --vd of a command that starts from one belt speed, in the
     grammar of `belt_speeds`, refused (in one line) when it names several."""
-    values = belt_speeds(text)
+    values = belt_speeds(text, at_rest)
     if len(values) != 1:
         raise argparse.ArgumentTypeError(f"this command starts from one belt speed, got "
                                          f"{len(values)} ({text!r})")
     return values[0]
+
+
+def belt_speed_or_rest(text: str) -> float:
+    """An argparse type: `one_belt_speed` where the belt may stand still (0: a
+    forced chain's friction damper)."""
+    return one_belt_speed(text, at_rest=True)
 
 
 #: The metavar of --vd in every command.
