@@ -133,6 +133,7 @@ def _fold_structures():
 
 
 @pytest.mark.study
+@pytest.mark.long
 @pytest.mark.numerics
 @pytest.mark.parametrize("case", ["pad sector", "mistuned ring"])
 def test_fold_derivatives_on_every_structure(case):

@@ -61,6 +61,7 @@ def test_switching_needs_a_branch_point(branch_point):
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_a_branch_point_on_an_unstable_branch_is_where_shooting_at_fixed_v_d_crosses():
     """The exact one-site branch of the ring of three, continued down from v_d 1.38
     through its fold at 1.3749 onto the unstable sheet above it, meets a branch

@@ -53,6 +53,7 @@ def design():
 
 @pytest.mark.numerics
 @pytest.mark.study
+@pytest.mark.long
 def test_followed_fold_is_the_mistuned_ring_s_own_fold(design):
     """The fold of the state at oscillator 1 (0-based), followed from the
     homogeneous ring through the pattern and the ring's symmetry, is the fold that
@@ -66,6 +67,7 @@ def test_followed_fold_is_the_mistuned_ring_s_own_fold(design):
 
 @pytest.mark.numerics
 @pytest.mark.study
+@pytest.mark.long
 def test_the_design_gradient_matches_finite_differences(design):
     """d objective / d theta (`MistuningDesign.gradient`: implicit differentiation
     of every fold, forward mode through optimistix's ImplicitAdjoint, weighted by

@@ -114,6 +114,7 @@ def _programs(flags: str) -> subprocess.Popen:
 
 
 @pytest.mark.study
+@pytest.mark.long
 @pytest.mark.slow
 @pytest.mark.numerics
 def test_every_kind_of_program_computes_the_same_with_and_without_the_flag():

@@ -101,6 +101,7 @@ def test_continuation_reproduces_itself_from_a_perturbed_start(one_site):
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_exact_one_site_branch_ends_where_the_exact_simulation_says(one_site, tmp_path,
                                                                      capsys):
     """The same branch on the exact stick/slip model (`jaxchain snake --engine
@@ -142,6 +143,7 @@ def exact_one_site_end(tmp_path_factory):
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(exact_one_site_end):
     """Upwards in v_d the exact one-site branch of the ring of 4 ends at a sliding
     bifurcation: the excited oscillator's stick phase shrinks like a square root,
@@ -532,6 +534,7 @@ def test_the_default_snakes_keep_the_previous_releases_store_key():
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_the_snake_switches_branches_at_its_branch_points(branch_point, tmp_path,
                                                           monkeypatch):
     """`localized_branches` (switch=True, the default) follows the other branch at
@@ -819,6 +822,7 @@ def test_symmetries_of_the_ring_and_the_deflation_operator_s_bad_arguments(
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_a_start_that_is_not_periodic_is_deflated_from_its_eq8_state(tmp_path,
                                                                       monkeypatch):
     """A start whose simulated state is not periodic (here the one-site start, its

@@ -6,9 +6,9 @@ on either side puts the crossing of its multiplier, the branch switched there
 breaks the two sites' symmetry and turns at a sliding point onto orbits without
 the weaker site's stick phase, and a branch that deflation finds is an isola.
 
-Marked `study`: the default run leaves it out (pyproject.toml, addopts), so that the
-suite keeps within 10 minutes; CI runs it as a step of its own (.ci/run), and
-`python -m pytest -m study` runs it here."""
+Marked `study` and `long`: the default run leaves it out (pyproject.toml, addopts),
+so that the suite keeps within 10 minutes, and so does CI (.ci/run), to keep its
+whole run within its time; `python -m pytest -m long` runs it here."""
 
 import json
 
@@ -18,7 +18,7 @@ import xarray as xr
 
 import jaxchain as jc
 
-pytestmark = pytest.mark.study
+pytestmark = [pytest.mark.study, pytest.mark.long]
 
 N = 8
 #: Shooting on the exact stick/slip model (the snake's on the exact engine); its
