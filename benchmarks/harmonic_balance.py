@@ -3,6 +3,16 @@
 time of one orbit solve by each method, measured in the same run.
 
     python benchmarks/harmonic_balance.py [--eps 1e-2,1e-3] [--harmonics 16,32,64,128]
+    python benchmarks/harmonic_balance.py --ring [--harmonics 32,64]
+    python benchmarks/harmonic_balance.py --coulomb [--harmonics 32,64,128]
+
+--ring: the one-site state of the paper's ring of 20 at v_d 1.5, eps 1e-3 (the
+snake's start for k = 1: eq. (8) simulated, then shot, `localized_branches`); the
+largest amplitude error over the ring against shooting's, and the times as above.
+--coulomb: the forced oscillator with Coulomb friction (xi 0.05, mu 0.3, F 1, v_d
+0, eps 1e-4, M = 64 H) at Omega 0.6, 0.9, 1.0, 1.1, 1.5, and with stops (F 0.35)
+at 0.6, 1.0, 1.5, against the exact motion by event-driven integration
+(tests/test_forced.py, `coulomb_motion`): the amplitude's relative error.
 
 For each eps, shooting (`Shooting(Smoothed(eps).for_orbits())`, the reference) and
 harmonic balance at each H solve the orbit from the same guess: shooting's orbit,
@@ -56,12 +66,86 @@ def rows(eps: float, harmonics: list[int]) -> list[str]:
     return out
 
 
+def ring_rows(harmonics: list[int]) -> list[str]:
+    params = jc.ChainParams(n_osc=20, v_d=1.5)
+    found = jc.localized_branches(
+        params, (1,), start_options=jc.SimulationOptions(t_end=3000.0, transient=2000.0),
+        switch=False, simulation_check=False, continuation_options=jc.ContinuationOptions(
+            ds=0.02, max_points=2, p_min=1.45, p_max=1.55))
+    ds = found["datasets"]["k=1"]
+    phase = int(ds.attrs["phase_oscillator"])
+    (start,) = np.flatnonzero(ds["v_d"].values == ds.attrs["start_vd"])
+    u = ds["u"].values[start]
+    shooting = jc.Shooting(jc.Smoothed(eps=1e-3).for_orbits(), phase_oscillator=phase)
+    reference = jc.periodic_orbit(params, (u[:-1].reshape(2, -1), float(u[-1])), shooting)
+    guess = (reference.y0 * (1 + 1e-3), reference.period * (1 + 1e-3))
+
+    def solve(method):
+        return lambda: method.solve(params, method.unknowns(params, *guess))[0]
+
+    base = _best_time(solve(shooting))
+    out = [f"| ring of 20, one site | shooting | yes | - | - | {base * 1e3:.1f} | 1 |"]
+    for h in harmonics:
+        method = jc.HarmonicBalance(eps=1e-3, harmonics=h, phase_oscillator=phase)
+        orbit = jc.periodic_orbit(params, guess, method, throw=False)
+        amplitude = float(np.max(np.abs(orbit.amplitudes - reference.amplitudes)))
+        period = abs(float(orbit.period / reference.period) - 1)
+        seconds = _best_time(solve(method), repeats=1)
+        out.append(f"| ring of 20, one site | H = {h} (M = {method.time_samples}) | "
+                   f"{'yes' if bool(orbit.converged) else 'no'} | {amplitude:.1e} (absolute) | "
+                   f"{period:.1e} | {seconds * 1e3:.0f} | {base / seconds:.3f} |")
+    return out
+
+
+def coulomb_rows(harmonics: list[int]) -> list[str]:
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    import test_forced as forced  # the exact motion's construction
+
+    out = []
+    for force, omegas in ((1.0, (0.6, 0.9, 1.0, 1.1, 1.5)), (0.35, (0.6, 1.0, 1.5))):
+        for omega in omegas:
+            exact, stops = forced.coulomb_motion(omega, force)
+            params = jc.ChainParams(n_osc=1, xi=forced.XI, v_d=0.0,
+                                    friction=jc.Coulomb(forced.MU),
+                                    forcing=jc.Forcing(force, omega))
+            errors = []
+            for h in harmonics:
+                method = jc.HarmonicBalance(eps=1e-4, harmonics=h, time_samples=64 * h)
+                orbit = jc.periodic_orbit(params, (np.zeros((2, 1)), 1.0), method, throw=False)
+                errors.append(f"{abs(float(orbit.amplitudes[0]) / exact - 1):.1e}"
+                              + ("" if bool(orbit.converged) else " (not converged)"))
+            out.append(f"| F = {force:g}, Omega = {omega:g} | {exact:.6f} | "
+                       f"{'yes' if stops else 'no'} | " + " | ".join(errors) + " |")
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--eps", default="1e-2,1e-3", help="smoothings, comma-separated")
     parser.add_argument("--harmonics", default="16,32,64,128", help="H values")
+    parser.add_argument("--ring", action="store_true", help="the ring of 20's one-site state")
+    parser.add_argument("--coulomb", action="store_true",
+                        help="the forced oscillator with Coulomb friction")
     args = parser.parse_args()
     jc.configure()
+    harmonics = [int(h) for h in args.harmonics.split(",")]
+    if args.coulomb:
+        print("| case | exact amplitude | stops | " + " | ".join(
+            f"error at H = {h}" for h in harmonics) + " |")
+        print("|---" * (3 + len(harmonics)) + "|")
+        for row in coulomb_rows(harmonics):
+            print(row, flush=True)
+        return
+    if args.ring:
+        print("| orbit | method | converged | amplitude error | period error | ms per orbit | "
+              "ratio |")
+        print("|---|---|---|---|---|---|---|")
+        for row in ring_rows(harmonics):
+            print(row, flush=True)
+        return
     print("| eps | method | converged | amplitude error | period error | ms per orbit | "
           "ratio |")
     print("|---|---|---|---|---|---|---|")

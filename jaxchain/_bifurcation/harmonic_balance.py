@@ -31,6 +31,7 @@ import dataclasses
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 from jaxtyping import Array, ArrayLike, Bool, Complex, Float, Int
 
@@ -42,12 +43,16 @@ from .._physics.custom_types import State
 from .._physics.forces import DEFAULT_EPS
 from .._physics.friction import as_parameter
 from .._physics.params import ChainParams
+from .harmonic_solve import BlockJacobiGMRES
 from .orbit_method import (AbstractOrbitMethod, PeriodicOrbit, closing_condition,
                            damped_newton, deflated_multipliers, flow_direction, guess_period, orbit_record,
                            phased_guess)
 
 #: How Floquet multipliers are computed: Hill's method, or one monodromy integration.
 FLOQUET = ("hill", "monodromy")
+#: How Newton's steps are solved: LU of the whole Jacobian, or GMRES preconditioned by
+#: its oscillator blocks (`BlockJacobiGMRES`).
+LINEAR_SOLVERS = ("lu", "blocks")
 
 
 class HarmonicBalance(AbstractOrbitMethod):
@@ -75,6 +80,10 @@ class HarmonicBalance(AbstractOrbitMethod):
         iteration budget of Newton's method damped by backtracking (`solve`).
     - `n_samples`: samples of one period from which amplitudes and stick are read.
     - `phase_oscillator`: the oscillator n of the phase condition x_n'(0) = 0.
+    - `linear_solver`: how each Newton step's linear system is solved: "blocks"
+        (default: GMRES preconditioned by the Jacobian's oscillator blocks, of size
+        2H + 2, `BlockJacobiGMRES`: the friction Jacobian is block diagonal over the
+        oscillators) or "lu" (LU of the whole Jacobian, of size n_osc (2H + 1) + 1).
 
     The unknowns u: the coefficients, shape (2H + 1, n_osc) flattened (rows a_0,
     a_1..a_H, b_1..b_H), then T.
@@ -82,7 +91,7 @@ class HarmonicBalance(AbstractOrbitMethod):
     **Raises:**
 
     `ValidationError` naming the field for eps <= 0, H < 1, M < 4H + 1, an unknown
-    `floquet`, a non-positive tolerance or count, or a negative phase oscillator.
+    `floquet` or `linear_solver`, a non-positive tolerance or count, or a negative phase oscillator.
     """
 
     eps: ArrayLike = eqx.field(converter=as_parameter)
@@ -93,10 +102,12 @@ class HarmonicBalance(AbstractOrbitMethod):
     newton_steps: int = eqx.field(static=True)
     n_samples: int = eqx.field(static=True)
     phase_oscillator: int = eqx.field(static=True)
+    linear_solver: str = eqx.field(static=True)
 
     def __init__(self, eps=DEFAULT_EPS, harmonics: int = 32, time_samples: int | None = None, *,
                  floquet: str = "monodromy", newton_tol: float = 1e-9, newton_steps: int = 40,
-                 n_samples: int = 4096, phase_oscillator: int = 0):
+                 n_samples: int = 4096, phase_oscillator: int = 0,
+                 linear_solver: str = "blocks"):
         self.eps = eps
         self.harmonics = harmonics
         self.time_samples = (int(2 ** np.ceil(np.log2(4 * harmonics + 1)))
@@ -107,6 +118,7 @@ class HarmonicBalance(AbstractOrbitMethod):
         self.newton_steps = newton_steps
         self.n_samples = n_samples
         self.phase_oscillator = phase_oscillator
+        self.linear_solver = linear_solver
 
     def __check_init__(self):
         check_count("HarmonicBalance.harmonics", self.harmonics)
@@ -115,6 +127,9 @@ class HarmonicBalance(AbstractOrbitMethod):
         check_count("HarmonicBalance.newton_steps", self.newton_steps)
         check_count("HarmonicBalance.phase_oscillator", self.phase_oscillator, 0)
         check_positive("HarmonicBalance.newton_tol", self.newton_tol)
+        if self.linear_solver not in LINEAR_SOLVERS:
+            raise ValidationError(f"HarmonicBalance.linear_solver must be one of "
+                                  f"{LINEAR_SOLVERS}, got {self.linear_solver!r}")
         if self.floquet not in FLOQUET:
             raise ValidationError(f"HarmonicBalance.floquet must be one of {FLOQUET}, got "
                                   f"{self.floquet!r}")
@@ -301,7 +316,9 @@ class HarmonicBalance(AbstractOrbitMethod):
 @checks_as_nan
 @eqx.filter_jit
 def _solve(method: HarmonicBalance, params: ChainParams, u0):
-    return damped_newton(method, params, u0, method.newton_steps)
+    linear_solver = (BlockJacobiGMRES(method.harmonics, params.n_osc, method.phase_oscillator)
+                     if method.linear_solver == "blocks" else lx.LU())
+    return damped_newton(method, params, u0, method.newton_steps, linear_solver)
 
 
 def _real_basis(h: int, d: int) -> np.ndarray:

@@ -9,6 +9,7 @@ import abc
 
 import equinox as eqx
 import jax.numpy as jnp
+import lineax as lx
 import optimistix as optx
 from jaxtyping import Array, Bool, Complex, Float, Int
 
@@ -266,20 +267,25 @@ class AbstractOrbitMethod(eqx.Module):
         raise ValidationError(f"{type(self).__name__} has no accuracy to refine")
 
 
-def damped_newton(method: AbstractOrbitMethod, params: ChainParams, u0, max_steps: int):
+def damped_newton(method: AbstractOrbitMethod, params: ChainParams, u0, max_steps: int,
+                  linear_solver: lx.AbstractLinearSolver = lx.AutoLinearSolver(well_posed=None)):
     """(The unknowns; whether it converged) by Newton steps on `method.residual`
     (optimistix's Gauss-Newton with the Newton descent: the same linear solve on a
     square system) shortened by backtracking until the squared residual decreases
     enough (Armijo; Dennis and Schnabel, *Numerical Methods for Unconstrained
     Optimization and Nonlinear Equations* (1996), Sect. 6.3): full Newton steps near
     the root, short ones where a full step would leave its neighbourhood.
-    Traceable; differentiable by the implicit function theorem."""
+    Traceable; differentiable by the implicit function theorem. `linear_solver`
+    (lineax) solves each step's linear system and the derivatives' (LU by
+    default)."""
     tol = method.newton_tol
     solver = eqx.tree_at(lambda s: s.search,
-                         optx.GaussNewton(rtol=tol, atol=tol, norm=optx.max_norm),
+                         optx.GaussNewton(rtol=tol, atol=tol, norm=optx.max_norm,
+                                          linear_solver=linear_solver),
                          optx.BacktrackingArmijo())
     sol = optx.least_squares(lambda u, p: method.residual(u, p), solver, u0, params,
-                             max_steps=max_steps, throw=False)
+                             max_steps=max_steps, throw=False,
+                             adjoint=optx.ImplicitAdjoint(linear_solver=linear_solver))
     # converged also where the residual vanishes to the tolerance but the search,
     # unable to lower a residual at rounding level, rejected every later step
     # (optimistix then runs out of steps without testing the termination)

@@ -42,7 +42,10 @@ class Mistuning(eqx.Module):
 
     def deviations(self, n_osc: int) -> np.ndarray:
         """delta_n, shape (n_osc,): sigma times standard normal draws of the key."""
-        draws = jax.random.normal(jax.random.key(int(self.seed)), (n_osc,), dtype=float)
+        # a constant, also where a chain is rebuilt under a trace (`with_parameter`
+        # of a mistuned chain under `jax.jit`)
+        with jax.ensure_compile_time_eval():
+            draws = jax.random.normal(jax.random.key(int(self.seed)), (n_osc,), dtype=float)
         return float(self.sigma) * np.asarray(draws)
 
     def stiffness(self, n_osc: int) -> np.ndarray:
