@@ -17,7 +17,8 @@ at 0.6, 1.0, 1.5, against the exact motion by event-driven integration
 For each eps, shooting (`Shooting(Smoothed(eps).for_orbits())`, the reference) and
 harmonic balance at each H solve the orbit from the same guess: shooting's orbit,
 its state and period moved by 1e-3 relative. Errors are relative to shooting's
-orbit (a row that did not converge says so); times are the best of 3 solves after one that compiles (`method.solve` on
+orbit (the largest amplitude error over the chain, relative to the largest
+amplitude; a row that did not converge says so); times are the best of 3 solves after one that compiles (`method.solve` on
 `method.unknowns`, the guess's projection included for harmonic balance). Prints
 a Markdown table; the ratio is shooting's time over harmonic balance's.
 """
@@ -41,29 +42,48 @@ def _best_time(fn, repeats: int = 3) -> float:
     return min(times)
 
 
+def _compared(label: str, params, reference, methods: dict, repeats: int = 3) -> list[str]:
+    """Rows of the table: shooting (`methods["shooting"]`) and each other method solved
+    from `reference` moved by 1e-3 relative; the largest amplitude error over the
+    chain relative to the reference's largest amplitude, the period's relative
+    error, the best time of `repeats` solves after one that compiles."""
+    guess = (reference.y0 * (1 + 1e-3), reference.period * (1 + 1e-3))
+    scale = float(np.max(reference.amplitudes))
+
+    def solve(method):
+        return lambda: method.solve(params, method.unknowns(params, *guess))[0]
+
+    base = _best_time(solve(methods["shooting"]), repeats)
+    out = [f"| {label} | shooting | yes | - | - | {base * 1e3:.1f} | 1 |"]
+    for name, method in methods.items():
+        if name == "shooting":
+            continue
+        orbit = jc.periodic_orbit(params, guess, method, throw=False)
+        amplitude = float(np.max(np.abs(orbit.amplitudes - reference.amplitudes))) / scale
+        period = abs(float(orbit.period / reference.period) - 1)
+        seconds = _best_time(solve(method), repeats)
+        out.append(f"| {label} | {name} | {'yes' if bool(orbit.converged) else 'no'} | "
+                   f"{amplitude:.1e} | {period:.1e} | {seconds * 1e3:.1f} | "
+                   f"{base / seconds:.3f} |")
+    return out
+
+
+def _harmonic_methods(shooting, harmonics: list[int], eps: float, **fields) -> dict:
+    methods = {"shooting": shooting}
+    for h in harmonics:
+        for solver in ("blocks", "lu") if fields else ("blocks",):
+            method = jc.HarmonicBalance(eps=eps, harmonics=h, linear_solver=solver, **fields)
+            methods[f"H = {h} (M = {method.time_samples}), {solver}"] = method
+    return methods
+
+
 def rows(eps: float, harmonics: list[int]) -> list[str]:
     params = jc.ChainParams(n_osc=1, v_d=1.5)
     shooting = jc.Shooting(jc.Smoothed(eps=eps).for_orbits())
     reference = jc.periodic_orbit(params, (jc.Exact().steady_sliding(params) + 1.0, 6.3),
                                   shooting)
-    guess = (reference.y0 * (1 + 1e-3), reference.period * (1 + 1e-3))
-
-    def solve(method):
-        return lambda: method.solve(params, method.unknowns(params, *guess))[0]
-
-    base = _best_time(solve(shooting))
-    out = [f"| {eps:g} | shooting | yes | - | - | {base * 1e3:.1f} | 1 |"]
-    for h in harmonics:
-        method = jc.HarmonicBalance(eps=eps, harmonics=h)
-        orbit = jc.periodic_orbit(params, guess, method, throw=False)
-        amplitude = abs(float(orbit.amplitudes[0] / reference.amplitudes[0]) - 1)
-        period = abs(float(orbit.period / reference.period) - 1)
-        seconds = _best_time(solve(method))
-        converged = "yes" if bool(orbit.converged) else "no"
-        out.append(f"| {eps:g} | H = {h} (M = {method.time_samples}) | {converged} | "
-                   f"{amplitude:.1e} | {period:.1e} | {seconds * 1e3:.1f} | "
-                   f"{base / seconds:.2f} |")
-    return out
+    return _compared(f"single, eps {eps:g}", params, reference,
+                     _harmonic_methods(shooting, harmonics, eps))
 
 
 def ring_rows(harmonics: list[int]) -> list[str]:
@@ -78,23 +98,9 @@ def ring_rows(harmonics: list[int]) -> list[str]:
     u = ds["u"].values[start]
     shooting = jc.Shooting(jc.Smoothed(eps=1e-3).for_orbits(), phase_oscillator=phase)
     reference = jc.periodic_orbit(params, (u[:-1].reshape(2, -1), float(u[-1])), shooting)
-    guess = (reference.y0 * (1 + 1e-3), reference.period * (1 + 1e-3))
-
-    def solve(method):
-        return lambda: method.solve(params, method.unknowns(params, *guess))[0]
-
-    base = _best_time(solve(shooting))
-    out = [f"| ring of 20, one site | shooting | yes | - | - | {base * 1e3:.1f} | 1 |"]
-    for h in harmonics:
-        method = jc.HarmonicBalance(eps=1e-3, harmonics=h, phase_oscillator=phase)
-        orbit = jc.periodic_orbit(params, guess, method, throw=False)
-        amplitude = float(np.max(np.abs(orbit.amplitudes - reference.amplitudes)))
-        period = abs(float(orbit.period / reference.period) - 1)
-        seconds = _best_time(solve(method), repeats=1)
-        out.append(f"| ring of 20, one site | H = {h} (M = {method.time_samples}) | "
-                   f"{'yes' if bool(orbit.converged) else 'no'} | {amplitude:.1e} (absolute) | "
-                   f"{period:.1e} | {seconds * 1e3:.0f} | {base / seconds:.3f} |")
-    return out
+    return _compared("ring of 20, one site", params, reference,
+                     _harmonic_methods(shooting, harmonics, 1e-3, phase_oscillator=phase),
+                     repeats=1)
 
 
 def coulomb_rows(harmonics: list[int]) -> list[str]:
@@ -146,7 +152,7 @@ def main() -> None:
         for row in ring_rows(harmonics):
             print(row, flush=True)
         return
-    print("| eps | method | converged | amplitude error | period error | ms per orbit | "
+    print("| orbit | method | converged | amplitude error | period error | ms per orbit | "
           "ratio |")
     print("|---|---|---|---|---|---|---|")
     for eps in (float(e) for e in args.eps.split(",")):
