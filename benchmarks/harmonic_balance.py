@@ -18,9 +18,10 @@ For each eps, shooting (`Shooting(Smoothed(eps).for_orbits())`, the reference) a
 harmonic balance at each H solve the orbit from the same guess: shooting's orbit,
 its state and period moved by 1e-3 relative. Errors are relative to shooting's
 orbit (the largest amplitude error over the chain, relative to the largest
-amplitude; a row that did not converge says so); times are the best of 3 solves after one that compiles (`method.solve` on
-`method.unknowns`, the guess's projection included for harmonic balance). Prints
-a Markdown table; the ratio is shooting's time over harmonic balance's.
+amplitude; a row that did not converge says so); times are the best of 3 solves
+(1 on the ring) after one that compiles (`method.solve` on `method.unknowns`, the
+guess's projection included for harmonic balance). Prints a Markdown table; the
+ratio is shooting's time over harmonic balance's.
 """
 
 import argparse

@@ -45,8 +45,8 @@ from .._physics.friction import as_parameter
 from .._physics.params import ChainParams
 from .harmonic_solve import BlockJacobiGMRES
 from .orbit_method import (AbstractOrbitMethod, PeriodicOrbit, closing_condition,
-                           damped_newton, deflated_multipliers, flow_direction, guess_period, orbit_record,
-                           phased_guess)
+                           damped_newton, deflated_multipliers, flow_direction, guess_period,
+                           orbit_record, phased_guess)
 
 #: How Floquet multipliers are computed: Hill's method, or one monodromy integration.
 FLOQUET = ("hill", "monodromy")
@@ -91,7 +91,8 @@ class HarmonicBalance(AbstractOrbitMethod):
     **Raises:**
 
     `ValidationError` naming the field for eps <= 0, H < 1, M < 4H + 1, an unknown
-    `floquet` or `linear_solver`, a non-positive tolerance or count, or a negative phase oscillator.
+    `floquet` or `linear_solver`, a non-positive tolerance or count, or a negative
+    phase oscillator.
     """
 
     eps: ArrayLike = eqx.field(converter=as_parameter)

@@ -16,8 +16,8 @@ from .._errors import ValidationError
 from .._physics.custom_types import State
 from .._physics.params import ChainParams
 from .orbit_method import (AbstractOrbitMethod, PeriodicOrbit, closing_condition,
-                           damped_newton, deflated_multipliers, flow_direction, guess_period, orbit_record,
-                           phased_guess)
+                           damped_newton, deflated_multipliers, flow_direction, guess_period,
+                           orbit_record, phased_guess)
 
 #: The root finders of `Shooting`.
 ROOT_FINDERS = ("newton", "levenberg-marquardt")

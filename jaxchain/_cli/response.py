@@ -12,7 +12,8 @@ from .._engine.engines import Smoothed
 from .._studies.response import frequency_response
 from .chain import CHAIN_HELP, add_chain_options, chain_params
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, add_ring_options,
-                     belt_speed_or_rest, param_default, positive_float, positive_int, report, show_progress)
+                     belt_speed_or_rest, param_default, positive_float, positive_int, report,
+                     show_progress)
 
 HELP = "frequency-response curve of a forced chain (harmonic balance, shooting)"
 DESCRIPTION = """\
