@@ -234,3 +234,25 @@ def test_a_tree_file_names_only_data_and_imported_modules():
 class _WithStatic(eqx.Module):
     x: jax.Array
     fn: object = eqx.field(static=True)
+
+
+def test_a_run_differentiated_in_forward_mode_is_traced_not_read_from_the_cache(
+        tmp_path, cache_settings):
+    """Once a command has kept programs in this process (`keep_programs`), a run
+    under `jax.jvp` still differentiates: the kept programs are exported ones, which
+    forward mode cannot differentiate, so a traced argument skips them. The
+    derivative equals the one without kept programs (the same program, bit for
+    bit)."""
+    def final_velocity(v_d):  # the exact engine, whose default adjoint is forward
+        params = jc.ChainParams(n_osc=1, v_d=v_d)
+        obs = jc.simulate(params, jnp.array([[0.5], [0.0]]), throw=False,
+                          engine=jc.Exact(jc.NonsmoothOptions(t_end=20.0, transient=10.0)))
+        return obs.amplitudes[0]
+
+    plain = jax.jvp(final_velocity, (1.5,), (1.0,))
+    keep_programs(tmp_path / "kept")
+    try:
+        kept = jax.jvp(final_velocity, (1.5,), (1.0,))
+    finally:
+        keep_programs(None)
+    assert np.isfinite(float(plain[1])) and float(kept[1]) == float(plain[1])

@@ -184,6 +184,10 @@ def compiled(fn: Callable, *args):
     What `fn` raises while it is traced (for example a `ValidationError` of a
     shape), as `fn(*args)` would.
     """
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args)):
+        # under a transformation (jax.jvp, jax.vmap, ...): a kept program is an
+        # exported one, which forward mode cannot differentiate; trace it here
+        return _jitted(fn)(*args)
     program = kept_program(fn, *args)
     return (program or _jitted(fn))(*args)
 
