@@ -182,6 +182,20 @@ def test_forced_coulomb_oscillator_against_the_exact_motion_without_stops():
     assert 0.4 < errors[1.5, 128] / errors[1.5, 64] < 0.6, errors
 
 
+def test_a_loose_forced_run_keeps_its_energy_balance():
+    """A run at loose tolerances is audited by its energy balance; the force's power
+    is in it: the forced linear oscillator (friction off) reaches the analytic
+    amplitude F / sqrt((1 - Omega^2)^2 + (2 xi Omega)^2) to 1e-3 (rtol 1e-4) with
+    status ok, not a failed balance."""
+    params = jc.ChainParams(n_osc=1, v_d=0.0, friction=jc.Coulomb(0.0),
+                            forcing=jc.Forcing(0.1, 0.8))
+    obs = jc.simulate(params, np.zeros((2, 1)), throw=False, options=jc.SimulationOptions(
+        t_end=400.0, transient=300.0, rtol=1e-4, atol=1e-6))
+    assert int(obs.status) == jc.Status.ok
+    exact = 0.1 / np.sqrt((1 - 0.8**2) ** 2 + (2 * 0.05 * 0.8) ** 2)
+    assert abs(float(obs.amplitudes[0]) / exact - 1) < 1e-3
+
+
 def test_the_exact_engine_refuses_a_forced_chain():
     params = jc.ChainParams(n_osc=2, v_d=0.5, forcing=jc.Forcing(0.1, 1.0))
     with pytest.raises(ValueError, match="forcing: the exact engine"):

@@ -55,12 +55,15 @@ def terms(solver: diffrax.AbstractSolver):
 
 
 def _work_rows(t, z, model: Model):
-    """The rows of the work integrals: the power of friction F_n x_n' and the
-    viscous dissipation 2 xi_n x_n'^2 of each oscillator (F_n the smoothed friction
-    force, eq. (2) with tanh(v_rel/eps); their sums are the rates in the energy
-    balance of `mechanical_energy`)."""
+    """The rows of the work integrals: the power of friction F_n x_n' (and of the
+    harmonic force f_n(t) x_n' of a forced chain) and the viscous dissipation
+    2 xi_n x_n'^2 of each oscillator (F_n the smoothed friction force, eq. (2) with
+    tanh(v_rel/eps); their sums are the rates in the energy balance of
+    `mechanical_energy`)."""
     params, v = model.params, z[1]
     force = smoothed_friction_force(params, v - params.v_d, model.eps)
+    if params.forcing is not None:
+        force = force + params.forcing.force(t)
     return jnp.stack([v * force, 2 * params.xi * v**2])
 
 
