@@ -185,6 +185,7 @@ def test_exact_one_site_branch_ends_where_its_stick_phase_vanishes(exact_one_sit
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_past_the_whole_ring_s_branch_point_the_check_sees_steady_sliding(
         exact_one_site_end):
     """The whole ring (all four on the HALC) loses stability at a branch point. Just
@@ -204,6 +205,7 @@ def test_past_the_whole_ring_s_branch_point_the_check_sees_steady_sliding(
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_the_one_site_edge_tends_to_the_single_oscillator_s_limit_as_eta_c_vanishes(
         exact_one_site_end):
     """The one-site branch's sliding point (the edge of the excited oscillator's
