@@ -47,6 +47,7 @@ STUDIES = {
                   ("jaxchain._studies.mistuning.study", "study_chains"),
                   ("jaxchain._studies.mistuning.design_study", "design_study")],
     "identify": [("jaxchain._studies.identification.fit", "_stage")],
+    "response": [("jaxchain._cli.response", "frequency_response")],
 }
 CLUSTER = ("jaxchain._engine.cluster", "connect")
 
@@ -54,8 +55,9 @@ CLUSTER = ("jaxchain._engine.cluster", "connect")
 #: The commands that compute (`server` shows and stops warm processes: test_warm.py).
 COMPUTING = [command for command in COMMANDS if command != "server"]
 
-ARGV = {command: [command] for command in COMPUTING} | {"figure": ["figure", "4"],
-                                                      "identify": ["identify", RECORD]}
+ARGV = {command: [command] for command in COMPUTING} | {
+    "figure": ["figure", "4"], "identify": ["identify", RECORD],
+    "response": ["response", "--force", "0.1,0.8", "--to", "1.2"]}
 
 
 class Reached(BaseException):
@@ -136,6 +138,8 @@ REFUSED = [
     (["snake", "--mistuning", "40"], "stiffness"),
     (["mistuning", "--sigmas", "-1"], "sigmas"),                 # mistuning_study
     (["identify", RECORD, "--fit", "v_d"], "cannot be fitted"),  # unknowns_of
+    (["response", "--force", "0.1,0.8", "--to", "1.2", "--harmonics", "4",
+      "--time-samples", "8"], "time_samples"),                   # HarmonicBalance
 ]
 
 

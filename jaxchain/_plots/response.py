@@ -1,10 +1,16 @@
 """The frequency-response curve of a forced chain."""
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
-import xarray as xr
 
 from .bifurcation import _segments
 from .canvas import single_axes
+
+if TYPE_CHECKING:  # heavy: imported where they are used
+    import xarray as xr
 
 
 def plot_frequency_response(ds: xr.Dataset, ax=None):
