@@ -83,7 +83,8 @@ class HarmonicBalance(AbstractOrbitMethod):
     - `linear_solver`: how each Newton step's linear system is solved: "blocks"
         (default: GMRES preconditioned by the Jacobian's oscillator blocks, of size
         2H + 2, `BlockJacobiGMRES`: the friction Jacobian is block diagonal over the
-        oscillators) or "lu" (LU of the whole Jacobian, of size n_osc (2H + 1) + 1).
+        oscillators; LU on one oscillator, whose one block is the whole Jacobian) or
+        "lu" (LU of the whole Jacobian, of size n_osc (2H + 1) + 1).
 
     The unknowns u: the coefficients, shape (2H + 1, n_osc) flattened (rows a_0,
     a_1..a_H, b_1..b_H), then T.
@@ -317,8 +318,10 @@ class HarmonicBalance(AbstractOrbitMethod):
 @checks_as_nan
 @eqx.filter_jit
 def _solve(method: HarmonicBalance, params: ChainParams, u0):
+    # one oscillator: its one block is the whole Jacobian
+    blocks = method.linear_solver == "blocks" and params.n_osc > 1
     linear_solver = (BlockJacobiGMRES(method.harmonics, params.n_osc, method.phase_oscillator)
-                     if method.linear_solver == "blocks" else lx.LU())
+                     if blocks else lx.LU())
     return damped_newton(method, params, u0, method.newton_steps, linear_solver)
 
 
