@@ -159,8 +159,8 @@ def test_the_oscillator_blocks_solve_the_coupled_ring_as_lu_does(damped_ring):
     couples one oscillator's harmonics only; the coupling springs couple the
     oscillators) reaches the orbit that LU of the whole Jacobian reaches, to
     Newton's tolerance (1e-9, two programs), from rest; and the derivative of the
-    largest amplitude in mu through its transposed solve (reverse mode) is that of
-    central differences to 1e-6. The amplitude is the largest of 4096 samples, piecewise
+    largest amplitude in mu, through its transposed solve (reverse mode) and forward
+    mode, is that of central differences to 1e-6. The amplitude is the largest of 4096 samples, piecewise
     smooth in mu, so central differences err as O(h) (measured: 2.4e-6 relative at
     h = 1e-5, 2e-8 at 1e-6, rounding 1e-9): the step is 1e-6."""
     params, methods = damped_ring
@@ -179,3 +179,4 @@ def test_the_oscillator_blocks_solve_the_coupled_ring_as_lu_does(damped_ring):
     h = 1e-6
     central = float((largest(0.3 + h) - largest(0.3 - h)) / (2 * h))
     assert abs(float(jax.grad(largest)(0.3)) - central) < 1e-6 * abs(central)
+    assert abs(float(jax.jvp(largest, (0.3,), (1.0,))[1]) - central) < 1e-6 * abs(central)
