@@ -87,20 +87,15 @@ def frequency_response(params: ChainParams, method: AbstractOrbitMethod, frequen
 
 
 def method_settings(method: AbstractOrbitMethod) -> dict:
-    """The orbit method's name and its settings that are plain numbers or names
-    (`method_harmonics`, `method_eps`, ...; a shooting engine's `eps` and
-    tolerances), for a result's attributes."""
-    out = {"method": type(method).__name__}
-    for owner, prefix in ((method, "method_"), (getattr(method, "engine", None), "engine_")):
-        for f in dataclasses.fields(owner) if dataclasses.is_dataclass(owner) else ():
-            value = getattr(owner, f.name)
-            if isinstance(value, (str, int, float)) or np.ndim(value) == 0 and np.isreal(value):
-                try:
-                    out[prefix + f.name] = (value if isinstance(value, (str, int))
-                                            else float(value))
-                except TypeError:
-                    continue
-    return out
+    """The orbit method's name and settings (`method_harmonics`, `method_eps`, ...)
+    and its engine's (`engine_eps`, `engine_rtol`, ...: `AbstractEngine.attributes`),
+    for a result's attributes."""
+    from .._sweeps.datasets import field_values
+
+    engine = getattr(method, "engine", None)
+    return ({"method": type(method).__name__} | field_values(method, "method_")
+            | {k if k == "engine" else f"engine_{k}": v
+               for k, v in (engine.attributes() if engine else {}).items()})
 
 
 def _bounded(options: ContinuationOptions, low: float, high: float, direction: int

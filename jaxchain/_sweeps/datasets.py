@@ -112,15 +112,16 @@ def observables_variables(obs: Observables, lead: tuple[str, ...]) -> dict:
 def field_values(obj, prefix: str = "") -> dict:
     """The fields of a dataclass (options) by name, with `prefix`, as netCDF
     attributes keep them: strings and whole numbers as they are, tuples as JSON
-    lists, other numbers as floats; those that are None left out (netCDF
-    attributes have no None)."""
+    lists, other numbers as floats; those that are None, and nested dataclasses (an
+    orbit method's engine), left out (netCDF attributes have no None)."""
     def plain(v):
         if isinstance(v, (str, int)):
             return v
         return json.dumps(list(v)) if isinstance(v, tuple) else float(v)
 
     return {prefix + f.name: plain(getattr(obj, f.name)) for f in dataclasses.fields(obj)
-            if getattr(obj, f.name) is not None}
+            if getattr(obj, f.name) is not None
+            and not dataclasses.is_dataclass(getattr(obj, f.name))}
 
 
 def run_attributes(params: ChainParams, engine: AbstractEngine, ics: str,
