@@ -41,6 +41,7 @@ from .._engine.engines import Smoothed
 from .._errors import ValidationError
 from .._physics.custom_types import State
 from .._physics.forces import DEFAULT_EPS
+from .._physics.model import split_vector_field
 from .._physics.friction import as_parameter
 from .._physics.params import ChainParams
 from .harmonic_solve import BlockJacobiGMRES
@@ -221,7 +222,58 @@ class HarmonicBalance(AbstractOrbitMethod):
         frequency-time scheme; a forcing's at the samples' times), shape
         (2H + 1) n_osc, and the phase condition sum_k k b_kn (x_n'(0) / omega, n the
         phase oscillator; for a forced chain the force's period,
-        `closing_condition`)."""
+        `closing_condition`). Where Newton's steps are solved by LU, its derivative
+        in u is `jacobian`, assembled from the field's Jacobian at the samples."""
+        if self._assembled(params):
+            return _assembled_residual(self, u, params)
+        return self._balance(u, params)
+
+    def _assembled(self, params: ChainParams) -> bool:
+        # GMRES's products need no matrix: there, the residual's own derivative
+        return self.linear_solver == "lu" or params.n_osc == 1
+
+    def jacobian(self, u: Float[Array, " n"], params: ChainParams) -> Float[Array, "n n"]:
+        """The Jacobian of `residual` in u, shape (n, n), n = n_osc (2H + 1) + 1,
+        assembled rather than differentiated through the FFTs. Eq. (5)'s field is a
+        linear part (springs, coupling, viscous damping, masses: one constant
+        Jacobian E) plus the friction force, whose oscillator n depends on its own
+        velocity only (`split_vector_field`): one derivative d_n(t) per oscillator
+        and sample. The coefficients' block is then the Galerkin projection of the
+        linearised equation (this module's docstring),
+
+            omega^2 (P S'') I - (P S) E_x - omega (P S') E_v
+              - omega diag_n(sum_t P_t d_n(t) S'_t),
+
+        with S, S', S'' the series and its derivatives in the phase at the M
+        samples and P the projection back onto the harmonics; the period's column by
+        one forward-mode product, the closing row by one reverse-mode one."""
+        coefficients, period = self._split(u)
+        omega = 2 * jnp.pi / period
+        n = coefficients.shape[1]
+        series, slope, curvature, projection = (jnp.asarray(b) for b in _bases(
+            self.harmonics, self.time_samples))
+        linear = jax.jacfwd(lambda y: jnp.ravel(split_vector_field(
+            0.0, jnp.reshape(y, (2, n)), params, self.eps)[0]))(jnp.zeros(2 * n))
+        x, dx = self._series(coefficients, 1)
+
+        def friction_slope(x, v):  # d(friction acceleration)_n / d v_n, shape (n,)
+            return jax.jvp(lambda w: split_vector_field(0.0, jnp.stack([x, w]), params,
+                                                        self.eps)[1][1], (v,), (jnp.ones(n),))[1]
+
+        slopes = jax.vmap(friction_slope)(x, omega * dx)  # (M, n)
+        eye = jnp.eye(n)
+        block = (jnp.einsum("rl,ij->rilj", omega**2 * (projection @ curvature), eye)
+                 - jnp.einsum("rl,ij->rilj", projection @ series, linear[n:, :n])
+                 - jnp.einsum("rl,ij->rilj", omega * (projection @ slope), linear[n:, n:])
+                 - omega * jnp.einsum("rt,tl,ti,ij->rilj", projection, slope, slopes, eye))
+        size = u.shape[0]
+        period_column = jax.jvp(lambda v: self._balance(v, params), (u,),
+                                (jnp.zeros(size).at[-1].set(1.0),))[1]
+        closing_row = jax.grad(lambda v: self._balance(v, params)[-1])(u)
+        return (jnp.zeros((size, size)).at[:-1, :-1].set(jnp.reshape(block, (size - 1,) * 2))
+                .at[:, -1].set(period_column).at[-1, :].set(closing_row))
+
+    def _balance(self, u: Float[Array, " n"], params: ChainParams) -> Float[Array, " n"]:
         coefficients, period = self._split(u)
         omega = 2 * jnp.pi / period
         x, dx, ddx = self._series(coefficients, 2)
@@ -323,6 +375,54 @@ def _solve(method: HarmonicBalance, params: ChainParams, u0):
     linear_solver = (BlockJacobiGMRES(method.harmonics, params.n_osc, method.phase_oscillator)
                      if blocks else lx.LU())
     return damped_newton(method, params, u0, method.newton_steps, linear_solver)
+
+
+@eqx.filter_custom_jvp
+def _assembled_residual(method: HarmonicBalance, u, params: ChainParams):
+    return method._balance(u, params)
+
+
+@_assembled_residual.def_jvp
+def _assembled_residual_jvp(primals, tangents):
+    """The residual's derivative in u by its assembled `jacobian` (one matrix for all
+    the directions that LU's materialisation asks for), in the method's and the
+    chain's parameters by forward mode through the residual."""
+    method, u, params = primals
+    t_method, t_u, t_params = tangents
+    r = method._balance(u, params)
+    t_r = jnp.zeros_like(r)
+    if t_u is not None:
+        t_r = t_r + method.jacobian(u, params) @ t_u
+    leaves, structure = jax.tree_util.tree_flatten((method, params))
+    t_leaves = structure.flatten_up_to((t_method, t_params))
+    moved = [i for i, t in enumerate(t_leaves) if t is not None]
+    if moved:
+        def balance(*values):
+            changed = list(leaves)
+            for i, value in zip(moved, values):
+                changed[i] = value
+            m, p = jax.tree_util.tree_unflatten(structure, changed)
+            return m._balance(u, p)
+
+        t_r = t_r + jax.jvp(balance, [leaves[i] for i in moved],
+                            [t_leaves[i] for i in moved])[1]
+    return r, t_r
+
+
+def _bases(h: int, m: int) -> tuple[np.ndarray, ...]:
+    """The series (1, cos k tau, sin k tau) at the M phases tau_t = 2 pi t / M, shape
+    (M, 2H + 1), its first and second derivatives in tau, and the projection back
+    onto the coefficients (the FFT's, `HarmonicBalance._projection`), shape
+    (2H + 1, M)."""
+    tau = 2 * np.pi * np.arange(m)[:, None] / m
+    k = np.arange(1, h + 1)[None]
+    cos, sin = np.cos(k * tau), np.sin(k * tau)
+    one, zero = np.ones((m, 1)), np.zeros((m, 1))
+    series = np.hstack([one, cos, sin])
+    slope = np.hstack([zero, -k * sin, k * cos])
+    curvature = np.hstack([zero, -k**2 * cos, -k**2 * sin])
+    projection = np.vstack([one.T / m, 2 * cos.T / m, 2 * sin.T / m])
+    return series, slope, curvature, projection
 
 
 def _real_basis(h: int, d: int) -> np.ndarray:

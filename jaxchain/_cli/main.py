@@ -18,7 +18,8 @@ from .common import (Parser, RunsFailed, UsageError, finish_prefetch, one_line,
 
 #: The subcommands, each a module of this package with `add_parser(sub)`.
 COMMANDS = ("localized", "sweep", "figure", "crosscheck", "work-precision", "boundaries",
-            "stress", "basin", "snake", "mistuning", "identify", "response", "server")
+            "stress", "basin", "snake", "mistuning", "identify", "response", "magnification",
+            "server")
 
 
 def build_parser(commands=COMMANDS) -> Parser:
