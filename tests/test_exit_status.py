@@ -48,6 +48,7 @@ STUDIES = {
                   ("jaxchain._studies.mistuning.design_study", "design_study")],
     "identify": [("jaxchain._studies.identification.fit", "_stage")],
     "response": [("jaxchain._cli.response", "frequency_response")],
+    "magnification": [("jaxchain._cli.magnification", "magnification_study")],
 }
 CLUSTER = ("jaxchain._engine.cluster", "connect")
 
@@ -140,6 +141,7 @@ REFUSED = [
     (["identify", RECORD, "--fit", "v_d"], "cannot be fitted"),  # unknowns_of
     (["response", "--force", "0.1,0.8", "--to", "1.2", "--harmonics", "4",
       "--time-samples", "8"], "time_samples"),                   # HarmonicBalance
+    (["magnification", "--harmonics", "4", "--time-samples", "8"], "time_samples"),
 ]
 
 

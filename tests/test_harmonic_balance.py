@@ -180,3 +180,29 @@ def test_the_oscillator_blocks_solve_the_coupled_ring_as_lu_does(damped_ring):
     central = float((largest(0.3 + h) - largest(0.3 - h)) / (2 * h))
     assert abs(float(jax.grad(largest)(0.3)) - central) < 1e-6 * abs(central)
     assert abs(float(jax.jvp(largest, (0.3,), (1.0,))[1]) - central) < 1e-6 * abs(central)
+
+
+@pytest.mark.numerics
+@pytest.mark.parametrize("params", [
+    jc.ChainParams(n_osc=5, xi=1e-3, v_d=0.0, friction=jc.Coulomb(mu=0.003),
+                   forcing=jc.Forcing.engine_order(5, 2, 0.01, 1.0)),
+    jc.ChainParams(n_osc=4, v_d=1.5, mass=[1.0, 2.0, 1.5, 1.0], stiffness=[1.0, 1.1, 0.9, 1.0]),
+    jc.ChainParams(n_osc=1, v_d=1.5)], ids=["forced ring", "masses", "one oscillator"])
+def test_the_assembled_jacobian_is_the_residual_s_derivative(params):
+    """`HarmonicBalance.jacobian` (assembled from the field's linear part and the
+    friction's slope at the samples) equals forward-mode differentiation of the
+    residual through its FFTs, at a random point, to rounding; the residual that LU
+    differentiates by it has that derivative in u and its own in eps."""
+    hb = jc.HarmonicBalance(eps=1e-2, harmonics=4, linear_solver="lu")
+    u = jax.numpy.asarray(np.random.default_rng(1).standard_normal(
+        params.n_osc * 9 + 1)).at[-1].set(6.0)
+    reference = jax.jacfwd(hb._balance)(u, params)
+    scale = np.max(np.abs(reference))
+    assert np.max(np.abs(hb.jacobian(u, params) - reference)) < 1e-12 * scale
+    assert np.max(np.abs(jax.jacrev(hb.residual)(u, params) - reference)) < 1e-12 * scale
+
+    def in_eps(method):
+        return lambda e: getattr(jc.HarmonicBalance(eps=e, harmonics=4, linear_solver="lu"),
+                                 method)(u, params)
+    assert np.allclose(jax.jacfwd(in_eps("residual"))(1e-2), jax.jacfwd(in_eps("_balance"))(1e-2),
+                       rtol=1e-12, atol=1e-12 * scale)

@@ -25,14 +25,16 @@ friction coefficient mu, smoothed by tanh(v/eps)). For each mistuning strength o
 the same normal numbers at every strength); for each, the forced response over the
 frequencies of --frequencies by harmonic balance (--harmonics H, --time-samples M;
 each orbit started from the one before, the draws vmapped), and its peak (the root
-of the amplitude's slope in OMEGA beside the grid's largest). The amplitude
+of the amplitude's slope in OMEGA beside each of the grid's three largest local
+maxima; space the grid by xi / 2 or less, or a resonance can hide between points). The amplitude
 magnification factor of a draw is its largest first-harmonic amplitude over the
 tuned ring's. Each friction coefficient of --mu is a study of its own; mu = 0 is
 the linear ring, whose magnification Whitehead's bound (1 + sqrt(N)) / 2 caps.
 
 --gradient also differentiates the mean magnification at --gradient-sigma in the
-first nonzero mu, by jax.grad (the implicit function theorem through each peak's
-orbit) and by central differences of the whole study, and reports both.
+first nonzero mu over the first --gradient-draws draws, by jax.grad and jax.jvp
+(the implicit function theorem through each peak's orbit) and by central
+differences of the whole study, and reports them.
 
 Each (mu, sigma) goes to <out>/magnification_parts/ as it finishes: --resume
 continues a killed run (a part is reused only with equal settings). Writes
@@ -79,9 +81,9 @@ def add_parser(sub):
     g.add_argument("--draws", type=positive_int, default=1000,
                    help="mistuned rings per strength (default 1000)")
     g.add_argument("--frequencies", type=_frequency_grid, default=_frequency_grid(
-        "0.95,1.07,61"), metavar="LOW,HIGH,COUNT",
-        help="forcing frequencies swept (default 0.95,1.07,61: every draw's resonances "
-             "up to sigma = 4 eta_c, spaced by about xi)")
+        "0.95,1.07,121"), metavar="LOW,HIGH,COUNT",
+        help="forcing frequencies swept (default 0.95,1.07,121: every draw's resonances "
+             "up to sigma = 4 eta_c, spaced by half the default xi)")
     g.add_argument("--harmonics", type=positive_int, default=1, metavar="H",
                    help="harmonic balance: highest harmonic (default 1, exact for the "
                         "linear ring)")
@@ -94,6 +96,9 @@ def add_parser(sub):
                         "central differences)")
     g.add_argument("--gradient-sigma", type=non_negative_float, default=1.0, metavar="S",
                    help="sigma / eta_c of --gradient (default 1)")
+    g.add_argument("--gradient-draws", type=positive_int, default=200, metavar="D",
+                   help="draws of --gradient, the first D of the study's (default 200: "
+                        "the check runs the study three times)")
     add_output_options(p, resume="a killed run from its finished (mu, sigma) parts")
     p.set_defaults(run=run)
     return p
@@ -139,7 +144,8 @@ def run(args) -> None:
 
         summary["gradient"] = {"mu": mu, "sigma_over_eta_c": args.gradient_sigma} | \
             magnification_gradient(with_parameter(params, "mu", mu),
-                                   args.gradient_sigma * args.eta_c, args.draws,
+                                   args.gradient_sigma * args.eta_c,
+                                   min(args.gradient_draws, args.draws),
                                    args.frequencies, method, lanes=args.lanes)
     wall = time.perf_counter() - start
     summary["wall_time_s"] = wall
@@ -162,6 +168,7 @@ def run(args) -> None:
             g = s["gradient"]
             print(f"d(mean magnification)/d mu at mu = {g['mu']:g}, sigma = "
                   f"{g['sigma_over_eta_c']:g} eta_c: {g['gradient']:.8g} (jax.grad), "
+                  f"{g['forward']:.8g} (jax.jvp), "
                   f"{g['finite_difference']:.8g} (central differences), relative "
                   f"difference {g['relative_error']:.2e}")
 

@@ -57,13 +57,16 @@ def first_harmonic(method: HarmonicBalance, u) -> jax.Array:
 
 
 def response_peaks(chains: ChainParams, method: HarmonicBalance, frequencies, *,
-                   refinements: int = 12) -> Peaks:
+                   refinements: int = 12, candidates: int = 3) -> Peaks:
     """The peak of each lane's forced response: harmonic balance at each frequency of
     `frequencies` in turn (each orbit started from the one before, from rest at the
-    first), vmapped over the lanes, then the peak of the oscillator that reaches the
-    largest amplitude located by successive parabolic interpolation between the grid
-    points around it (`refinements` steps; Brent, *Algorithms for Minimization
-    without Derivatives* (1973), Ch. 5).
+    first), vmapped over the lanes; then, at each of the `candidates` largest local
+    maxima of the grid's largest amplitude, the peak of the oscillator that reaches
+    it: the root of its amplitude's slope in the frequency (central differences of
+    orbits) between the grid points beside it, by `refinements` steps of the
+    Illinois variant of regula falsi (Dowell and Jarratt, BIT 11 (1971) 168-174);
+    the largest of the peaks found. A resonance narrower than the grid's spacing
+    can hide between two points: space the grid by half the damping ratio or less.
 
     **Arguments:**
 
@@ -83,8 +86,12 @@ def response_peaks(chains: ChainParams, method: HarmonicBalance, frequencies, *,
     size = chains.n_osc * (2 * method.harmonics + 1) + 1
     u0 = jnp.zeros((lanes, size)).at[:, -1].set(2 * np.pi / frequencies[0])
     us, amplitudes, ok = _sweep(method, chains, jnp.asarray(frequencies), u0)
-    peak = _refine(method, chains, jnp.asarray(frequencies), us, amplitudes, ok, refinements)
-    return Peaks(*(np.asarray(a) for a in peak))
+    found = [[np.asarray(a) for a in _refine(method, chains, jnp.asarray(frequencies), us,
+                                             amplitudes, ok, refinements, rank)]
+             for rank in range(min(candidates, frequencies.size))]
+    best = np.argmax(np.stack([f[0] for f in found]), axis=0)
+    lanes = np.arange(best.size)
+    return Peaks(*(np.stack([f[i] for f in found])[best, lanes] for i in range(5)))
 
 
 def _at_frequency(chains: ChainParams, omega) -> ChainParams:
@@ -112,11 +119,16 @@ def _sweep(method, chains, frequencies, u0):
 
 @checks_as_nan
 @eqx.filter_jit
-def _refine(method, chains, frequencies, us, amplitudes, ok, refinements):
+def _refine(method, chains, frequencies, us, amplitudes, ok, refinements, rank):
     lanes = jnp.arange(us.shape[1])
     size = frequencies.shape[0]
     top = jnp.max(amplitudes, axis=2)  # (F, lanes)
-    grid_best = jnp.argmax(top, axis=0)
+    # the grid's local maxima, largest first: the rank-th of them
+    padded = jnp.pad(top, ((1, 1), (0, 0)), constant_values=-jnp.inf)
+    local = (top >= padded[:-2]) & (top >= padded[2:])
+    score = jnp.where(local, top, -jnp.inf)
+    grid_best = jnp.argsort(-score, axis=0)[rank]
+    candidate = jnp.isfinite(score[grid_best, lanes])
     best = jnp.clip(grid_best, 1, size - 2)
     osc = jnp.argmax(amplitudes[grid_best, lanes], axis=1)
     u = us[best, lanes]
@@ -156,7 +168,7 @@ def _refine(method, chains, frequencies, us, amplitudes, ok, refinements):
     (_, _, b, _, amp, u, converged), _ = jax.lax.scan(step, carry, None, length=refinements)
     # a grid peak at an end of the range has no stationary point beside it
     at_end = (grid_best == 0) | (grid_best == size - 1)
-    return amp, b, osc, u, converged & ~at_end
+    return jnp.where(candidate, amp, -jnp.inf), b, osc, u, converged & ~at_end
 
 
 def mistuned_lanes(params: ChainParams, sigma: float, draws: int) -> ChainParams:
@@ -321,7 +333,8 @@ def magnification_gradient(params: ChainParams, sigma: float, draws: int, freque
     Central differences: the whole study (sweep and refinement) again at mu (1 +-
     `relative_step`).
 
-    **Returns:** a dict: `mean_magnification`, `gradient`, `finite_difference`,
+    **Returns:** a dict: `mean_magnification`, `gradient` (reverse mode), `forward`
+    (the same by `jax.jvp`), `finite_difference`,
     `step`, `relative_error`.
 
     **Raises:** as `magnification_study`.
@@ -347,6 +360,8 @@ def magnification_gradient(params: ChainParams, sigma: float, draws: int, freque
 
     gradient = float(checks_as_nan(eqx.filter_jit(jax.grad(mean_magnification)))(
         jnp.asarray(mu)))
+    forward = float(checks_as_nan(eqx.filter_jit(lambda m: jax.jvp(
+        mean_magnification, (m,), (jnp.ones_like(m),))[1]))(jnp.asarray(mu)))
     step = relative_step * mu
     values = []
     for value in (mu + step, mu - step):
@@ -356,5 +371,5 @@ def magnification_gradient(params: ChainParams, sigma: float, draws: int, freque
         values.append(np.mean(p.amplitude[1:]) / p.amplitude[0])
     fd = (values[0] - values[1]) / (2 * step)
     return {"mean_magnification": float(np.mean(peaks.amplitude[1:]) / peaks.amplitude[0]),
-            "gradient": gradient, "finite_difference": fd, "step": step,
+            "gradient": gradient, "forward": forward, "finite_difference": fd, "step": step,
             "relative_error": abs(gradient - fd) / abs(fd)}
