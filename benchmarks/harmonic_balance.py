@@ -5,6 +5,7 @@ time of one orbit solve by each method, measured in the same run.
     python benchmarks/harmonic_balance.py [--eps 1e-2,1e-3] [--harmonics 16,32,64,128]
     python benchmarks/harmonic_balance.py --ring [--harmonics 32,64]
     python benchmarks/harmonic_balance.py --coulomb [--harmonics 32,64,128]
+    python benchmarks/harmonic_balance.py --jacobian [--harmonics 1,3,8]
 
 --ring: the one-site state of the paper's ring of 20 at v_d 1.5, eps 1e-3 (the
 snake's start for k = 1: eq. (8) simulated, then shot, `localized_branches`); the
@@ -13,6 +14,10 @@ largest amplitude error over the ring against shooting's, and the times as above
 0, eps 1e-4, M = 64 H) at Omega 0.6, 0.9, 1.0, 1.1, 1.5, and with stops (F 0.35)
 at 0.6, 1.0, 1.5, against the exact motion by event-driven integration
 (tests/test_forced.py, `coulomb_motion`): the amplitude's relative error.
+--jacobian: the Jacobian of the residual on 256 forced mistuned rings of 20 with
+friction dampers (`jaxchain magnification`'s chain, M = 64), vmapped: assembled
+(`HarmonicBalance.jacobian`) against `jax.jacfwd` through the FFTs, the best of 3
+after one that compiles, and their largest difference.
 
 For each eps, shooting (`Shooting(Smoothed(eps).for_orbits())`, the reference) and
 harmonic balance at each H solve the orbit from the same guess: shooting's orbit,
@@ -129,6 +134,27 @@ def coulomb_rows(harmonics: list[int]) -> list[str]:
     return out
 
 
+def jacobian_rows(harmonics: list[int]) -> list[str]:
+    from jaxchain._studies.magnification import mistuned_lanes
+
+    params = jc.ChainParams(n_osc=20, xi=2e-3, eta_c=0.01, v_d=0.0, friction=jc.Coulomb(mu=1e-3),
+                            forcing=jc.Forcing.engine_order(20, 3, 4e-3, 1.0))
+    chains = mistuned_lanes(params, 0.01, 255)
+    out = []
+    for h in harmonics:
+        hb = jc.HarmonicBalance(eps=0.05, harmonics=h, time_samples=64, linear_solver="lu")
+        u = jax.numpy.asarray(np.random.default_rng(0).standard_normal(
+            (256, 20 * (2 * h + 1) + 1)) * 0.3).at[:, -1].set(2 * np.pi)
+        assembled = jax.jit(jax.vmap(hb.jacobian))
+        autodiff = jax.jit(jax.vmap(jax.jacfwd(hb._balance)))
+        a = _best_time(lambda: assembled(u, chains))
+        b = _best_time(lambda: autodiff(u, chains))
+        gap = float(np.max(np.abs(assembled(u, chains) - autodiff(u, chains))))
+        out.append(f"| {h} | {20 * (2 * h + 1) + 1} | {a * 1e3 / 256:.3f} | "
+                   f"{b * 1e3 / 256:.3f} | {b / a:.2f} | {gap:.1e} |")
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--eps", default="1e-2,1e-3", help="smoothings, comma-separated")
@@ -136,9 +162,18 @@ def main() -> None:
     parser.add_argument("--ring", action="store_true", help="the ring of 20's one-site state")
     parser.add_argument("--coulomb", action="store_true",
                         help="the forced oscillator with Coulomb friction")
+    parser.add_argument("--jacobian", action="store_true",
+                        help="the assembled Jacobian against jax.jacfwd, vmapped")
     args = parser.parse_args()
     jc.configure()
     harmonics = [int(h) for h in args.harmonics.split(",")]
+    if args.jacobian:
+        print("| H | unknowns | assembled, ms per ring | jax.jacfwd, ms per ring | ratio | "
+              "largest difference |")
+        print("|---|---|---|---|---|---|")
+        for row in jacobian_rows(harmonics):
+            print(row, flush=True)
+        return
     if args.coulomb:
         print("| case | exact amplitude | stops | " + " | ".join(
             f"error at H = {h}" for h in harmonics) + " |")
