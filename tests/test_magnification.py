@@ -75,6 +75,7 @@ def test_vmapped_lanes_equal_the_lanes_run_one_at_a_time(linear_peaks):
         assert abs(alone.frequency[0] - peaks.frequency[lane]) < 1e-6
 
 
+@pytest.mark.study
 @pytest.mark.numerics
 @pytest.mark.slow
 def test_the_mean_magnification_s_derivative_in_mu_against_central_differences():
