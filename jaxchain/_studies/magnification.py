@@ -305,10 +305,11 @@ def _part(chain: ChainParams, sigma: float, draws: int, frequencies, method, lan
 
 
 def _peaks_in_lanes(chains: ChainParams, method, frequencies, lanes: int, bar) -> Peaks:
-    """`response_peaks` of the lanes of `chains`, `lanes` at a time (the last group
-    padded with copies of its first, so that every group runs one program)."""
+    """`response_peaks` of the lanes of `chains` in groups of equal size of at most
+    `lanes` (the last padded with copies of its first, so that every group runs one
+    program)."""
     total = np.shape(chains.forcing.frequency)[0]
-    lanes = min(lanes, total)
+    lanes = -(-total // -(-total // lanes))  # groups of equal size, none larger than asked
     parts = []
     for start in range(0, total, lanes):
         index = np.arange(start, min(start + lanes, total))
