@@ -12,9 +12,11 @@ Mech. 56 (1989)): the series to M time samples of one period by the inverse FFT,
 the model's acceleration there (its friction law smoothed, tanh(v_rel/eps), eq. (1)
 with eq. (7)), and back by the FFT; M >= 4H + 1 keeps the products that the Hill
 matrix needs free of aliasing. A phase condition x_n'(0) = 0 (as `Shooting`'s) fixes
-the orbit's phase. Newton's method by optimistix, the Jacobian by forward-mode
-differentiation (`jax.jacfwd`), damped by backtracking where a full step does
-not lower the residual.
+the orbit's phase. Newton's method by optimistix, damped by backtracking where a
+full step does not lower the residual; its linear steps by LU of the Jacobian
+assembled from the field's (`HarmonicBalance.jacobian`: the friction's derivative is
+diagonal over the oscillators) or by GMRES preconditioned by the Jacobian's
+oscillator blocks (`BlockJacobiGMRES`).
 
 Floquet multipliers from one monodromy integration over the period started on the
 orbit, or by Hill's method (Lazarus and Thomas, C. R. Mecanique 338 (2010)
