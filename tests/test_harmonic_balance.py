@@ -4,6 +4,7 @@ oscillator's stick-slip cycle at v_d 1.5 (eps 1e-2), its Floquet multipliers by
 Hill's method and by one monodromy integration, and its branch from the fold down
 to the Hopf point, whose v_d is known in closed form."""
 
+import equinox as eqx
 import jax
 import numpy as np
 import pytest
@@ -196,13 +197,15 @@ def test_the_assembled_jacobian_is_the_residual_s_derivative(params):
     hb = jc.HarmonicBalance(eps=1e-2, harmonics=4, linear_solver="lu")
     u = jax.numpy.asarray(np.random.default_rng(1).standard_normal(
         params.n_osc * 9 + 1)).at[-1].set(6.0)
-    reference = jax.jacfwd(hb._balance)(u, params)
+    # each compiled (eqx.filter_jit): differentiated op by op they take a minute
+    reference = eqx.filter_jit(jax.jacfwd(hb._balance))(u, params)
     scale = np.max(np.abs(reference))
-    assert np.max(np.abs(hb.jacobian(u, params) - reference)) < 1e-12 * scale
-    assert np.max(np.abs(jax.jacrev(hb.residual)(u, params) - reference)) < 1e-12 * scale
+    assert np.max(np.abs(eqx.filter_jit(hb.jacobian)(u, params) - reference)) < 1e-12 * scale
+    assert np.max(np.abs(eqx.filter_jit(jax.jacrev(hb.residual))(u, params)
+                         - reference)) < 1e-12 * scale
 
     def in_eps(method):
-        return lambda e: getattr(jc.HarmonicBalance(eps=e, harmonics=4, linear_solver="lu"),
-                                 method)(u, params)
-    assert np.allclose(jax.jacfwd(in_eps("residual"))(1e-2), jax.jacfwd(in_eps("_balance"))(1e-2),
+        return eqx.filter_jit(jax.jacfwd(lambda e: getattr(jc.HarmonicBalance(
+            eps=e, harmonics=4, linear_solver="lu"), method)(u, params)))
+    assert np.allclose(in_eps("residual")(1e-2), in_eps("_balance")(1e-2),
                        rtol=1e-12, atol=1e-12 * scale)
