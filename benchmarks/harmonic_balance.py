@@ -167,34 +167,27 @@ def main() -> None:
     args = parser.parse_args()
     jc.configure()
     harmonics = [int(h) for h in args.harmonics.split(",")]
+    orbit_columns = ["orbit", "method", "converged", "amplitude error", "period error",
+                     "ms per orbit", "ratio"]
     if args.jacobian:
-        print("| H | unknowns | assembled, ms per ring | jax.jacfwd, ms per ring | ratio | "
-              "largest difference |")
-        print("|---|---|---|---|---|---|")
-        for row in jacobian_rows(harmonics):
-            print(row, flush=True)
-        return
-    if args.coulomb:
-        print("| case | exact amplitude | stops | " + " | ".join(
-            f"error at H = {h}" for h in harmonics) + " |")
-        print("|---" * (3 + len(harmonics)) + "|")
-        for row in coulomb_rows(harmonics):
-            print(row, flush=True)
-        return
-    if args.ring:
-        print("| orbit | method | converged | amplitude error | period error | ms per orbit | "
-              "ratio |")
-        print("|---|---|---|---|---|---|---|")
-        for row in ring_rows(harmonics):
-            print(row, flush=True)
-        return
-    print("| orbit | method | converged | amplitude error | period error | ms per orbit | "
-          "ratio |")
-    print("|---|---|---|---|---|---|---|")
-    for eps in (float(e) for e in args.eps.split(",")):
-        for row in rows(eps, [int(h) for h in args.harmonics.split(",")]):
-            print(row, flush=True)
+        _table(["H", "unknowns", "assembled, ms per ring", "jax.jacfwd, ms per ring", "ratio",
+                "largest difference"], jacobian_rows(harmonics))
+    elif args.coulomb:
+        _table(["case", "exact amplitude", "stops", *(f"error at H = {h}" for h in harmonics)],
+               coulomb_rows(harmonics))
+    elif args.ring:
+        _table(orbit_columns, ring_rows(harmonics))
+    else:
+        _table(orbit_columns, (row for eps in (float(e) for e in args.eps.split(","))
+                               for row in rows(eps, harmonics)))
 
+
+def _table(columns: list[str], rows) -> None:
+    """A Markdown table: its header, then each row as it is computed."""
+    print("| " + " | ".join(columns) + " |")
+    print("|---" * len(columns) + "|")
+    for row in rows:
+        print(row, flush=True)
 
 if __name__ == "__main__":
     main()
