@@ -3,8 +3,10 @@ the mistuning strength, with Whitehead's bound."""
 
 import numpy as np
 
+from .canvas import panel_figure
 
-def plot_magnification(ds):
+
+def plot_magnification(ds, fig=None):
     """Two panels from `magnification_study`'s Dataset `ds`: (a) the mean, the 95th
     percentile and the largest magnification over the converged draws against
     sigma / eta_c, one colour per friction coefficient, with Whitehead's bound
@@ -12,11 +14,14 @@ def plot_magnification(ds):
     strength of the largest mean (the linear ring's where it was run), one
     histogram per friction coefficient.
 
-    **Returns:** the matplotlib Figure.
+    Draws on `fig` (a Figure or a SubFigure) when given, on a new figure otherwise.
+
+    **Returns:** the Figure (or SubFigure) drawn on.
     """
     import matplotlib.pyplot as plt
 
-    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    fig = panel_figure(fig, (11, 4.2))
+    a, b = fig.subplots(1, 2)
     ratio = ds["sigma_over_eta_c"].values
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     means = []
