@@ -137,6 +137,7 @@ from ._studies.work_precision import work_precision as work_precision
 from ._studies.response import frequency_response as frequency_response
 from ._studies.magnification import magnification_gradient as magnification_gradient
 from ._studies.magnification import magnification_study as magnification_study
+from ._studies.localized_ranges import localized_ranges as localized_ranges
 from ._studies.basin.basin import basin_stability as basin_stability
 from ._studies.basin.sampling import Box as Box, sample_states as sample_states
 from ._studies.basin.classes import wilson_interval as wilson_interval
@@ -186,6 +187,7 @@ from ._plots.dynamics import (
 from ._plots.sweep import plot_bifurcation_diagram as plot_bifurcation_diagram
 from ._plots.response import plot_frequency_response as plot_frequency_response
 from ._plots.magnification import plot_magnification as plot_magnification
+from ._plots.localized_ranges import plot_localized_ranges as plot_localized_ranges
 from ._plots.bifurcation import (
     plot_limit_cycle_branch as plot_limit_cycle_branch,
     plot_bistable_region as plot_bistable_region,

@@ -49,6 +49,7 @@ STUDIES = {
     "identify": [("jaxchain._studies.identification.fit", "_stage")],
     "response": [("jaxchain._cli.response", "frequency_response")],
     "magnification": [("jaxchain._cli.magnification", "magnification_study")],
+    "localized-ranges": [("jaxchain._studies.localized_ranges", "branch_range")],
 }
 CLUSTER = ("jaxchain._engine.cluster", "connect")
 
@@ -142,6 +143,7 @@ REFUSED = [
     (["response", "--force", "0.1,0.8", "--to", "1.2", "--harmonics", "4",
       "--time-samples", "8"], "time_samples"),                   # HarmonicBalance
     (["magnification", "--harmonics", "4", "--time-samples", "8"], "time_samples"),
+    (["localized-ranges", "--site", "20"], "site"),              # localized_ranges
 ]
 
 

@@ -51,13 +51,14 @@ ARGV = {"localized": ["localized"], "sweep": ["sweep"], "figure": ["figure", "4"
         "boundaries": ["boundaries"], "stress": ["stress"], "basin": ["basin"],
         "snake": ["snake"], "mistuning": ["mistuning"], "identify": ["identify", EXAMPLE_RECORD],
         "response": ["response", "--force", "0.1,0.8", "--to", "1.2"],
-        "magnification": ["magnification"]}
+        "magnification": ["magnification"], "localized-ranges": ["localized-ranges"]}
 FIRST_OUTPUT = {"localized": "localized_vd1.5.nc", "sweep": "sweep.zarr",
                 "figure": "figure4.nc", "crosscheck": "crosscheck.nc",
                 "work-precision": "work_precision.csv", "boundaries": "boundaries.json",
                 "stress": "stress.csv", "basin": "basin.nc", "snake": "snake.json",
                 "mistuning": "mistuning.json", "identify": "identified_chain.toml",
-                "response": "response.nc", "magnification": "magnification.nc"}
+                "response": "response.nc", "magnification": "magnification.nc",
+                "localized-ranges": "localized_ranges.nc"}
 
 #: The --vd grammar's metavar, of the commands that run a list of belt speeds and of
 #: those that start from one.
@@ -74,7 +75,7 @@ AT_REST = {"response": "belt speeds must be finite and >= 0 (0: the belt at rest
                        "'1.5,-1'"}
 #: The commands that integrate only at their orbit method's own tolerances
 #: (`for_orbits`), and so take no solver options.
-ORBITS_ONLY = ("response", "magnification")
+ORBITS_ONLY = ("response", "magnification", "localized-ranges")
 
 
 def _usage_error(argv: list[str], capsys) -> str:
@@ -88,7 +89,7 @@ def _usage_error(argv: list[str], capsys) -> str:
 
 def test_every_command_is_covered():
     assert set(ARGV) == set(FIRST_OUTPUT) == set(COMMANDS)
-    assert "server" in ALL_COMMANDS and len(COMMANDS) == 13
+    assert "server" in ALL_COMMANDS and len(COMMANDS) == 14
 
 
 @pytest.mark.parametrize("command", COMMANDS)

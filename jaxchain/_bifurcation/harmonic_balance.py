@@ -386,9 +386,11 @@ def _assembled_residual(method: HarmonicBalance, u, params: ChainParams):
 
 @_assembled_residual.def_jvp
 def _assembled_residual_jvp(primals, tangents):
-    """The residual's derivative in u by its assembled `jacobian` (one matrix for all
-    the directions that LU's materialisation asks for), in the method's and the
-    chain's parameters by forward mode through the residual."""
+    """The residual's derivative in u by its assembled `jacobian`, in the method's
+    and the chain's parameters by their Jacobians (forward mode through the
+    residual, one pass per element of each moved parameter: a few), each then
+    applied to the tangent: one matrix for all the directions that LU's
+    materialisation asks for (a continued parameter's column among them)."""
     method, u, params = primals
     t_method, t_u, t_params = tangents
     r = method._balance(u, params)
@@ -397,17 +399,19 @@ def _assembled_residual_jvp(primals, tangents):
         t_r = t_r + method.jacobian(u, params) @ t_u
     leaves, structure = jax.tree_util.tree_flatten((method, params))
     t_leaves = structure.flatten_up_to((t_method, t_params))
-    moved = [i for i, t in enumerate(t_leaves) if t is not None]
-    if moved:
-        def balance(*values):
+    for i, t in enumerate(t_leaves):
+        if t is None:
+            continue
+
+        def balance(value, i=i):
             changed = list(leaves)
-            for i, value in zip(moved, values):
-                changed[i] = value
+            changed[i] = value
             m, p = jax.tree_util.tree_unflatten(structure, changed)
             return m._balance(u, p)
 
-        t_r = t_r + jax.jvp(balance, [leaves[i] for i in moved],
-                            [t_leaves[i] for i in moved])[1]
+        leaf = jnp.asarray(leaves[i])
+        column = jax.jacfwd(balance)(leaf)  # (n,) + the leaf's shape
+        t_r = t_r + jnp.tensordot(column, t, axes=leaf.ndim)
     return r, t_r
 
 

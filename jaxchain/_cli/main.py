@@ -19,7 +19,7 @@ from .common import (Parser, RunsFailed, UsageError, finish_prefetch, one_line,
 #: The subcommands, each a module of this package with `add_parser(sub)`.
 COMMANDS = ("localized", "sweep", "figure", "crosscheck", "work-precision", "boundaries",
             "stress", "basin", "snake", "mistuning", "identify", "response", "magnification",
-            "server")
+            "localized-ranges", "server")
 
 
 def build_parser(commands=COMMANDS) -> Parser:

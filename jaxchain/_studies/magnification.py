@@ -304,21 +304,27 @@ def _part(chain: ChainParams, sigma: float, draws: int, frequencies, method, lan
     return part
 
 
-def _peaks_in_lanes(chains: ChainParams, method, frequencies, lanes: int, bar) -> Peaks:
-    """`response_peaks` of the lanes of `chains` in groups of equal size of at most
-    `lanes` (the last padded with copies of its first, so that every group runs one
-    program)."""
-    total = np.shape(chains.forcing.frequency)[0]
+def in_groups(chains: ChainParams, total: int, lanes: int, compute, bar) -> dict:
+    """`compute(group)`, a dict of arrays over a group's lanes, for the `total` lanes
+    of `chains` (lane 0 the tuned chain, `mistuned_lanes`) in groups of equal size of
+    at most `lanes` (the last padded with copies of its first, so that every group
+    runs one program), concatenated; `bar` advanced by each group's draws."""
     lanes = -(-total // -(-total // lanes))  # groups of equal size, none larger than asked
     parts = []
     for start in range(0, total, lanes):
         index = np.arange(start, min(start + lanes, total))
         padded = np.concatenate([index, np.full(lanes - index.size, index[0])])
-        group = jax.tree_util.tree_map(lambda a: a[padded], chains)
-        peaks = response_peaks(group, method, frequencies)
-        parts.append(jax.tree_util.tree_map(lambda a: a[:index.size], dataclasses.asdict(peaks)))
+        out = compute(jax.tree_util.tree_map(lambda a: a[padded], chains))
+        parts.append({k: np.asarray(v)[:index.size] for k, v in out.items()})
         bar.update(index.size - (start == 0))
-    return Peaks(**{k: np.concatenate([p[k] for p in parts]) for k in parts[0]})
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def _peaks_in_lanes(chains: ChainParams, method, frequencies, lanes: int, bar) -> Peaks:
+    """`response_peaks` of the lanes of `chains` in groups (`in_groups`)."""
+    total = np.shape(chains.forcing.frequency)[0]
+    return Peaks(**in_groups(chains, total, lanes, lambda group: dataclasses.asdict(
+        response_peaks(group, method, frequencies)), bar))
 
 
 def magnification_gradient(params: ChainParams, sigma: float, draws: int, frequencies,
