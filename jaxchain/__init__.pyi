@@ -137,7 +137,9 @@ from ._studies.work_precision import work_precision as work_precision
 from ._studies.response import frequency_response as frequency_response
 from ._studies.magnification import magnification_gradient as magnification_gradient
 from ._studies.magnification import magnification_study as magnification_study
-from ._studies.localized_ranges import localized_ranges as localized_ranges
+from ._studies.localized_ranges import (
+    localized_ranges as localized_ranges, shooting_ranges as shooting_ranges,
+)
 from ._studies.basin.basin import basin_stability as basin_stability
 from ._studies.basin.sampling import Box as Box, sample_states as sample_states
 from ._studies.basin.classes import wilson_interval as wilson_interval

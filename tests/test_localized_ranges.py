@@ -34,15 +34,13 @@ def test_the_draws_procedure_agrees_with_the_driver_and_with_shooting(tmp_path):
     multipliers and of the fold on the same harmonic-balance branch, to 1e-4; a
     mistuned draw's range against shooting's (the independent orbit method, the
     same driver), to 5e-3 (acceptance: H = 16 resolves the ends to that)."""
-    from jaxchain._studies.localized_ranges import shooting_ranges
-
     sigma = RING.eta_c
     ds = jc.localized_ranges(RING, [sigma], 2, HB, lanes=3, store=tmp_path)
     assert ds.attrs["tuned_low_kind"] == "Neimark-Sacker"
     assert ds.attrs["tuned_high_kind"] == "fold"
     assert abs(ds.attrs["tuned_low_lanes"] - ds.attrs["tuned_low"]) < 1e-4
     assert abs(ds.attrs["tuned_high_lanes"] - ds.attrs["tuned_high"]) < 1e-4
-    (shot,) = shooting_ranges(RING, sigma, [1], eps=1e-2)
+    (shot,) = jc.shooting_ranges(RING, sigma, [1], eps=1e-2)
     part = ds.sel(sigma=sigma, draw=1)
     assert bool(part["found"])
     assert abs(float(part["low"]) - shot["low"]) < 5e-3

@@ -52,19 +52,19 @@ TUNED_CONTINUATION = ContinuationOptions(ds=0.01, ds_max=0.05, p_min=1.0, p_max=
                                          max_points=80)
 #: The arclength step of each draw's march from the start to its two ends (the
 #: norm of the harmonic-balance unknowns and v_d together), and the steps' budget.
-STEP = 0.05
-MAX_STEPS = 60
+STEP = 0.08
+MAX_STEPS = 40
 #: Regula falsi steps of an end met as a multiplier leaving the unit circle.
-REFINEMENTS = 5
+REFINEMENTS = 4
 #: Bisections of an end met as a fold's corner, within FOLD_WIDTH in v_d past the
-#: last orbit before it: a resolution of FOLD_WIDTH / 2^BISECTIONS.
+#: last orbit before it (a resolution of FOLD_WIDTH / 2^BISECTIONS).
 BISECTIONS = 10
-FOLD_WIDTH = 0.02
-#: The multipliers' integration tolerances (rtol, atol): a sign of |mu| - 1 needs
-#: less than shooting's 1e-10.
-MULTIPLIER_TOLERANCES = (1e-8, 1e-10)
+FOLD_WIDTH = 0.03
+#: The multipliers' integration tolerances (rtol, atol): the sign of |mu| - 1 needs
+#: far less than shooting's 1e-10.
+MULTIPLIER_TOLERANCES = (1e-6, 1e-8)
 #: A step shortened to this fraction of the step without passing stops its lane.
-SHORTEST = 16
+SHORTEST = 8
 #: The chord method's iteration budget per crossing.
 CHORD_STEPS = 30
 #: A correction that moves the orbit further than this has jumped to another branch.
@@ -88,12 +88,15 @@ class BranchRange:
 
 
 def branch_range(params: ChainParams, method, *, site: int = 0,
-                 options: ContinuationOptions = TUNED_CONTINUATION) -> BranchRange:
+                 options: ContinuationOptions = TUNED_CONTINUATION, store=None
+                 ) -> BranchRange:
     """The one-site state at oscillator `site` of the chain `params` (found by
     simulating eq. (8) and shooting at `params.v_d`, `localized_orbit`, on the
     smoothed model at the method's eps), moved to `method` (a `Shooting` or a
     `HarmonicBalance`), its branch followed both ways by `follow_branch`, and the
     stable segment through the start with the bifurcations located at its ends.
+    `store`: a netCDF file where the branch is kept and read back for equal
+    arguments (`follow_branch`).
 
     **Raises:** `RuntimeError` where the state is not found at `params.v_d`, or is
     not stable there, or its stable segment has an end without a located
@@ -101,14 +104,13 @@ def branch_range(params: ChainParams, method, *, site: int = 0,
     from .._engine.engines import Smoothed
     from .mistuning.edges import localized_orbit
 
-    eps = method.eps if isinstance(method, HarmonicBalance) else method.engine.eps
-    shot, _ = localized_orbit(params, site, engine=Smoothed(eps=eps))
+    shot, _ = localized_orbit(params, site, engine=Smoothed(eps=method.engine.eps))
     if shot is None:
         raise RuntimeError(f"no periodic one-site state at oscillator {site} at v_d "
                            f"{float(params.v_d):g}: start from a v_d inside its range")
     method = method.with_phase_oscillator(site)
     orbit = periodic_orbit(shot.params, shot, method)
-    branch = follow_branch(orbit, method, options)
+    branch = follow_branch(orbit, method, options, store=store)
     start = int(np.argmin(np.abs(branch.p - float(params.v_d))))
     stable = branch.stable
     if not stable[start]:
@@ -265,10 +267,10 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
     a, b, ga, gb = z.copy(), z.copy(), g.copy(), g.copy()
     for _ in range(max_steps):
         predicted = z + h[:, None] * t
+        active = ok & ~done & ~stuck
         z_new, converged = corrected(predicted, t)
         # a correction far from its prediction jumped to another branch: a failure
         converged = converged & (np.linalg.norm(z_new - predicted, axis=1) <= h)
-        active = ok & ~done & ~stuck
         h = np.where(active & ~converged, h / 2, h)  # a failed step is retried shorter
         stuck |= active & (h < step / SHORTEST)
         # a failed correction's iterate may be far from any orbit, where the
@@ -282,7 +284,8 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
         done |= crossed
         moves &= ~crossed
         moved = z_new - z
-        t = np.where(moves[:, None], moved / np.linalg.norm(moved, axis=1, keepdims=True), t)
+        length = np.linalg.norm(moved, axis=1, keepdims=True)
+        t = np.where(moves[:, None], moved / np.where(length > 0, length, 1.0), t)
         z, g = np.where(moves[:, None], z_new, z), np.where(moves, g_new, g)
         h = np.where(moves, np.minimum(1.5 * h, step), h)
         if not np.any(ok & ~done & ~stuck):
@@ -292,7 +295,8 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
     normal = (b0 - a0) / np.where(found, np.linalg.norm(b0 - a0, axis=1), 1.0)[:, None]
     lo, hi, side = np.zeros(lanes), np.ones(lanes), np.zeros(lanes)
     for _ in range(refinements):
-        w = np.where(found, lo - ga * (hi - lo) / (gb - ga), 0.0)  # the secant root
+        span = np.where(found, gb - ga, 1.0)
+        w = np.where(found, lo - ga * (hi - lo) / span, 0.0)  # the secant root
         zw, converged = corrected(a0 + w[:, None] * (b0 - a0), normal)
         found = found & converged
         zw = np.where(found[:, None], zw, a)
@@ -378,6 +382,8 @@ def _ends(d: _Draws, z_start: np.ndarray, tangent: np.ndarray, v0: float) -> dic
             end, found = np.where(at_fold, fold, end), found | at_fold
             kind = np.where(at_fold, KINDS[0], kind)
         out[name], out[f"{name}_kind"] = np.where(found & ok, end, np.nan), kind
+        if os.environ.get("LRDEBUG"):
+            print("TIMING", name, _t.time() - _t0, flush=True)
         out["found"] = out["found"] & found
     return out
 
@@ -436,7 +442,10 @@ def localized_ranges(params: ChainParams, sigmas, draws: int, method: HarmonicBa
     _checked(params, sigmas, draws, lanes, site)
     began = time.perf_counter()
     method = method.with_phase_oscillator(site)
-    tuned = branch_range(params, method, site=site)
+    if store is not None:
+        Path(store).mkdir(parents=True, exist_ok=True)
+    tuned = branch_range(params, method, site=site,
+                         store=None if store is None else Path(store) / "tuned_branch.nc")
     bar = tqdm(total=len(sigmas) * draws, disable=not progress, unit="draw")
     parts = [_part(params, float(sigma), draws, method, tuned, site, lanes, bar, store)
              for sigma in sigmas]
@@ -503,11 +512,20 @@ def _part(params: ChainParams, sigma: float, draws: int, method: HarmonicBalance
 
 def shooting_ranges(params: ChainParams, sigma: float, draws, *, eps: float, site: int = 0
                     ) -> list[dict]:
-    """The stable ranges of the given draws (indices into `mistuned_lanes`'s draws,
-    0-based) at strength sigma by shooting on the smoothed model at `eps` and the
-    driver (`branch_range` with `Shooting`): the independent check of
-    `localized_ranges`. Each a dict: draw, low, low_kind, high, high_kind (None
-    where the branch does not give its range: `error`)."""
+    """The stable ranges of the given draws at strength sigma by shooting on the
+    smoothed model at `eps` (Tsit5 at 1e-10/1e-12, `for_orbits`) and the driver
+    (`branch_range` with `Shooting`): the independent check of `localized_ranges`,
+    one branch at a time (a minute or more each on the ring of 20).
+
+    **Arguments:** `params`, `sigma`, `site` as `localized_ranges`'s; `draws`: the
+    draws' indices (0-based: draw d is `mistuned_lanes`'s lane d + 1); `eps`: the
+    smoothing velocity (> 0, dimensionless).
+
+    **Returns:** one dict per draw: `draw`, `low`, `low_kind`, `high`, `high_kind`
+    (dimensionless v_d; None, with `error`, where the branch gives no range).
+
+    **Raises:** `ValidationError` for a bad eps or sigma.
+    """
     from .._bifurcation.shooting import Shooting
     from .._engine.engines import Smoothed
 
