@@ -382,8 +382,6 @@ def _ends(d: _Draws, z_start: np.ndarray, tangent: np.ndarray, v0: float) -> dic
             end, found = np.where(at_fold, fold, end), found | at_fold
             kind = np.where(at_fold, KINDS[0], kind)
         out[name], out[f"{name}_kind"] = np.where(found & ok, end, np.nan), kind
-        if os.environ.get("LRDEBUG"):
-            print("TIMING", name, _t.time() - _t0, flush=True)
         out["found"] = out["found"] & found
     return out
 
