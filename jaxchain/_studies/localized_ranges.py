@@ -60,6 +60,9 @@ REFINEMENTS = 4
 #: last orbit before it (a resolution of FOLD_WIDTH / 2^BISECTIONS).
 BISECTIONS = 10
 FOLD_WIDTH = 0.03
+#: The version of the draws' procedure, in each stored part's key: a part computed
+#: by another is computed again.
+PROCEDURE = 2
 #: The multipliers' integration tolerances (rtol, atol): the sign of |mu| - 1 needs
 #: far less than shooting's 1e-10.
 MULTIPLIER_TOLERANCES = (1e-6, 1e-8)
@@ -294,22 +297,30 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
     a0, b0 = a.copy(), b.copy()  # the segment, fixed: trial points a0 + w (b0 - a0)
     normal = (b0 - a0) / np.where(found, np.linalg.norm(b0 - a0, axis=1), 1.0)[:, None]
     lo, hi, side = np.zeros(lanes), np.ones(lanes), np.zeros(lanes)
+    refining = found.copy()
     for _ in range(refinements):
-        span = np.where(found, gb - ga, 1.0)
-        w = np.where(found, lo - ga * (hi - lo) / span, 0.0)  # the secant root
-        zw, converged = corrected(a0 + w[:, None] * (b0 - a0), normal)
-        found = found & converged
-        zw = np.where(found[:, None], zw, a)
+        span = np.where(refining, gb - ga, 1.0)
+        w = np.where(refining, lo - ga * (hi - lo) / span, 0.0)  # the secant root
+        trial = a0 + w[:, None] * (b0 - a0)
+        zw, converged = corrected(trial, normal)
+        if np.any(refining & ~converged):  # the chord's reach is short near a fold
+            z_newton, by_newton = d.corrected(trial, trial, normal, newton=True)
+            zw = np.where((~converged & by_newton)[:, None], z_newton, zw)
+            converged = converged | by_newton
+        # a lane whose trial fails keeps its bracket: its end is interpolated there
+        refining = refining & converged
+        zw = np.where(refining[:, None], zw, a)
         gw = d.g(zw)
         stable = gw <= 0
         # Illinois: the end kept twice in a row has its value halved
-        gb = np.where(stable & (side > 0), gb / 2, gb)
-        ga = np.where(~stable & (side < 0), ga / 2, ga)
-        lo, ga, a = (np.where(stable, w, lo), np.where(stable, gw, ga),
-                     np.where(stable[:, None], zw, a))
-        hi, gb, b = (np.where(stable, hi, w), np.where(stable, gb, gw),
-                     np.where(stable[:, None], b, zw))
-        side = np.where(stable, 1.0, -1.0)
+        gb = np.where(refining & stable & (side > 0), gb / 2, gb)
+        ga = np.where(refining & ~stable & (side < 0), ga / 2, ga)
+        upper, lower = refining & stable, refining & ~stable
+        lo, ga, a = (np.where(upper, w, lo), np.where(upper, gw, ga),
+                     np.where(upper[:, None], zw, a))
+        hi, gb, b = (np.where(lower, w, hi), np.where(lower, gw, gb),
+                     np.where(lower[:, None], zw, b))
+        side = np.where(refining, np.where(stable, 1.0, -1.0), side)
     w = ga / (ga - gb)  # the root between the last stable and unstable trials
     end = a[:, -1] + w * (b[:, -1] - a[:, -1])
     multiplier = np.where(found, d.critical(np.where(found[:, None], b, z0)), np.nan)
@@ -479,7 +490,7 @@ def _part(params: ChainParams, sigma: float, draws: int, method: HarmonicBalance
     settings = {"chain": chain_record(params), "method": method_settings(method),
                 "sigma": sigma, "draws": draws, "site": site,
                 "march": [STEP, MAX_STEPS, REFINEMENTS, BISECTIONS, FOLD_WIDTH,
-                          *MULTIPLIER_TOLERANCES]}
+                          *MULTIPLIER_TOLERANCES], "procedure": PROCEDURE}
     path = None
     if store is not None:
         path = Path(store) / f"sigma{sigma:.6g}.nc"
