@@ -321,7 +321,7 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
         hi, gb, b = (np.where(lower, w, hi), np.where(lower, gw, gb),
                      np.where(lower[:, None], zw, b))
         side = np.where(refining, np.where(stable, 1.0, -1.0), side)
-    w = ga / (ga - gb)  # the root between the last stable and unstable trials
+    w = ga / np.where(found, ga - gb, -1.0)  # the root between the last stable and unstable
     end = a[:, -1] + w * (b[:, -1] - a[:, -1])
     multiplier = np.where(found, d.critical(np.where(found[:, None], b, z0)), np.nan)
     return (np.where(found, end, np.nan), found, multiplier,
