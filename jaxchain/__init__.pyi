@@ -137,6 +137,10 @@ from ._studies.work_precision import work_precision as work_precision
 from ._studies.response import frequency_response as frequency_response
 from ._studies.magnification import magnification_gradient as magnification_gradient
 from ._studies.magnification import magnification_study as magnification_study
+from ._studies.magnification import (
+    mistuned_lanes as mistuned_lanes, response_peaks as response_peaks,
+    whitehead_bound as whitehead_bound,
+)
 from ._studies.localized_ranges import (
     localized_ranges as localized_ranges, shooting_ranges as shooting_ranges,
 )

@@ -9,8 +9,6 @@ import pytest
 from scipy.optimize import minimize_scalar
 
 import jaxchain as jc
-from jaxchain._studies.magnification import (magnification_gradient, mistuned_lanes,
-                                             response_peaks, whitehead_bound)
 
 N, R, A, XI = 4, 1, 4e-3, 2e-3
 FREQUENCIES = np.linspace(0.96, 1.06, 81)
@@ -46,8 +44,8 @@ def analytic_peak(stiffness):
 
 @pytest.fixture(scope="module")
 def linear_peaks():
-    chains = mistuned_lanes(LINEAR, 0.01, 3)
-    return chains, response_peaks(chains, HB, FREQUENCIES)
+    chains = jc.mistuned_lanes(LINEAR, 0.01, 3)
+    return chains, jc.response_peaks(chains, HB, FREQUENCIES)
 
 
 @pytest.mark.numerics
@@ -60,7 +58,7 @@ def test_the_linear_ring_s_peaks_are_the_analytic_response_s(linear_peaks):
     for lane in range(4):
         stiffness = np.broadcast_to(np.asarray(chains.stiffness)[lane], (N,))
         assert abs(peaks.amplitude[lane] / analytic_peak(stiffness) - 1) < 1e-8
-    assert np.all(peaks.amplitude[1:] / peaks.amplitude[0] <= whitehead_bound(N))
+    assert np.all(peaks.amplitude[1:] / peaks.amplitude[0] <= jc.whitehead_bound(N))
 
 
 @pytest.mark.numerics
@@ -69,8 +67,8 @@ def test_vmapped_lanes_equal_the_lanes_run_one_at_a_time(linear_peaks):
     equal to the Newton tolerance."""
     chains, peaks = linear_peaks
     for lane in (0, 2):
-        alone = response_peaks(jax.tree_util.tree_map(lambda a: a[lane:lane + 1], chains), HB,
-                               FREQUENCIES)
+        alone = jc.response_peaks(jax.tree_util.tree_map(lambda a: a[lane:lane + 1], chains),
+                                  HB, FREQUENCIES)
         assert abs(alone.amplitude[0] / peaks.amplitude[lane] - 1) < 1e-8
         assert abs(alone.frequency[0] - peaks.frequency[lane]) < 1e-6
 
@@ -85,7 +83,7 @@ def test_the_mean_magnification_s_derivative_in_mu_against_central_differences()
     peaks again at mu (1 +- 1e-3)), within 1e-4 relative."""
     damped = jc.ChainParams(n_osc=N, xi=XI, eta_c=0.01, v_d=0.0, friction=jc.Coulomb(mu=1e-3),
                             forcing=jc.Forcing.engine_order(N, R, A, 1.0))
-    result = magnification_gradient(damped, 0.01, 3, FREQUENCIES, HB, relative_step=1e-3)
+    result = jc.magnification_gradient(damped, 0.01, 3, FREQUENCIES, HB, relative_step=1e-3)
     assert result["relative_error"] < 1e-4, result
     assert abs(result["forward"] / result["gradient"] - 1) < 1e-10, result
     assert result["gradient"] != 0
@@ -93,9 +91,9 @@ def test_the_mean_magnification_s_derivative_in_mu_against_central_differences()
 
 def test_bad_input_is_refused_by_name():
     with pytest.raises(jc.ValidationError, match="forced chain"):
-        magnification_gradient(jc.ChainParams(n_osc=N, friction=jc.Coulomb(mu=1e-3)),
+        jc.magnification_gradient(jc.ChainParams(n_osc=N, friction=jc.Coulomb(mu=1e-3)),
                                0.01, 2, FREQUENCIES, HB)
     with pytest.raises(jc.ValidationError, match="frequencies"):
-        response_peaks(mistuned_lanes(LINEAR, 0.01, 1), HB, [1.0, 0.9, 1.1])
+        jc.response_peaks(jc.mistuned_lanes(LINEAR, 0.01, 1), HB, [1.0, 0.9, 1.1])
     with pytest.raises(jc.ValidationError, match="sigmas"):
         jc.magnification_study(LINEAR, [-0.01], 2, FREQUENCIES, HB)
