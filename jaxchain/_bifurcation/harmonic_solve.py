@@ -24,8 +24,7 @@ class BlockJacobiGMRES(lx.AbstractLinearSolver):
     (this module's docstring), for unknowns laid out as `HarmonicBalance`'s: the
     coefficients (2H + 1, n_osc) flattened row by row, then the period; the last
     equation (the phase condition or the period's) joins the block of
-    `phase_oscillator`, which carries the period's column (and those of `extra`
-    trailing unknowns and equations in all).
+    `phase_oscillator`, which carries the period's column.
 
     The blocks are read from the operator itself, by 2H + 2 products with probe
     vectors (each probe sets one harmonic of every oscillator at once, and one the
@@ -39,9 +38,6 @@ class BlockJacobiGMRES(lx.AbstractLinearSolver):
         oscillator of the phase condition.
     - `rtol`, `atol`: GMRES's tolerances on the residual (lineax, max norm).
     - `restart`, `max_steps`: GMRES's restart length and iteration budget.
-    - `extra`: the unknowns after the coefficients (the period; the period and a
-        continued parameter for a continuation's bordered system), whose columns
-        and equations all join the block of `phase_oscillator`.
     """
 
     harmonics: int = eqx.field(static=True)
@@ -51,7 +47,6 @@ class BlockJacobiGMRES(lx.AbstractLinearSolver):
     atol: float = eqx.field(static=True, default=1e-12)
     restart: int = eqx.field(static=True, default=40)
     max_steps: int = eqx.field(static=True, default=400)
-    extra: int = eqx.field(static=True, default=1)
 
     def _gmres(self) -> lx.GMRES:
         return lx.GMRES(rtol=self.rtol, atol=self.atol, restart=self.restart,
@@ -61,34 +56,30 @@ class BlockJacobiGMRES(lx.AbstractLinearSolver):
         return operator, self._preconditioner(operator)
 
     def _preconditioner(self, operator) -> lx.FunctionLinearOperator:
-        m, n, p, e = 2 * self.harmonics + 1, self.n_osc, self.phase_oscillator, self.extra
-        size = m * n + e
-        probes = np.zeros((m + e, size))
+        m, n, p = 2 * self.harmonics + 1, self.n_osc, self.phase_oscillator
+        size = m * n + 1
+        probes = np.zeros((m + 1, size))
         for j in range(m):
             probes[j, j * n:(j + 1) * n] = 1.0
-        probes[m + np.arange(e), m * n + np.arange(e)] = 1.0
-        columns = jax.vmap(operator.mv)(jnp.asarray(probes))  # (m + e, size)
-        last_rows = jax.vmap(operator.transpose().mv)(jnp.asarray(probes[m:]))  # (e, size)
+        probes[m, -1] = 1.0
+        columns = jax.vmap(operator.mv)(jnp.asarray(probes))  # (m + 1, size)
+        last_row = operator.transpose().mv(jnp.zeros(size).at[-1].set(1.0))
         # block n: rows i*n + n, columns j (harmonic j of every oscillator)
         blocks = jnp.transpose(jnp.reshape(columns[:m, :m * n], (m, m, n)), (2, 1, 0))
-        # the trailing unknowns' columns and equations' rows, on each oscillator's rows
-        trailing_columns = jnp.transpose(jnp.reshape(columns[m:, :m * n], (e, m, n)),
-                                         (2, 1, 0))  # (n, m, e)
-        trailing_rows = jnp.transpose(jnp.reshape(last_rows[:, :m * n], (e, m, n)),
-                                      (2, 0, 1))  # (n, e, m)
-        corner = last_rows[:, m * n:]  # (e, e)
-        is_p = (jnp.arange(n) == p)[:, None, None]
+        period_column = jnp.reshape(columns[m, :m * n], (m, n)).T  # (n, m)
+        closing_row = jnp.reshape(last_row[:m * n], (m, n)).T  # (n, m)
+        is_p = (jnp.arange(n) == p)[:, None]
         augmented = jnp.concatenate([
-            jnp.concatenate([blocks, jnp.where(is_p, trailing_columns, 0.0)], axis=2),
-            jnp.concatenate([jnp.where(is_p, trailing_rows, 0.0),
-                             jnp.where(is_p, corner, jnp.eye(e))], axis=2)],
-            axis=1)  # (n, m + e, m + e)
+            jnp.concatenate([blocks, jnp.where(is_p, period_column, 0.0)[:, :, None]], axis=2),
+            jnp.concatenate([jnp.where(is_p, closing_row, 0.0),
+                             jnp.where(is_p[:, 0], last_row[-1], 1.0)[:, None]],
+                            axis=1)[:, None, :]], axis=1)  # (n, m + 1, m + 1)
         lu = jax.vmap(jsl.lu_factor)(augmented)
 
         def apply(z):
-            zc = jnp.reshape(z[:m * n], (m, n)).T  # (n, m)
-            rhs = jnp.concatenate([zc, jnp.where(is_p[:, :, 0], z[m * n:], 0.0)], axis=1)
-            y = jax.vmap(jsl.lu_solve)(lu, rhs)  # (n, m + e)
+            zc = jnp.reshape(z[:-1], (m, n)).T  # (n, m)
+            rhs = jnp.concatenate([zc, jnp.where(is_p[:, 0], z[-1], 0.0)[:, None]], axis=1)
+            y = jax.vmap(jsl.lu_solve)(lu, rhs)  # (n, m + 1)
             return jnp.concatenate([jnp.ravel(y[:, :m].T), y[p, m:]])
 
         return lx.FunctionLinearOperator(apply, operator.in_structure())

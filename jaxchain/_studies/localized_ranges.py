@@ -36,7 +36,6 @@ import numpy as np
 from .._bifurcation.branches import FollowedBranch, follow_branch
 from .._bifurcation.continuation import ContinuationOptions, PseudoArclength
 from .._bifurcation.harmonic_balance import HarmonicBalance
-from .._bifurcation.harmonic_solve import BlockJacobiGMRES
 from .._bifurcation.orbit_method import (critical_multiplier, deflated_multipliers,
                                           flow_direction)
 from .._bifurcation.periodic_orbit import periodic_orbit
@@ -142,18 +141,16 @@ def _crossings(method: HarmonicBalance, chains: ChainParams, predicted, base, no
     chord method (Newton's with the matrix of the first iterate kept: one
     factorization per crossing, then back-substitutions), or Newton's method where
     `newton` (near a fold, where the chord's reach is too short), on the harmonic
-    balance and
-    the hyperplane together (Keller's corrector, as `PseudoArclength`'s, to its
-    tolerance), from `predicted` moved onto the hyperplane; the matrix assembled
-    from the residual's own (`HarmonicBalance.jacobian`) with the column of v_d (one
-    forward-mode product), factored by LU or the oscillator blocks (lineax, as the
-    method's `linear_solver`). Vmapped over the lanes of `chains`, `predicted`,
-    `base`, `normal`, each shape (lanes, n + 1) with z = (u, v_d): (z, converged)."""
+    balance and the hyperplane together (Keller's corrector, as `PseudoArclength`'s,
+    to its tolerance), from `predicted` moved onto the hyperplane. The matrix is
+    assembled from the residual's own (`HarmonicBalance.jacobian`) with the column
+    of v_d (one forward-mode product) and factored by LU (lineax; on this bordered
+    matrix GMRES preconditioned by the oscillator blocks measured no faster).
+    Vmapped over the lanes of `chains`, `predicted`, `base`, `normal`, each shape
+    (lanes, n + 1) with z = (u, v_d): (z, converged)."""
     from .._physics.params import with_parameter
 
-    n_osc = predicted.shape[1] // (2 * method.harmonics + 1)
-    solver = (lx.LU() if method.linear_solver == "lu" or n_osc == 1 else
-              BlockJacobiGMRES(method.harmonics, n_osc, method.phase_oscillator, extra=2))
+    solver = lx.LU()
 
     def one(params, z0, b, t):
         def balance(u, v):
@@ -426,8 +423,9 @@ def localized_ranges(params: ChainParams, sigmas, draws: int, method: HarmonicBa
     - `sigmas`: the mistuning strengths (standard deviations of the ground
         stiffness deviations delta_n, >= 0).
     - `draws`: mistuned rings per strength (>= 1), `mistuned_lanes`.
-    - `method`: the `HarmonicBalance` of every orbit (eps, H, M; LU or oscillator
-        blocks for its linear steps); its phase condition is moved to `site`.
+    - `method`: the `HarmonicBalance` of every orbit (eps, H, M; its
+        `linear_solver` serves the tuned branch, the draws' corrector factors by
+        LU); its phase condition is moved to `site`.
     - `site`: the oscillator (0-based) on the HALC.
     - `lanes`: rings solved together (`jax.vmap`); `progress`: a progress bar.
     - `store`: a folder where each sigma's part is written as it finishes and read
