@@ -330,9 +330,9 @@ def _last_orbit(d: _Draws, z: np.ndarray, width: float, bisections: int
     """The fold beyond each lane's orbit z = (u, v_d) (NaN lanes are skipped): the
     furthest v_d to which its orbit continues, by bisection on v_d within `width`
     of it (above for width > 0, below for width < 0), each trial corrected at its
-    v_d from the last orbit found (Newton's method on the hyperplane v_d = const). A fold is where the branch stops: at a
-    sharp corner every continuation that can reach it finds it. Returns (v_d,
-    found), shape (lanes,)."""
+    v_d from the last orbit found (Newton's method on the hyperplane v_d =
+    const). A fold is where the branch stops: at a sharp corner every continuation
+    that can reach it finds it. Returns (v_d, found), shape (lanes,)."""
     lanes, n = z.shape
     normal = np.broadcast_to(np.eye(n)[-1], (lanes, n))
     found = np.all(np.isfinite(z), axis=1)
