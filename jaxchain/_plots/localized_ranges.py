@@ -39,6 +39,7 @@ def plot_localized_ranges(ds, fig=None):
     for ax, end, title in ((a, "tuned_low", "(a) lower end"), (b, "tuned_high", "(b) upper end")):
         ax.axvline(ds.attrs[end], color="k", lw=1, label="tuned ring")
         ax.set_xlabel("v_d")
+        ax.xaxis.set_major_locator(plt.MaxNLocator(5))
         ax.set_ylabel("draws")
         ax.set_title(title)
         ax.legend(fontsize=7)
