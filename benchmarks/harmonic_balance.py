@@ -77,7 +77,7 @@ def _compared(label: str, params, reference, methods: dict, repeats: int = 3) ->
 def _harmonic_methods(shooting, harmonics: list[int], eps: float, **fields) -> dict:
     methods = {"shooting": shooting}
     for h in harmonics:
-        for solver in ("blocks", "lu") if fields else ("blocks",):
+        for solver in ("blocks", "ring", "lu") if fields else ("blocks",):
             method = jc.HarmonicBalance(eps=eps, harmonics=h, linear_solver=solver, **fields)
             methods[f"H = {h} (M = {method.time_samples}), {solver}"] = method
     return methods

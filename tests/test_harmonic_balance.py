@@ -149,7 +149,7 @@ def damped_ring():
     params = jc.mistune(jc.ChainParams(n_osc=4, eta_c=0.1, v_d=0.0, friction=jc.Coulomb(0.3),
                                        forcing=forcing), 0.05, 1)
     methods = {name: jc.HarmonicBalance(eps=1e-3, harmonics=16, linear_solver=name)
-               for name in ("blocks", "lu")}
+               for name in ("blocks", "ring", "lu")}
     return params, methods
 
 
@@ -158,7 +158,8 @@ def damped_ring():
 def test_the_oscillator_blocks_solve_the_coupled_ring_as_lu_does(damped_ring):
     """GMRES preconditioned by the Jacobian's oscillator blocks (the friction force
     couples one oscillator's harmonics only; the coupling springs couple the
-    oscillators) reaches the orbit that LU of the whole Jacobian reaches, to
+    oscillators), and the block elimination over the ring's oscillators, each
+    reach the orbit that LU of the whole Jacobian reaches, to
     Newton's tolerance (1e-9, two programs), from rest; and the derivative of the
     largest amplitude in mu, through its transposed solve (reverse mode) and forward
     mode, is that of central differences to 1e-6. The amplitude is the largest of 4096 samples, piecewise
@@ -168,19 +169,20 @@ def test_the_oscillator_blocks_solve_the_coupled_ring_as_lu_does(damped_ring):
     u0 = methods["lu"].unknowns(params, np.zeros((2, 4)), 1.0)
     solved = {name: m.solve(params, u0) for name, m in methods.items()}
     assert all(bool(ok) for _, ok in solved.values())
-    np.testing.assert_allclose(solved["blocks"][0], solved["lu"][0], rtol=1e-9, atol=1e-9)
-    method = methods["blocks"]
+    for name in ("blocks", "ring"):
+        np.testing.assert_allclose(solved[name][0], solved["lu"][0], rtol=1e-9, atol=1e-9)
+        method = methods[name]
 
-    @jax.jit
-    def largest(mu):
-        p = jc.with_parameter(params, "mu", mu)
-        u, _ = method.solve(p, solved["lu"][0])
-        return jax.numpy.max(method.describe(u, p).amplitudes)
+        @jax.jit
+        def largest(mu, method=method):
+            p = jc.with_parameter(params, "mu", mu)
+            u, _ = method.solve(p, solved["lu"][0])
+            return jax.numpy.max(method.describe(u, p).amplitudes)
 
-    h = 1e-6
-    central = float((largest(0.3 + h) - largest(0.3 - h)) / (2 * h))
-    assert abs(float(jax.grad(largest)(0.3)) - central) < 1e-6 * abs(central)
-    assert abs(float(jax.jvp(largest, (0.3,), (1.0,))[1]) - central) < 1e-6 * abs(central)
+        h = 1e-6
+        central = float((largest(0.3 + h) - largest(0.3 - h)) / (2 * h))
+        assert abs(float(jax.grad(largest)(0.3)) - central) < 1e-6 * abs(central)
+        assert abs(float(jax.jvp(largest, (0.3,), (1.0,))[1]) - central) < 1e-6 * abs(central)
 
 
 @pytest.mark.numerics
@@ -209,3 +211,41 @@ def test_the_assembled_jacobian_is_the_residual_s_derivative(params):
             eps=e, harmonics=4, linear_solver="lu"), method)(u, params)))
     assert np.allclose(in_eps("residual")(1e-2), in_eps("_balance")(1e-2),
                        rtol=1e-12, atol=1e-12 * scale)
+
+
+@pytest.mark.parametrize("n_osc, harmonics, border", [(7, 3, 2), (2, 2, 1)])
+def test_the_block_elimination_over_a_ring_solves_as_dense_lu(n_osc, harmonics, border):
+    """`CyclicBlockLU` on a random matrix with a harmonic-balance Jacobian's
+    structure on a ring (dense blocks per oscillator; each coupled to its two
+    neighbours harmonic by harmonic, the ring closed; a dense border) solves it and
+    its transpose as numpy's dense solve does, to rounding."""
+    import lineax as lx
+
+    from jaxchain._bifurcation.harmonic_solve import CyclicBlockLU
+
+    rng = np.random.default_rng(3)
+    m, n = 2 * harmonics + 1, n_osc
+    size = m * n + border
+    a = np.zeros((size, size))
+    for i in range(n):
+        rows = np.arange(m) * n + i  # (harmonic, oscillator) order
+        a[np.ix_(rows, rows)] = rng.normal(size=(m, m)) + 4 * np.eye(m)
+        for j in {(i + 1) % n, (i - 1) % n} - {i}:
+            a[rows, np.arange(m) * n + j] += rng.normal(size=m)
+    a[:, m * n:] = rng.normal(size=(size, border))
+    a[m * n:, :] = rng.normal(size=(border, size))
+    b = rng.normal(size=size)
+    operator = lx.MatrixLinearOperator(jax.numpy.asarray(a))
+    solver = CyclicBlockLU(harmonics, n_osc, border)
+    x = lx.linear_solve(operator, jax.numpy.asarray(b), solver).value
+    xt = lx.linear_solve(operator.transpose(), jax.numpy.asarray(b), solver).value
+    scale = np.linalg.cond(a) * 1e-15
+    np.testing.assert_allclose(x, np.linalg.solve(a, b), atol=scale * np.abs(x).max())
+    np.testing.assert_allclose(xt, np.linalg.solve(a.T, b), atol=scale * np.abs(xt).max())
+
+
+def test_the_ring_elimination_refuses_a_lattice():
+    params = jc.ChainParams(graph=jc.Graph.lattice(3, 3), v_d=1.5)
+    method = jc.HarmonicBalance(eps=1e-2, harmonics=2, linear_solver="ring")
+    with pytest.raises(jc.ValidationError, match="linear_solver 'ring'"):
+        method.solve(params, method.unknowns(params, np.ones((2, 9)), 6.3))

@@ -268,7 +268,8 @@ class AbstractOrbitMethod(eqx.Module):
 
 
 def damped_newton(method: AbstractOrbitMethod, params: ChainParams, u0, max_steps: int,
-                  linear_solver: lx.AbstractLinearSolver = lx.AutoLinearSolver(well_posed=None)):
+                  linear_solver: lx.AbstractLinearSolver = lx.AutoLinearSolver(well_posed=None),
+                  adjoint_solver: lx.AbstractLinearSolver | None = None):
     """(The unknowns; whether it converged) by Newton steps on `method.residual`
     (optimistix's Gauss-Newton with the Newton descent: the same linear solve on a
     square system) shortened by backtracking until the squared residual decreases
@@ -276,8 +277,10 @@ def damped_newton(method: AbstractOrbitMethod, params: ChainParams, u0, max_step
     Optimization and Nonlinear Equations* (1996), Sect. 6.3): full Newton steps near
     the root, short ones where a full step would leave its neighbourhood.
     Traceable; differentiable by the implicit function theorem. `linear_solver`
-    (lineax) solves each step's linear system and the derivatives' (LU by
-    default)."""
+    (lineax) solves each step's linear system (LU by default), `adjoint_solver`
+    the derivatives' (`linear_solver` by default): optimistix differentiates a
+    least-squares solution through the Jacobian of its optimality condition,
+    J^T J and the residual's curvature, which has not J's sparsity."""
     tol = method.newton_tol
     solver = eqx.tree_at(lambda s: s.search,
                          optx.GaussNewton(rtol=tol, atol=tol, norm=optx.max_norm,
@@ -285,7 +288,9 @@ def damped_newton(method: AbstractOrbitMethod, params: ChainParams, u0, max_step
                          optx.BacktrackingArmijo())
     sol = optx.least_squares(lambda u, p: method.residual(u, p), solver, u0, params,
                              max_steps=max_steps, throw=False,
-                             adjoint=optx.ImplicitAdjoint(linear_solver=linear_solver))
+                             adjoint=optx.ImplicitAdjoint(linear_solver=linear_solver
+                                                          if adjoint_solver is None
+                                                          else adjoint_solver))
     # converged also where the residual vanishes to the tolerance but the search,
     # unable to lower a residual at rounding level, rejected every later step
     # (optimistix then runs out of steps without testing the termination)
