@@ -213,35 +213,25 @@ def test_the_assembled_jacobian_is_the_residual_s_derivative(params):
                        rtol=1e-12, atol=1e-12 * scale)
 
 
-@pytest.mark.parametrize("n_osc, harmonics, border", [(7, 3, 2), (2, 2, 1)])
-def test_the_block_elimination_over_a_ring_solves_as_dense_lu(n_osc, harmonics, border):
-    """`CyclicBlockLU` on a random matrix with a harmonic-balance Jacobian's
-    structure on a ring (dense blocks per oscillator; each coupled to its two
-    neighbours harmonic by harmonic, the ring closed; a dense border) solves it and
-    its transpose as numpy's dense solve does, to rounding."""
-    import lineax as lx
-
-    from jaxchain._bifurcation.harmonic_solve import CyclicBlockLU
-
-    rng = np.random.default_rng(3)
-    m, n = 2 * harmonics + 1, n_osc
-    size = m * n + border
-    a = np.zeros((size, size))
-    for i in range(n):
-        rows = np.arange(m) * n + i  # (harmonic, oscillator) order
-        a[np.ix_(rows, rows)] = rng.normal(size=(m, m)) + 4 * np.eye(m)
-        for j in {(i + 1) % n, (i - 1) % n} - {i}:
-            a[rows, np.arange(m) * n + j] += rng.normal(size=m)
-    a[:, m * n:] = rng.normal(size=(size, border))
-    a[m * n:, :] = rng.normal(size=(border, size))
-    b = rng.normal(size=size)
-    operator = lx.MatrixLinearOperator(jax.numpy.asarray(a))
-    solver = CyclicBlockLU(harmonics, n_osc, border)
-    x = lx.linear_solve(operator, jax.numpy.asarray(b), solver).value
-    xt = lx.linear_solve(operator.transpose(), jax.numpy.asarray(b), solver).value
-    scale = np.linalg.cond(a) * 1e-15
-    np.testing.assert_allclose(x, np.linalg.solve(a, b), atol=scale * np.abs(x).max())
-    np.testing.assert_allclose(xt, np.linalg.solve(a.T, b), atol=scale * np.abs(xt).max())
+@pytest.mark.parametrize("n_osc, boundary", [(7, "ring"), (5, "free"), (2, "ring")])
+def test_the_block_elimination_over_a_ring_solves_as_lu(n_osc, boundary):
+    """Harmonic balance with the block elimination over the oscillators
+    (`linear_solver="ring"`) takes Newton's steps exactly: from LU's orbit (a
+    forced, mistuned ring or line of friction dampers, H = 3) moved by 1e-3, four
+    steps reach LU's orbit to Newton's tolerance (1e-9, two programs), as
+    quadratic convergence does (1e-3, 1e-6, 1e-12); a solve wrong by a fixed
+    fraction would converge linearly, and fail within four."""
+    forcing = jc.Forcing.engine_order(n_osc, 1, 1.0, 1.05)
+    params = jc.mistune(jc.ChainParams(n_osc=n_osc, eta_c=0.1, v_d=0.0, boundary=boundary,
+                                       friction=jc.Coulomb(0.3), forcing=forcing), 0.05, 2)
+    lu = jc.HarmonicBalance(eps=1e-2, harmonics=3, linear_solver="lu")
+    u, ok = lu.solve(params, lu.unknowns(params, np.zeros((2, n_osc)), 1.0))
+    assert bool(ok)
+    moved = np.asarray(u) * (1 + 1e-3 * np.random.default_rng(5).standard_normal(u.shape))
+    ring = jc.HarmonicBalance(eps=1e-2, harmonics=3, linear_solver="ring", newton_steps=4)
+    u_ring, ok = ring.solve(params, moved)
+    assert bool(ok)
+    np.testing.assert_allclose(u_ring, u, rtol=1e-9, atol=1e-9)
 
 
 def test_the_ring_elimination_refuses_a_lattice():
