@@ -68,7 +68,7 @@ class JacobianBlocks(NamedTuple):
         damping and friction (dense in the harmonics);
     - `stiffness`, `damping`: the blocks P S and omega P S' of a displacement's and
         a velocity's term, shape (m, m): oscillator i's block of j != i is
-        `coupling(i, j)`;
+        -(stiffness E_x[i, j] + damping E_v[i, j]);
     - `linear`: the field's linear Jacobian E, shape (2 n_osc, 2 n_osc);
     - `period_column`, `closing_row`: the period's column and the closing
         condition's row of the whole Jacobian, shape (n_osc m + 1,).
@@ -80,13 +80,6 @@ class JacobianBlocks(NamedTuple):
     linear: Float[Array, "2n 2n"]
     period_column: Float[Array, " size"]
     closing_row: Float[Array, " size"]
-
-    def coupling(self, i, j) -> Float[Array, "k m m"]:
-        """The blocks of oscillators i (rows) and j (columns), i != j, index arrays
-        of one length k."""
-        n = self.own.shape[0]
-        return -(self.stiffness[None] * self.linear[n + i, j][:, None, None]
-                 + self.damping[None] * self.linear[n + i, n + j][:, None, None])
 
 
 class HarmonicBalance(AbstractOrbitMethod):
