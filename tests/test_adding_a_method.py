@@ -104,6 +104,7 @@ def test_a_new_method_runs_through_periodic_orbit():
     np.testing.assert_allclose(back, orbit.y0, atol=1e-12)
 
 
+@pytest.mark.study
 def test_a_new_method_runs_through_continuation():
     params = jc.ChainParams(n_osc=4, eta_c=0.1)
     method = LinearNormalMode(mode=3, amplitude=0.5)  # the anti-phase mode of the ring

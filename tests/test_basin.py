@@ -18,6 +18,7 @@ ONE = jc.ChainParams(n_osc=1)
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_single_oscillator_stick_slip_is_certain_below_hopf_and_absent_above_fold():
     """Below the Hopf point steady sliding is unstable, so every sample ends in
     stick-slip; above the fold (the stick-slip existence limit) none does; between
@@ -75,6 +76,7 @@ def test_clusters_count_groups_across_the_ring_closure():
     assert jc.Graph.line(6).clusters(on).tolist() == [2, 1, 0, 1]  # basin's n_clusters
 
 
+@pytest.mark.study
 def test_same_key_same_result_and_a_killed_run_resumes_to_the_same(tmp_path, monkeypatch):
     params = jc.ChainParams(n_osc=3)
     kwargs = dict(options=SHORT, n_check=2, batch_size=4, progress=False)
@@ -100,6 +102,7 @@ def test_same_key_same_result_and_a_killed_run_resumes_to_the_same(tmp_path, mon
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_basin_command_json_and_figures(tmp_path, capsys):
     argv = ["basin", "--n-osc", "1", "--vd", "1.0,2.1", "--samples", "12", "--t-end", "300",
             "--transient", "200", "--out", str(tmp_path), "--json", "--no-progress"]

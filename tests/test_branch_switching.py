@@ -22,6 +22,7 @@ RING, SHOOTING = RING_OF_TWO, SHOOTING_OF_TWO
 # is tests/conftest.py's: the tests of the snake's switching share it (test_snake.py).
 
 
+@pytest.mark.study
 def test_switched_branch_breaks_the_symmetry_and_converges_under_refinement(branch_point):
     """Off the branch point by 0.02 and by 0.01 in arclength: each switched branch
     has unequal amplitudes, their difference growing away from the branch point

@@ -147,6 +147,7 @@ def test_hopf_point_of_a_mistuned_open_chain_with_eq1_is_the_closed_form():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_stribeck_stick_slip_cycle_against_the_exact_switch_model():
     """One oscillator with a Stribeck law at v_d = 1: the smoothed model (eps = 1e-3)
     and the non-smooth reference against scipy's event-driven cycle (the slip arc
@@ -206,6 +207,7 @@ def test_energy_balance_of_a_mistuned_open_chain():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_per_oscillator_arrays_are_never_read_as_lanes():
     """A chain whose per-oscillator length equals the lane count keeps its arrays per
     oscillator: lane_params adds the lane axis in front, and each lane of a batch of

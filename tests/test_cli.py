@@ -120,6 +120,7 @@ def localized_small(tmp_path_factory):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_localized_json_and_files(localized_small):
     """The JSON and its files, and what they say against the paper and the
     event-driven non-smooth reference (an independent solver, no smoothing): eq. (8)
@@ -166,6 +167,7 @@ def test_failed_runs_give_valid_json_with_nulls_and_exit_1(tmp_path, capsys):
 
 
 @pytest.mark.skipif(SCRIPT is None, reason="the jaxchain console script is not installed")
+@pytest.mark.study
 def test_installed_command_table_and_usage_error(localized_small, tmp_path):
     """The console script as a user runs it, in a fresh process. It keeps the
     compiled integration in the persistent compilation cache (JAXCHAIN_CACHE_DIR,

@@ -135,6 +135,7 @@ def test_shooting_compiles_once_for_five_xi(monkeypatch):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_continuation_compiles_once_for_five_problems(monkeypatch):
     """A new `cycle_problem` for each xi: its residual and records are equal
     modules, not new lambdas, so the corrector, tangent and records trace once; the

@@ -30,6 +30,7 @@ def branch():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_branch_leaves_the_hopf_point_upwards_and_turns_at_a_fold(branch):
     _, found, _ = branch
     p = np.asarray(found.p)[np.asarray(found.converged)]
@@ -72,6 +73,7 @@ def test_bisection_along_the_branch_finds_the_fold_of_the_extended_system(branch
 
 @pytest.mark.numerics
 @pytest.mark.parametrize("where, value", [("xi", 0.05), ("mu_st", 1.0)])
+@pytest.mark.study
 def test_fold_derivative_against_finite_differences(branch, where, value):
     problem, _, fold = branch
     start = jnp.concatenate([fold.u, fold.p[None], fold.null_vector])
@@ -116,6 +118,7 @@ def default_curves(branch):
 @pytest.mark.numerics
 @pytest.mark.slow
 @pytest.mark.parametrize("where", ["xi", "mu_st"])
+@pytest.mark.study
 def test_every_default_fold_converges_near_the_existence_limit(branch, default_curves, where):
     problem, _, fold = branch
     curves = default_curves[where]
@@ -206,6 +209,7 @@ def test_a_failed_hopf_solve_is_nan_never_a_number():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_boundaries_command_json_and_figures(tmp_path, capsys):
     """`jaxchain boundaries` end to end on one oscillator (no ring, no simulation
     dots), on two damping ratios and one friction ratio: the Hopf point against its

@@ -18,6 +18,7 @@ SETTLED = jc.SimulationOptions(t_end=1200.0, transient=600.0, chunk_length=150.0
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_periodic_states_agree_within_the_smoothing_error(tmp_path):
     """On a small ring, the default smoothed model gives the reference's n_HALC and
     amplitudes to better than 1 % on periodic states; a second call reads the
@@ -80,6 +81,7 @@ def test_stored_reference_runs_are_read_back_only_for_equal_settings(tmp_path):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_smoothed_error_shrinks_with_eps():
     """The amplitude error against the reference falls when eps is divided by 10
     (the smoothed law converges to the non-smooth one)."""

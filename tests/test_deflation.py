@@ -42,6 +42,7 @@ def _orbit(u):
 
 @pytest.mark.numerics
 @pytest.mark.parametrize("scale", [0.0, 1e-6, 1e-4])
+@pytest.mark.study
 def test_repeated_deflation_from_one_start_finds_distinct_orbits(simulated, scale):
     """From eq. (8) with two excited (perturbed by a relative `scale`, with the phase
     condition kept), nothing known: first the two-site state that simulation

@@ -18,6 +18,7 @@ def start():
     return params, obs.y_final
 
 
+@pytest.mark.study
 def test_the_old_names_warn_and_give_the_new_forms_results(start):
     params, y = start
     with pytest.warns(DeprecationWarning, match="ExactShooting is deprecated"):
@@ -61,6 +62,7 @@ def test_the_exact_bistable_range_is_bistable_range_on_the_exact_engine():
     assert abs(found.summary["fold_minus_existence_limit"]) < 1e-8
 
 
+@pytest.mark.study
 def test_the_old_exact_runs_are_simulate_on_the_exact_engine():
     """`simulate_nonsmooth` and `run_nonsmooth` warn and give what `simulate` with
     `engine=Exact(...)` and `Exact(...).run` give, bit for bit, in the one

@@ -56,6 +56,7 @@ def test_the_smoothed_engine_value_is_the_default_run_bit_for_bit():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_an_ensemble_on_the_exact_engine_records_it():
     """Each lane of the ensemble is the exact engine's run of its start (another
     compiled program: agreement to 1e-8 at rtol 1e-12); the dataset names the engine
@@ -75,6 +76,7 @@ def test_an_ensemble_on_the_exact_engine_records_it():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_vmapped_lanes_of_the_exact_engine_are_its_single_runs():
     """The GPU's route on the CPU: lanes of the exact engine vmapped together, where
     the event's root find runs in every lane, also in lanes whose guards did not
@@ -143,6 +145,7 @@ def test_basin_stability_on_the_exact_engine_classifies_each_samples_run():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_crosscheck_of_the_exact_engine_agrees_with_its_reference():
     """The exact engine's lanes against its own reference runs (the same model, the
     lanes at rtol 1e-12 and the reference at its 1e-10): the same n_HALC and
@@ -155,6 +158,7 @@ def test_the_crosscheck_of_the_exact_engine_agrees_with_its_reference():
     assert "amplitudes_smoothed" not in ds
 
 
+@pytest.mark.study
 def test_the_commands_run_the_exact_engine_or_refuse_it_in_one_line(tmp_path, capsys):
     """`--engine exact` runs `jaxchain localized` (the engine in its JSON, eps and
     the solver not), each start's n_HALC that of the exact engine's run; a command

@@ -8,6 +8,7 @@ from helpers import TIGHT, assert_within_drift
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_ensemble_equals_runs_done_one_at_a_time():
     """3 initial conditions x 2 belt speeds in one ensemble give the observables of
     6 separate `simulate` calls, in the order given. The ensemble's lanes and

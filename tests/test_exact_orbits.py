@@ -53,6 +53,7 @@ def test_exact_stick_slip_cycle_from_perturbed_starts_is_the_scipy_cycle(guess, 
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_exact_cycle_s_stick_phase_is_the_scipy_stick(guess):
     """The stick phase of the single oscillator's exact stick-slip cycle, read from
     the exact engine's switch log over its orbit (`Exact.stick_phases`), is the stick of
@@ -203,6 +204,7 @@ def through_the_limit(followed_past_the_limit):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_followed_branch_ends_at_a_sliding_point_and_is_cut_at_the_hopf_point(
         followed_past_the_limit, through_the_limit):
     """`follow_branch` goes through the sliding point where the stick-slip
@@ -258,6 +260,7 @@ def test_the_branch_continued_past_the_existence_limit_meets_a_sliding_point_the
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_past_the_sliding_point_the_branch_is_the_cycle_without_stick_down_to_hopf(
         through_the_limit):
     """Through the sliding point at the existence limit the continuation
@@ -323,6 +326,7 @@ def test_the_sliding_point_from_the_branch_s_own_orbits_needs_no_trial_beside_th
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_sliding_curves_in_xi_and_mu_st_are_the_existence_limits(past_the_limit):
     """The sliding point followed in a second parameter (`sliding_curve`, natural
     continuation with `locate_sliding` at each value: the chains' method) over the
@@ -350,6 +354,7 @@ def test_sliding_curves_in_xi_and_mu_st_are_the_existence_limits(past_the_limit)
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_grazing_curves_against_xi_and_the_friction_ratio_are_the_existence_limits():
     """The two-parameter curves of grazing (`grazing_curve`, natural continuation of
     the grazing point) over the landed fold-curve grid (xi 0.03 ... 0.10 at the
@@ -368,6 +373,7 @@ def test_grazing_curves_against_xi_and_the_friction_ratio_are_the_existence_limi
 
 @pytest.mark.numerics
 @pytest.mark.parametrize("where", ["xi", "mu_st"])
+@pytest.mark.study
 def test_grazing_slope_is_the_derivative_of_the_existence_limit(where):
     """`grazing_slope` (the implicit function theorem on the defining condition)
     against central differences of the closed-form existence limit (h = 1e-5, the

@@ -43,6 +43,7 @@ def _set_distance(a, b):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_harmonic_balance_gives_the_linear_response_exactly_with_one_harmonic(linear_ring):
     """H = 1 holds the linear chain's response exactly: the start state to 1e-12
     from rest as the guess, the period the force's, and the Floquet multipliers
@@ -58,6 +59,7 @@ def test_harmonic_balance_gives_the_linear_response_exactly_with_one_harmonic(li
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_shooting_on_the_forced_smoothed_engine_gives_the_linear_response(linear_ring):
     """Shooting integrates the forced field from t = 0: its orbit is the analytic
     response to 1e-8 (the flow's tolerances 1e-10, 1e-12), its multipliers exp(A T)'s
@@ -205,6 +207,7 @@ def test_the_exact_engine_refuses_a_forced_chain():
 # --- the command line ---
 
 
+@pytest.mark.study
 def test_the_response_command_draws_the_linear_resonance_curve(tmp_path):
     """`jaxchain response` on the linear oscillator (friction off, H = 1): every
     point's amplitude is the analytic F / sqrt((1 - Omega^2)^2 + (2 xi Omega)^2) to

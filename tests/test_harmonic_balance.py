@@ -25,6 +25,7 @@ def shot():
 
 @pytest.mark.numerics
 @pytest.mark.slow
+@pytest.mark.study
 def test_the_stick_slip_cycle_converges_to_shooting_s_as_harmonics_grow(shot):
     """From shooting's orbit as the guess: amplitude and period errors fall as H
     doubles (16, 32, 64: the velocity's kink at the stick phase makes the
@@ -119,6 +120,7 @@ def test_vmapped_over_mistuning_draws_equals_the_draws_one_at_a_time(shot):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_amplitude_s_derivative_in_eps_against_central_differences(shot):
     """d A / d eps of the stick-slip cycle at eps 1e-2 (H = 32) by optimistix's
     implicit differentiation through Newton's method, in reverse mode (`jax.grad`)
@@ -155,6 +157,7 @@ def damped_ring():
 
 @pytest.mark.numerics
 @pytest.mark.slow
+@pytest.mark.study
 def test_the_oscillator_blocks_solve_the_coupled_ring_as_lu_does(damped_ring):
     """GMRES preconditioned by the Jacobian's oscillator blocks (the friction force
     couples one oscillator's harmonics only; the coupling springs couple the
@@ -214,6 +217,7 @@ def test_the_assembled_jacobian_is_the_residual_s_derivative(params):
 
 
 @pytest.mark.parametrize("n_osc, boundary", [(7, "ring"), (5, "free"), (2, "ring")])
+@pytest.mark.study
 def test_the_block_elimination_over_a_ring_solves_as_lu(n_osc, boundary):
     """Harmonic balance with the block elimination over the oscillators
     (`linear_solver="ring"`) takes Newton's steps exactly: from LU's orbit (a

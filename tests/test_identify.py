@@ -102,6 +102,7 @@ def _law(theta):
 
 @pytest.mark.numerics
 @pytest.mark.parametrize("engine", ["smoothed", "exact"])
+@pytest.mark.study
 def test_the_jacobian_of_the_misfit_is_that_of_finite_differences(engine):
     """Forward-mode through the integration (`AbstractEngine.flow`, what a fit
     integrates in each window) against central differences of the same residual:

@@ -74,6 +74,7 @@ def devices_at_a_barrier():
     return [int(d) for d in used.strip("[]").split(",")], int(n_devices)
 
 
+@pytest.mark.study
 def test_one_cpu_device_per_core(every_device):
     """`jaxchain.configure()` asks JAX for one CPU device per usable core (nothing
     in that process's environment sets the count)."""
@@ -92,6 +93,7 @@ def test_lane_order_deals_lanes_like_cards(n_lanes, n_devices):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_run_lanes_with_padding_equals_runs_done_one_at_a_time():
     """3 stick-slipping lanes (padded to a multiple of the device count) come back
     in the order given, each equal to its own `simulate`: a different compiled
@@ -164,6 +166,7 @@ def test_given_costs_only_order_the_lanes():
         run_lanes(lanes, y0, solver, TIGHT, costs=[1.0, 2.0])
 
 
+@pytest.mark.study
 def test_compiled_run_holds_no_callback_custom_call_or_scatter():
     """The optimised program of the queue engine's run holds no host callback (it
     could not be cached, and the loop would run op by op), no custom call (LAPACK)
@@ -216,6 +219,7 @@ def test_on_devices_raises_the_first_error():
         on_devices(task, 5, "failing")
 
 
+@pytest.mark.study
 def test_memory_and_output_do_not_grow_with_t_end():
     """Amplitudes only: a run to t_end = 15000 (the paper's window [10000, 15000])
     keeps the same output and needs the same memory as a run to 1500 (window
@@ -239,6 +243,7 @@ def test_memory_and_output_do_not_grow_with_t_end():
     assert abs(sizes[1] / sizes[0] - 1) < 0.1
 
 
+@pytest.mark.study
 def test_observers_keep_the_compiled_run_free_of_callbacks_and_scatters():
     """With every observer, the tangent vector included, the optimised program holds
     no host callback, custom call or scatter (see test_lanes): the observers reduce

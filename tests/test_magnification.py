@@ -49,6 +49,7 @@ def linear_peaks():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_linear_ring_s_peaks_are_the_analytic_response_s(linear_peaks):
     """H = 1 is exact on the linear ring: every lane's peak (the tuned ring and three
     draws at sigma = eta_c) equals the direct solve's maximised over the frequency,
@@ -62,6 +63,7 @@ def test_the_linear_ring_s_peaks_are_the_analytic_response_s(linear_peaks):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_vmapped_lanes_equal_the_lanes_run_one_at_a_time(linear_peaks):
     """The batch's peaks against each lane's own run (another compiled program):
     equal to the Newton tolerance."""

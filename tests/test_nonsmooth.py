@@ -162,6 +162,7 @@ def _cycle(v_d, xi, options):
 
 @pytest.mark.numerics
 @pytest.mark.parametrize("adjoint", ["reverse", "forward"])
+@pytest.mark.study
 def test_cycle_gradients_against_finite_differences_of_scipy(adjoint):
     """d(amplitude, period)/d(v_d, xi) of the stick-slip cycle (xi 0.05) at v_d 1.2,
     1.5, 1.7: reverse mode (`jax.jacrev`, checkpointed loops) and forward mode

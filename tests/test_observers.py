@@ -64,6 +64,7 @@ def steady_sliding_runs():
 
 @pytest.mark.numerics
 @pytest.mark.parametrize("solver", ["ros34pw2", "tsit5"])
+@pytest.mark.study
 def test_steady_sliding_exponent_is_half_the_effective_damping(steady_sliding_runs, solver):
     """Linearised about steady sliding every mode has the damping 2 xi - mu'(v_d)
     (DESIGN.md): the largest exponent is -(2 xi - mu'(v_d)) / 2 above the Hopf point."""

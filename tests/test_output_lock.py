@@ -55,6 +55,7 @@ def _one_line_error(capsys) -> str:
 
 
 @pytest.mark.skipif(SCRIPT is None, reason="the jaxchain console script is not installed")
+@pytest.mark.study
 def test_a_second_command_into_a_busy_folder_is_refused_and_the_first_keeps_its_results(
         tmp_path, capsys):
     out = tmp_path / "out"

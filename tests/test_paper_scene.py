@@ -11,6 +11,7 @@ from helpers import scipy_stick_slip_cycle
 
 @pytest.mark.numerics
 @pytest.mark.slow
+@pytest.mark.study
 def test_fig4_staircase_at_vd_1_5():
     """N = 20, v_d = 1.5, eq. (8) with k = 1..20 excited, t in [0, 5000], observed
     after 4000: the states have settled by then (the paper integrates to 15000,
@@ -43,6 +44,7 @@ def test_fig4_staircase_at_vd_1_5():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_a_lone_sliding_oscillator_is_pumped_by_its_in_phase_neighbours():
     """Why eq. (8) with k = 19 of N = 20 ends with 20 on the HALC: physics, not the
     placement of the block. Any 19 excited oscillators leave one at steady sliding

@@ -90,6 +90,7 @@ def test_a_planted_program_file_never_runs(tmp_path, cache_settings):
     assert json.loads(tree.read_text())["type"] == "dict"
 
 
+@pytest.mark.study
 def test_the_command_line_runs_no_planted_file(tmp_path, monkeypatch, cache_settings):
     """The audit's case: `jaxchain localized` with its cache in a folder whose kept
     programs' `.tree` files were replaced by a pickle that creates a marker. The

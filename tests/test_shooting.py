@@ -122,6 +122,7 @@ def test_the_method_takes_another_phase_oscillator_and_keeps_the_rest():
 
 @pytest.mark.numerics
 @pytest.mark.parametrize("n_osc", [1, 2])
+@pytest.mark.study
 def test_deflated_multipliers_obey_liouville(n_osc):
     """The non-trivial multipliers come from the monodromy matrix with the flow
     direction deflated; their product times the trivial one is det M, which

@@ -21,6 +21,7 @@ def _growth_rate(p):
 
 @pytest.mark.numerics
 @pytest.mark.parametrize("v_d, grows", [(2.0, False), (1.0, True)])
+@pytest.mark.study
 def test_single_oscillator_near_steady_sliding_decays_or_grows(v_d, grows):
     """Below the Hopf speed 1.1513 steady sliding is unstable, above it stable. The
     envelope follows exp(sigma t) with the analytic sigma; windows of 20 time units

@@ -65,6 +65,7 @@ def test_shooting_from_simulation_gives_the_simulated_state_and_its_multipliers(
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_one_site_branch_ends_where_simulation_says(one_site):
     """Its low end is a Neimark-Sacker point (a complex pair leaves the unit circle:
     the quiet neighbours start to oscillate), and direct simulation keeps the state
@@ -775,6 +776,7 @@ def test_the_snake_switches_along_the_axes_of_the_orbit_s_symmetry():
                                                jc.PseudoArclength()) == []
 
 
+@pytest.mark.study
 def test_the_distance_from_an_orbit_is_to_the_nearest_point_of_its_copies(
         ring_of_three_states):
     """`Deflation.distances` against the distance written out here: the closed

@@ -158,6 +158,7 @@ def test_solution_matches_scipy_within_the_tolerance(controller):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_both_controllers_give_the_same_localized_state():
     """The default controller and diffrax's, at the default tolerances: the same
     oscillators on the HALC and amplitudes within the cross-check's 1 %."""

@@ -56,6 +56,7 @@ def test_quick_matrix_verifies_every_case_on_the_default_solver(tmp_path, capsys
     assert stored.read_bytes() == written and stored.stat().st_mtime_ns == mtime
 
 
+@pytest.mark.study
 def test_an_explicit_solver_at_tiny_eps_fails_with_a_specific_hint(tmp_path, capsys):
     """Tsit5 with a step budget far below mu_st/eps fails with max_steps, and the hint
     names the stiffness and the solver that copes: `jaxchain stress --quick --what
@@ -73,6 +74,7 @@ def test_an_explicit_solver_at_tiny_eps_fails_with_a_specific_hint(tmp_path, cap
     assert "solver='ros34pw2'" in row["hint"]
 
 
+@pytest.mark.study
 def test_a_collapsing_step_size_is_its_own_status():
     """A run that spends its step budget on steps shorter than dtmin on average fails
     with the status "step size collapsed", not "max_steps reached"; with the same
@@ -131,6 +133,7 @@ def test_existence_limit_with_steep_friction():
         assert (arc.status == 1) == returns, d  # status 1: it came back to the belt
 
 
+@pytest.mark.study
 def test_auto_solver_is_explicit_only_where_the_stick_phase_is_not_stiff(tmp_path, capsys):
     """`--solver auto` at `--eps` takes Tsit5 where mu_st/eps <= 100 (eps = 0.1) and
     ROS34PW2 where the stick phase is stiff (eps = 1e-3): the engine its --json

@@ -150,6 +150,7 @@ def test_energy_balance_on_a_lattice_with_masses():
     assert abs(float(change - (work - dissipated))) < 1e-8
 
 
+@pytest.mark.study
 def test_tabulated_law_reproduces_the_stick_slip_cycle_of_its_closed_form():
     """eq. (1) sampled at 241 speeds and interpolated (PCHIP, equal to scipy's
     `PchipInterpolator` on even and uneven tables): its interpolation error is below
@@ -298,6 +299,7 @@ def test_example_chain_files_round_trip(path, tmp_path):
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.study
 def test_the_si_brake_pad_runs_from_its_chain_file(tmp_path, capsys):
     """`jaxchain localized --chain` of the SI pad (a lattice, masses, a measured
     table) runs at the file's belt speed and records its scales."""

@@ -38,6 +38,7 @@ def _chunk_times(store, batches) -> dict:
             for p in store.glob(f"*/c/{b}") if p.is_file()}
 
 
+@pytest.mark.study
 def test_sweep_killed_then_resumed_equals_an_uninterrupted_run(tmp_path, uninterrupted):
     """`jaxchain sweep` in its own process is killed (SIGKILL) while it holds
     before writing batch 1, batch 0 stored (the writers' test hook), then resumed

@@ -111,6 +111,7 @@ def _forward(argv, env, cwd, before="pass") -> tuple[int, bool, str, str]:
     return status, jax_imported, "\n".join(out), run.stderr
 
 
+@pytest.mark.study
 def test_commands_back_to_back_are_served_warm_with_the_same_results(warm_env):
     env, folder, first = warm_env
     before = _server(env)
@@ -132,6 +133,7 @@ def test_commands_back_to_back_are_served_warm_with_the_same_results(warm_env):
     assert sum(f'"loop{i}"' in line for line in log.splitlines() for i in range(3)) == 3
 
 
+@pytest.mark.study
 def test_exit_status_stdin_cwd_and_environment_as_in_a_process_of_its_own(warm_env, tmp_path):
     env, _, _ = warm_env
     pid = _server(env)["pid"]

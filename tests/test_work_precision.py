@@ -83,6 +83,7 @@ def command_run(tmp_path_factory):
     return out, report
 
 
+@pytest.mark.study
 def test_work_precision_command(command_run):
     """The command end to end: the study with its reference points (the exact
     engine at rtol 1e-6, 1e-8 and 1e-10, each a timed non-smooth run), its CSV and
@@ -152,6 +153,7 @@ def _measured(rows):
     return [{k: v for k, v in r.items() if k not in ("wall_s", "compile_s")} for r in rows]
 
 
+@pytest.mark.study
 def test_resume_reads_back_only_rows_of_equal_settings(tmp_path):
     """A study resumed from a CSV that holds rows of other settings (and rows of
     the old layout, without a key) gives what a fresh study gives, row by row;

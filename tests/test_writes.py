@@ -126,6 +126,7 @@ def test_a_process_killed_as_it_rewrites_each_kind_of_file_leaves_the_previous_o
         assert table.row("a") == {"key": "a", "value": "1.5"}
 
 
+@pytest.mark.study
 def test_a_command_killed_as_it_replaces_its_dataset_leaves_the_previous_one(tmp_path):
     """`jaxchain localized` in its own process, over the files of an earlier run,
     killed (SIGKILL) as it holds before renaming its new netCDF file into place:
@@ -160,6 +161,7 @@ jc.main([*sys.argv[2:], "--vd", "1.6", "--overwrite", "--out", sys.argv[1]])
 """
 
 
+@pytest.mark.study
 def test_a_sweep_overwrite_killed_at_any_batch_or_before_its_swap_leaves_the_old_store(
         tmp_path):
     """`jaxchain sweep --overwrite` with another belt speed builds its store beside
