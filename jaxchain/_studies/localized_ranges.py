@@ -57,11 +57,11 @@ MAX_STEPS = 40
 REFINEMENTS = 4
 #: Bisections of an end met as a fold's corner, within FOLD_WIDTH in v_d past the
 #: last orbit before it (a resolution of FOLD_WIDTH / 2^BISECTIONS).
-BISECTIONS = 10
+BISECTIONS = 9
 FOLD_WIDTH = 0.03
 #: The version of the draws' procedure, in each stored part's key: a part computed
 #: by another is computed again.
-PROCEDURE = 2
+PROCEDURE = 3
 #: The multipliers' integration tolerances (rtol, atol): the sign of |mu| - 1 needs
 #: far less than shooting's 1e-10.
 MULTIPLIER_TOLERANCES = (1e-6, 1e-8)
@@ -71,6 +71,9 @@ SHORTEST = 8
 CHORD_STEPS = 30
 #: A correction that moves the orbit further than this has jumped to another branch.
 JUMP = 0.2
+#: The lane counts of the draws' compiled programs: a call on fewer lanes (those
+#: still marching, refining or bisecting) runs on the next count up.
+BUCKETS = (1, 4, 16, 32, 48)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -168,18 +171,22 @@ def _crossings(method: HarmonicBalance, chains: ChainParams, predicted, base, no
         first = factored(start)
 
         def step(carry):
-            z, k, _ = carry
+            z, k, change, _ = carry
             operator, state = factored(z) if newton else first
             residual = jnp.concatenate([balance(z[:-1], z[-1]), (t @ (z - b))[None]])
             dz = lx.linear_solve(operator, residual, solver, state=state, throw=False).value
-            return z - dz, k + 1, jnp.max(jnp.abs(dz) / (1 + jnp.abs(z)))
+            return z - dz, k + 1, jnp.max(jnp.abs(dz) / (1 + jnp.abs(z))), change
 
         def going(carry):
-            _, k, change = carry
+            _, k, change, before = carry
+            # a correction that grows after the third iteration diverges: the
+            # lane stops there, unconverged, and no other lane waits on it
+            diverging = (k >= 3) & (change > before)
             return (k < (algorithm.newton_steps if newton else CHORD_STEPS)) & (
-                change > algorithm.newton_tol)
+                change > algorithm.newton_tol) & ~diverging
 
-        z, _, change = jax.lax.while_loop(going, step, (start, 0, jnp.asarray(jnp.inf)))
+        inf = jnp.asarray(jnp.inf)
+        z, _, change, _ = jax.lax.while_loop(going, step, (start, 0, inf, inf))
         return z, (change <= algorithm.newton_tol) & jnp.all(jnp.isfinite(z))
 
     return jax.vmap(one)(chains, predicted, base, normal)
@@ -217,19 +224,48 @@ class _Draws:
     engine: object
     algorithm: PseudoArclength
 
-    def corrected(self, predicted, base, normal, newton: bool = False
+    def _on(self, where, compute, *arrays):
+        """`compute(draws, *arrays)` on the lanes where `where` holds only (all lanes
+        where it is None), gathered and padded with copies of the first to the next
+        of `BUCKETS` (so that a few programs serve every count): no lane idle in a
+        call waits on the others. Returns the outputs over all lanes, with None
+        where `where` holds for no lane (no call)."""
+        lanes = np.shape(arrays[0])[0]
+        chosen = np.arange(lanes) if where is None else np.flatnonzero(where)
+        if chosen.size == 0:
+            return None
+        size = min([b for b in BUCKETS if b >= chosen.size] + [lanes])
+        index = np.concatenate([chosen, np.full(size - chosen.size, chosen[0])])
+        draws = dataclasses.replace(self, chains=jax.tree_util.tree_map(
+            lambda a: a[index], self.chains))
+        outputs = compute(draws, *(jnp.asarray(np.asarray(a)[index]) for a in arrays))
+        return chosen, tuple(np.asarray(o)[:chosen.size] for o in outputs)
+
+    def corrected(self, predicted, base, normal, newton: bool = False, where=None
                   ) -> tuple[np.ndarray, np.ndarray]:
-        z, ok = _crossings(self.method, self.chains, jnp.asarray(predicted),
-                           jnp.asarray(base), jnp.asarray(normal), self.algorithm, newton)
-        return np.asarray(z), np.asarray(ok)
+        """`_crossings` of the lanes where `where` holds (all where None): (z, ok),
+        z the prediction and ok False on the others."""
+        z, ok = np.array(predicted, dtype=float), np.zeros(np.shape(predicted)[0], bool)
+        done = self._on(where, lambda d, *a: _crossings(d.method, d.chains, *a, d.algorithm,
+                                                        newton), predicted, base, normal)
+        if done is not None:
+            chosen, (z_chosen, ok_chosen) = done
+            z[chosen], ok[chosen] = z_chosen, ok_chosen
+        return z, ok
 
-    def critical(self, z: np.ndarray) -> np.ndarray:
-        """The largest non-trivial multiplier of each lane's orbit z (complex)."""
-        return np.asarray(_critical(self.engine, self.chains, jnp.asarray(z), self.method))
+    def critical(self, z: np.ndarray, where=None) -> np.ndarray:
+        """The largest non-trivial multiplier of each lane's orbit z (complex) where
+        `where` holds (all lanes where None), NaN on the others."""
+        out = np.full(np.shape(z)[0], np.nan, dtype=complex)
+        done = self._on(where, lambda d, z: (_critical(d.engine, d.chains, z, d.method),), z)
+        if done is not None:
+            out[done[0]] = done[1][0]
+        return out
 
-    def g(self, z: np.ndarray) -> np.ndarray:
-        """The largest non-trivial |multiplier| minus 1 of each lane's orbit z."""
-        return np.abs(self.critical(z)) - 1.0
+    def g(self, z: np.ndarray, where=None) -> np.ndarray:
+        """The largest non-trivial |multiplier| minus 1 of each lane's orbit z where
+        `where` holds (all lanes where None), NaN on the others."""
+        return np.abs(self.critical(z, where)) - 1.0
 
 
 def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
@@ -255,8 +291,8 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
     """
     lanes = z0.shape[0]
 
-    def corrected(base, normal):
-        return d.corrected(base, base, normal)
+    def corrected(base, normal, where):
+        return d.corrected(base, base, normal, where=where)
 
     z, t = z0, np.broadcast_to(t0, z0.shape)
     g = d.g(z)
@@ -268,7 +304,7 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
     for _ in range(max_steps):
         predicted = z + h[:, None] * t
         active = ok & ~done & ~stuck
-        z_new, converged = corrected(predicted, t)
+        z_new, converged = corrected(predicted, t, active)
         # a correction far from its prediction jumped to another branch: a failure
         converged = converged & (np.linalg.norm(z_new - predicted, axis=1) <= h)
         h = np.where(active & ~converged, h / 2, h)  # a failed step is retried shorter
@@ -276,8 +312,8 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
         # a failed correction's iterate may be far from any orbit, where the
         # multipliers' integration would take its whole step budget
         z_new = np.where(converged[:, None], z_new, z)
-        g_new = d.g(z_new)
         moves = active & converged
+        g_new = d.g(z_new, moves)
         crossed = moves & (g_new > 0)
         a, ga = np.where(crossed[:, None], z, a), np.where(crossed, g, ga)
         b, gb = np.where(crossed[:, None], z_new, b), np.where(crossed, g_new, gb)
@@ -299,15 +335,16 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
         span = np.where(refining, gb - ga, 1.0)
         w = np.where(refining, lo - ga * (hi - lo) / span, 0.0)  # the secant root
         trial = a0 + w[:, None] * (b0 - a0)
-        zw, converged = corrected(trial, normal)
+        zw, converged = corrected(trial, normal, refining)
         if np.any(refining & ~converged):  # the chord's reach is short near a fold
-            z_newton, by_newton = d.corrected(trial, trial, normal, newton=True)
+            z_newton, by_newton = d.corrected(trial, trial, normal, newton=True,
+                                              where=refining & ~converged)
             zw = np.where((~converged & by_newton)[:, None], z_newton, zw)
             converged = converged | by_newton
         # a lane whose trial fails keeps its bracket: its end is interpolated there
         refining = refining & converged
         zw = np.where(refining[:, None], zw, a)
-        gw = d.g(zw)
+        gw = d.g(zw, refining)
         stable = gw <= 0
         # Illinois: the end kept twice in a row has its value halved
         gb = np.where(refining & stable & (side > 0), gb / 2, gb)
@@ -320,7 +357,7 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
         side = np.where(refining, np.where(stable, 1.0, -1.0), side)
     w = ga / np.where(found, ga - gb, -1.0)  # the root between the last stable and unstable
     end = a[:, -1] + w * (b[:, -1] - a[:, -1])
-    multiplier = np.where(found, d.critical(np.where(found[:, None], b, z0)), np.nan)
+    multiplier = d.critical(b, found)
     return (np.where(found, end, np.nan), found, multiplier,
             np.where((ok & stuck)[:, None], z, np.nan))
 
@@ -342,7 +379,7 @@ def _last_orbit(d: _Draws, z: np.ndarray, width: float, bisections: int
     for _ in range(bisections):
         v = 0.5 * (lo[:, -1] + hi)
         trial = np.concatenate([lo[:, :-1], v[:, None]], axis=1)
-        zv, converged = d.corrected(trial, trial, normal, newton=True)
+        zv, converged = d.corrected(trial, trial, normal, newton=True, where=found)
         passes = converged & (np.linalg.norm(zv - trial, axis=1) <= JUMP)
         lo = np.where(passes[:, None], zv, lo)
         hi = np.where(passes, hi, v)
