@@ -52,6 +52,7 @@ def test_switched_branch_breaks_the_symmetry_and_converges_under_refinement(bran
     assert abs(float(a.period - b.period)) < 1e-7
 
 
+@pytest.mark.study
 def test_switching_needs_a_branch_point(branch_point):
     problem, branch, point = branch_point
     with pytest.raises(ValueError, match="step"):

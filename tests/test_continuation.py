@@ -152,6 +152,7 @@ def test_every_default_fold_converges_near_the_existence_limit(branch, default_c
 
 @pytest.mark.numerics
 @pytest.mark.slow
+@pytest.mark.study
 def test_fold_curve_is_robust_to_a_perturbed_start(branch, default_curves):
     problem, _, fold = branch
     start = np.concatenate([fold.u, fold.p[None], fold.null_vector])

@@ -239,6 +239,7 @@ def past_the_limit(through_the_limit):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_branch_continued_past_the_existence_limit_meets_a_sliding_point_there(
         past_the_limit):
     """Continued beyond the existence limit, the exact branch meets a sliding
@@ -307,6 +308,7 @@ def test_past_the_sliding_point_the_branch_is_the_cycle_without_stick_down_to_ho
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_sliding_point_from_the_branch_s_own_orbits_needs_no_trial_beside_them(
         past_the_limit):
     """`locate_sliding` seeded with the branch's orbits nearest the limit (the

@@ -116,6 +116,7 @@ def test_run_lanes_with_padding_equals_runs_done_one_at_a_time():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_one_device_two_devices_and_both_engines_give_the_same_results(every_device):
     """5 lanes (`lanes_on_every_device.five_lanes`), with the work queue on one
     device and on two: every field is bitwise equal (each lane is the same compiled
@@ -137,6 +138,7 @@ def test_one_device_two_devices_and_both_engines_give_the_same_results(every_dev
                             [one["num_steps"], vmapped["num_steps"]], field)
 
 
+@pytest.mark.study
 def test_the_queue_compiles_its_program_once_for_every_cpu_device(every_device):
     """On a CPU the queue's workers all run the program compiled for the first
     device (XLA's CPU client runs it from several threads at once): after the run

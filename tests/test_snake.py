@@ -82,6 +82,7 @@ def test_the_one_site_branch_ends_where_simulation_says(one_site):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_continuation_reproduces_itself_from_a_perturbed_start(one_site):
     """The Neimark-Sacker point again, from the starting orbit perturbed by a
     relative 1e-6: the same belt speed to 1e-6."""
@@ -237,6 +238,7 @@ def test_the_one_site_edge_tends_to_the_single_oscillator_s_limit_as_eta_c_vanis
     assert abs(c[0] - c[1]) < 0.03 * c[1], c
 
 
+@pytest.mark.study
 def test_stored_branches_are_read_back_only_for_equal_settings(one_site):
     found, out = one_site
     again = jc.localized_branches(RING, (1,), continuation_options=OPTIONS, out=out,
@@ -811,6 +813,7 @@ def test_the_distance_from_an_orbit_is_to_the_nearest_point_of_its_copies(
         assert abs(slope - central) < 1e-6 * max(abs(central), 1.0)
 
 
+@pytest.mark.study
 def test_symmetries_of_the_ring_and_the_deflation_operator_s_bad_arguments(
         ring_of_three_states):
     """The dihedral group on the homogeneous ring (2N distinct permutations), the

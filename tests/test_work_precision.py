@@ -100,6 +100,7 @@ def test_work_precision_command(command_run):
     assert [float(r["rtol"]) for r in rows if r["method"] == "tsit5"] == list(COMMAND_RTOLS)
 
 
+@pytest.mark.study
 def test_recommend_asks_a_run_at_rtol_over_10_that_agrees(command_run, tmp_path):
     """A setting is confirmed only by a run at exactly a tenth of its rtol that
     moves the largest amplitude by less than target/10, relative; a run at a tiny
