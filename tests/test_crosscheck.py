@@ -100,6 +100,7 @@ def test_state_class_names():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_the_public_class_tolerances_drive_the_crosscheck():
     """`jc.ClassTolerances` is the cross-check's: with its defaults the single
     oscillator's stick-slip cycle is periodic in both models; with half-window

@@ -70,6 +70,7 @@ def test_repeated_deflation_from_one_start_finds_distinct_orbits(simulated, scal
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_deflating_the_state_of_a_start_leads_elsewhere(simulated):
     """Shooting from eq. (8) with one excited reaches the one-site state, as
     simulation does from there; with that state deflated (the other state,
@@ -89,6 +90,7 @@ def test_deflating_the_state_of_a_start_leads_elsewhere(simulated):
     assert copies_distance(one, other) > 1e-2 and scipy_return(other) < 1e-6
 
 
+@pytest.mark.study
 def test_symmetries_of_the_ring_and_bad_arguments(simulated):
     """Clear errors for bad arguments (the ring's symmetries and the deflation
     operator's own, test_snake.py)."""

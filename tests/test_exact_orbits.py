@@ -390,6 +390,7 @@ def test_grazing_slope_is_the_derivative_of_the_existence_limit(where):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_boundaries_command_with_the_exact_engine_reports_grazing(tmp_path, capsys):
     """`jaxchain boundaries --engine exact`: the Hopf point (closed form) and the
     grazing point, found from steady sliding's Hopf point without a start, in the

@@ -462,6 +462,7 @@ def test_neighbouring_numbers_of_sites_connect_where_one_joined_set_of_branches_
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_snake_command_json_and_bad_options(tmp_path, capsys):
     """The command's branch, read back from its file, against scipy: each stored
     point (the state and period of `u`) is a periodic orbit of eq. (5) at its belt
