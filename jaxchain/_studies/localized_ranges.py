@@ -61,7 +61,7 @@ BISECTIONS = 9
 FOLD_WIDTH = 0.03
 #: The version of the draws' procedure, in each stored part's key: a part computed
 #: by another is computed again.
-PROCEDURE = 3
+PROCEDURE = 4
 #: The multipliers' integration tolerances (rtol, atol): the sign of |mu| - 1 needs
 #: far less than shooting's 1e-10.
 MULTIPLIER_TOLERANCES = (1e-6, 1e-8)
@@ -171,22 +171,18 @@ def _crossings(method: HarmonicBalance, chains: ChainParams, predicted, base, no
         first = factored(start)
 
         def step(carry):
-            z, k, change, _ = carry
+            z, k, _ = carry
             operator, state = factored(z) if newton else first
             residual = jnp.concatenate([balance(z[:-1], z[-1]), (t @ (z - b))[None]])
             dz = lx.linear_solve(operator, residual, solver, state=state, throw=False).value
-            return z - dz, k + 1, jnp.max(jnp.abs(dz) / (1 + jnp.abs(z))), change
+            return z - dz, k + 1, jnp.max(jnp.abs(dz) / (1 + jnp.abs(z)))
 
         def going(carry):
-            _, k, change, before = carry
-            # a correction that grows after the third iteration diverges: the
-            # lane stops there, unconverged, and no other lane waits on it
-            diverging = (k >= 3) & (change > before)
+            _, k, change = carry
             return (k < (algorithm.newton_steps if newton else CHORD_STEPS)) & (
-                change > algorithm.newton_tol) & ~diverging
+                change > algorithm.newton_tol)
 
-        inf = jnp.asarray(jnp.inf)
-        z, _, change, _ = jax.lax.while_loop(going, step, (start, 0, inf, inf))
+        z, _, change = jax.lax.while_loop(going, step, (start, 0, jnp.asarray(jnp.inf)))
         return z, (change <= algorithm.newton_tol) & jnp.all(jnp.isfinite(z))
 
     return jax.vmap(one)(chains, predicted, base, normal)
