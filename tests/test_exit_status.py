@@ -330,3 +330,26 @@ def test_the_snake_summary_prints_a_check_without_a_growth_and_an_end_without_a_
                     "not_periodic": [], "v_d": 1.5})
     out = capsys.readouterr().out
     assert out.count("started at") == 1 and "started at v_d = 1.6" in out
+
+
+def test_a_check_by_shooting_that_disagrees_fails_the_localized_ranges_run():
+    """`jaxchain localized-ranges --check K` exits 1 where shooting and harmonic
+    balance disagree: the draws named are those with an end off by more than the
+    tolerance, of another kind, or without a range by shooting (the figures of
+    draws 1 and 0 at 2 eta_c, the second as a march stopped short gave it)."""
+    from jaxchain._cli.localized_ranges import CHECK_TOLERANCE, check_disagreements
+
+    def draw(d, low, high, low_hb, high_hb, kinds=("fold", "fold"), kinds_hb=None):
+        kinds_hb = kinds_hb or kinds
+        return {"draw": d, "low": low, "high": high, "low_hb": low_hb, "high_hb": high_hb,
+                "low_kind": kinds[0], "high_kind": kinds[1], "low_kind_hb": kinds_hb[0],
+                "high_kind_hb": kinds_hb[1], "difference": None if low is None else
+                max(abs(low - low_hb), abs(high - high_hb))}
+
+    agree = draw(1, 1.17871, 1.76136, 1.17904, 1.76130, ("Neimark-Sacker", "fold"))
+    short = draw(0, 1.36754, 1.76079, 1.36645, 1.70448, kinds_hb=("fold", "period doubling"))
+    off = draw(2, 1.35273, 1.75918, 1.35273 + 2 * CHECK_TOLERANCE, 1.75918)
+    kind = draw(3, 1.32157, 1.76296, 1.32157, 1.76296, kinds_hb=("Neimark-Sacker", "fold"))
+    lost = draw(4, None, None, 1.3, 1.76)
+    assert check_disagreements([agree]) == []
+    assert check_disagreements([agree, short, off, kind, lost]) == [0, 2, 3, 4]
