@@ -174,6 +174,7 @@ def test_existence_limit_compiles_once_for_five_xi(monkeypatch):
     assert traces == ["_peak"]
 
 
+@pytest.mark.study
 def test_bifurcation_programs_hold_no_host_callback(monkeypatch):
     """JAX keeps no program that calls back into Python in its persistent
     compilation cache, and equinox's checks (in diffrax, lineax and optimistix)

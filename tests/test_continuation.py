@@ -50,6 +50,7 @@ def test_branch_leaves_the_hopf_point_upwards_and_turns_at_a_fold(branch):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_fold_is_near_the_nonsmooth_existence_limit(branch):
     _, found, fold = branch
     assert bool(fold.converged)
@@ -61,6 +62,7 @@ def test_fold_is_near_the_nonsmooth_existence_limit(branch):
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_bisection_along_the_branch_finds_the_fold_of_the_extended_system(branch):
     """On the single oscillator's branch from the Hopf point, the fold located by
     bisection on dp/ds agrees with the Moore-Spence fold to 1e-6."""

@@ -123,6 +123,7 @@ def test_the_public_class_tolerances_drive_the_crosscheck():
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_crosscheck_command_json_and_files(tmp_path, capsys):
     """The command on the single oscillator (the window of `SMALL`), against scipy's
     event-driven stick-slip cycle: the reference amplitude to 1e-6, the smoothed

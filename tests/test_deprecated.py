@@ -44,6 +44,7 @@ def test_the_old_call_of_periodic_orbit_says_the_new_one(start):
         jc.periodic_orbit(params, y, 6.3)
 
 
+@pytest.mark.study
 def test_the_exact_bistable_range_is_bistable_range_on_the_exact_engine():
     """The previous `exact_bistable_range` is `bistable_range` with the exact model's
     method: the same Hopf and grazing points and curves, its summary keys those of

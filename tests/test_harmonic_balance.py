@@ -101,6 +101,7 @@ def test_a_guess_of_the_wrong_shape_and_a_state_without_its_series_are_refused()
 
 
 @pytest.mark.numerics
+@pytest.mark.study
 def test_vmapped_over_mistuning_draws_equals_the_draws_one_at_a_time(shot):
     """Harmonic balance is a fixed-size Newton iteration: `jax.vmap` of its solve
     over 6 stiffness-mistuning draws (sigma 0.02, `mistune`, stacked by

@@ -92,6 +92,7 @@ def test_the_lock_of_a_killed_command_blocks_nothing(tmp_path, capsys):
     assert (out / "localized_vd1.5.nc").exists() and not (out / HOLDER).exists()
 
 
+@pytest.mark.study
 def test_wait_waits_for_the_holder_to_end(tmp_path, capsys):
     out = tmp_path / "out"
     holder = _holder(out, t_end=300.0)

@@ -184,6 +184,7 @@ def test_resume_reads_back_only_rows_of_equal_settings(tmp_path):
     assert stored.read_text() == written and stored.stat().st_mtime_ns == mtime
 
 
+@pytest.mark.study
 def test_max_steps_is_recorded_and_tighter_rtols_skipped(tmp_path):
     rows = jc.work_precision(tmp_path / "wp.csv", ["single"], ["tsit5"], [1e-4, 1e-6],
                              [1e-4], scipy=False, reference_points=False, max_steps=50)
