@@ -224,8 +224,8 @@ class _Draws:
         """`compute(draws, *arrays)` on the lanes where `where` holds only (all lanes
         where it is None), gathered and padded with copies of the first to the next
         of `BUCKETS` (so that a few programs serve every count): no lane idle in a
-        call waits on the others. Returns the outputs over all lanes, with None
-        where `where` holds for no lane (no call)."""
+        call waits on the others. Returns (the chosen lanes' indices, their outputs),
+        or None where `where` holds for no lane (no call)."""
         lanes = np.shape(arrays[0])[0]
         chosen = np.arange(lanes) if where is None else np.flatnonzero(where)
         if chosen.size == 0:
