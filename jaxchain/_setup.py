@@ -34,7 +34,7 @@ XLA_FLAGS = ("--xla_backend_extra_options="
              "xla_cpu_small_while_loop_byte_threshold=1000000000")
 
 
-def _usable_cores() -> int:
+def usable_cores() -> int:
     """The cores this process may run on (its CPU affinity where the system has one)."""
     if hasattr(os, "sched_getaffinity"):
         return max(1, len(os.sched_getaffinity(0)))
@@ -94,7 +94,7 @@ def configure(devices: int | None = None) -> None:
     if devices is None and _device_count_chosen():
         return
     with contextlib.suppress(RuntimeError):  # backends already started
-        jax.config.update("jax_num_cpu_devices", devices or _usable_cores())
+        jax.config.update("jax_num_cpu_devices", devices or usable_cores())
 
 
 def check_float64() -> None:

@@ -8,6 +8,7 @@ import numpy as np
 
 from .._bifurcation.harmonic_balance import HarmonicBalance
 from .._physics.params import ChainParams
+from .._setup import usable_cores
 from .._studies.localized_ranges import localized_ranges, shooting_ranges
 from .common import (Outputs, RunsFailed, UsageError, add_output_options, comma_list,
                      non_negative_float, positive_float, positive_int, report, show_progress)
@@ -70,7 +71,11 @@ def add_parser(sub):
                    help="harmonic balance: time samples of a period (default: the "
                         "smallest power of two >= 4H + 1)")
     g.add_argument("--lanes", type=positive_int, default=64,
-                   help="rings solved together, vmapped (default 64)")
+                   help="rings solved together, vmapped: a group (default 64)")
+    g.add_argument("--workers", type=positive_int, default=None, metavar="W",
+                   help="processes that compute the groups side by side, one core each "
+                        "(default: one per usable core; 1: one group after another); the "
+                        "ranges are the same either way")
     g.add_argument("--check", type=int, default=0, metavar="K",
                    help="follow the first K draws of the strongest mistuning by shooting "
                         "too, and compare (default 0; each takes one to three minutes)")
@@ -93,7 +98,8 @@ def run(args) -> None:
     sigmas = [s * args.eta_c for s in args.sigmas]
     start = time.perf_counter()
     ds = localized_ranges(params, sigmas, args.draws, method, site=args.site,
-                          lanes=args.lanes, progress=show_progress(args),
+                          lanes=args.lanes, workers=args.workers or usable_cores(),
+                          progress=show_progress(args),
                           store=outputs.path("localized_ranges_parts"))
     summary = {"tuned": {k: ds.attrs[k] for k in (
         "tuned_low", "tuned_low_kind", "tuned_high", "tuned_high_kind",

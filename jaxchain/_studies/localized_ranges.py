@@ -44,7 +44,7 @@ from .._checks import check_count
 from .._errors import ValidationError
 from .._physics.params import ChainParams
 from .._physics.record import chain_record
-from .magnification import in_groups, mistuned_lanes
+from .magnification import mistuned_lanes
 
 #: The tuned branch's continuation: small steps, so that its points resolve both ends.
 TUNED_CONTINUATION = ContinuationOptions(ds=0.01, ds_max=0.05, p_min=1.0, p_max=2.2,
@@ -56,12 +56,14 @@ MAX_STEPS = 40
 #: Regula falsi steps of an end met as a multiplier leaving the unit circle.
 REFINEMENTS = 4
 #: Bisections of an end met as a fold's corner, within FOLD_WIDTH in v_d past the
-#: last orbit before it (a resolution of FOLD_WIDTH / 2^BISECTIONS).
-BISECTIONS = 9
+#: last orbit before it: a resolution of FOLD_WIDTH / 2^BISECTIONS (4.7e-4; the
+#: midpoint reported, within 2.3e-4), a tenth of the 5e-3 that the check by
+#: shooting allows (each bisection costs a Newton solve of every lane at its fold).
+BISECTIONS = 6
 FOLD_WIDTH = 0.03
 #: The version of the draws' procedure, in each stored part's key: a part computed
 #: by another is computed again.
-PROCEDURE = 4
+PROCEDURE = 5
 #: The multipliers' integration tolerances (rtol, atol): the sign of |mu| - 1 needs
 #: far less than shooting's 1e-10.
 MULTIPLIER_TOLERANCES = (1e-6, 1e-8)
@@ -258,11 +260,6 @@ class _Draws:
             out[done[0]] = done[1][0]
         return out
 
-    def g(self, z: np.ndarray, where=None) -> np.ndarray:
-        """The largest non-trivial |multiplier| minus 1 of each lane's orbit z where
-        `where` holds (all lanes where None), NaN on the others."""
-        return np.abs(self.critical(z, where)) - 1.0
-
 
 def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
                    max_steps: int, refinements: int
@@ -291,12 +288,14 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
         return d.corrected(base, base, normal, where=where)
 
     z, t = z0, np.broadcast_to(t0, z0.shape)
-    g = d.g(z)
+    c = d.critical(z)
+    g = np.abs(c) - 1.0
     ok = g <= 0  # a stable start
     done = np.zeros(lanes, dtype=bool)  # crossed into instability
     stuck = np.zeros(lanes, dtype=bool)  # no step passes: at a fold's corner
     h = np.full(lanes, float(step))
     a, b, ga, gb = z.copy(), z.copy(), g.copy(), g.copy()
+    cb = c.copy()  # the critical multiplier at b: the kind of the end
     for _ in range(max_steps):
         predicted = z + h[:, None] * t
         active = ok & ~done & ~stuck
@@ -309,10 +308,12 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
         # multipliers' integration would take its whole step budget
         z_new = np.where(converged[:, None], z_new, z)
         moves = active & converged
-        g_new = d.g(z_new, moves)
+        c_new = d.critical(z_new, moves)
+        g_new = np.abs(c_new) - 1.0
         crossed = moves & (g_new > 0)
         a, ga = np.where(crossed[:, None], z, a), np.where(crossed, g, ga)
         b, gb = np.where(crossed[:, None], z_new, b), np.where(crossed, g_new, gb)
+        cb = np.where(crossed, c_new, cb)
         done |= crossed
         moves &= ~crossed
         moved = z_new - z
@@ -340,7 +341,8 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
         # a lane whose trial fails keeps its bracket: its end is interpolated there
         refining = refining & converged
         zw = np.where(refining[:, None], zw, a)
-        gw = d.g(zw, refining)
+        cw = d.critical(zw, refining)
+        gw = np.abs(cw) - 1.0
         stable = gw <= 0
         # Illinois: the end kept twice in a row has its value halved
         gb = np.where(refining & stable & (side > 0), gb / 2, gb)
@@ -350,11 +352,11 @@ def _stability_end(d: _Draws, z0: np.ndarray, t0: np.ndarray, step: float,
                      np.where(upper[:, None], zw, a))
         hi, gb, b = (np.where(lower, w, hi), np.where(lower, gw, gb),
                      np.where(lower[:, None], zw, b))
+        cb = np.where(lower, cw, cb)
         side = np.where(refining, np.where(stable, 1.0, -1.0), side)
     w = ga / np.where(found, ga - gb, -1.0)  # the root between the last stable and unstable
     end = a[:, -1] + w * (b[:, -1] - a[:, -1])
-    multiplier = d.critical(b, found)
-    return (np.where(found, end, np.nan), found, multiplier,
+    return (np.where(found, end, np.nan), found, np.where(found, cb, np.nan),
             np.where((ok & stuck)[:, None], z, np.nan))
 
 
@@ -395,18 +397,18 @@ def _kind(multiplier: np.ndarray) -> np.ndarray:
     return np.where(angle < 1e-3, KINDS[0], np.where(angle > np.pi - 1e-3, KINDS[1], KINDS[2]))
 
 
-def _ends(d: _Draws, z_start: np.ndarray, tangent: np.ndarray, v0: float) -> dict:
+def _ends(d: _Draws, z_start: np.ndarray, tangent: np.ndarray, v0: float, tuned
+          ) -> dict:
     """Both ends of each lane's stable range (this module's docstring), from the
     tuned start z_start moved to each lane's orbit at v0, `tangent` pointing up in
     v_d: a dict of arrays over the lanes: low, high, low_kind, high_kind, found.
-    Lane 0 is the tuned ring (`mistuned_lanes`), whose stiffness the homotopy of
-    the start moves from."""
+    `tuned`: the tuned ring's stiffness, which the homotopy of the start moves
+    from."""
     lanes, n = z_start.shape
     # each lane's orbit at v0 by Newton's method, from the tuned ring's through the
     # lane's ring at half its mistuning (a homotopy: the tuned orbit is too far from
     # a strongly mistuned ring's for Newton's method alone)
     at_v0 = np.broadcast_to(np.eye(n)[-1], (lanes, n))
-    tuned = d.chains.stiffness[:1]
     half = dataclasses.replace(d, chains=eqx.tree_at(
         lambda c: c.stiffness, d.chains, tuned + 0.5 * (d.chains.stiffness - tuned)))
     z_half, ok = half.corrected(z_start, z_start, at_v0, newton=True)
@@ -417,7 +419,7 @@ def _ends(d: _Draws, z_start: np.ndarray, tangent: np.ndarray, v0: float) -> dic
     for name, sign in (("low", -1.0), ("high", 1.0)):
         end, found, multiplier, stuck = _stability_end(d, z0, sign * tangent, STEP, MAX_STEPS,
                                                        REFINEMENTS)
-        kind = _kind(multiplier)
+        kind = np.where(found, _kind(multiplier), "")
         if np.any(np.isfinite(stuck[:, -1])):
             fold, at_fold = _last_orbit(d, stuck, sign * FOLD_WIDTH, BISECTIONS)
             end, found = np.where(at_fold, fold, end), found | at_fold
@@ -444,7 +446,8 @@ def _checked(params: ChainParams, sigmas, draws: int, lanes: int, site: int):
 
 
 def localized_ranges(params: ChainParams, sigmas, draws: int, method: HarmonicBalance, *,
-                     site: int = 0, lanes: int = 64, progress: bool = False, store=None):
+                     site: int = 0, lanes: int = 64, workers: int = 1, progress: bool = False,
+                     store=None):
     """The one-site localized state's stable range in v_d over stiffness mistuning
     draws and strengths, by harmonic balance vmapped over the draws (this module's
     docstring).
@@ -460,15 +463,20 @@ def localized_ranges(params: ChainParams, sigmas, draws: int, method: HarmonicBa
         `linear_solver` serves the tuned branch, the draws' corrector factors by
         LU); its phase condition is moved to `site`.
     - `site`: the oscillator (0-based) on the HALC.
-    - `lanes`: rings solved together (`jax.vmap`); `progress`: a progress bar.
+    - `lanes`: rings solved together (`jax.vmap`), a group.
+    - `workers`: processes that compute the groups side by side (`Followers`: on
+        a CPU, one per core; 1 computes them here, one after the other). A group's
+        ends do not depend on the process that computed it.
+    - `progress`: a progress bar.
     - `store`: a folder where each sigma's part is written as it finishes and read
         back where every setting that produced it matches: a killed study resumes.
 
     **Returns:** an `xarray.Dataset` over `sigma` and `draw`: `low`, `high` (the
-    range's ends in v_d), `low_kind`, `high_kind` (`KINDS`), `found`; attributes:
-    the tuned ring's range by the driver (`tuned_low`, `tuned_high` and their
-    kinds) and by the draws' own procedure (`tuned_low_lanes`, `tuned_high_lanes`),
-    the chain, the method, `site` and the wall time. Dimensionless (eqs. (4)-(6)).
+    range's ends in v_d), `low_kind`, `high_kind` (`KINDS`; "" where not found),
+    `found`; attributes: the tuned ring's range by the driver (`tuned_low`,
+    `tuned_high` and their kinds) and by the draws' own procedure
+    (`tuned_low_lanes`, `tuned_high_lanes`), the chain, the method, `site` and the
+    wall time. Dimensionless (eqs. (4)-(6)).
 
     **Raises:** `ValidationError` for a mistuned or forced chain, a negative sigma,
     a bad count or site; `RuntimeError` where the tuned ring's one-site state is
@@ -477,9 +485,11 @@ def localized_ranges(params: ChainParams, sigmas, draws: int, method: HarmonicBa
     import xarray as xr
     from tqdm.auto import tqdm
 
+    from .pool import Followers
     from .response import method_settings
 
     _checked(params, sigmas, draws, lanes, site)
+    check_count("workers", workers)
     began = time.perf_counter()
     method = method.with_phase_oscillator(site)
     if store is not None:
@@ -487,8 +497,12 @@ def localized_ranges(params: ChainParams, sigmas, draws: int, method: HarmonicBa
     tuned = branch_range(params, method, site=site,
                          store=None if store is None else Path(store) / "tuned_branch.nc")
     bar = tqdm(total=len(sigmas) * draws, disable=not progress, unit="draw")
-    parts = [_part(params, float(sigma), draws, method, tuned, site, lanes, bar, store)
-             for sigma in sigmas]
+    with Followers(workers) as pool:
+        # every sigma's groups are submitted before any is awaited: the workers
+        # stay busy across the strengths
+        pending = [_part(params, float(sigma), draws, method, tuned, site, lanes, pool, store)
+                   for sigma in sigmas]
+        parts = [finish(bar) for finish in pending]
     bar.close()
     dims = ("sigma", "draw")
     names = ("low", "high", "low_kind", "high_kind", "found")
@@ -507,15 +521,28 @@ def localized_ranges(params: ChainParams, sigmas, draws: int, method: HarmonicBa
             "units": "dimensionless, eqs. (4)-(6) of the paper"})
 
 
+def _group_ends(method: HarmonicBalance, group: ChainParams, z_start: np.ndarray,
+                tangent: np.ndarray, v0: float, tuned) -> dict:
+    """`_ends` of one group of lanes (stacked chains), each started from the tuned
+    orbit z_start: a task that `Followers` may run in another process."""
+    from .._engine.engines import Smoothed
+
+    engine = Smoothed(eps=method.eps).for_orbits(*MULTIPLIER_TOLERANCES)
+    lanes = np.shape(group.v_d)[0]
+    return _ends(_Draws(method, group, engine, PseudoArclength()),
+                 np.broadcast_to(z_start, (lanes, np.size(z_start))), tangent, v0, tuned)
+
+
 def _part(params: ChainParams, sigma: float, draws: int, method: HarmonicBalance,
-          tuned: BranchRange, site: int, lanes: int, bar, store):
-    """One sigma of `localized_ranges` as a Dataset over `draw`, read back from
-    `store` where it holds the same settings' part, computed and written there
-    otherwise."""
+          tuned: BranchRange, site: int, lanes: int, pool, store):
+    """One sigma of `localized_ranges`: its groups submitted to `pool` (none where
+    `store` holds the same settings' part). Returns a function of the progress bar
+    that waits for them and returns the part, a Dataset over `draw`, written to
+    `store` as it is complete."""
     import xarray as xr
 
-    from .._engine.engines import Smoothed
     from .._sweeps.result_store import read_dataset, write_dataset
+    from .magnification import lane_groups
     from .response import method_settings
 
     settings = {"chain": chain_record(params), "method": method_settings(method),
@@ -527,27 +554,37 @@ def _part(params: ChainParams, sigma: float, draws: int, method: HarmonicBalance
         path = Path(store) / f"sigma{sigma:.6g}.nc"
         stored = read_dataset(path, "localized-ranges", **settings)
         if stored is not None:
-            bar.update(draws)
-            return stored
+            def read_back(bar):
+                bar.update(draws)
+                return stored
+            return read_back
     chains = mistuned_lanes(params, sigma, draws)
     branch = tuned.branch
     k = int(np.argmin(np.abs(branch.p - float(params.v_d))))
     z = np.concatenate([branch.u, branch.p[:, None]], axis=1)
     tangent = z[min(k + 1, len(z) - 1)] - z[max(k - 1, 0)]
     tangent = tangent * np.sign(tangent[-1]) / np.linalg.norm(tangent)
-    engine = Smoothed(eps=method.eps).for_orbits(*MULTIPLIER_TOLERANCES)
-    size = min(lanes, draws + 1)
-    start = np.broadcast_to(z[k], (size, z.shape[1]))
-    ends = in_groups(chains, draws + 1, lanes, lambda group: _ends(
-        _Draws(method, group, engine, PseudoArclength()), start[:np.shape(group.v_d)[0]],
-        tangent, float(branch.p[k])), bar)
-    part = xr.Dataset({name: ("draw", value[1:]) for name, value in ends.items()},
-                      attrs={"tuned_low_lanes": float(ends["low"][0]),
-                             "tuned_high_lanes": float(ends["high"][0])})
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_dataset(part, path, "localized-ranges", **settings)
-    return part
+    groups = lane_groups(draws + 1, lanes)
+    futures = [pool.submit(_group_ends, method,
+                           jax.tree_util.tree_map(lambda a: np.asarray(a)[padded], chains),
+                           z[k], tangent, float(branch.p[k]), float(params.stiffness))
+               for _, padded in groups]
+
+    def finish(bar):
+        outs = []
+        for (index, _), future in zip(groups, futures):
+            outs.append({name: np.asarray(v)[:index.size] for name, v in future.result().items()})
+            bar.update(index.size - (index[0] == 0))
+        ends = {name: np.concatenate([o[name] for o in outs]) for name in outs[0]}
+        part = xr.Dataset({name: ("draw", value[1:]) for name, value in ends.items()},
+                          attrs={"tuned_low_lanes": float(ends["low"][0]),
+                                 "tuned_high_lanes": float(ends["high"][0])})
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_dataset(part, path, "localized-ranges", **settings)
+        return part
+
+    return finish
 
 
 def shooting_ranges(params: ChainParams, sigma: float, draws, *, eps: float, site: int = 0

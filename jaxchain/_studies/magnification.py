@@ -309,15 +309,24 @@ def in_groups(chains: ChainParams, total: int, lanes: int, compute, bar) -> dict
     of `chains` (lane 0 the tuned chain, `mistuned_lanes`) in groups of equal size of
     at most `lanes` (the last padded with copies of its first, so that every group
     runs one program), concatenated; `bar` advanced by each group's draws."""
-    lanes = -(-total // -(-total // lanes))  # groups of equal size, none larger than asked
     parts = []
-    for start in range(0, total, lanes):
-        index = np.arange(start, min(start + lanes, total))
-        padded = np.concatenate([index, np.full(lanes - index.size, index[0])])
+    for index, padded in lane_groups(total, lanes):
         out = compute(jax.tree_util.tree_map(lambda a: a[padded], chains))
         parts.append({k: np.asarray(v)[:index.size] for k, v in out.items()})
-        bar.update(index.size - (start == 0))
+        bar.update(index.size - (index[0] == 0))
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def lane_groups(total: int, lanes: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The groups of `in_groups`: (the lanes' indices, the same padded with copies of
+    the first to the group size) for each group, the groups of equal size of at
+    most `lanes`."""
+    lanes = -(-total // -(-total // lanes))  # groups of equal size, none larger than asked
+    groups = []
+    for start in range(0, total, lanes):
+        index = np.arange(start, min(start + lanes, total))
+        groups.append((index, np.concatenate([index, np.full(lanes - index.size, index[0])])))
+    return groups
 
 
 def _peaks_in_lanes(chains: ChainParams, method, frequencies, lanes: int, bar) -> Peaks:

@@ -20,7 +20,7 @@ from .branch import BRANCH_METHOD, SNAKE_CONTINUATION, branch_dataset
 from .checks import _stable_range_checks
 from .deflated import _deflated_orbits, _on_followed_branch, _stored_orbits
 from .orbits import snake_orbits
-from .pool import Followers
+from ..pool import Followers
 from .starts import (
     RECURRENCES,
     RETRY_VD,

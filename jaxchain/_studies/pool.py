@@ -1,8 +1,10 @@
-"""The snake's branches followed side by side: the continuations of different
-starts share nothing, so with `workers` > 1 each runs in a process of its own
-(spawned, with jaxchain configured as in its parent and the parent's compilation
-cache), on its own core; with 1 each is computed where its result is first
-asked for, in the order of the sequential run."""
+"""Independent computations side by side (the snake's branches from different
+starts, the localized ranges' groups of draws): they share nothing, so with
+`workers` > 1 each runs in a process of its own (spawned, with jaxchain configured
+as in its parent and the parent's compilation cache), on its own core; with 1 each
+is computed where its result is first asked for, in the order of the sequential
+run. Processes, not threads: XLA's CPU client ran two devices' programs of the
+localized ranges one after the other when two threads called them."""
 
 from __future__ import annotations
 
