@@ -28,6 +28,7 @@ def _record(path: Path, rows: int, source: str = EXAMPLE_RECORD) -> Path:
 
 @pytest.mark.study
 @pytest.mark.slow
+@pytest.mark.long
 def test_records_of_the_same_name_in_two_folders_each_get_their_fit(tmp_path):
     examples = Path(EXAMPLE_RECORD).parent
     records = [_record(tmp_path / "a" / "rig.csv", 60, examples / "rig_vd0.4.csv"),

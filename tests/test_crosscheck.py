@@ -19,6 +19,7 @@ SETTLED = jc.SimulationOptions(t_end=1200.0, transient=600.0, chunk_length=150.0
 
 @pytest.mark.numerics
 @pytest.mark.study
+@pytest.mark.long
 def test_periodic_states_agree_within_the_smoothing_error(tmp_path):
     """On a small ring, the default smoothed model gives the reference's n_HALC and
     amplitudes to better than 1 % on periodic states; a second call reads the

@@ -57,6 +57,7 @@ def _scheduler_address(file, deadline_s=60) -> str:
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_a_sweep_on_a_local_cluster_equals_the_in_process_sweep(tmp_path, client, in_process):
     """Each batch is a task on one of two spawned worker processes, which writes
     its region of the store: the result equals the in-process sweep bit for bit
@@ -123,6 +124,7 @@ def test_a_worker_killed_mid_sweep_is_replaced_and_its_batch_is_run_again(
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_process(
         tmp_path, in_process):
     """`jaxchain sweep --scheduler ADDRESS` on a scheduler and one worker started
@@ -171,6 +173,7 @@ def test_the_scheduler_going_away_exits_1_in_one_line_and_resume_finishes_in_pro
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_basin_on_a_local_cluster_equals_basin_in_process(tmp_path, client):
     """`jaxchain basin --scheduler ADDRESS`, on the module's cluster of two spawned
     workers, writes the basin.nc of the in-process command, to the last bit. The ring

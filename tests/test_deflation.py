@@ -129,6 +129,7 @@ def test_the_snake_follows_the_orbits_that_deflation_finds(tmp_path):
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_branches_followed_by_two_workers_are_those_of_one(tmp_path):
     """`localized_branches(workers=2)`: the starts' branches, and those of the
     orbits deflation finds, followed in two processes side by side, are the

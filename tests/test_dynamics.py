@@ -90,6 +90,7 @@ def run_figure(name, tmp_path, capsys):
 
 @pytest.mark.numerics
 @pytest.mark.study
+@pytest.mark.long
 def test_figure_command_quick_runs_every_scene_and_keeps_only_what_it_shows(tmp_path,
                                                                             capsys):
     """Each scene through the command, observing only what it shows; the states of

@@ -146,6 +146,7 @@ def test_basin_stability_on_the_exact_engine_classifies_each_samples_run():
 
 @pytest.mark.numerics
 @pytest.mark.study
+@pytest.mark.long
 def test_the_crosscheck_of_the_exact_engine_agrees_with_its_reference():
     """The exact engine's lanes against its own reference runs (the same model, the
     lanes at rtol 1e-12 and the reference at its 1e-10): the same n_HALC and

@@ -94,6 +94,7 @@ def test_exact_shooting_refuses_bad_input_in_one_line():
 
 @pytest.mark.numerics
 @pytest.mark.study
+@pytest.mark.long
 def test_the_damped_newton_method_reaches_a_weakly_unstable_orbit_from_farther():
     """The ring of eight's five-site orbit at v_d 1.4 (eq. (8) with five sites,
     found by the snake from its simulation) is unstable by a real multiplier 1.034
@@ -118,6 +119,7 @@ def test_the_damped_newton_method_reaches_a_weakly_unstable_orbit_from_farther()
 
 @pytest.mark.study
 @pytest.mark.numerics
+@pytest.mark.long
 def test_smoothed_multipliers_approach_the_exact_ones_as_eps_falls(guess):
     """Two oscillators in phase on a ring (the coupling idle: each is the single
     oscillator's cycle): the exact Floquet multipliers are 1 (trivial), two zeros
@@ -145,6 +147,7 @@ def test_smoothed_multipliers_approach_the_exact_ones_as_eps_falls(guess):
 
 @pytest.mark.study
 @pytest.mark.numerics
+@pytest.mark.long
 def test_exact_cycles_continued_in_v_d_are_the_scipy_cycles_up_to_the_existence_limit(guess):
     """Pseudo-arclength continuation of the exact stick-slip cycle in v_d
     (`cycle_problem` on the exact engine): at every converged point below the existence limit

@@ -56,6 +56,7 @@ def test_grad_at_the_defaults_refuses_in_one_line():
 @pytest.mark.study
 @pytest.mark.slow
 @pytest.mark.numerics
+@pytest.mark.long
 def test_forward_and_reverse_mode_agree_with_scipy_central_differences():
     """d amplitude / d v_d of the stick-slip cycle at v_d 1.5: `jax.jvp` at the
     exact engine's defaults and `jax.grad` with adjoint "reverse", within 1e-4

@@ -73,9 +73,15 @@ STUDY = {"02_bifurcation_sweep.ipynb", "03_dynamics_of_localized_states.ipynb",
          "09_identification.ipynb"}
 
 
+#: The two longest (70 and 119 s in CI's study step) are also `long`: CI leaves them
+#: out to keep its whole run within 45 minutes.
+LONG = {"08_brake_pad.ipynb", "09_identification.ipynb"}
+
+
 def _marks(name: str) -> tuple:
     return ((pytest.mark.slow,) if name in SLOW else ()) + (
-        (pytest.mark.study,) if name in STUDY else ())
+        (pytest.mark.study,) if name in STUDY else ()) + (
+        (pytest.mark.long,) if name in LONG else ())
 
 
 @pytest.mark.parametrize("name", [

@@ -227,6 +227,7 @@ def test_a_fit_at_another_eps_runs_the_compiled_program_of_the_first(clean_recor
 
 @pytest.mark.numerics
 @pytest.mark.study
+@pytest.mark.long
 def test_the_exact_engine_fits_exact_records_without_the_smoothing_bias(clean_records,
                                                                        tmp_path, capsys):
     """Records of the exact model refitted by the exact model, by `jaxchain identify
@@ -248,6 +249,7 @@ def test_the_exact_engine_fits_exact_records_without_the_smoothing_bias(clean_re
 
 @pytest.mark.study
 @pytest.mark.numerics
+@pytest.mark.long
 def test_noise_free_records_give_the_parameters_and_offsets(clean_records):
     """Without noise the parameters come back within the smoothing's bias, which
     is linear in eps (2.0 %, 0.24 %, 0.03 % of xi at eps = 1e-3, 1e-4, 1e-5 on
@@ -270,6 +272,7 @@ def test_noise_free_records_give_the_parameters_and_offsets(clean_records):
 @pytest.mark.numerics
 @pytest.mark.slow
 @pytest.mark.study
+@pytest.mark.long
 def test_standard_errors_cover_the_truth_as_often_as_they_should(clean_records):
     """Ten noise draws (0.5 % of the amplitude) of the same records, four
     parameters and two offsets each: 60 intervals of +-2 standard errors, which
@@ -293,6 +296,7 @@ def test_standard_errors_cover_the_truth_as_often_as_they_should(clean_records):
 @pytest.mark.numerics
 @pytest.mark.slow
 @pytest.mark.study
+@pytest.mark.long
 def test_stribeck_records_are_attributed_to_the_stribeck_law():
     """Records made with a Stribeck law of Gaussian decay (delta = 2), which the
     exponential law cannot take: on held-out records the Stribeck fit's residual

@@ -156,6 +156,7 @@ def test_the_single_site_state_s_frequency_damping_and_linear_decay(study):
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_resume_after_a_lost_chain_gives_the_same_study(study, tmp_path, capsys):
     """A run killed before its last chain (its store missing) and the study's
     files lost: --resume recomputes them, the lost chain on a Dask cluster, and the

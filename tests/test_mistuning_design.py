@@ -96,6 +96,7 @@ def test_the_design_gradient_matches_finite_differences(design):
 
 @pytest.mark.numerics
 @pytest.mark.study
+@pytest.mark.long
 def test_pattern_keeps_budget_and_mean():
     """With the mean kept (the default), the design's pattern keeps the ring's mean
     stiffness and the budget, from a start (seed 1) whose budget tanh(theta) has a

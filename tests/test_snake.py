@@ -47,6 +47,7 @@ def one_site(tmp_path_factory):
 
 @pytest.mark.study
 @pytest.mark.numerics
+@pytest.mark.long
 def test_shooting_from_simulation_gives_the_simulated_state_and_its_multipliers():
     """The 1-site state of a ring of 4 at v_d = 1.5: the orbit has the simulated
     energy (within 0.5 %) and sites; the trivial multiplier is 1 to 1e-6; each quiet
@@ -255,6 +256,7 @@ def test_stored_branches_are_read_back_only_for_equal_settings(one_site):
 
 @pytest.mark.study
 @pytest.mark.numerics
+@pytest.mark.long
 def test_recurrences_of_a_periodic_orbit_return_after_one_period():
     """On the single oscillator's exact stick-slip cycle every turning point x' = 0
     (from + to -) comes back after one period: the guesses of `_recurrences` are
@@ -304,6 +306,7 @@ def test_eq8_on_the_ring_is_fixed_by_the_reflection_about_an_odd_block_s_centre(
 
 @pytest.mark.numerics
 @pytest.mark.study
+@pytest.mark.long
 def test_inside_its_fixed_subspace_the_symmetric_start_reaches_an_orbit_unstable_across_it():
     """Eq. (8) with five of the ring of eight's oscillators excited, simulated
     inside the fixed subspace of its reflection (`symmetric_state`) and shot from
@@ -573,6 +576,7 @@ def test_the_snake_switches_branches_at_its_branch_points(branch_point, tmp_path
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch, tmp_path):
     """The first start's continuation raises (as it did where the start's phase
     condition was not the problem's): that start is reported with the reason, the
@@ -608,6 +612,7 @@ def test_a_branch_that_fails_is_flagged_and_the_others_are_kept(monkeypatch, tmp
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_a_switch_that_fails_is_reported_with_its_branch_point(branch_point, monkeypatch):
     """Where the step onto the other branch does not converge (`switch_branch` raises
     RuntimeError), the snake follows the orbits that deflation finds beside the

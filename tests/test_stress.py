@@ -20,6 +20,7 @@ QUICK = [("eps", 1e-1), ("eps", 1e-5), ("n_osc", 1), ("v_d", 1e-3), ("v_d", 1.15
 
 @pytest.mark.numerics
 @pytest.mark.study
+@pytest.mark.long
 def test_quick_matrix_verifies_every_case_on_the_default_solver(tmp_path, capsys):
     """`jaxchain stress --quick` on the default path: every case of the reduced
     matrix, the edges of the model included (eps = 1e-5, v_d = 1e-3, eta_c = 100,

@@ -323,6 +323,7 @@ def test_the_si_brake_pad_runs_from_its_chain_file(tmp_path, capsys):
 
 
 @pytest.mark.study
+@pytest.mark.long
 def test_a_mass_and_a_table_through_hopf_point_and_shooting():
     """A single oscillator of mass 1.7 with eq. (1) sampled into a table: its Hopf
     point is eq. (1)'s (the trace 2 xi - mu'(v_d) vanishes whatever the mass), within

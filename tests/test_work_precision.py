@@ -42,6 +42,7 @@ def _read(path) -> list[dict]:
 
 @pytest.mark.study
 @pytest.mark.numerics
+@pytest.mark.long
 def test_study_errors_fall_with_eps_and_the_recommendation_holds(tmp_path):
     """For the single oscillator, the amplitude and trajectory errors against the
     reference fall with eps (the smoothed law converges to the non-smooth one).
