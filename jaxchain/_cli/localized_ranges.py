@@ -74,8 +74,8 @@ def add_parser(sub):
                    help="rings solved together, vmapped: a group (default 64)")
     g.add_argument("--workers", type=positive_int, default=None, metavar="W",
                    help="processes that compute the groups side by side, one core each "
-                        "(default: one per usable core; 1: one group after another); the "
-                        "ranges are the same either way")
+                        "(default: one per usable core; 1: one group after another, on "
+                        "every core)")
     g.add_argument("--check", type=int, default=0, metavar="K",
                    help="follow the first K draws of the strongest mistuning by shooting "
                         "too, and compare (default 0; each takes one to three minutes)")
@@ -123,7 +123,7 @@ def run(args) -> None:
     if args.check:
         sigma = max(sigmas)
         checks = shooting_ranges(params, sigma, range(args.check), eps=args.eps,
-                                 site=args.site)
+                                 site=args.site, workers=args.workers or usable_cores())
         part = ds.sel(sigma=sigma)
         for c in checks:
             c["low_hb"] = float(part["low"].values[c["draw"]])

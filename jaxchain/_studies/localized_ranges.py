@@ -464,9 +464,10 @@ def localized_ranges(params: ChainParams, sigmas, draws: int, method: HarmonicBa
         LU); its phase condition is moved to `site`.
     - `site`: the oscillator (0-based) on the HALC.
     - `lanes`: rings solved together (`jax.vmap`), a group.
-    - `workers`: processes that compute the groups side by side (`Followers`: on
-        a CPU, one per core; 1 computes them here, one after the other). A group's
-        ends do not depend on the process that computed it.
+    - `workers`: processes that compute the groups side by side (`Followers`, one
+        thread each: on a CPU, one per core; 1 computes them here, one after the
+        other). The ends agree with those of one process to the corrector's
+        tolerance and the ends' resolutions.
     - `progress`: a progress bar.
     - `store`: a folder where each sigma's part is written as it finishes and read
         back where every setting that produced it matches: a killed study resumes.
@@ -497,7 +498,7 @@ def localized_ranges(params: ChainParams, sigmas, draws: int, method: HarmonicBa
     tuned = branch_range(params, method, site=site,
                          store=None if store is None else Path(store) / "tuned_branch.nc")
     bar = tqdm(total=len(sigmas) * draws, disable=not progress, unit="draw")
-    with Followers(workers) as pool:
+    with Followers(workers, one_thread=True) as pool:
         # every sigma's groups are submitted before any is awaited: the workers
         # stay busy across the strengths
         pending = [_part(params, float(sigma), draws, method, tuned, site, lanes, pool, store)
@@ -587,35 +588,45 @@ def _part(params: ChainParams, sigma: float, draws: int, method: HarmonicBalance
     return finish
 
 
-def shooting_ranges(params: ChainParams, sigma: float, draws, *, eps: float, site: int = 0
-                    ) -> list[dict]:
+def shooting_ranges(params: ChainParams, sigma: float, draws, *, eps: float, site: int = 0,
+                    workers: int = 1) -> list[dict]:
     """The stable ranges of the given draws at strength sigma by shooting on the
     smoothed model at `eps` (Tsit5 at 1e-10/1e-12, `for_orbits`) and the driver
     (`branch_range` with `Shooting`): the independent check of `localized_ranges`,
-    one branch at a time (a minute or more each on the ring of 20).
+    one branch per draw (a minute or more each on the ring of 20), `workers`
+    processes side by side (`Followers`).
 
-    **Arguments:** `params`, `sigma`, `site` as `localized_ranges`'s; `draws`: the
-    draws' indices (0-based: draw d is `mistuned_lanes`'s lane d + 1); `eps`: the
-    smoothing velocity (> 0, dimensionless).
+    **Arguments:** `params`, `sigma`, `site`, `workers` as `localized_ranges`'s;
+    `draws`: the draws' indices (0-based: draw d is `mistuned_lanes`'s lane d + 1);
+    `eps`: the smoothing velocity (> 0, dimensionless).
 
     **Returns:** one dict per draw: `draw`, `low`, `low_kind`, `high`, `high_kind`
     (dimensionless v_d; None, with `error`, where the branch gives no range).
 
-    **Raises:** `ValidationError` for a bad eps or sigma.
+    **Raises:** `ValidationError` for a bad eps, sigma or workers.
     """
+    from .._engine.engines import Smoothed
+    from .pool import Followers
+
+    check_count("workers", workers)
+    Smoothed(eps=eps)  # a bad eps is refused here, before any process starts
+    draws = [int(d) for d in draws]
+    chains = mistuned_lanes(params, sigma, max(draws) + 1)
+    with Followers(workers, one_thread=True) as pool:
+        futures = [pool.submit(_shooting_range, jax.tree_util.tree_map(
+            lambda a: np.asarray(a)[d + 1], chains), eps, site) for d in draws]
+        return [{"draw": d} | future.result() for d, future in zip(draws, futures)]
+
+
+def _shooting_range(chain: ChainParams, eps: float, site: int) -> dict:
+    """One draw of `shooting_ranges`: a task that `Followers` may run in another
+    process."""
     from .._bifurcation.shooting import Shooting
     from .._engine.engines import Smoothed
 
-    draws = [int(d) for d in draws]
-    chains = mistuned_lanes(params, sigma, max(draws) + 1)
-    out = []
-    for d in draws:
-        chain = jax.tree_util.tree_map(lambda a: a[d + 1], chains)
-        try:
-            r = branch_range(chain, Shooting(Smoothed(eps=eps).for_orbits()), site=site)
-            out.append({"draw": d, "low": r.low, "low_kind": r.low_kind, "high": r.high,
-                        "high_kind": r.high_kind})
-        except RuntimeError as error:
-            out.append({"draw": d, "low": None, "low_kind": None, "high": None,
-                        "high_kind": None, "error": str(error)})
-    return out
+    try:
+        r = branch_range(chain, Shooting(Smoothed(eps=eps).for_orbits()), site=site)
+    except RuntimeError as error:
+        return {"low": None, "low_kind": None, "high": None, "high_kind": None,
+                "error": str(error)}
+    return {"low": r.low, "low_kind": r.low_kind, "high": r.high, "high_kind": r.high_kind}
